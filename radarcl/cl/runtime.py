@@ -1,0 +1,211 @@
+"""Device choice, program builds memoised per context, kernels fetched once.
+
+A ``Runtime`` owns one context and one in-order queue. Kernel programs come from the
+``kernels/`` directory (``radarcl/kernels`` once installed), built with ``-I`` on that
+directory so ``#include "radarcl_common.h"`` works and PoCL's cache follows header edits,
+and with ``-D`` switches that specialise a kernel (disabled features cost nothing).
+"""
+
+import logging
+import os
+from pathlib import Path
+
+import numpy as np
+
+from radarcl.errors import KernelBuildError, NoOpenCLError
+
+log = logging.getLogger(__name__)
+
+DEVICE_ENV = "RADARCL_DEVICE"
+"""Environment variable that picks the device: ``P:D`` indices (``0:0``) or a
+case-insensitive substring of "platform / device" (``pocl``, ``nvidia``)."""
+
+_INSTALL_HINT = ("No OpenCL platform was found. radarcl runs on any OpenCL 1.2 device; on a "
+                 "machine without one, install PoCL for the CPU with "
+                 "'pip install pocl-binary-distribution' (a dependency of radarcl, so "
+                 "reinstalling radarcl with pip also brings it).")
+
+
+def _cl():
+    """Import pyopencl lazily so that io/, config and the viewer never need it."""
+    import pyopencl
+
+    return pyopencl
+
+
+def kernels_dir():
+    """Directory holding the ``.cl`` sources: ``radarcl/kernels`` when installed, ``kernels/``
+    beside the package in a source checkout."""
+    here = Path(__file__).resolve().parent.parent
+    for candidate in (here / "kernels", here.parent / "kernels"):
+        if (candidate / "radarcl_common.h").is_file():
+            return candidate
+    raise KernelBuildError(f"kernel sources not found beside {here} (looked for radarcl_common.h "
+                           "in radarcl/kernels and ../kernels); reinstall radarcl")
+
+
+def _all_devices():
+    cl = _cl()
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error as exc:  # PoCL-less pyopencl raises PLATFORM_NOT_FOUND_KHR here
+        raise NoOpenCLError(f"{_INSTALL_HINT} (pyopencl said: {exc})") from exc
+    found = []
+    for p_index, platform in enumerate(platforms):
+        try:
+            devices = platform.get_devices()
+        except cl.Error:
+            continue
+        for d_index, device in enumerate(devices):
+            found.append((p_index, d_index, platform, device))
+    if not found:
+        raise NoOpenCLError(_INSTALL_HINT)
+    return found
+
+
+def choose_device(spec=None):
+    """Pick the OpenCL device radarcl runs on.
+
+    ``spec`` (or the ``RADARCL_DEVICE`` environment variable when ``spec`` is None) selects by
+    ``"P:D"`` indices or by a substring of "platform / device". Without either, a GPU is
+    preferred and PoCL's CPU device is the fallback. Raises ``NoOpenCLError`` when nothing fits.
+    """
+    cl = _cl()
+    spec = os.environ.get(DEVICE_ENV) if spec is None else spec
+    found = _all_devices()
+    if spec:
+        spec = spec.strip()
+        parts = spec.split(":")
+        if len(parts) == 2 and all(p.isdigit() for p in parts):
+            for p_index, d_index, _, device in found:
+                if (p_index, d_index) == (int(parts[0]), int(parts[1])):
+                    return device
+        else:
+            for _, _, platform, device in found:
+                if spec.lower() in f"{platform.name} / {device.name}".lower():
+                    return device
+        listing = "; ".join(f"{p}:{d} {pl.name} / {dev.name}" for p, d, pl, dev in found)
+        raise NoOpenCLError(f"{DEVICE_ENV}={spec!r} matches no device; available: {listing}")
+    gpus = [dev for _, _, _, dev in found if dev.type & cl.device_type.GPU]
+    if gpus:
+        return gpus[0]
+    pocl = [dev for _, _, pl, dev in found if "portable computing language" in pl.name.lower()]
+    return (pocl or [found[0][3]])[0]
+
+
+def device_report():
+    """Lines describing every platform and device, with what radarcl's kernels need."""
+    cl = _cl()
+    chosen = choose_device()
+    lines = []
+    for p_index, d_index, platform, device in _all_devices():
+        ext = device.extensions.split()
+        mark = "*" if device.int_ptr == chosen.int_ptr else " "
+        lines += [
+            f"{mark} {p_index}:{d_index}  {platform.name} ({platform.version})",
+            f"      device         {device.name} [{cl.device_type.to_string(device.type)}]",
+            f"      OpenCL C       {device.opencl_c_version}",
+            f"      compute units  {device.max_compute_units}, max work-group {device.max_work_group_size}",
+            f"      memory         global {device.global_mem_size / 2**30:.1f} GiB, "
+            f"largest buffer {device.max_mem_alloc_size / 2**30:.2f} GiB, "
+            f"local {device.local_mem_size // 1024} KiB",
+            f"      int32 atomics  {'yes' if 'cl_khr_global_int32_base_atomics' in ext else 'no'}, "
+            f"int64 atomics {'yes' if 'cl_khr_int64_base_atomics' in ext else 'no'}, "
+            f"fp64 {'yes' if 'cl_khr_fp64' in ext else 'no'}",
+        ]
+    lines.append(f"(* = chosen; set {DEVICE_ENV}=P:D or a name substring to override)")
+    return lines
+
+
+class KernelSet:
+    """The kernels of one built program, fetched once (``program.name`` would make a new
+    ``cl.Kernel`` on every access)."""
+
+    def __init__(self, program, source_path, options):
+        self.program = program
+        self.source_path = source_path
+        self.options = options
+        self._kernels = {k.function_name: k for k in program.all_kernels()}
+
+    def __getitem__(self, name):
+        try:
+            return self._kernels[name]
+        except KeyError:
+            raise KeyError(f"{self.source_path.name} has no kernel {name!r}; it has "
+                           f"{sorted(self._kernels)}") from None
+
+
+def _define(name, value):
+    if isinstance(value, bool):
+        value = int(value)
+    if isinstance(value, float):
+        value = repr(float(value)) + "f"
+    return f"-D{name}={value}"
+
+
+class Runtime:
+    """One OpenCL context and in-order queue on one device, with memoised program builds."""
+
+    def __init__(self, device=None, profiling=False):
+        cl = _cl()
+        self.device = device if device is not None else choose_device()
+        self.context = cl.Context([self.device])
+        props = cl.command_queue_properties.PROFILING_ENABLE if profiling else 0
+        self.queue = cl.CommandQueue(self.context, properties=props)
+        self._programs = {}
+
+    @property
+    def name(self):
+        """'platform / device' of this runtime."""
+        return f"{self.device.platform.name} / {self.device.name}"
+
+    @property
+    def is_cpu(self):
+        """True for a CPU device (PoCL's pthread device, for instance)."""
+        return bool(self.device.type & _cl().device_type.CPU)
+
+    def kernels(self, stem, defines=None):
+        """Build ``kernels/<stem>.cl`` with ``-D`` ``defines`` (memoised) and return its KernelSet."""
+        cl = _cl()
+        directory = kernels_dir()
+        path = directory / f"{stem}.cl"
+        options = [f"-I{directory}"] + [_define(k, v) for k, v in sorted((defines or {}).items())]
+        key = (stem, tuple(options))
+        cached = self._programs.get(key)
+        if cached is not None:
+            return cached
+        try:
+            source = path.read_text()
+        except OSError as exc:
+            raise KernelBuildError(f"cannot read kernel source {path}: {exc}") from exc
+        program = cl.Program(self.context, source)
+        try:
+            program.build(options=options)
+        except cl.Error as exc:
+            try:
+                build_log = program.get_build_info(self.device, cl.program_build_info.LOG)
+            except cl.Error:
+                build_log = "(no build log)"
+            raise KernelBuildError(f"building {path} failed on {self.name}\n"
+                                   f"options: {' '.join(options)}\nlog:\n{build_log or exc}") from exc
+        log.debug("built %s with %s", path.name, options)
+        kernel_set = KernelSet(program, path, options)
+        self._programs[key] = kernel_set
+        return kernel_set
+
+    def max_local_size(self, kernel):
+        """Largest work-group size this device allows for ``kernel``."""
+        cl = _cl()
+        return int(min(self.device.max_work_group_size,
+                       kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.device)))
+
+    def to_device(self, array):
+        """Copy a host array into a new read-only device buffer."""
+        cl = _cl()
+        array = np.ascontiguousarray(array)
+        return cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=array)
+
+    def empty(self, nbytes):
+        """A new read-write device buffer of ``nbytes`` bytes (at least 1)."""
+        cl = _cl()
+        return cl.Buffer(self.context, cl.mem_flags.READ_WRITE, size=max(1, int(nbytes)))

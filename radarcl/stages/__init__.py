@@ -1,0 +1,1 @@
+"""One plan object per kernel file: an expensive constructor, a cheap checked call."""

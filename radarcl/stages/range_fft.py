@@ -1,0 +1,175 @@
+"""Range FFT of whole frames: window, zero padding, FFT, magnitude or power (paper §3.2).
+
+``RangeFFT`` wraps ``kernels/range_fft.cl``; it is equivalent to
+``radarcl.reference.range_profile(samples, n_fft, window=..., output=..., gain=...)`` and
+``radarcl.reference.beam_flags(samples, clip_level)``, within ``RANGE_FFT_RTOL`` of the
+float64 oracle (see tests/test_range_fft.py).
+
+Bad samples: a beam with a NaN or Inf sample is flagged ``FLAG_NONFINITE``, written as NaN,
+counted in ``RangeFFTResult.n_invalid``, and must give no evidence downstream; its paired beam
+is unaffected. A beam that reaches ``clip_level`` is flagged ``FLAG_CLIPPED`` and counted.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from radarcl import reference
+from radarcl.config import is_power_of_two
+from radarcl.errors import ConfigError, DeviceCapabilityError, ShapeError
+
+_INPUT_KINDS = {np.dtype(np.float32): 0, np.dtype(np.int16): 1, np.dtype(np.complex64): 2}
+
+
+@dataclass(frozen=True)
+class RangeFFTResult:
+    """Profiles (n_az, n_el, n_bins) float32 and per-beam flags (n_az, n_el) uint8."""
+
+    profiles: np.ndarray
+    flags: np.ndarray
+
+    @property
+    def valid(self):
+        """Boolean mask of beams that may give evidence (no NaN/Inf sample)."""
+        return (self.flags & reference.FLAG_NONFINITE) == 0
+
+    @property
+    def n_invalid(self):
+        """Beams with a NaN or Inf sample."""
+        return int(np.count_nonzero(~self.valid))
+
+    @property
+    def n_clipped(self):
+        """Beams with at least one sample at the clip level."""
+        return int(np.count_nonzero(self.flags & reference.FLAG_CLIPPED))
+
+
+class RangeFFT:
+    """A compiled range-FFT plan for frames of one shape and dtype.
+
+    runtime: a ``radarcl.cl.Runtime``.
+    batch: (n_az, n_el) beams per frame.
+    n_samples: samples per beam; n_fft: padded length, a power of two >= max(n_samples, 4).
+    dtype: float32 or int16 (real ADC samples) or complex64 (I/Q).
+    window: "hann" or "rect". output: "magnitude" or "power".
+    gain: optional (n_bins,) factor per bin, e.g. ``reference.range_gain`` for r^k compensation.
+    clip_level: |sample| at or above this flags the beam CLIPPED (default: int16 rails
+        for int16 input, never for floats).
+    local_size: work-group size (a power of two dividing n_fft/4); default: the largest the
+        device allows, up to n_fft/4.
+    """
+
+    def __init__(self, runtime, batch, n_samples, n_fft, *, dtype=np.int16, window="hann",
+                 output="magnitude", gain=None, clip_level=None, local_size=None):
+        import pyopencl as cl
+
+        self.runtime = runtime
+        self.batch = tuple(int(b) for b in batch)
+        if len(self.batch) != 2 or min(self.batch) < 1:
+            raise ConfigError(f"batch must be (n_az, n_el) with both >= 1, got {batch!r}")
+        self.n_beams = self.batch[0] * self.batch[1]
+        self.n_samples = int(n_samples)
+        if self.n_samples < 2:
+            raise ConfigError(f"n_samples must be at least 2, got {n_samples!r}")
+        if not is_power_of_two(n_fft) or n_fft < max(self.n_samples, 4):
+            raise ConfigError(f"n_fft must be a power of two >= max(n_samples, 4) = "
+                              f"{max(self.n_samples, 4)} (eq. 11 pads, never truncates), got {n_fft!r}")
+        self.n_fft = int(n_fft)
+        self.dtype = np.dtype(dtype)
+        if self.dtype not in _INPUT_KINDS:
+            raise ConfigError(f"dtype must be one of float32, int16, complex64, got {self.dtype}")
+        self.complex_input = self.dtype == np.complex64
+        self.n_bins = self.n_fft if self.complex_input else self.n_fft // 2
+        if output not in reference.OUTPUTS:
+            raise ConfigError(f"output must be one of {reference.OUTPUTS}, got {output!r}")
+        self.window_kind, self.output = window, output
+        w = reference.window_coefficients(window, self.n_samples)
+
+        # Calibration: divide by the window's coherent gain (squared for power), times gain.
+        calibration = (1.0 / w.sum()) ** (2 if output == "power" else 1)
+        per_bin = np.full(self.n_bins, calibration)
+        if gain is not None:
+            gain = np.asarray(gain, dtype=np.float64)
+            if gain.shape != (self.n_bins,) or not np.isfinite(gain).all():
+                raise ShapeError(f"gain must be finite with shape ({self.n_bins},), got {gain.shape}")
+            per_bin = per_bin * gain
+        if clip_level is None:
+            clip_level = 32767.0 if self.dtype == np.int16 else math.inf
+        self.clip_level = float(clip_level)
+        if math.isnan(self.clip_level) or self.clip_level <= 0:
+            raise ConfigError(f"clip_level must be positive, got {clip_level!r}")
+
+        m = 1 << max(1, math.ceil(math.log2(self.n_samples)))  # sub-transform length >= n_samples
+        device = runtime.device
+        local_bytes = 2 * self.n_fft * 8 + 8
+        if local_bytes > device.local_mem_size:
+            raise DeviceCapabilityError(f"n_fft = {self.n_fft} needs {local_bytes} bytes of local memory; "
+                                        f"{device.name} has {device.local_mem_size}")
+        max_ls = min(self.n_fft // 4, device.max_work_group_size)
+        if local_size is None:
+            local_size = 1 << int(math.log2(max_ls))
+        if not is_power_of_two(local_size) or local_size > max_ls:
+            raise ConfigError(f"local_size must be a power of two <= {max_ls} (n_fft/4 and the "
+                              f"device limit), got {local_size!r}")
+        self.local_size = int(local_size)
+        defines = dict(N_FFT=self.n_fft, N_SAMPLES=self.n_samples, M=m, LOG2_M=int(math.log2(m)),
+                       P=self.n_fft // m, LOG2_P=int(math.log2(self.n_fft // m)), N_BINS=self.n_bins,
+                       LOCAL_SIZE=self.local_size, INPUT_KIND=_INPUT_KINDS[self.dtype],
+                       WINDOWED=window != "rect", POWER=output == "power",
+                       CHECK_FINITE=self.dtype != np.int16)
+        self._kernel = runtime.kernels("range_fft", defines)["range_fft"]
+        self._kernel.set_scalar_arg_dtypes([None, None, None, None, np.float32, np.int32, None, None])
+
+        j = np.arange(self.n_fft)
+        self._window = runtime.to_device(w.astype(np.float32))
+        self._twiddle = runtime.to_device(np.exp(-2j * np.pi * j / self.n_fft).astype(np.complex64))
+        self._scale = runtime.to_device(per_bin.astype(np.float32))
+        self.profiles_buf = runtime.empty(self.n_beams * self.n_bins * 4)
+        self.flags_buf = runtime.empty(self.n_beams)
+        self._samples_buf = None
+        self._cl = cl
+
+    @property
+    def input_shape(self):
+        """Shape one frame must have: (n_az, n_el, n_samples)."""
+        return (*self.batch, self.n_samples)
+
+    @property
+    def n_jobs(self):
+        """Work-groups per frame: beam pairs for real input, beams for complex."""
+        return self.n_beams if self.complex_input else (self.n_beams + 1) // 2
+
+    def check(self, samples):
+        """Raise ShapeError unless ``samples`` is one frame of this plan's shape and dtype."""
+        samples = np.asarray(samples)
+        if samples.shape != self.input_shape or samples.dtype != self.dtype:
+            raise ShapeError(f"expected a frame of shape {self.input_shape} {self.dtype}, "
+                             f"got {samples.shape} {samples.dtype}")
+        return np.ascontiguousarray(samples)
+
+    def enqueue(self, samples_buf, wait_for=None):
+        """Launch on a device buffer of samples; results stay in ``profiles_buf``/``flags_buf``.
+        Returns the kernel event (for chaining stages without host round trips)."""
+        gsize = (self.n_jobs * self.local_size,)
+        return self._kernel(self.runtime.queue, gsize, (self.local_size,), samples_buf, self._window,
+                            self._twiddle, self._scale, self.clip_level, self.n_beams,
+                            self.profiles_buf, self.flags_buf, wait_for=wait_for)
+
+    def upload(self, samples):
+        """Copy a checked frame into the plan's input buffer; returns the copy event."""
+        samples = self.check(samples)
+        if self._samples_buf is None:
+            self._samples_buf = self.runtime.empty(samples.nbytes)
+        return self._cl.enqueue_copy(self.runtime.queue, self._samples_buf, samples, is_blocking=False)
+
+    def __call__(self, samples):
+        """Process one frame: (n_az, n_el, n_samples) -> RangeFFTResult (blocking)."""
+        cl = self._cl
+        copy = self.upload(samples)
+        done = self.enqueue(self._samples_buf, wait_for=[copy])
+        profiles = np.empty((*self.batch, self.n_bins), np.float32)
+        flags = np.empty(self.batch, np.uint8)
+        cl.enqueue_copy(self.runtime.queue, profiles, self.profiles_buf, wait_for=[done])
+        cl.enqueue_copy(self.runtime.queue, flags, self.flags_buf, wait_for=[done])
+        return RangeFFTResult(profiles, flags)
