@@ -71,31 +71,29 @@ void range_fft(
     const int has_b = !COMPLEX_INPUT && beam_a + 1 < n_beams;
     const __global sample_t *row_a = samples + (size_t)beam_a * N_SAMPLES;
 
-    if (lid < 2) job_flags[lid] = 0;
+    if (lid == 0) { job_flags[0] = 0; job_flags[1] = 0; }   /* local size may be 1 */
     barrier(CLK_LOCAL_MEM_FENCE);
 
-    /* Load: buf0[q M + j] = w_j z_j W_N^{j q}, zero beyond the samples. */
+    /* Load each sample once: buf0[q M + j] = w_j z_j W_N^{j q} for the P blocks, zero beyond
+     * the samples. */
     int bad_a = 0, bad_b = 0;
-    for (int idx = lid; idx < N_FFT; idx += LOCAL_SIZE) {
-        const int q = idx >> LOG2_M;
-        const int j = idx & (M - 1);
+    for (int j = lid; j < M; j += LOCAL_SIZE) {
         float2 z = (float2)(0.0f, 0.0f);
         if (j < N_SAMPLES) {
-            int ba = 0, bb = 0;
 #if COMPLEX_INPUT
             const float2 s = row_a[j];
-            z = (float2)(load_part(s.x, clip_level, &ba), load_part(s.y, clip_level, &ba));
+            z = (float2)(load_part(s.x, clip_level, &bad_a), load_part(s.y, clip_level, &bad_a));
 #else
-            z.x = load_part((float)row_a[j], clip_level, &ba);
-            if (has_b) z.y = load_part((float)row_a[N_SAMPLES + j], clip_level, &bb);
+            z.x = load_part((float)row_a[j], clip_level, &bad_a);
+            if (has_b) z.y = load_part((float)row_a[N_SAMPLES + j], clip_level, &bad_b);
 #endif
 #if WINDOWED
             z *= window[j];
 #endif
-            if (q) z = cmul(z, twiddle[j * q]);
-            else { bad_a |= ba; bad_b |= bb; }
         }
-        buf0[idx] = z;
+        buf0[j] = z;
+        for (int q = 1; q < P; q++)
+            buf0[q * M + j] = cmul(z, twiddle[j * q]);
     }
     if (bad_a) atomic_or(&job_flags[0], bad_a);
     if (bad_b) atomic_or(&job_flags[1], bad_b);
@@ -163,7 +161,7 @@ void range_fft(
 #if POWER
         float va = dot(xa, xa) * scale[k];
 #else
-        float va = hypot(xa.x, xa.y) * scale[k];
+        float va = sqrt(dot(xa, xa)) * scale[k];
 #endif
         out_a[k] = (fa & FLAG_NONFINITE) ? NAN : va;
 #if !COMPLEX_INPUT
@@ -171,7 +169,7 @@ void range_fft(
 #if POWER
             float vb = dot(xb, xb) * scale[k];
 #else
-            float vb = hypot(xb.x, xb.y) * scale[k];
+            float vb = sqrt(dot(xb, xb)) * scale[k];
 #endif
             out_a[N_BINS + k] = (fb & FLAG_NONFINITE) ? NAN : vb;
         }

@@ -1,0 +1,3 @@
+from radarcl.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""Frame formats, recordings and readers of other radars' files. No pyopencl imports here."""

@@ -1,0 +1,1 @@
+"""Simulation: the FMCW beat-signal simulator and (later) the reference scene with ground truth."""

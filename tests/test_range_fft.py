@@ -1,0 +1,157 @@
+"""kernels/range_fft.cl <-> radarcl/stages/range_fft.py against radarcl.reference.range_profile."""
+
+import numpy as np
+import pytest
+
+from radarcl import reference
+from radarcl.errors import ConfigError, ShapeError
+from radarcl.stages.range_fft import RangeFFT
+from tolerances import RANGE_FFT_RTOL, WEAK_TONE_RTOL
+
+
+def make_samples(rng, shape, dtype):
+    if dtype == np.complex64:
+        return (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64) * 100
+    if dtype == np.int16:
+        return rng.integers(-3000, 3000, shape).astype(np.int16)
+    return rng.standard_normal(shape).astype(np.float32)
+
+
+def rel_err(got, want):
+    return np.abs(got.astype(np.float64) - want).max() / np.abs(want).max()
+
+
+CASES = [  # (dtype, n_samples, n_fft, window, output)
+    (np.int16, 256, 256, "hann", "magnitude"),      # N = n: no padding
+    (np.int16, 256, 1024, "hann", "magnitude"),     # N = 4n: the paper's 768 zeros
+    (np.float32, 256, 512, "rect", "power"),
+    (np.float32, 200, 512, "hann", "magnitude"),    # n not a power of two
+    (np.float32, 3, 4, "hann", "magnitude"),        # local size 1
+    (np.float32, 2, 8, "rect", "magnitude"),        # M = 2: radix-2 only, P = 4
+    (np.complex64, 128, 128, "hann", "magnitude"),  # I/Q, all N bins kept
+    (np.complex64, 100, 512, "rect", "power"),
+    (np.int16, 256, 4096, "hann", "power"),
+]
+
+
+@pytest.mark.parametrize("dtype,n,n_fft,window,output", CASES)
+def test_matches_oracle(runtime, dtype, n, n_fft, window, output):
+    x = make_samples(np.random.default_rng(n_fft + n), (5, 3, n), dtype)  # 15 beams: odd pair count
+    plan = RangeFFT(runtime, (5, 3), n, n_fft, dtype=dtype, window=window, output=output)
+    got = plan(x)
+    want = reference.range_profile(x, n_fft, window=window, output=output)
+    assert got.profiles.shape == want.shape == (5, 3, n_fft if dtype == np.complex64 else n_fft // 2)
+    assert got.profiles.dtype == np.float32
+    assert rel_err(got.profiles, want) <= RANGE_FFT_RTOL
+    assert np.array_equal(got.flags, reference.beam_flags(x, plan.clip_level))
+
+
+@pytest.mark.parametrize("local_size", [1, 2, 16, 64, 256])
+def test_local_sizes_agree(runtime, local_size):
+    x = make_samples(np.random.default_rng(7), (64, 4, 256), np.int16)
+    want = reference.range_profile(x, 1024)
+    got = RangeFFT(runtime, (64, 4), 256, 1024, local_size=local_size)(x)
+    assert rel_err(got.profiles, want) <= RANGE_FFT_RTOL
+
+
+def test_repeatable_bit_for_bit(runtime):
+    x = make_samples(np.random.default_rng(3), (64, 4, 256), np.int16)
+    plan = RangeFFT(runtime, (64, 4), 256, 512)
+    first = plan(x).profiles
+    assert np.array_equal(first, plan(x).profiles)
+
+
+def test_all_zero_frame_gives_exact_zeros(runtime):
+    got = RangeFFT(runtime, (4, 4), 256, 512)(np.zeros((4, 4, 256), np.int16))
+    assert np.array_equal(got.profiles, np.zeros((4, 4, 256), np.float32))
+    assert not got.flags.any()
+
+
+def test_full_scale_clipped_frame(runtime):
+    # A square wave at the int16 rails: every beam saturates; values stay finite and exact-ish.
+    j = np.arange(256)
+    square = np.where((j // 8) % 2 == 0, 32767, -32768).astype(np.int16)
+    x = np.broadcast_to(square, (8, 4, 256)).copy()
+    got = RangeFFT(runtime, (8, 4), 256, 1024)(x)
+    assert np.isfinite(got.profiles).all()
+    assert rel_err(got.profiles, reference.range_profile(x, 1024)) <= RANGE_FFT_RTOL
+    assert got.n_clipped == 32 and got.n_invalid == 0
+
+
+def test_single_impulse_is_flat(runtime):
+    # An impulse at sample j0 transforms to a flat magnitude w[j0] / sum(w) at every bin.
+    x = np.zeros((2, 1, 256), np.float32)
+    x[:, :, 100] = 1.0
+    got = RangeFFT(runtime, (2, 1), 256, 1024, dtype=np.float32)(x)
+    w = reference.window_coefficients("hann", 256)
+    np.testing.assert_allclose(got.profiles, w[100] / w.sum(), rtol=RANGE_FFT_RTOL)
+
+
+def test_120_db_spread_between_two_tones(runtime):
+    n, n_fft = 256, 256
+    j = np.arange(n)
+    x = (1.0 * np.exp(2j * np.pi * 40 * j / n) + 1e-6 * np.exp(2j * np.pi * 200 * j / n))
+    x = x.astype(np.complex64)[None, None, :]
+    got = RangeFFT(runtime, (1, 1), n, n_fft, dtype=np.complex64, window="rect")(x).profiles[0, 0]
+    want = reference.range_profile(x, n_fft, window="rect")[0, 0]
+    assert want[40] == pytest.approx(1.0, rel=1e-6)
+    assert abs(got[200] - want[200]) / want[200] <= WEAK_TONE_RTOL   # the -120 dB tone survives
+    assert rel_err(got, want) <= RANGE_FFT_RTOL
+
+
+def test_range_gain_compensation(runtime):
+    x = make_samples(np.random.default_rng(11), (4, 4, 256), np.int16)
+    gain = reference.range_gain(256, 0.25, 2.0)
+    got = RangeFFT(runtime, (4, 4), 256, 512, gain=gain)(x)
+    assert rel_err(got.profiles, reference.range_profile(x, 512, gain=gain)) <= RANGE_FFT_RTOL
+    assert np.array_equal(got.profiles[..., 0], np.zeros((4, 4), np.float32))   # r = 0 gets gain 0
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_nonfinite_beams_flagged_and_partner_untouched(runtime, bad):
+    x = make_samples(np.random.default_rng(5), (4, 2, 256), np.float32)
+    x[1, 0, 17] = bad                      # beam 2 is paired with beam 3 in one FFT
+    got = RangeFFT(runtime, (4, 2), 256, 512, dtype=np.float32)(x)
+    want = reference.range_profile(x, 512)
+    assert np.isnan(got.profiles[1, 0]).all() and np.isnan(want[1, 0]).all()
+    valid = got.valid
+    assert valid.sum() == 7 and not valid[1, 0] and got.n_invalid == 1
+    assert rel_err(got.profiles[valid], want[valid]) <= RANGE_FFT_RTOL
+    assert got.flags[1, 0] == reference.FLAG_NONFINITE
+
+
+def test_nonfinite_complex_sample(runtime):
+    x = make_samples(np.random.default_rng(6), (2, 1, 64), np.complex64)
+    x[0, 0, 3] = complex(1.0, np.nan)
+    got = RangeFFT(runtime, (2, 1), 64, 128, dtype=np.complex64)(x)
+    assert got.n_invalid == 1 and np.isnan(got.profiles[0, 0]).all()
+    assert rel_err(got.profiles[1], reference.range_profile(x, 128)[1]) <= RANGE_FFT_RTOL
+
+
+def test_wrong_shape_or_dtype_is_refused(runtime):
+    plan = RangeFFT(runtime, (64, 4), 256, 512)
+    with pytest.raises(ShapeError, match=r"expected a frame of shape \(64, 4, 256\) int16, got \(256, 256\) float64"):
+        plan(np.zeros((256, 256)))
+    with pytest.raises(ShapeError, match="int16"):
+        plan(np.zeros((64, 4, 256), np.float32))
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    (dict(n_samples=256, n_fft=128), "n_fft must be a power of two >= "),
+    (dict(n_samples=256, n_fft=768), "power of two"),
+    (dict(n_samples=256, n_fft=512, dtype=np.float64), "dtype must be one of"),
+    (dict(n_samples=256, n_fft=512, window="kaiser"), "window must be one of"),
+    (dict(n_samples=256, n_fft=512, output="db"), "output must be one of"),
+    (dict(n_samples=256, n_fft=512, local_size=3), "local_size must be a power of two"),
+    (dict(n_samples=256, n_fft=512, local_size=256), "local_size must be a power of two"),
+    (dict(n_samples=256, n_fft=512, clip_level=-1.0), "clip_level must be positive"),
+    (dict(n_samples=1, n_fft=4), "n_samples must be at least 2"),
+])
+def test_impossible_plans_are_refused(runtime, kwargs, match):
+    with pytest.raises(ConfigError, match=match):
+        RangeFFT(runtime, (64, 4), **kwargs)
+
+
+def test_gain_of_wrong_length_is_refused(runtime):
+    with pytest.raises(ShapeError, match=r"gain must be finite with shape \(256,\)"):
+        RangeFFT(runtime, (64, 4), 256, 512, gain=np.ones(10))
