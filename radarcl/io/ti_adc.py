@@ -19,7 +19,7 @@ TI_OPENRADAR = RadarConfig(
     carrier_hz=77.4201e9, bandwidth_hz=60e12 * 51.2e-6, sweep_time_s=51.2e-6,
     sample_rate_hz=2.5e6, n_samples=128, complex_samples=True,
     beamwidth_az_deg=60.0, beamwidth_el_deg=30.0, n_azimuth=1, n_elevation=1,
-    range_min_m=0.1, range_max_m=6.0)
+    range_min_m=0.2, range_max_m=6.0)   # below 0.2 m: transmitter-to-receiver coupling
 
 
 def words_to_int16(values):

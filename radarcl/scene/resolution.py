@@ -40,14 +40,31 @@ class ResolutionResult:
     n_ffts: tuple
     resolved_fraction: dict      # n_fft -> fraction in [0, 1]
     peak_ranges: dict            # n_fft -> list of peak-range lists, one per case
-    n_cases: int
+    target_ranges: np.ndarray    # (n_cases, 2) true ranges of the pair in each case
+
+    @property
+    def n_cases(self):
+        """Number of simulated (phase, offset) cases."""
+        return len(self.target_ranges)
+
+    def peak_error_m(self, n_fft):
+        """Largest distance [m] between a target and its peak over the cases resolved at n_fft."""
+        errors = [max(abs(p[0] - t[0]), abs(p[-1] - t[1]))
+                  for p, t in zip(self.peak_ranges[n_fft], self.target_ranges) if len(p) >= 2]
+        return max(errors, default=float("nan"))
 
 
 def two_target_experiment(config: RadarConfig, near_m=7.0, separation_m=1.0, n_ffts=(256, 512, 1024),
-                          n_phases=12, n_offsets=10, window="hann", min_dip_db=0.0):
+                          n_phases=12, n_offsets=10, window="hann", min_dip_db=0.0, transform=None):
     """Simulate two equal point targets at near_m + offset and near_m + offset + separation_m for
     every relative phase (n_phases over 2 pi) and offset (n_offsets over one resolution cell);
-    count the cases with two peaks for each padded FFT length."""
+    count the cases with two peaks for each padded FFT length.
+
+    transform(samples (n_cases, n), n_fft) -> profiles; default the float64 oracle
+    ``reference.range_profile`` with this window (pass a kernel plan's call to test the kernel)."""
+    if transform is None:
+        def transform(samples, n_fft):
+            return reference.range_profile(samples, n_fft, window=window)
     phases = np.linspace(0, 2 * np.pi, n_phases, endpoint=False)
     offsets = np.linspace(0, config.range_resolution_m, n_offsets, endpoint=False)
     shape = (n_offsets, n_phases, 2)
@@ -60,8 +77,8 @@ def two_target_experiment(config: RadarConfig, near_m=7.0, separation_m=1.0, n_f
     lo, hi = near_m - 1.5, near_m + config.range_resolution_m + separation_m + 1.5
     fractions, peaks = {}, {}
     for n_fft in n_ffts:
-        profiles = reference.range_profile(samples, n_fft, window=window)
+        profiles = transform(samples, n_fft)
         axis = config.bin_ranges_m(n_fft)
         peaks[n_fft] = [count_peaks(p, axis, lo, hi, min_dip_db) for p in profiles]
         fractions[n_fft] = float(np.mean([len(p) >= 2 for p in peaks[n_fft]]))
-    return ResolutionResult(separation_m, tuple(n_ffts), fractions, peaks, len(samples))
+    return ResolutionResult(separation_m, tuple(n_ffts), fractions, peaks, ranges.reshape(-1, 2))

@@ -1,0 +1,34 @@
+"""House rules: one name, three files; the installed package carries kernels/."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_every_kernel_has_its_wrapper_and_test():
+    stems = [p.stem for p in (ROOT / "kernels").glob("*.cl")]
+    assert stems, "no kernels found"
+    for stem in stems:
+        assert (ROOT / "radarcl" / "stages" / f"{stem}.py").is_file(), f"kernels/{stem}.cl has no wrapper"
+        assert (ROOT / "tests" / f"test_{stem}.py").is_file(), f"kernels/{stem}.cl has no test"
+
+
+def test_installed_copy_runs_a_kernel(tmp_path):
+    """`pip install .` (not editable) into a fresh target, then run a kernel from there,
+    from a directory where the source tree cannot be imported."""
+    target = tmp_path / "site"
+    subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation",
+                    "--target", str(target), str(ROOT)], check=True, cwd=tmp_path)
+    assert (target / "radarcl" / "kernels" / "range_fft.cl").is_file()
+    script = ("import numpy as np, radarcl, radarcl.cl as c\n"
+              "from radarcl.stages.range_fft import RangeFFT\n"
+              "assert str(c.kernels_dir()).startswith(%r), c.kernels_dir()\n"
+              "p = RangeFFT(c.Runtime(), (2, 1), 8, 16, dtype=np.float32)(np.ones((2, 1, 8), np.float32)).profiles\n"
+              "print(radarcl.__file__, float(p[0, 0, 0]))\n") % str(target)
+    env = {**os.environ, "PYTHONPATH": str(target)}
+    out = subprocess.run([sys.executable, "-c", script], check=True, cwd=tmp_path, env=env,
+                         capture_output=True, text=True).stdout
+    assert out.startswith(str(target)) and out.split()[-1] == "1.0"

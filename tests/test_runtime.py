@@ -1,0 +1,73 @@
+"""OpenCL runtime: device choice, memoised builds, clear errors."""
+
+import numpy as np
+import pytest
+
+from radarcl.cl import Runtime, choose_device, device_report, kernels_dir
+from radarcl.cl import runtime as rt_module
+from radarcl.errors import KernelBuildError, NoOpenCLError
+
+
+def test_device_override_by_name_and_index(monkeypatch):
+    default = choose_device()
+    monkeypatch.setenv("RADARCL_DEVICE", default.name[:6])
+    assert choose_device().int_ptr == default.int_ptr
+    monkeypatch.setenv("RADARCL_DEVICE", "0:0")
+    assert choose_device() is not None
+    monkeypatch.setenv("RADARCL_DEVICE", "no-such-device")
+    with pytest.raises(NoOpenCLError, match="matches no device; available: 0:0"):
+        choose_device()
+
+
+def test_no_platform_says_how_to_get_pocl(monkeypatch):
+    import pyopencl as cl
+
+    def no_platforms():
+        raise cl.Error("clGetPlatformIDs failed: PLATFORM_NOT_FOUND_KHR")
+
+    monkeypatch.setattr(cl, "get_platforms", no_platforms)
+    with pytest.raises(NoOpenCLError, match="pip install pocl-binary-distribution"):
+        choose_device(spec="")
+
+
+def test_builds_are_memoised_and_kernels_fetched_once(runtime):
+    a = runtime.kernels("range_fft", _defines())
+    b = runtime.kernels("range_fft", _defines())
+    assert a is b and a["range_fft"] is b["range_fft"]
+    other = runtime.kernels("range_fft", {**_defines(), "POWER": 1})
+    assert other is not a
+
+
+def test_build_failure_names_file_options_and_log(runtime, tmp_path, monkeypatch):
+    (tmp_path / "radarcl_common.h").write_text("")
+    (tmp_path / "broken.cl").write_text("__kernel void broken(__global float *x) { x[0] = undefined_name; }\n")
+    monkeypatch.setattr(rt_module, "kernels_dir", lambda: tmp_path)
+    with pytest.raises(KernelBuildError) as info:
+        Runtime(runtime.device).kernels("broken", {"ANSWER": 42})
+    message = str(info.value)
+    assert "broken.cl" in message and "-DANSWER=42" in message and "undefined_name" in message
+
+
+def test_missing_kernel_name_is_explained(runtime):
+    with pytest.raises(KeyError, match="range_fft.cl has no kernel 'nope'"):
+        runtime.kernels("range_fft", _defines())["nope"]
+
+
+def test_info_lists_the_chosen_device():
+    lines = device_report()
+    assert any(line.startswith("* ") for line in lines)
+    assert any("int32 atomics  yes" in line for line in lines)
+
+
+def test_kernels_dir_has_the_common_header():
+    assert (kernels_dir() / "radarcl_common.h").is_file()
+
+
+def _defines():
+    return dict(N_FFT=8, N_SAMPLES=8, M=8, LOG2_M=3, P=1, LOG2_P=0, N_BINS=4, LOCAL_SIZE=2,
+                INPUT_KIND=0, WINDOWED=1, POWER=0, CHECK_FINITE=1)
+
+
+def test_float_defines_are_exact():
+    assert rt_module._define("X", 0.1) == "-DX=0.1f" and rt_module._define("B", True) == "-DB=1"
+    assert float(rt_module._define("X", 1e-7)[4:-1]) == np.float64(1e-7)
