@@ -1,0 +1,56 @@
+"""The `radarcl` command: help, info, the demo's outputs, the bench's JSON, clear errors."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from radarcl.cli import main
+
+
+def run_cli(*args, env=None):
+    return subprocess.run([sys.executable, "-m", "radarcl", *args], capture_output=True, text=True, env=env)
+
+
+def test_help_lists_commands():
+    out = run_cli("--help")
+    assert out.returncode == 0
+    for command in ("info", "demo", "bench"):
+        assert command in out.stdout
+
+
+def test_info(capsys):
+    assert main(["info"]) == 0
+    assert "(* = chosen" in capsys.readouterr().out
+
+
+def test_demo_writes_its_outputs(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    for name in ("fig9.png", "frame.png", "summary.json"):
+        assert (tmp_path / name).stat().st_size > 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert len(summary["pair_peaks_m"]["256"]) == 1 and len(summary["pair_peaks_m"]["1024"]) == 2
+    assert "§4.1 sweep" in capsys.readouterr().out
+
+
+def test_bench_json_has_the_issue_keys(capsys):
+    assert main(["bench", "range-fft", "--json", "--repeat", "10", "--n-fft", "512"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    for key in ("ms_per_frame", "scipy_ms_per_frame", "ratio_vs_scipy", "max_rel_err", "runs"):
+        assert key in result
+    assert result["max_rel_err"] < 1e-6 and result["ratio_vs_scipy"] > 0
+
+
+def test_bad_device_is_a_sentence_not_a_traceback():
+    import os
+
+    out = run_cli("info", env={**os.environ, "RADARCL_DEVICE": "no-such-device"})
+    assert out.returncode == 2
+    assert out.stderr.startswith("radarcl: error: RADARCL_DEVICE='no-such-device' matches no device")
+    assert "Traceback" not in out.stderr
+
+
+def test_unknown_benchmark_is_refused():
+    out = run_cli("bench", "warp-drive")
+    assert out.returncode == 2 and "invalid choice" in out.stderr
