@@ -3,11 +3,13 @@
  * Equivalent to radarcl.reference.range_profile(samples, N_FFT, window=..., output=...,
  * gain=scale * sum(window)) in float32, plus radarcl.reference.beam_flags(samples, clip_level).
  *
- * Work mapping: one work-group per JOB. For real input a job is a PAIR of beams (2g, 2g+1)
- * packed as z = a + i b into one complex FFT and separated on store:
+ * Work mapping: get_group_id(0) = g handles VEC jobs g*VEC + l, one per vector LANE l, so every
+ * butterfly is SIMD across jobs and twiddles are scalars shared by the lanes (VEC = 4 or 8 on
+ * CPUs, where PoCL does not vectorise across work-items; VEC = 1 on GPUs). For real input a job is
+ * a PAIR of beams (2j, 2j+1) packed as z = a + i b into one complex FFT and separated on store:
  *     A[k] = (Z[k] + conj Z[N-k]) / 2,   B[k] = (Z[k] - conj Z[N-k]) / 2i,
  * which halves the arithmetic. For complex (I/Q) input a job is one beam.
- * get_group_id(0) = job, get_local_id(0) = worker; LOCAL_SIZE workers loop over the butterflies.
+ * get_local_id(0) = worker; LOCAL_SIZE workers loop over the butterflies of the group's jobs.
  *
  * Zero padding is pruned: with N_FFT = P * M and M >= N_SAMPLES, bin P m + q of the padded
  * transform is the M-point FFT of z_j W_N^{jq}, so the P sub-transforms skip the zeros
@@ -17,8 +19,9 @@
  *
  * -D constants (set by radarcl/stages/range_fft.py):
  *   N_FFT, N_SAMPLES, M, LOG2_M, P, LOG2_P, N_BINS  sizes as above; N_BINS = N_FFT/2 (real) or N_FFT
+ *   VEC          jobs per work-group, one per SIMD lane: 1, 2, 4 or 8
  *   LOCAL_SIZE   work-group size, a power of two dividing N_FFT/4; a constant so that the
- *                butterfly loops have fixed trip counts and PoCL vectorises across workers
+ *                butterfly loops have fixed trip counts
  *   INPUT_KIND   0 float32 real, 1 int16 real, 2 complex64 (float2)
  *   WINDOWED     1: multiply samples by window[] on load; 0: rectangular, no load
  *   POWER        1: |X|^2 on store; 0: |X|
@@ -41,6 +44,37 @@ typedef float sample_t;
 #define BEAMS_PER_JOB 2
 #endif
 
+/* VEC complex numbers: .lo holds the real parts of the lanes, .hi the imaginary parts. With
+ * VEC = 1 this is the plain float2 (re, im). */
+#if VEC == 1
+typedef float rvec;
+typedef float2 cvec;
+#elif VEC == 2
+typedef float2 rvec;
+typedef float4 cvec;
+#elif VEC == 4
+typedef float4 rvec;
+typedef float8 cvec;
+#elif VEC == 8
+typedef float8 rvec;
+typedef float16 cvec;
+#else
+#error "VEC must be 1, 2, 4 or 8"
+#endif
+typedef union { rvec v; float s[VEC]; } lanes_t;
+
+/* Lanes times one scalar twiddle t. */
+inline cvec cmul_tw(cvec a, float2 t)
+{
+    return (cvec)(a.lo * t.x - a.hi * t.y, a.lo * t.y + a.hi * t.x);
+}
+
+/* Lanes times -i: the forward radix-4 quarter turn, exact. */
+inline cvec cmul_minus_i_v(cvec a)
+{
+    return (cvec)(a.hi, -a.lo);
+}
+
 /* Read one sample as float, set flags for NaN/Inf and clipping. */
 inline float load_part(float v, float clip_level, int *bad)
 {
@@ -49,6 +83,17 @@ inline float load_part(float v, float clip_level, int *bad)
 #endif
     if (fabs(v) >= clip_level) *bad |= FLAG_CLIPPED;
     return v;
+}
+
+/* |x| or |x|^2 per lane. */
+inline rvec detect(cvec x)
+{
+    const rvec p = x.lo * x.lo + x.hi * x.hi;
+#if POWER
+    return p;
+#else
+    return sqrt(p);
+#endif
 }
 
 __kernel __attribute__((reqd_work_group_size(LOCAL_SIZE, 1, 1)))
@@ -62,75 +107,82 @@ void range_fft(
     __global float *profiles,         /* (n_beams, N_BINS) magnitude or power */
     __global uchar *flags)            /* (n_beams) FLAG_* bits */
 {
-    __local float2 buf0[N_FFT];
-    __local float2 buf1[N_FFT];
-    __local int job_flags[2];
+    __local cvec buf0[N_FFT];
+    __local cvec buf1[N_FFT];
+    __local int job_flags[BEAMS_PER_JOB * VEC];
 
     const int lid = get_local_id(0);
-    const int beam_a = get_group_id(0) * BEAMS_PER_JOB;
-    const int has_b = !COMPLEX_INPUT && beam_a + 1 < n_beams;
-    const __global sample_t *row_a = samples + (size_t)beam_a * N_SAMPLES;
+    const int beam0 = get_group_id(0) * VEC * BEAMS_PER_JOB;   /* first beam of lane 0 */
 
-    if (lid == 0) { job_flags[0] = 0; job_flags[1] = 0; }   /* local size may be 1 */
+    if (lid == 0)                                               /* local size may be 1 */
+        for (int b = 0; b < BEAMS_PER_JOB * VEC; b++) job_flags[b] = 0;
     barrier(CLK_LOCAL_MEM_FENCE);
 
     /* Load each sample once: buf0[q M + j] = w_j z_j W_N^{j q} for the P blocks, zero beyond
-     * the samples. */
-    int bad_a = 0, bad_b = 0;
+     * the samples and beyond the last beam. */
+    int bad[BEAMS_PER_JOB * VEC];
+    for (int b = 0; b < BEAMS_PER_JOB * VEC; b++) bad[b] = 0;
     for (int j = lid; j < M; j += LOCAL_SIZE) {
-        float2 z = (float2)(0.0f, 0.0f);
-        if (j < N_SAMPLES) {
+        lanes_t re, im;
+        for (int l = 0; l < VEC; l++) {
+            const int beam = beam0 + l * BEAMS_PER_JOB;
+            float a = 0.0f, b = 0.0f;
+            if (j < N_SAMPLES && beam < n_beams) {
 #if COMPLEX_INPUT
-            const float2 s = row_a[j];
-            z = (float2)(load_part(s.x, clip_level, &bad_a), load_part(s.y, clip_level, &bad_a));
+                const float2 s = samples[(size_t)beam * N_SAMPLES + j];
+                a = load_part(s.x, clip_level, &bad[l]);
+                b = load_part(s.y, clip_level, &bad[l]);
 #else
-            z.x = load_part((float)row_a[j], clip_level, &bad_a);
-            if (has_b) z.y = load_part((float)row_a[N_SAMPLES + j], clip_level, &bad_b);
+                a = load_part((float)samples[(size_t)beam * N_SAMPLES + j], clip_level, &bad[2 * l]);
+                if (beam + 1 < n_beams)
+                    b = load_part((float)samples[(size_t)(beam + 1) * N_SAMPLES + j], clip_level, &bad[2 * l + 1]);
 #endif
-#if WINDOWED
-            z *= window[j];
-#endif
+            }
+            re.s[l] = a;
+            im.s[l] = b;
         }
+        cvec z = (cvec)(re.v, im.v);
+#if WINDOWED
+        if (j < N_SAMPLES) z *= window[j];
+#endif
         buf0[j] = z;
         for (int q = 1; q < P; q++)
-            buf0[q * M + j] = cmul(z, twiddle[j * q]);
+            buf0[q * M + j] = cmul_tw(z, twiddle[j * q]);
     }
-    if (bad_a) atomic_or(&job_flags[0], bad_a);
-    if (bad_b) atomic_or(&job_flags[1], bad_b);
+    for (int b = 0; b < BEAMS_PER_JOB * VEC; b++)
+        if (bad[b]) atomic_or(&job_flags[b], bad[b]);
     barrier(CLK_LOCAL_MEM_FENCE);
 
     /* Stockham passes over the P blocks at once; p = length of the finished sub-transforms. */
-    __local float2 *src = buf0;
-    __local float2 *dst = buf1;
+    __local cvec *src = buf0;
+    __local cvec *dst = buf1;
     int p = 1;
 #if LOG2_M & 1
     for (int i = lid; i < N_FFT / 2; i += LOCAL_SIZE) {
         const int base = (i >> (LOG2_M - 1)) << LOG2_M;   /* block q * M */
         const int ii = i & (M / 2 - 1);
-        const float2 u0 = src[base + ii];
-        const float2 u1 = src[base + ii + M / 2];
+        const cvec u0 = src[base + ii];
+        const cvec u1 = src[base + ii + M / 2];
         dst[base + 2 * ii] = u0 + u1;                      /* p = 1: no twiddle */
         dst[base + 2 * ii + 1] = u0 - u1;
     }
     barrier(CLK_LOCAL_MEM_FENCE);
-    { __local float2 *t = src; src = dst; dst = t; }
+    { __local cvec *t = src; src = dst; dst = t; }
     p = 2;
 #endif
+#if LOG2_M >= 2
     for (; p < M; p <<= 2) {
         const int tw_step = N_FFT / (4 * p);                /* W_{4p}^k = W_N^{k N / 4p} */
         for (int i = lid; i < N_FFT / 4; i += LOCAL_SIZE) {
             const int base = (i >> (LOG2_M - 2)) << LOG2_M;
             const int ii = i & (M / 4 - 1);
             const int k = ii & (p - 1);
-            float2 u0 = src[base + ii];
-            float2 u1 = src[base + ii + M / 4];
-            float2 u2 = src[base + ii + M / 2];
-            float2 u3 = src[base + ii + 3 * M / 4];
             const int t = k * tw_step;
-            u1 = cmul(u1, twiddle[t]);
-            u2 = cmul(u2, twiddle[2 * t]);
-            u3 = cmul(u3, twiddle[3 * t]);
-            const float2 v0 = u0 + u2, v1 = u0 - u2, v2 = u1 + u3, v3 = cmul_minus_i(u1 - u3);
+            const cvec u0 = src[base + ii];
+            const cvec u1 = cmul_tw(src[base + ii + M / 4], twiddle[t]);
+            const cvec u2 = cmul_tw(src[base + ii + M / 2], twiddle[2 * t]);
+            const cvec u3 = cmul_tw(src[base + ii + 3 * M / 4], twiddle[3 * t]);
+            const cvec v0 = u0 + u2, v1 = u0 - u2, v2 = u1 + u3, v3 = cmul_minus_i_v(u1 - u3);
             const int j = base + ((ii - k) << 2) + k;
             dst[j] = v0 + v2;
             dst[j + p] = v1 + v3;
@@ -138,41 +190,37 @@ void range_fft(
             dst[j + 3 * p] = v1 - v3;
         }
         barrier(CLK_LOCAL_MEM_FENCE);
-        { __local float2 *t = src; src = dst; dst = t; }
+        { __local cvec *t = src; src = dst; dst = t; }
     }
+#endif
 
     /* Store: Z[P m + q] sits at src[q M + m]. */
-    const int fa = job_flags[0], fb = job_flags[1];
-    if (lid == 0) {
-        flags[beam_a] = (uchar)fa;
-        if (has_b) flags[beam_a + 1] = (uchar)fb;
-    }
-    __global float *out_a = profiles + (size_t)beam_a * N_BINS;
+    if (lid == 0)
+        for (int b = 0; b < BEAMS_PER_JOB * VEC; b++)
+            if (beam0 + b < n_beams) flags[beam0 + b] = (uchar)job_flags[b];
     for (int k = lid; k < N_BINS; k += LOCAL_SIZE) {
-        const float2 zk = src[((k & (P - 1)) << LOG2_M) + (k >> LOG2_P)];
+        const cvec zk = src[((k & (P - 1)) << LOG2_M) + (k >> LOG2_P)];
+        const float s = scale[k];
+        lanes_t va, vb;
 #if COMPLEX_INPUT
-        const float2 xa = zk;
+        va.v = detect(zk) * s;
 #else
         const int kn = (N_FFT - k) & (N_FFT - 1);
-        const float2 zn = conj2(src[((kn & (P - 1)) << LOG2_M) + (kn >> LOG2_P)]);
-        const float2 xa = 0.5f * (zk + zn);
-        const float2 xb = cmul_minus_i(0.5f * (zk - zn));
+        const cvec zn_raw = src[((kn & (P - 1)) << LOG2_M) + (kn >> LOG2_P)];
+        const cvec zn = (cvec)(zn_raw.lo, -zn_raw.hi);          /* conj Z[N-k] */
+        va.v = detect(0.5f * (zk + zn)) * s;
+        vb.v = detect(cmul_minus_i_v(0.5f * (zk - zn))) * s;
 #endif
-#if POWER
-        float va = dot(xa, xa) * scale[k];
-#else
-        float va = sqrt(dot(xa, xa)) * scale[k];
-#endif
-        out_a[k] = (fa & FLAG_NONFINITE) ? NAN : va;
+        for (int l = 0; l < VEC; l++) {
+            const int beam = beam0 + l * BEAMS_PER_JOB;
+            if (beam < n_beams)
+                profiles[(size_t)beam * N_BINS + k] =
+                    (job_flags[l * BEAMS_PER_JOB] & FLAG_NONFINITE) ? NAN : va.s[l];
 #if !COMPLEX_INPUT
-        if (has_b) {
-#if POWER
-            float vb = dot(xb, xb) * scale[k];
-#else
-            float vb = sqrt(dot(xb, xb)) * scale[k];
+            if (beam + 1 < n_beams)
+                profiles[(size_t)(beam + 1) * N_BINS + k] =
+                    (job_flags[2 * l + 1] & FLAG_NONFINITE) ? NAN : vb.s[l];
 #endif
-            out_a[N_BINS + k] = (fb & FLAG_NONFINITE) ? NAN : vb;
         }
-#endif
     }
 }

@@ -26,7 +26,7 @@ def cmd_demo(args):
     """Run the main job on the built-in default."""
     from radarcl import demo
 
-    demo.run(_runtime(), args.out, seed=args.seed)
+    demo.run(_runtime(), args.out, seed=args.seed, report=print)
     return 0
 
 

@@ -33,7 +33,7 @@ TARGETS = ([PointTarget(*PAIR_BEAM, PAIR_M[0], 0.25, 0.0), PointTarget(*PAIR_BEA
 N_FFTS = (256, 512, 1024)
 
 
-def run(runtime, out_dir, seed=0, report=print):
+def run(runtime, out_dir, seed=0, report=log.info):
     """Run the demo; ``report`` receives progress lines. Returns the summary dict."""
     import matplotlib
 

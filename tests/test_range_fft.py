@@ -47,11 +47,26 @@ def test_matches_oracle(runtime, dtype, n, n_fft, window, output):
 
 
 @pytest.mark.parametrize("local_size", [1, 2, 16, 64, 256])
-def test_local_sizes_agree(runtime, local_size):
+@pytest.mark.parametrize("vector_width", [1, 2, 4, 8])
+def test_local_sizes_and_vector_widths_agree(runtime, local_size, vector_width):
     x = make_samples(np.random.default_rng(7), (64, 4, 256), np.int16)
     want = reference.range_profile(x, 1024)
-    got = RangeFFT(runtime, (64, 4), 256, 1024, local_size=local_size)(x)
+    got = RangeFFT(runtime, (64, 4), 256, 1024, local_size=local_size, vector_width=vector_width)(x)
     assert rel_err(got.profiles, want) <= RANGE_FFT_RTOL
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.complex64])
+@pytest.mark.parametrize("batch", [(1, 1), (3, 5), (17, 1)])
+def test_partial_last_group(runtime, dtype, batch):
+    # Beam counts that leave lanes of the last work-group empty (and an unpaired last beam).
+    x = make_samples(np.random.default_rng(8), (*batch, 64), dtype)
+    x[0, 0, 5] = np.nan
+    got = RangeFFT(runtime, batch, 64, 256, dtype=dtype, vector_width=8)(x)
+    want = reference.range_profile(x, 256)
+    valid = got.valid
+    assert got.n_invalid == 1 and np.isnan(got.profiles[0, 0]).all()
+    if valid.any():
+        assert rel_err(got.profiles[valid], want[valid]) <= RANGE_FFT_RTOL
 
 
 def test_repeatable_bit_for_bit(runtime):
@@ -146,6 +161,7 @@ def test_wrong_shape_or_dtype_is_refused(runtime):
     (dict(n_samples=256, n_fft=512, local_size=256), "local_size must be a power of two"),
     (dict(n_samples=256, n_fft=512, clip_level=-1.0), "clip_level must be positive"),
     (dict(n_samples=1, n_fft=4), "n_samples must be at least 2"),
+    (dict(n_samples=256, n_fft=512, vector_width=3), "vector_width must be one of"),
 ])
 def test_impossible_plans_are_refused(runtime, kwargs, match):
     with pytest.raises(ConfigError, match=match):

@@ -65,7 +65,7 @@ def test_kernels_dir_has_the_common_header():
 
 def _defines():
     return dict(N_FFT=8, N_SAMPLES=8, M=8, LOG2_M=3, P=1, LOG2_P=0, N_BINS=4, LOCAL_SIZE=2,
-                INPUT_KIND=0, WINDOWED=1, POWER=0, CHECK_FINITE=1)
+                INPUT_KIND=0, WINDOWED=1, POWER=0, CHECK_FINITE=1, VEC=1)
 
 
 def test_float_defines_are_exact():
