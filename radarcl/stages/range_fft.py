@@ -145,7 +145,7 @@ class RangeFFT:
         self._scale = runtime.to_device(per_bin.astype(np.float32))
         self.profiles_buf = runtime.empty(self.n_beams * self.n_bins * 4)
         self.flags_buf = runtime.empty(self.n_beams)
-        self._samples_buf = None
+        self.samples_buf = None   # device copy of the last uploaded frame (see upload)
         self._cl = cl
 
     @property
@@ -182,15 +182,15 @@ class RangeFFT:
     def upload(self, samples):
         """Copy a checked frame into the plan's input buffer; returns the copy event."""
         samples = self.check(samples)
-        if self._samples_buf is None:
-            self._samples_buf = self.runtime.empty(samples.nbytes)
-        return self._cl.enqueue_copy(self.runtime.queue, self._samples_buf, samples, is_blocking=False)
+        if self.samples_buf is None:
+            self.samples_buf = self.runtime.empty(samples.nbytes)
+        return self._cl.enqueue_copy(self.runtime.queue, self.samples_buf, samples, is_blocking=False)
 
     def __call__(self, samples):
         """Process one frame: (n_az, n_el, n_samples) -> RangeFFTResult (blocking)."""
         cl = self._cl
         copy = self.upload(samples)
-        done = self.enqueue(self._samples_buf, wait_for=[copy])
+        done = self.enqueue(self.samples_buf, wait_for=[copy])
         profiles = np.empty((*self.batch, self.n_bins), np.float32)
         flags = np.empty(self.batch, np.uint8)
         cl.enqueue_copy(self.runtime.queue, profiles, self.profiles_buf, wait_for=[done])
