@@ -34,7 +34,7 @@ def count_peaks(profile, ranges_m, lo_m, hi_m, min_dip_db=0.0):
 
 @dataclass(frozen=True)
 class ResolutionResult:
-    """Fraction of (phase, offset) cases with two peaks, per FFT length; example profiles."""
+    """Fraction of (phase, offset) cases with two peaks per FFT length, the peaks found, the truth."""
 
     separation_m: float
     n_ffts: tuple
