@@ -168,3 +168,148 @@ class RadarConfig:
 
 PAPER_RADAR = RadarConfig()
 """The radar of Foessel-Bunting §2.3, the default everywhere."""
+
+
+@dataclass(frozen=True)
+class CfarConfig:
+    """A CFAR detector (paper §3.3, Fig. 6) on power profiles; see ``radarcl.detection``.
+
+    kind: "ca" (cell averaging, the paper's), "go" (greatest of), "so" (smallest of), "os"
+        (ordered statistic).
+    guard, train: guard and training cells per side of the cell under test.
+    pfa: design false-alarm probability; the threshold factor ``alpha`` follows from it.
+    rank: OS only, the k-th smallest of the 2 x train cells (default round(3/4 n), Rohling).
+    noise_floor: the noise estimate is max(estimate, noise_floor), so an all-zero training
+        window gives a finite ratio and log. 1e-30 keeps alpha x floor a normal float32.
+
+    Defaults: the paper's cell averaging at P_fa 1e-3, sized for its 512 bins of 0.125 m. The
+    guard band must hold half of the widest pulse: a ground echo at -9 deg spans some 35 bins
+    at the threshold, and with a narrower guard its own bins raise the noise estimate until it
+    is no longer detected in full (measured on scene.profiles.fig10_ground_beam: guard 4 and
+    8 lose it or cut it below the wide-pulse width, 16 keeps it wide).
+
+    Edge rule "shift": every cell uses exactly 2 x train training cells inside the profile.
+    Near an end, the cells the missing side cannot give are taken further out on the other
+    side, outside the guard band. The estimate then has the same statistics at every bin, so
+    one alpha gives the design P_fa everywhere (zero padding would bias it low, wrap-around
+    would mix the two ends). The oracle is ``radarcl.reference.cfar``.
+    """
+
+    kind: str = "ca"
+    guard: int = 16         # covers half of a wide ground echo, so it does not mask itself
+    train: int = 16
+    pfa: float = 1e-3
+    rank: int | None = None
+    noise_floor: float = 1e-30
+
+    def __post_init__(self):
+        from radarcl import detection
+
+        _require(self.kind in detection.CFAR_KINDS,
+                 f"CFAR kind must be one of {detection.CFAR_KINDS}, got {self.kind!r}")
+        _require(isinstance(self.guard, (int, np.integer)) and not isinstance(self.guard, bool)
+                 and self.guard >= 0, f"guard must be an integer >= 0, got {self.guard!r}")
+        _positive_int("train", self.train)
+        _require(isinstance(self.pfa, (int, float)) and 0 < self.pfa < 1,
+                 f"pfa must lie strictly between 0 and 1, got {self.pfa!r}")
+        if self.kind == "os":
+            if self.rank is None:
+                object.__setattr__(self, "rank", detection.default_rank(self.n_train))
+            _require(isinstance(self.rank, (int, np.integer)) and 1 <= self.rank <= self.n_train,
+                     f"OS-CFAR rank must be in [1, {self.n_train}] (2 x train cells), got {self.rank!r}")
+        else:
+            _require(self.rank is None, f"rank applies to OS-CFAR only, got rank={self.rank!r} "
+                                        f"for kind {self.kind!r}")
+        _require(isinstance(self.noise_floor, (int, float)) and 1e-37 <= self.noise_floor < 1e37,
+                 f"noise_floor must lie in [1e-37, 1e37] (a normal float32), got {self.noise_floor!r}")
+        _require(self.alpha * self.noise_floor >= 1.2e-38,
+                 f"alpha x noise_floor = {self.alpha * self.noise_floor:.3g} is below the smallest normal "
+                 f"float32; raise noise_floor or lower pfa")
+
+    @property
+    def n_train(self):
+        """Training cells in all: 2 x train."""
+        return 2 * int(self.train)
+
+    @property
+    def window(self):
+        """Cells a profile needs at least: the cell under test, 2 x guard and 2 x train."""
+        return 1 + 2 * int(self.guard) + 2 * int(self.train)
+
+    @property
+    def alpha(self):
+        """Threshold factor on the noise estimate for the design pfa (``detection.threshold_factor``)."""
+        from radarcl import detection
+
+        return detection.threshold_factor(self.kind, float(self.pfa), self.n_train,
+                                          int(self.rank) if self.rank is not None else None)
+
+    def check_profile_length(self, n_bins):
+        """Refuse profiles shorter than the CFAR window."""
+        _require(n_bins >= self.window,
+                 f"a {self.kind.upper()}-CFAR with {self.guard} guard and {self.train} training cells per "
+                 f"side needs profiles of at least {self.window} bins, got {n_bins}")
+        return int(n_bins)
+
+
+@dataclass(frozen=True)
+class InterpretConfig:
+    """The down-range interpreter, eq. 12, with the paper's defaults.
+
+    Evidence per bin, in natural log-odds (``radarcl.logodds``):
+      pulse bins (r/n > alpha):                 k_occ * log10(r / n), never below 0
+      noise bins before the first wide pulse:   e_high  (E_h)
+      noise bins after its end:                 e_low   (E_l)
+      bins outside [range_min_m, range_max_m]:  0 (no evidence)
+    k_occ = 1, E_h = -1 are read off the paper's Fig. 10: "a value of -1 providing strong
+    evidence that the cells are empty", and "close to +2" on a ground pulse some 20 dB above the
+    noise (log10 of the power ratio = 2). The paper gives no number for E_l, only "a weaker
+    level"; -0.1 is our choice (its empirical rule says noise behind a surface implies little).
+    wide_pulse_m: the wide-pulse rule (physics.wide_pulse_width); default: the paper's stand
+        (sensor 1.5 m above flat ground - our assumption, the paper does not say), lowest
+        elevation -14 deg, 2 deg beam, 0.5 m resolution: 1.87 m.
+    max_pulses: pulses kept per beam (more are counted, and still give evidence).
+    """
+
+    k_occ: float = 1.0
+    e_high: float = -1.0
+    e_low: float = -0.1
+    range_min_m: float = 1.0
+    range_max_m: float = 64.0
+    wide_pulse_m: float = None
+    max_pulses: int = 32
+
+    def __post_init__(self):
+        if self.wide_pulse_m is None:
+            object.__setattr__(self, "wide_pulse_m", PAPER_WIDE_PULSE_M)
+        for name in ("k_occ", "e_high", "e_low", "range_min_m", "range_max_m", "wide_pulse_m"):
+            value = getattr(self, name)
+            _require(isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value),
+                     f"{name} must be a finite number, got {value!r}")
+        _require(self.k_occ >= 0, f"k_occ must be >= 0 (a stronger echo is more evidence), got {self.k_occ}")
+        _require(self.e_high <= 0 and self.e_low <= 0,
+                 f"E_h and E_l are evidence of emptiness and must be <= 0 (eq. 12), got "
+                 f"{self.e_high} and {self.e_low}")
+        _require(0 <= self.range_min_m < self.range_max_m,
+                 f"need 0 <= range_min_m < range_max_m, got {self.range_min_m} and {self.range_max_m}")
+        _require(self.wide_pulse_m > 0, f"wide_pulse_m must be positive, got {self.wide_pulse_m}")
+        _positive_int("max_pulses", self.max_pulses)
+
+    def bin_interval(self, bin_spacing_m, n_bins):
+        """[first, last] bins (inclusive) whose range lies in [range_min_m, range_max_m]:
+        bin j sits at j x bin_spacing_m. Empty (first > last) when none does."""
+        _require(bin_spacing_m > 0, f"bin spacing must be positive, got {bin_spacing_m}")
+        first = max(0, math.ceil(self.range_min_m / bin_spacing_m - 1e-9))
+        last = min(int(n_bins) - 1, math.floor(self.range_max_m / bin_spacing_m + 1e-9))
+        return first, last
+
+    def wide_bins(self, bin_spacing_m):
+        """A pulse of at least this many bins is wide."""
+        return max(1, math.ceil(self.wide_pulse_m / bin_spacing_m - 1e-9))
+
+
+PAPER_SENSOR_HEIGHT_M = 1.5
+PAPER_LOWEST_ELEVATION_DEG = -14.0
+PAPER_WIDE_PULSE_M = float(physics.wide_pulse_width(
+    PAPER_SENSOR_HEIGHT_M, math.radians(PAPER_LOWEST_ELEVATION_DEG),
+    math.radians(PAPER_RADAR.beamwidth_el_deg), PAPER_RADAR.range_resolution_m))

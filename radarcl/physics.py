@@ -7,6 +7,8 @@ resolution is 0.4997 m here).
 
 import numpy as np
 
+from radarcl.errors import ConfigError
+
 SPEED_OF_LIGHT = 299_792_458.0  # [m/s], exact (SI definition)
 
 
@@ -71,3 +73,42 @@ def bin_spacing(bandwidth_hz, sweep_time_s, sample_rate_hz, n_fft):
     """
     return range_of_beat_frequency(np.asarray(sample_rate_hz, dtype=float) / n_fft,
                                    bandwidth_hz, sweep_time_s)
+
+
+# Width of a point target's pulse at the CFAR threshold, in resolution cells c/2B: the -6 dB
+# mainlobe width of the Hann window is 2.00 bins of the unpadded FFT (Harris, Proc. IEEE 66(1),
+# 1978, table I), and a threshold some 10-20 dB above the noise cuts a strong pulse near there.
+HANN_PULSE_WIDTH_CELLS = 2.0
+
+
+def ground_echo_extent(sensor_height_m, elevation_rad, beamwidth_el_rad):
+    """Down-range extent [m] of flat ground lit by a beam (paper §3.3, Fig. 5).
+
+    A beam whose axis points ``elevation_rad`` (< 0: down) with half-power width
+    ``beamwidth_el_rad`` from ``sensor_height_m`` above flat ground lights the ground from
+    h / sin(-e + b/2) to h / sin(-e - b/2). Infinite when the upper beam edge does not reach the
+    ground (-e <= b/2): the echo then runs to the end of the profile.
+    """
+    h = float(sensor_height_m)
+    near_angle = -float(elevation_rad) + 0.5 * float(beamwidth_el_rad)
+    far_angle = -float(elevation_rad) - 0.5 * float(beamwidth_el_rad)
+    if h <= 0 or near_angle <= 0:
+        raise ConfigError(f"the beam must point at the ground from above it: height {sensor_height_m} m, "
+                         f"elevation {elevation_rad} rad, beamwidth {beamwidth_el_rad} rad")
+    if far_angle <= 0:
+        return float("inf")
+    return h / np.sin(far_angle) - h / np.sin(near_angle)
+
+
+def wide_pulse_width(sensor_height_m, lowest_elevation_rad, beamwidth_el_rad, range_resolution_m,
+                     pulse_width_cells=HANN_PULSE_WIDTH_CELLS):
+    """The paper's wide-pulse rule (§3.3) as a width [m] at the CFAR threshold.
+
+    "A pulse is considered wide if the extension at the CFAR threshold is equal to or more than
+    the extension of the distributed echo of flat terrain at the lowest elevation of the radar
+    (-14 deg)": the ground extent at that elevation (``ground_echo_extent``), seen through the
+    radar's own pulse, which adds ``pulse_width_cells`` resolution cells (a point target is that
+    wide at the threshold, so only echoes longer than the steepest ground return count as wide).
+    """
+    return (ground_echo_extent(sensor_height_m, lowest_elevation_rad, beamwidth_el_rad)
+            + float(pulse_width_cells) * float(range_resolution_m))

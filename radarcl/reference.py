@@ -6,6 +6,7 @@ against them. Nothing here is fast, and nothing here needs OpenCL.
 
 import numpy as np
 
+from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
 
 WINDOWS = ("hann", "rect")
@@ -14,6 +15,12 @@ OUTPUTS = ("magnitude", "power")
 # Per-beam flags set while loading samples (range_fft kernel and oracle alike).
 FLAG_NONFINITE = 1   # a NaN or Inf sample: the beam is invalid and gives no evidence
 FLAG_CLIPPED = 2     # a sample at or beyond the clip level: the ADC saturated
+# Per-beam flags set by the interpreter on the range profile it is given.
+FLAG_BAD_PROFILE = 4  # a profile bin that is NaN, Inf or negative: not a power profile
+FLAG_SILENT = 8       # every bin exactly 0: the receiver measured nothing
+# Beams with any of these give no evidence and no pulses. A clipped beam still does.
+NO_EVIDENCE_FLAGS = FLAG_NONFINITE | FLAG_BAD_PROFILE | FLAG_SILENT
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 def window_coefficients(kind, n):
@@ -93,3 +100,110 @@ def range_profile(samples, n_fft, *, window="hann", output="magnitude", gain=Non
         result = result * gain
     result[invalid] = np.nan
     return result
+
+
+def training_cells(n_bins, guard, train):
+    """Training-cell indices of every cell under the "shift" edge rule, int64 (n_bins, 2 train).
+
+    Row i lists, in increasing order, ``train`` cells below i - guard and ``train`` above
+    i + guard; near an end, the cells one side lacks are taken further out on the other side.
+    The first ``train`` entries are the lower half, the last ``train`` the upper half (the two
+    halves GO- and SO-CFAR compare). Needs n_bins >= 1 + 2 guard + 2 train.
+    """
+    if n_bins < 1 + 2 * guard + 2 * train:
+        raise ConfigError(f"{n_bins} bins cannot hold guard {guard} + training {train} cells per side")
+    i = np.arange(n_bins)[:, None]
+    have_below = np.minimum(train, np.maximum(0, i - guard))
+    have_above = np.minimum(train, np.maximum(0, n_bins - 1 - i - guard))
+    n_below = have_below + (train - have_above)
+    u = np.arange(2 * train)[None, :]
+    return np.where(u < n_below, i - guard - n_below + u, i + guard + 1 + (u - n_below))
+
+
+def cfar(profiles, config):
+    """CFAR of power profiles (..., n_bins), in float64: ``(noise, ratio, mask)``.
+
+    noise: the estimate n_i of ``config.kind`` over ``training_cells``, floored at
+        ``config.noise_floor``; ratio: r_i / n_i, saturated at the largest float32;
+    mask: r_i > alpha n_i (bool). NaN in a window propagates into noise and ratio and never
+    detects.
+    """
+    r = np.asarray(profiles, dtype=np.float64)
+    if r.ndim < 1:
+        raise ShapeError(f"profiles must be (..., n_bins), got shape {r.shape}")
+    config.check_profile_length(r.shape[-1])
+    cells = r[..., training_cells(r.shape[-1], config.guard, config.train)]
+    lower, upper = cells[..., :config.train], cells[..., config.train:]
+    if config.kind == "ca":
+        estimate = cells.mean(axis=-1)
+    elif config.kind == "go":
+        estimate = np.maximum(lower.mean(axis=-1), upper.mean(axis=-1))
+    elif config.kind == "so":
+        estimate = np.minimum(lower.mean(axis=-1), upper.mean(axis=-1))
+    else:
+        estimate = np.sort(cells, axis=-1)[..., config.rank - 1]
+    noise = np.maximum(estimate, config.noise_floor)
+    with np.errstate(over="ignore", invalid="ignore"):
+        ratio = np.minimum(r / noise, FLOAT32_MAX)
+        mask = r > config.alpha * noise
+    return noise, ratio, mask
+
+
+def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
+    """The down-range interpreter, eq. 12, on (..., n_bins) arrays, plainly, beam by beam.
+
+    profiles: power r_i; noise, mask: from ``cfar``; flags: per-beam flags from range
+    processing (..., ) or None. Returns ``(evidence, pulses, n_pulses, flags)``:
+    evidence int32 (..., n_bins) in ``logodds`` units; pulses int32
+    (..., max_pulses, 4) rows [start, end, peak, wide] (inclusive bins, -1 where unused);
+    n_pulses int32 (...) the true count (may exceed max_pulses); flags uint8 (...) with
+    FLAG_BAD_PROFILE / FLAG_SILENT added. Beams with a ``NO_EVIDENCE_FLAGS`` flag give 0
+    evidence and no pulses. Pulses are runs of detections inside the evidence interval.
+    """
+    r = np.asarray(profiles, dtype=np.float64)
+    n = np.asarray(noise, dtype=np.float64)
+    m = np.asarray(mask).astype(bool)
+    if r.ndim < 1 or n.shape != r.shape or m.shape != r.shape:
+        raise ShapeError(f"profiles, noise and mask must share one shape (..., n_bins), got "
+                         f"{r.shape}, {n.shape}, {m.shape}")
+    batch, n_bins = r.shape[:-1], r.shape[-1]
+    flags_in = np.zeros(batch, np.uint8) if flags is None else np.asarray(flags, np.uint8)
+    if flags_in.shape != batch:
+        raise ShapeError(f"flags must have shape {batch}, got {flags_in.shape}")
+    first, last = config.bin_interval(bin_spacing_m, n_bins)
+    wide_bins = config.wide_bins(bin_spacing_m)
+    e_high, e_low = (int(v) for v in logodds.to_fixed([config.e_high, config.e_low]))
+    evidence = np.zeros(r.shape, np.int32)
+    pulses = np.full((*batch, config.max_pulses, 4), -1, np.int32)
+    n_pulses = np.zeros(batch, np.int32)
+    flags_out = flags_in.copy()
+    for beam in np.ndindex(*batch):
+        rb, nb, mb = r[beam], n[beam], m[beam]
+        with np.errstate(invalid="ignore"):
+            if not (np.isfinite(rb).all() and (rb >= 0).all()):
+                flags_out[beam] |= FLAG_BAD_PROFILE
+        if not (rb != 0).any():
+            flags_out[beam] |= FLAG_SILENT
+        if flags_out[beam] & NO_EVIDENCE_FLAGS:
+            continue
+        after_wide = False
+        j = first
+        while j <= last:
+            if not mb[j]:
+                evidence[beam][j] = e_low if after_wide else e_high
+                j += 1
+                continue
+            start = j
+            while j <= last and mb[j]:
+                nats = max(0.0, config.k_occ * (np.log10(rb[j]) - np.log10(nb[j])))
+                evidence[beam][j] = logodds.to_fixed(nats)
+                j += 1
+            end = j - 1
+            wide = end - start + 1 >= wide_bins
+            k = n_pulses[beam]
+            if k < config.max_pulses:
+                peak = start + int(np.argmax(rb[start:end + 1]))
+                pulses[beam][k] = (start, end, peak, int(wide))
+            n_pulses[beam] += 1
+            after_wide = after_wide or wide
+    return evidence, pulses, n_pulses, flags_out

@@ -9,3 +9,17 @@ RANGE_FFT_RTOL = 2e-6
 # leakage): the float32 transform's rounding floor is ~ -140 dB of the peak, so the weak tone's
 # bin is recovered to within this relative error.
 WEAK_TONE_RTOL = 0.05
+
+# CFAR noise estimates and ratios in float32 against the float64 oracle, relative: a direct sum
+# of 2 x train <= 64 cells rounds by at most 64 eps32 = 4e-6 (measured 2e-7 with 32 cells).
+CFAR_RTOL = 1e-5
+
+# A detection decision r > alpha n can only differ between float32 and float64 where r lies
+# within a few float32 roundings of the threshold: bins closer than this (relative) are not
+# compared, and the test asserts that they are rare.
+DECISION_MARGIN = 1e-5
+
+# Evidence on pulse bins is k_occ (log10 r - log10 n) x 1024 rounded to an integer: float32 logs
+# differ from float64 by ~1e-6 nat, so the rounding may fall one unit apart. Noise bins (E_h,
+# E_l, 0) carry no arithmetic and are compared exactly.
+EVIDENCE_UNITS_TOL = 1

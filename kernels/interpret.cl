@@ -1,0 +1,98 @@
+/* The down-range interpreter, eq. 12, on a whole frame in one launch (paper §3.3, Fig. 10).
+ *
+ * Equivalent to radarcl.reference.interpret(profiles, noise, mask, config, bin_spacing, flags):
+ *   pulse bins (mask = 1):                  k_occ * log10(r / n), clamped to [0, 16 nat]
+ *   noise bins before the first wide pulse: E_h;   after its last bin: E_l
+ *   bins outside [FIRST_BIN, LAST_BIN]:     0
+ * in int32 fixed-point log-odds (radarcl.logodds: LOGODDS_SCALE units per nat, rounded to
+ * nearest even). Pulses are runs of detections inside [FIRST_BIN, LAST_BIN]; a pulse of at
+ * least WIDE_BINS bins is wide (physics.wide_pulse_width). log10(r) - log10(n) instead of
+ * log10(r / n): the ratio of a 1e30 echo over a floored noise overflows float32, the logs never.
+ *
+ * Work mapping: get_global_id(0) = beam. One work-item walks its beam's bins in order, since
+ * whether a noise bin gets E_h or E_l depends on every pulse before it; a frame has 256 beams of
+ * 512 bins, a fraction of the CFAR's work. Any local size works.
+ *
+ * Beams flagged FLAG_NONFINITE upstream, or found here to hold a NaN, Inf or negative bin
+ * (FLAG_BAD_PROFILE) or only zeros (FLAG_SILENT), give 0 evidence and no pulses.
+ *
+ * -D constants (set by radarcl/stages/interpret.py):
+ *   N_BINS      bins per profile
+ *   MAX_PULSES  pulse rows kept per beam; more are counted and still give evidence
+ */
+#include "radarcl_common.h"
+
+__kernel void interpret(
+    const __global float *profiles,   // (n_beams, N_BINS) power r_i
+    const __global float *noise,      // (n_beams, N_BINS) CFAR noise estimate n_i (floored)
+    const __global uchar *mask,       // (n_beams, N_BINS) CFAR detections
+    const __global uchar *flags_in,   // (n_beams,) flags from range processing
+    const float k_occ,                // eq. 12 gain [nat per decade of r/n]
+    const int e_high,                 // E_h [logodds units], noise before the first wide pulse
+    const int e_low,                  // E_l [logodds units], noise after it
+    const int first_bin,              // evidence interval [first_bin, last_bin], inclusive
+    const int last_bin,
+    const int wide_bins,              // a pulse this wide or wider is wide [bins]
+    const int n_beams,
+    __global int *evidence,           // (n_beams, N_BINS) out [logodds units]
+    __global int4 *pulses,            // (n_beams, MAX_PULSES) out: start, end, peak, wide; -1 unused
+    __global int *n_pulses,           // (n_beams,) out: pulses found (may exceed MAX_PULSES)
+    __global uchar *flags_out)        // (n_beams,) out: flags_in | BAD_PROFILE | SILENT
+{
+    const int beam = get_global_id(0);
+    if (beam >= n_beams)
+        return;
+    const size_t row = (size_t)beam * N_BINS;
+    const __global float *r = profiles + row;
+    const __global float *n = noise + row;
+    const __global uchar *m = mask + row;
+    __global int *ev = evidence + row;
+    __global int4 *pl = pulses + (size_t)beam * MAX_PULSES;
+
+    uchar flags = flags_in[beam];
+    int bad = 0, any_signal = 0;
+    for (int j = 0; j < N_BINS; j++) {
+        bad |= !(isfinite(r[j]) && r[j] >= 0.0f);
+        any_signal |= r[j] != 0.0f;
+    }
+    flags |= (bad ? FLAG_BAD_PROFILE : 0) | (any_signal ? 0 : FLAG_SILENT);
+    flags_out[beam] = flags;
+    for (int k = 0; k < MAX_PULSES; k++)
+        pl[k] = (int4)(-1);
+    if (flags & NO_EVIDENCE_FLAGS) {
+        for (int j = 0; j < N_BINS; j++)
+            ev[j] = 0;
+        n_pulses[beam] = 0;
+        return;
+    }
+
+    for (int j = 0; j < first_bin && j < N_BINS; j++)
+        ev[j] = 0;
+    int count = 0, after_wide = 0, start = -1, peak = -1;
+    for (int j = first_bin; j <= last_bin; j++) {
+        if (m[j]) {
+            const float nats = k_occ * (log10(r[j]) - log10(n[j]));
+            ev[j] = convert_int_rte(clamp(nats, 0.0f, EVIDENCE_LIMIT_NATS) * LOGODDS_SCALE);
+            if (start < 0) {
+                start = j;
+                peak = j;
+            } else if (r[j] > r[peak]) {
+                peak = j;
+            }
+        } else {
+            ev[j] = after_wide ? e_low : e_high;
+        }
+        /* A pulse ends at the last detected bin of a run, or at the last bin of the interval. */
+        if (start >= 0 && (j == last_bin || !m[j + 1])) {
+            const int wide = j - start + 1 >= wide_bins;
+            if (count < MAX_PULSES)
+                pl[count] = (int4)(start, j, peak, wide);
+            count++;
+            after_wide |= wide;
+            start = -1;
+        }
+    }
+    for (int j = max(last_bin + 1, 0); j < N_BINS; j++)
+        ev[j] = 0;
+    n_pulses[beam] = count;
+}

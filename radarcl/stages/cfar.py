@@ -1,0 +1,126 @@
+"""CFAR detection of whole frames of power profiles (paper §3.3, Fig. 6).
+
+``Cfar`` wraps ``kernels/cfar.cl``; it is equivalent to ``radarcl.reference.cfar(profiles,
+config)`` (edge rule "shift", see ``CfarConfig``): noise estimates and ratios within
+``CFAR_RTOL`` of the float64 oracle, masks identical except where r_i lies within
+``DECISION_MARGIN`` of the threshold (see tests/test_cfar.py).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from radarcl.config import CfarConfig
+from radarcl.errors import ConfigError, ShapeError
+
+_KINDS = {"ca": 0, "go": 1, "so": 2, "os": 3}
+# Work-items per group along the bins. Measured on PoCL, 2 cores, paper frame (256 x 512, CA
+# 8+8 cells): see the bench; any size is correct (the test runs several).
+DEFAULT_LOCAL_SIZE = 64
+CPU_VECTOR_WIDTH = 8
+VECTOR_WIDTHS = (1, 2, 4, 8, 16)
+
+
+@dataclass(frozen=True)
+class CfarResult:
+    """Per-bin CFAR outputs, each of shape (*batch, n_bins)."""
+
+    noise: np.ndarray   # float32 n_i, floored
+    ratio: np.ndarray   # float32 r_i / n_i, saturated at the largest float32
+    mask: np.ndarray    # bool, r_i > alpha n_i
+
+
+class Cfar:
+    """A compiled CFAR plan for frames of one shape.
+
+    runtime: a ``radarcl.cl.Runtime``; batch: the beam shape of a frame, e.g. (64, 4) or (400,);
+    n_bins: bins per profile; config: a ``CfarConfig`` (kind, guard, train, pfa, rank, floor);
+    local_size: work-items per group along the bins (default 64, capped by the device).
+    vector_width: bins per work-item, one per SIMD lane: 1, 2, 4, 8, 16; default 8 on a CPU
+        device (PoCL does not vectorise across work-items here), 1 on a GPU.
+    Profiles are power (square-law), float32, non-negative; see ``reference.cfar`` for NaN.
+    """
+
+    def __init__(self, runtime, batch, n_bins, config=None, *, local_size=None, vector_width=None):
+        import pyopencl as cl
+
+        self.runtime = runtime
+        self.config = config if config is not None else CfarConfig()
+        if not isinstance(self.config, CfarConfig):
+            raise ConfigError(f"config must be a CfarConfig, got {type(self.config).__name__}")
+        self.batch = tuple(int(b) for b in batch)
+        if not self.batch or min(self.batch) < 1:
+            raise ConfigError(f"batch must be a non-empty shape of positive sizes, got {batch!r}")
+        self.n_beams = int(np.prod(self.batch))
+        self.n_bins = self.config.check_profile_length(int(n_bins))
+        self.alpha = float(self.config.alpha)
+        if vector_width is None:
+            vector_width = CPU_VECTOR_WIDTH if runtime.is_cpu else 1
+        if vector_width not in VECTOR_WIDTHS:
+            raise ConfigError(f"vector_width must be one of {VECTOR_WIDTHS}, got {vector_width!r}")
+        self.vector_width = int(vector_width)
+        self._kernel = runtime.kernels("cfar", dict(
+            N_BINS=self.n_bins, GUARD=self.config.guard, TRAIN=self.config.train,
+            KIND=_KINDS[self.config.kind], RANK=self.config.rank or 0, VEC=self.vector_width))["cfar"]
+        self._kernel.set_scalar_arg_dtypes([None, np.float32, np.float32, np.int32, None, None, None])
+        max_ls = runtime.max_local_size(self._kernel)
+        if local_size is None:
+            local_size = min(DEFAULT_LOCAL_SIZE, max_ls)
+        if not (isinstance(local_size, (int, np.integer)) and 1 <= local_size <= max_ls):
+            raise ConfigError(f"local_size must be an integer in [1, {max_ls}], got {local_size!r}")
+        self.local_size = int(local_size)
+        size = self.n_beams * self.n_bins
+        self.noise_buf = runtime.empty(4 * size)
+        self.ratio_buf = runtime.empty(4 * size)
+        self.mask_buf = runtime.empty(size)
+        self.profiles_buf = None   # device copy of the last uploaded frame (see upload)
+        self._cl = cl
+
+    @property
+    def input_shape(self):
+        """Shape one frame of profiles must have: (*batch, n_bins)."""
+        return (*self.batch, self.n_bins)
+
+    def check(self, profiles):
+        """Raise ShapeError unless ``profiles`` is one float32 frame of this plan's shape."""
+        profiles = np.asarray(profiles)
+        if profiles.shape != self.input_shape or profiles.dtype != np.float32:
+            raise ShapeError(f"expected power profiles of shape {self.input_shape} float32, "
+                             f"got {profiles.shape} {profiles.dtype}")
+        return np.ascontiguousarray(profiles)
+
+    def enqueue(self, profiles_buf, wait_for=None):
+        """Launch on a device buffer of profiles (e.g. ``RangeFFT.profiles_buf`` in power);
+        results stay in ``noise_buf``, ``ratio_buf``, ``mask_buf``. Returns the kernel event."""
+        if profiles_buf is None:
+            raise ConfigError("no profiles buffer: upload a frame first or pass a device buffer")
+        ls = self.local_size
+        items = -(-self.n_bins // self.vector_width)
+        gsize = (-(-items // ls) * ls, self.n_beams)
+        return self._kernel(self.runtime.queue, gsize, (ls, 1), profiles_buf, self.alpha,
+                            float(self.config.noise_floor), self.n_beams,
+                            self.noise_buf, self.ratio_buf, self.mask_buf, wait_for=wait_for)
+
+    def upload(self, profiles):
+        """Copy a checked frame into the plan's input buffer; returns the copy event."""
+        profiles = self.check(profiles)
+        if self.profiles_buf is None:
+            self.profiles_buf = self.runtime.empty(profiles.nbytes)
+        return self._cl.enqueue_copy(self.runtime.queue, self.profiles_buf, profiles, is_blocking=False)
+
+    def download(self, wait_for=None):
+        """Copy the last results to the host (blocking) as a CfarResult."""
+        cl, q = self._cl, self.runtime.queue
+        noise = np.empty(self.input_shape, np.float32)
+        ratio = np.empty(self.input_shape, np.float32)
+        mask = np.empty(self.input_shape, np.uint8)
+        cl.enqueue_copy(q, noise, self.noise_buf, wait_for=wait_for)
+        cl.enqueue_copy(q, ratio, self.ratio_buf, wait_for=wait_for)
+        cl.enqueue_copy(q, mask, self.mask_buf, wait_for=wait_for)
+        return CfarResult(noise, ratio, mask.astype(bool))
+
+    def __call__(self, profiles):
+        """Process one frame of profiles (*batch, n_bins) float32 -> CfarResult (blocking)."""
+        copy = self.upload(profiles)
+        done = self.enqueue(self.profiles_buf, wait_for=[copy])
+        return self.download(wait_for=[done])

@@ -1,0 +1,126 @@
+"""kernels/interpret.cl <-> radarcl/stages/interpret.py against radarcl.reference.interpret (eq. 12)."""
+
+import numpy as np
+import pytest
+
+from radarcl import logodds, reference
+from radarcl.config import CfarConfig, InterpretConfig
+from radarcl.errors import ConfigError, ShapeError
+from radarcl.pipeline import Detection
+from radarcl.stages.interpret import Interpreter
+from tolerances import EVIDENCE_UNITS_TOL
+
+SPACING = 0.125
+
+
+def check_against_oracle(got, profiles, noise, mask, config, flags=None):
+    """Pulses, counts and flags identical; evidence identical off pulses, within one unit on them."""
+    evidence, pulses, n_pulses, flags_out = reference.interpret(profiles, noise, mask, config, SPACING, flags)
+    assert np.array_equal(got.flags, flags_out)
+    assert np.array_equal(got.n_pulses, n_pulses)
+    assert np.array_equal(got.pulses, pulses)
+    on_pulse = np.asarray(mask, bool)
+    assert np.array_equal(got.evidence[~on_pulse], evidence[~on_pulse])
+    assert np.abs(got.evidence[on_pulse].astype(np.int64) - evidence[on_pulse]).max(initial=0) <= EVIDENCE_UNITS_TOL
+    return evidence, pulses, n_pulses, flags_out
+
+
+def frame(seed=0, shape=(16, 4, 256)):
+    rng = np.random.default_rng(seed)
+    x = rng.exponential(size=shape).astype(np.float32)
+    beams = x.reshape(-1, shape[-1])
+    beams[0, 50:53] = 1e3             # narrow pulse
+    beams[0, 100:116] = 1e3           # wide pulse (16 bins = 2 m): E_l behind it
+    beams[1, 60] = 1e30               # huge ratio: evidence clamped at the limit
+    beams[2, 30:240:40] = 1e4         # six pulses: more than max_pulses = 4
+    return x
+
+
+def run_both(runtime, x, config=InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4),
+             cfar=CfarConfig(guard=16, train=8), flags=None, **options):
+    det = Detection(runtime, x.shape[:-1], x.shape[-1], SPACING, cfar, config)
+    if options:
+        det.interpreter = Interpreter(runtime, x.shape[:-1], x.shape[-1], SPACING, config, **options)
+    got = det(x, flags)
+    return got, check_against_oracle(got.interpret, x, got.cfar.noise, got.cfar.mask, config, flags)
+
+
+def test_matches_oracle(runtime):
+    got, (evidence, pulses, n_pulses, _) = run_both(runtime, frame())
+    cfg = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4)
+    first, last = cfg.bin_interval(SPACING, 256)
+    assert (first, last) == (8, 240)
+    ev = got.interpret.evidence
+    assert np.all(ev[..., :first] == 0) and np.all(ev[..., last + 1:] == 0)
+    # the wide pulse: E_h before it, positive on it, E_l after it (off later pulses)
+    e_high, e_low = logodds.to_fixed([-1.0, -0.1])
+    beam = ev[0, 0]
+    wide = [p for p in got.interpret.pulses[0, 0] if p[3] == 1]
+    assert wide and wide[0][0] <= 100 and wide[0][1] >= 115
+    start, end = wide[0][:2]
+    noise_bins = ~got.cfar.mask[0, 0]
+    assert np.all(beam[first:start][noise_bins[first:start]] == e_high)
+    assert np.all(beam[end + 1:last + 1][noise_bins[end + 1:last + 1]] == e_low)
+    assert np.all(beam[start:end + 1] > 0)
+    assert ev[0, 1, 60] == logodds.EVIDENCE_LIMIT
+    assert n_pulses[0, 2] == 6 and np.all(pulses[0, 2, :, 0] >= 0)
+
+
+@pytest.mark.parametrize("local_size", [1, 3, 16, 64])
+def test_local_sizes_agree(runtime, local_size):
+    run_both(runtime, frame(seed=local_size, shape=(13, 97)), local_size=local_size)
+
+
+def test_flags_and_invalid_beams_give_no_evidence(runtime):
+    x = frame(seed=4, shape=(6, 128))
+    x[1] = 0.0                        # silent receiver
+    x[2, 70] = np.nan                 # bad profile
+    x[3, 10] = -1.0                   # negative power: not a power profile
+    flags = np.zeros(6, np.uint8)
+    flags[4] = reference.FLAG_NONFINITE   # invalid upstream
+    flags[5] = reference.FLAG_CLIPPED     # clipped upstream: still gives evidence
+    got, (evidence, _, n_pulses, flags_out) = run_both(runtime, x, flags=flags)
+    assert list(flags_out) == [0, reference.FLAG_SILENT, reference.FLAG_BAD_PROFILE,
+                               reference.FLAG_BAD_PROFILE, reference.FLAG_NONFINITE, reference.FLAG_CLIPPED]
+    assert np.all(evidence[1:5] == 0) and np.all(n_pulses[1:5] == 0)
+    assert np.all(got.interpret.pulses[1:5] == -1)
+    assert np.any(evidence[5] != 0) and list(got.interpret.valid) == [True, False, False, False, False, True]
+
+
+def test_strong_echo_never_overflows(runtime):
+    """Echoes up to float32's largest value over floored noise: evidence clamped, never wrapped."""
+    x = np.zeros((3, 64), np.float32)
+    x[0, 20] = np.finfo(np.float32).max
+    x[1, 20] = 1e-20
+    x[2, 20] = 1e-28                  # 100 x the noise floor
+    cfg = InterpretConfig(range_min_m=0.0, range_max_m=8.0, k_occ=3.0)
+    got, (evidence, _, _, _) = run_both(runtime, x, cfg, CfarConfig(guard=1, train=2))
+    assert got.cfar.mask[:, 20].all()
+    assert evidence[0, 20] == logodds.EVIDENCE_LIMIT
+    assert 0 < got.interpret.evidence[1, 20] <= logodds.EVIDENCE_LIMIT
+    assert 0 < got.interpret.evidence[2, 20] <= logodds.EVIDENCE_LIMIT
+
+
+def test_k_occ_zero_and_empty_interval(runtime):
+    x = frame(seed=5, shape=(4, 64))
+    got, (evidence, _, _, _) = run_both(runtime, x, InterpretConfig(k_occ=0.0, range_min_m=0.0, range_max_m=8.0))
+    assert np.all(evidence[got.cfar.mask] == 0)
+    got, (evidence, _, n_pulses, _) = run_both(runtime, x, InterpretConfig(range_min_m=10.0, range_max_m=20.0))
+    assert np.all(evidence == 0) and np.all(n_pulses == 0)   # 64 bins reach 7.9 m only
+
+
+def test_refuses_bad_input(runtime):
+    with pytest.raises(ConfigError, match="E_h and E_l are evidence of emptiness"):
+        InterpretConfig(e_high=0.5)
+    with pytest.raises(ConfigError, match="k_occ must be >= 0"):
+        InterpretConfig(k_occ=-1.0)
+    with pytest.raises(ConfigError, match="range_min_m < range_max_m"):
+        InterpretConfig(range_min_m=5.0, range_max_m=5.0)
+    with pytest.raises(ConfigError, match="must be a finite number"):
+        InterpretConfig(e_low=float("nan"))
+    plan = Interpreter(runtime, (4,), 64, SPACING)
+    ok = np.ones((4, 64), np.float32)
+    with pytest.raises(ShapeError, match=r"expected noise of shape \(4, 64\) float32"):
+        plan(ok, ok[:, :32], ok > 0)
+    with pytest.raises(ShapeError, match=r"expected flags of shape \(4,\) uint8"):
+        plan(ok, ok, ok > 0, flags=np.zeros(4, np.int32))
