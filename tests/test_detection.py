@@ -1,0 +1,85 @@
+"""Detection theory (radarcl.detection), the wide-pulse geometry (radarcl.physics) and the
+fixed-point log-odds unit (radarcl.logodds)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from radarcl import detection, logodds, physics
+from radarcl.config import PAPER_WIDE_PULSE_M, CfarConfig, InterpretConfig
+from radarcl.errors import ConfigError
+
+
+@pytest.mark.parametrize("kind", detection.CFAR_KINDS)
+@pytest.mark.parametrize("pfa", [1e-1, 1e-3, 1e-6])
+@pytest.mark.parametrize("n", [2, 16, 32])
+def test_threshold_factor_inverts_pfa(kind, pfa, n):
+    rank = detection.default_rank(n) if kind == "os" else None
+    try:
+        alpha = detection.threshold_factor(kind, pfa, n, rank)
+    except ConfigError as exc:     # SO/OS with few cells cannot reach a large pfa: said so
+        assert "cannot reach" in str(exc) and kind in ("so", "os")
+        return
+    assert math.isclose(detection.false_alarm_probability(kind, alpha, n, rank), pfa, rel_tol=1e-9)
+
+
+def test_ca_closed_form_and_textbook_pd():
+    n, pfa = 16, 1e-3
+    alpha = detection.threshold_factor("ca", pfa, n)
+    assert math.isclose(alpha, n * (pfa ** (-1 / n) - 1))
+    snr = 10 ** 1.3
+    want = (1 + alpha / (n * (1 + snr))) ** -n
+    assert math.isclose(detection.detection_probability_swerling1("ca", alpha, n, snr), want)
+
+
+def test_go_and_so_split_two_one_sided_detectors():
+    """P_go + P_so = P(left alone) + P(right alone): an identity of the order statistics."""
+    m, t = 8, 0.9
+    total = detection.false_alarm_probability("go", t * m, 2 * m) + detection.false_alarm_probability("so", t * m, 2 * m)
+    assert math.isclose(total, 2 * (1 + t) ** -m)
+
+
+def test_refuses_impossible_detectors():
+    with pytest.raises(ConfigError, match="strictly between 0 and 1"):
+        detection.threshold_factor("ca", 1.0, 16)
+    with pytest.raises(ConfigError, match="even integer"):
+        detection.threshold_factor("go", 1e-3, 7)
+    with pytest.raises(ConfigError, match="rank must be an integer in"):
+        detection.threshold_factor("os", 1e-3, 16, 0)
+    with pytest.raises(ConfigError, match="snr must be >= 0"):
+        detection.detection_probability_swerling1("ca", 5.0, 16, -1.0)
+
+
+def test_wide_pulse_rule_from_geometry():
+    h, beam = 1.5, math.radians(2.0)
+    extent = physics.ground_echo_extent(h, math.radians(-14.0), beam)
+    assert math.isclose(extent, h / math.sin(math.radians(13)) - h / math.sin(math.radians(15)))
+    assert math.isclose(PAPER_WIDE_PULSE_M, extent + 2.0 * physics.range_resolution(300e6))
+    assert physics.ground_echo_extent(h, math.radians(-0.5), beam) == math.inf   # grazing: no end
+    # steeper beams light shorter stretches of ground
+    assert physics.ground_echo_extent(h, math.radians(-30), beam) < extent
+    with pytest.raises(ConfigError, match="point at the ground"):
+        physics.ground_echo_extent(h, math.radians(5.0), beam)
+    assert InterpretConfig().wide_bins(0.125) == 15
+
+
+def test_logodds_fixed_point():
+    assert logodds.to_fixed(1.0) == 1024 and logodds.to_fixed(-0.1) == -102
+    assert logodds.to_fixed(0.5 / 1024) == 0 and logodds.to_fixed(1.5 / 1024) == 2   # ties to even
+    assert logodds.to_fixed(np.inf) == logodds.EVIDENCE_LIMIT
+    assert logodds.to_fixed(-1e9) == -logodds.EVIDENCE_LIMIT
+    assert abs(logodds.probability(logodds.from_probability(0.7)) - 0.7) < 1e-3
+    with pytest.raises(ConfigError):
+        logodds.to_fixed(np.nan)
+    with pytest.raises(ConfigError):
+        logodds.from_probability(1.0)
+    # a frame of updates cannot approach the int32 range
+    assert 256 * logodds.EVIDENCE_LIMIT < 2 ** 31 / 100
+
+
+def test_cfar_config_derived_values():
+    c = CfarConfig()
+    assert c.n_train == 32 and c.window == 65
+    assert math.isclose(c.alpha, 32 * (1e-3 ** (-1 / 32) - 1))
+    assert CfarConfig(kind="os", train=8).rank == 12
