@@ -48,7 +48,7 @@ typedef CAT(int, VEC) intv;
 
 /* The estimate of the cells c[0 .. 2 TRAIN-1] (increasing position; the first TRAIN are the
  * lower half). Written once for scalars and vectors of bins alike. */
-#define ESTIMATE(T_FLOAT, T_INT, TRUE_IS_ONE, c, out)                                                     \
+#define ESTIMATE(T_FLOAT, T_INT, TRUE_IS_ONE, c, out)                                         \
     do {                                                                                      \
         if (KIND == KIND_OS) {                                                                \
             /* The k-th smallest: the cell c with #(x < c) < RANK <= #(x <= c). Counting keeps \
@@ -69,16 +69,20 @@ typedef CAT(int, VEC) intv;
                 lower += c[u];                                                                \
             for (int u = TRAIN; u < N_TRAIN; u++)                                             \
                 upper += c[u];                                                                \
-            if (KIND == KIND_CA) {                                                            \
-                out = (lower + upper) * (1.0f / N_TRAIN);                                     \
-            } else {                                                                          \
-                /* GO: the greater half, SO: the smaller; a NaN half gives NaN (fmax/fmin     \
-                 * would drop it, the oracle keeps it). */                                    \
-                T_FLOAT pick = (KIND == KIND_GO) ? select(upper, lower, lower > upper)        \
-                                                 : select(upper, lower, lower < upper);       \
-                out = select(pick, (T_FLOAT)(NAN), isnan(lower) || isnan(upper));             \
-                out *= 1.0f / TRAIN;                                                          \
-            }                                                                                 \
+            HALVES_TO_ESTIMATE(T_FLOAT, lower, upper, out);                                   \
+        }                                                                                     \
+    } while (0)
+
+/* CA, GO or SO from the sums of the lower and upper halves. GO takes the greater half, SO the
+ * smaller; a NaN half gives NaN (fmax/fmin would drop it, the oracle keeps it). */
+#define HALVES_TO_ESTIMATE(T_FLOAT, lower, upper, out)                                         \
+    do {                                                                                      \
+        if (KIND == KIND_CA) {                                                                \
+            out = (lower + upper) * (1.0f / N_TRAIN);                                         \
+        } else {                                                                              \
+            T_FLOAT pick = (KIND == KIND_GO) ? select(upper, lower, lower > upper)            \
+                                             : select(upper, lower, lower < upper);           \
+            out = select(pick, (T_FLOAT)(NAN), isnan(lower) || isnan(upper)) * (1.0f / TRAIN);\
         }                                                                                     \
     } while (0)
 
@@ -131,13 +135,24 @@ __kernel void cfar(
             cfar_bin(p, i0 + lane, alpha, noise_floor, noise, ratio, mask);
         return;
     }
+    floatv estimate;
+#if KIND == KIND_OS
     floatv c[N_TRAIN];
     for (int u = 0; u < TRAIN; u++) {
         c[u] = VLOAD(p + i0 - GUARD - TRAIN + u);
         c[TRAIN + u] = VLOAD(p + i0 + GUARD + 1 + u);
     }
-    floatv estimate;
     ESTIMATE(floatv, intv, VTRUE, c, estimate);
+#else
+    /* Summed straight from the loads: a private array of cells costs PoCL a copy per
+     * work-item. Same order as in cfar_bin. */
+    floatv lower = 0.0f, upper = 0.0f;
+    for (int u = 0; u < TRAIN; u++)
+        lower += VLOAD(p + i0 - GUARD - TRAIN + u);
+    for (int u = 0; u < TRAIN; u++)
+        upper += VLOAD(p + i0 + GUARD + 1 + u);
+    HALVES_TO_ESTIMATE(floatv, lower, upper, estimate);
+#endif
     const floatv n = select(estimate, (floatv)(noise_floor), estimate < noise_floor);
     const floatv r = VLOAD(p + i0);
     const floatv q = r / n;

@@ -32,12 +32,25 @@ def cmd_demo(args):
 
 def cmd_bench(args):
     """Run a benchmark."""
-    from radarcl.bench import range_fft
+    from radarcl.bench import cfar, range_fft
 
     if not args.json:
-        print(f"measuring {args.which} on {len(args.n_fft)} sizes x {args.repeat} repetitions ...", file=sys.stderr)
-    result = range_fft.run(_runtime(), n_ffts=tuple(args.n_fft), repeat=args.repeat)
-    print(json.dumps(result) if args.json else "\n".join(range_fft.format_table(result)))
+        print(f"measuring {args.which}, {args.repeat} repetitions per variant ...", file=sys.stderr)
+    if args.which == "range-fft":
+        result = range_fft.run(_runtime(), n_ffts=tuple(args.n_fft), repeat=args.repeat)
+        lines = range_fft.format_table(result)
+    else:
+        result = cfar.run(_runtime(), repeat=args.repeat)
+        lines = cfar.format_table(result)
+    print(json.dumps(result) if args.json else "\n".join(lines))
+    return 0
+
+
+def cmd_navtech(args):
+    """CFAR + eq. 12 on a Navtech scan; plot one azimuth like the paper's Fig. 10."""
+    from radarcl.navtech_report import report
+
+    report(_runtime(), args, print)
     return 0
 
 
@@ -59,11 +72,32 @@ def build_parser():
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("bench", help="benchmarks, each against a baseline measured in the same run")
-    p.add_argument("which", choices=["range-fft"], help="what to measure")
+    p.add_argument("which", choices=["range-fft", "cfar"],
+                   help="range-fft: window+FFT+magnitude vs scipy; cfar: CFAR + eq. 12 vs numpy")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.add_argument("--repeat", type=int, default=200, help="timed repetitions per variant (default: %(default)s)")
-    p.add_argument("--n-fft", type=int, nargs="+", default=[512, 1024], help="FFT lengths (default: 512 1024)")
+    p.add_argument("--n-fft", type=int, nargs="+", default=[512, 1024],
+                   help="range-fft only: FFT lengths (default: 512 1024)")
     p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser("navtech", help="CFAR and the eq. 12 interpreter on a Navtech polar scan (Oxford "
+                                       "format PNG); plot one azimuth like the paper's Fig. 10",
+                       description="Reads a scan, converts its dB levels to power (1 dB per level), runs "
+                                   "CFAR and eq. 12 on every azimuth with the kernels, prints what was "
+                                   "found and writes a Fig. 10 style PNG of one azimuth.")
+    p.add_argument("scan", help="a <unix_us>.png scan")
+    p.add_argument("--azimuth", type=int, default=0, help="azimuth index to plot (default: %(default)s)")
+    p.add_argument("--out", default="navtech_fig10.png", help="PNG to write (default: %(default)s)")
+    p.add_argument("--kind", choices=["ca", "go", "so", "os"], default="ca", help="CFAR kind (default: %(default)s)")
+    p.add_argument("--guard", type=int, default=16, help="guard cells per side (default: %(default)s)")
+    p.add_argument("--train", type=int, default=16, help="training cells per side (default: %(default)s)")
+    p.add_argument("--pfa", type=float, default=1e-3, help="design false-alarm probability (default: %(default)s)")
+    p.add_argument("--range-min", type=float, default=2.0,
+                   help="no evidence nearer than this [m]; the radome echo fills the first ~1.5 m (default: %(default)s)")
+    p.add_argument("--range-max", type=float, default=None, help="no evidence beyond this [m] (default: the last bin)")
+    p.add_argument("--wide-m", type=float, default=None,
+                   help="wide-pulse width at the threshold [m] (default: the paper's geometry, 1.87 m)")
+    p.set_defaults(func=cmd_navtech)
     return parser
 
 

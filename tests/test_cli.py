@@ -16,7 +16,7 @@ def run_cli(*args, env=None):
 def test_help_lists_commands():
     out = run_cli("--help")
     assert out.returncode == 0
-    for command in ("info", "demo", "bench"):
+    for command in ("info", "demo", "bench", "navtech"):
         assert command in out.stdout
 
 
@@ -40,6 +40,16 @@ def test_bench_json_has_the_issue_keys(capsys):
     for key in ("ms_per_frame", "scipy_ms_per_frame", "ratio_vs_scipy", "max_rel_err", "runs"):
         assert key in result
     assert result["max_rel_err"] < 1e-6 and result["ratio_vs_scipy"] > 0
+
+
+def test_bench_cfar_json_has_the_issue_keys(capsys):
+    """The numpy baseline computes the same thing: its mask and evidence match the oracle."""
+    assert main(["bench", "cfar", "--json", "--repeat", "10"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    for key in ("ms_per_frame", "numpy_ms_per_frame", "ratio_vs_numpy"):
+        assert result[key] > 0
+    assert result["mask_mismatches"] == 0 and result["evidence_max_abs_err_units"] <= 1
+    assert result["numpy_evidence_max_abs_err_units"] <= 1 and result["detections"] > 0
 
 
 def test_bad_device_is_a_sentence_not_a_traceback():

@@ -30,11 +30,12 @@ class NumpyDetection:
         have_below = np.minimum(c.train, np.maximum(0, i - c.guard))
         have_above = np.minimum(c.train, np.maximum(0, n_bins - 1 - i - c.guard))
         n_below = have_below + (c.train - have_above)
-        # Cumulative-sum indices: sum of x[a:b] = C[b] - C[a] with C[0] = 0.
-        self.b_lo, self.b_hi = i - c.guard - n_below, i - c.guard
-        self.b_hi = np.where(n_below > 0, self.b_hi, self.b_lo)
-        self.a_lo = i + c.guard + 1
-        self.a_hi = self.a_lo + (2 * c.train - n_below)
+        n_above = 2 * c.train - n_below
+        # Cumulative-sum indices: sum of x[a:b] = C[b] - C[a] with C[0] = 0; empty sides -> 0:0.
+        self.b_lo = np.where(n_below > 0, i - c.guard - n_below, 0)
+        self.b_hi = np.where(n_below > 0, i - c.guard, 0)
+        self.a_lo = np.where(n_above > 0, i + c.guard + 1, 0)
+        self.a_hi = np.where(n_above > 0, i + c.guard + 1 + n_above, 0)
         self.alpha, self.floor, self.n_train = c.alpha, c.noise_floor, c.n_train
         self.first, self.last = t.bin_interval(bin_spacing_m, n_bins)
         self.wide_bins = t.wide_bins(bin_spacing_m)
@@ -98,7 +99,8 @@ def run(runtime, repeat=200):
     flat = profiles.reshape(-1, n_bins)
 
     def kernels():
-        detection.enqueue(detection.cfar.profiles_buf, wait_for=[detection.cfar.upload(profiles)]).wait()
+        copy = detection.cfar.upload(profiles)
+        detection.enqueue(detection.cfar.profiles_buf, wait_for=[copy]).wait()
 
     def cfar_only():
         detection.cfar.enqueue(detection.cfar.profiles_buf).wait()

@@ -1,0 +1,87 @@
+"""Real Navtech scans (../shared/data/navtech_oxford): the reader, and CFAR + eq. 12 on them
+with the kernels against the float64 oracle; the `radarcl navtech` command."""
+
+import numpy as np
+import pytest
+
+from radarcl import reference
+from radarcl.cli import main
+from radarcl.config import CfarConfig, InterpretConfig
+from radarcl.errors import FrameFormatError
+from radarcl.io import navtech
+from radarcl.pipeline import Detection
+from test_cfar import check_against_oracle
+from tolerances import EVIDENCE_UNITS_TOL
+
+
+@pytest.fixture(scope="module")
+def scans(shared_data):
+    return navtech.scan_paths(shared_data / "navtech_oxford" / "radar")
+
+
+def test_reader_decodes_every_scan(scans):
+    assert len(scans) == 11
+    for path in scans:
+        scan = navtech.load_scan(path)
+        assert scan.levels.shape == (400, 3768) and scan.levels.dtype == np.uint8
+        assert scan.valid.all()
+        # one revolution: 400 azimuths 0.9 deg apart, timestamps inside ~1/4 s after the name
+        assert np.allclose(np.diff(scan.angles_rad), 2 * np.pi / 400, atol=1e-9)
+        assert 0 <= scan.angles_rad.min() and scan.angles_rad.max() < 2 * np.pi
+        assert np.all(np.diff(scan.timestamps_us) >= 0)
+        assert scan.timestamps_us[0] == int(path.stem)
+        assert 0.2e6 < scan.timestamps_us[-1] - scan.timestamps_us[0] < 0.3e6
+
+
+def test_levels_are_decibels_of_integer_amplitudes(scans):
+    """The evidence for 1 dB per level: the lowest levels present are 20 log10(k), k = 1..8."""
+    levels = np.unique(navtech.load_scan(scans[0]).levels)
+    assert list(levels[:8]) == [0, 6, 9, 12, 14, 15, 17, 18]
+    assert np.all(np.abs(levels[:8] - 20 * np.log10(np.arange(1, 9))) < 1.0)
+    assert navtech.levels_to_power(np.array([0, 10, 255]))[1] == np.float32(10.0)
+
+
+def test_bad_files_are_refused(tmp_path):
+    bad = tmp_path / "1.png"
+    bad.write_bytes(b"not a png")
+    with pytest.raises(FrameFormatError, match="not a readable PNG"):
+        navtech.load_scan(bad)
+    from PIL import Image
+
+    Image.fromarray(np.zeros((4, 8), np.uint8)).save(tmp_path / "2.png")
+    with pytest.raises(FrameFormatError, match=r"expected an 8-bit greyscale image of shape \(azimuths, 11 \+ bins\)"):
+        navtech.load_scan(tmp_path / "2.png")
+    with pytest.raises(FrameFormatError, match="no Navtech scans"):
+        navtech.scan_paths(tmp_path / "empty")
+
+
+def test_detection_on_a_real_scan_matches_the_oracle(runtime, scans):
+    scan = navtech.load_scan(scans[3])
+    power = scan.power()
+    cfar_config = CfarConfig()
+    interpret_config = InterpretConfig(range_min_m=2.0, range_max_m=160.0, max_pulses=128)
+    result = Detection(runtime, (400,), scan.n_bins, scan.bin_spacing_m, cfar_config, interpret_config)(power)
+    assert np.isfinite(result.cfar.noise).all() and np.isfinite(result.cfar.ratio).all()
+    mask = check_against_oracle(result.cfar, power, cfar_config)
+    per_azimuth = mask.sum(axis=1)
+    # plausible: every azimuth sees something, none is mostly detections
+    assert per_azimuth.min() >= 1 and per_azimuth.max() < 0.3 * scan.n_bins
+    # the interpreter on 40 azimuths (the plain oracle walks bins in Python)
+    rows = slice(0, 400, 10)
+    evidence, pulses, n_pulses, flags = reference.interpret(
+        power[rows], result.cfar.noise[rows], result.cfar.mask[rows], interpret_config, scan.bin_spacing_m)
+    got = result.interpret
+    assert np.array_equal(got.n_pulses[rows], n_pulses) and np.array_equal(got.pulses[rows], pulses)
+    assert np.array_equal(got.flags[rows], flags) and got.valid.all()
+    diff = np.abs(got.evidence[rows].astype(np.int64) - evidence)
+    assert diff.max() <= EVIDENCE_UNITS_TOL and np.array_equal(diff[~result.cfar.mask[rows]], 0 * diff[~result.cfar.mask[rows]])
+    assert 5 <= got.n_pulses.mean() <= 200
+
+
+def test_cli_plots_one_azimuth(scans, tmp_path, capsys):
+    out = tmp_path / "fig.png"
+    assert main(["navtech", str(scans[0]), "--azimuth", "100", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert out.stat().st_size > 10_000 and "pulses per azimuth" in text and "azimuth 100:" in text
+    assert main(["navtech", str(scans[0]), "--azimuth", "400", "--out", str(out)]) == 2
+    assert "--azimuth must be in [0, 399]" in capsys.readouterr().err
