@@ -81,8 +81,8 @@ class NumpyDetection:
 
 
 def paper_profiles(seed=0):
-    """Power profiles of one paper frame: exponential receiver noise, a ground return rising
-    with elevation, and point echoes up to 120 dB above the noise."""
+    """Power profiles of one paper frame (``scene.profiles.paper_like_frame``): receiver noise,
+    ground returns, and point echoes up to ~100 dB above the noise."""
     from radarcl.scene.profiles import paper_like_frame
 
     return paper_like_frame(seed)

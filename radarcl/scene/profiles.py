@@ -73,8 +73,8 @@ def fig10_fence_and_tree(seed=0, n_fft=1024, fence_m=14.0, tree_m=23.0):
 
 def paper_like_frame(seed=0, tilt_deg=-7.0, n_fft=1024, radar=PAPER_RADAR):
     """Power profiles (n_az, n_el, n_fft/2) float32 of one frame of the paper's radar on its
-    stand: ground in every beam that reaches it, and 0-3 point echoes per beam whose powers
-    span up to 120 dB above the noise. Stacked beam k points at tilt + (k - 1.5) x 2 deg."""
+    stand: ground in every beam that reaches it, and 0-3 point echoes per beam with amplitudes
+    0.5-5.5 decades above the per-sample noise (up to ~100 dB in power). Stacked beam k points at tilt + (k - 1.5) x 2 deg."""
     rng = np.random.default_rng(seed)
     n_az, n_el = radar.n_azimuth, radar.n_elevation
     beams = []
