@@ -5,6 +5,7 @@ The defaults are the radar of Foessel-Bunting §2.3: a bistatic 77 GHz FMCW unit
 64 azimuths 1 deg apart x 4 stacked beams 2 deg apart, range 1-64 m.
 """
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -236,9 +237,10 @@ class CfarConfig:
         """Cells a profile needs at least: the cell under test, 2 x guard and 2 x train."""
         return 1 + 2 * int(self.guard) + 2 * int(self.train)
 
-    @property
+    @functools.cached_property
     def alpha(self):
-        """Threshold factor on the noise estimate for the design pfa (``detection.threshold_factor``)."""
+        """Threshold factor on the noise estimate for the design pfa (``detection.threshold_factor``;
+        solved once per config: GO, SO and OS need a bisection)."""
         from radarcl import detection
 
         return detection.threshold_factor(self.kind, float(self.pfa), self.n_train,

@@ -7,9 +7,6 @@ through CFAR and the eq. 12 interpreter.
 
 from dataclasses import dataclass
 
-import numpy as np
-
-from radarcl.errors import ShapeError
 from radarcl.stages.cfar import Cfar, CfarResult
 from radarcl.stages.interpret import InterpretResult, Interpreter
 
@@ -46,9 +43,6 @@ class Detection:
         copy = self.cfar.upload(profiles)
         flags_buf = None
         if flags is not None:
-            flags = np.asarray(flags)
-            if flags.shape != self.cfar.batch or flags.dtype != np.uint8:
-                raise ShapeError(f"expected flags of shape {self.cfar.batch} uint8, got {flags.shape} {flags.dtype}")
-            flags_buf = self.cfar.runtime.to_device(flags)
+            flags_buf = self.cfar.runtime.to_device(self.interpreter.check_flags(flags))
         done = self.enqueue(self.cfar.profiles_buf, flags_buf, wait_for=[copy])
         return DetectionResult(self.cfar.download(wait_for=[done]), self.interpreter.download(wait_for=[done]))

@@ -27,15 +27,15 @@ class NumpyDetection:
             raise ConfigError("the numpy baseline implements CA-CFAR only")
         c, t = cfar_config, interpret_config
         i = np.arange(n_bins)
-        have_below = np.minimum(c.train, np.maximum(0, i - c.guard))
-        have_above = np.minimum(c.train, np.maximum(0, n_bins - 1 - i - c.guard))
-        n_below = have_below + (c.train - have_above)
-        n_above = 2 * c.train - n_below
-        # Cumulative-sum indices: sum of x[a:b] = C[b] - C[a] with C[0] = 0; empty sides -> 0:0.
-        self.b_lo = np.where(n_below > 0, i - c.guard - n_below, 0)
-        self.b_hi = np.where(n_below > 0, i - c.guard, 0)
-        self.a_lo = np.where(n_above > 0, i + c.guard + 1, 0)
-        self.a_hi = np.where(n_above > 0, i + c.guard + 1 + n_above, 0)
+        # The shift edge rule's cells (one definition, the oracle's) as a run below and a run
+        # above each bin; sum of x[a:b] = C[b] - C[a] with C[0] = 0; an empty run is 0:0.
+        cells = reference.training_cells(n_bins, c.guard, c.train)
+        n_below = (cells < i[:, None]).sum(axis=1)
+        n_above = c.n_train - n_below
+        self.b_lo = np.where(n_below > 0, cells[:, 0], 0)
+        self.b_hi = self.b_lo + n_below
+        self.a_hi = np.where(n_above > 0, cells[:, -1] + 1, 0)
+        self.a_lo = self.a_hi - n_above
         self.alpha, self.floor, self.n_train = c.alpha, c.noise_floor, c.n_train
         self.first, self.last = t.bin_interval(bin_spacing_m, n_bins)
         self.wide_bins = t.wide_bins(bin_spacing_m)

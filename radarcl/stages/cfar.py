@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarcl.config import CfarConfig
-from radarcl.errors import ConfigError, ShapeError
+from radarcl.errors import ConfigError
+from radarcl.stages import beam_batch, check_array, upload, work_group_size
 
 _KINDS = {"ca": 0, "go": 1, "so": 2, "os": 3}
 # Measured on PoCL, 2 cores, paper frame (256 beams x 512 bins, CA 16+16 cells), kernel only:
@@ -49,10 +50,7 @@ class Cfar:
         self.config = config if config is not None else CfarConfig()
         if not isinstance(self.config, CfarConfig):
             raise ConfigError(f"config must be a CfarConfig, got {type(self.config).__name__}")
-        self.batch = tuple(int(b) for b in batch)
-        if not self.batch or min(self.batch) < 1:
-            raise ConfigError(f"batch must be a non-empty shape of positive sizes, got {batch!r}")
-        self.n_beams = int(np.prod(self.batch))
+        self.batch, self.n_beams = beam_batch(batch)
         self.n_bins = self.config.check_profile_length(int(n_bins))
         self.alpha = float(self.config.alpha)
         if vector_width is None:
@@ -64,12 +62,7 @@ class Cfar:
             N_BINS=self.n_bins, GUARD=self.config.guard, TRAIN=self.config.train,
             KIND=_KINDS[self.config.kind], RANK=self.config.rank or 0, VEC=self.vector_width))["cfar"]
         self._kernel.set_scalar_arg_dtypes([None, np.float32, np.float32, np.int32, None, None, None])
-        max_ls = runtime.max_local_size(self._kernel)
-        if local_size is None:
-            local_size = min(DEFAULT_LOCAL_SIZE, max_ls)
-        if not (isinstance(local_size, (int, np.integer)) and 1 <= local_size <= max_ls):
-            raise ConfigError(f"local_size must be an integer in [1, {max_ls}], got {local_size!r}")
-        self.local_size = int(local_size)
+        self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
         size = self.n_beams * self.n_bins
         self.noise_buf = runtime.empty(4 * size)
         self.ratio_buf = runtime.empty(4 * size)
@@ -84,11 +77,7 @@ class Cfar:
 
     def check(self, profiles):
         """Raise ShapeError unless ``profiles`` is one float32 frame of this plan's shape."""
-        profiles = np.asarray(profiles)
-        if profiles.shape != self.input_shape or profiles.dtype != np.float32:
-            raise ShapeError(f"expected power profiles of shape {self.input_shape} float32, "
-                             f"got {profiles.shape} {profiles.dtype}")
-        return np.ascontiguousarray(profiles)
+        return check_array(profiles, self.input_shape, np.float32, "power profiles")
 
     def enqueue(self, profiles_buf, wait_for=None):
         """Launch on a device buffer of profiles (e.g. ``RangeFFT.profiles_buf`` in power);
@@ -104,10 +93,8 @@ class Cfar:
 
     def upload(self, profiles):
         """Copy a checked frame into the plan's input buffer; returns the copy event."""
-        profiles = self.check(profiles)
-        if self.profiles_buf is None:
-            self.profiles_buf = self.runtime.empty(profiles.nbytes)
-        return self._cl.enqueue_copy(self.runtime.queue, self.profiles_buf, profiles, is_blocking=False)
+        self.profiles_buf, copy = upload(self.runtime, self.profiles_buf, self.check(profiles))
+        return copy
 
     def download(self, wait_for=None):
         """Copy the last results to the host (blocking) as a CfarResult."""

@@ -13,7 +13,8 @@ import numpy as np
 
 from radarcl import logodds, reference
 from radarcl.config import InterpretConfig
-from radarcl.errors import ConfigError, ShapeError
+from radarcl.errors import ConfigError
+from radarcl.stages import beam_batch, check_array, work_group_size
 
 # Beams per work-group. One work-item walks one beam; any size is correct.
 DEFAULT_LOCAL_SIZE = 16
@@ -49,10 +50,7 @@ class Interpreter:
         self.config = config if config is not None else InterpretConfig()
         if not isinstance(self.config, InterpretConfig):
             raise ConfigError(f"config must be an InterpretConfig, got {type(self.config).__name__}")
-        self.batch = tuple(int(b) for b in batch)
-        if not self.batch or min(self.batch) < 1:
-            raise ConfigError(f"batch must be a non-empty shape of positive sizes, got {batch!r}")
-        self.n_beams = int(np.prod(self.batch))
+        self.batch, self.n_beams = beam_batch(batch)
         self.n_bins = int(n_bins)
         if self.n_bins < 1:
             raise ConfigError(f"n_bins must be positive, got {n_bins!r}")
@@ -64,12 +62,7 @@ class Interpreter:
                                                          MAX_PULSES=self.config.max_pulses))["interpret"]
         self._kernel.set_scalar_arg_dtypes([None, None, None, None, np.float32] + [np.int32] * 6
                                            + [None] * 4)
-        max_ls = runtime.max_local_size(self._kernel)
-        if local_size is None:
-            local_size = min(DEFAULT_LOCAL_SIZE, max_ls)
-        if not (isinstance(local_size, (int, np.integer)) and 1 <= local_size <= max_ls):
-            raise ConfigError(f"local_size must be an integer in [1, {max_ls}], got {local_size!r}")
-        self.local_size = int(local_size)
+        self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
         self.evidence_buf = runtime.empty(4 * self.n_beams * self.n_bins)
         self.pulses_buf = runtime.empty(16 * self.n_beams * self.config.max_pulses)
         self.n_pulses_buf = runtime.empty(4 * self.n_beams)
@@ -81,6 +74,10 @@ class Interpreter:
     def input_shape(self):
         """Shape of a frame of profiles: (*batch, n_bins)."""
         return (*self.batch, self.n_bins)
+
+    def check_flags(self, flags):
+        """Per-beam flags as a contiguous uint8 array of shape ``batch``, or ShapeError."""
+        return check_array(flags, self.batch, np.uint8, "flags")
 
     def enqueue(self, profiles_buf, noise_buf, mask_buf, flags_buf=None, wait_for=None):
         """Launch on device buffers (profiles float32, CFAR noise float32 and mask uint8,
@@ -110,19 +107,11 @@ class Interpreter:
         """Interpret one frame given on the host (blocking): profiles and noise float32,
         mask bool or uint8, all (*batch, n_bins); flags uint8 (*batch,) or None."""
         rt = self.runtime
-        arrays = {"profiles": (profiles, np.float32), "noise": (noise, np.float32), "mask": (mask, None)}
-        checked = {}
-        for name, (array, dtype) in arrays.items():
-            array = np.asarray(array)
-            if array.shape != self.input_shape or (dtype is not None and array.dtype != dtype):
-                raise ShapeError(f"expected {name} of shape {self.input_shape} "
-                                 f"{np.dtype(dtype) if dtype else 'bool'}, got {array.shape} {array.dtype}")
-            checked[name] = array
+        profiles = check_array(profiles, self.input_shape, np.float32, "profiles")
+        noise = check_array(noise, self.input_shape, np.float32, "noise")
+        mask = check_array(mask, self.input_shape, None, "mask")
         if flags is not None:
-            flags = np.asarray(flags)
-            if flags.shape != self.batch or flags.dtype != np.uint8:
-                raise ShapeError(f"expected flags of shape {self.batch} uint8, got {flags.shape} {flags.dtype}")
-        bufs = [rt.to_device(checked["profiles"]), rt.to_device(checked["noise"]),
-                rt.to_device(checked["mask"].astype(np.uint8)),
+            flags = self.check_flags(flags)
+        bufs = [rt.to_device(profiles), rt.to_device(noise), rt.to_device(mask.astype(np.uint8)),
                 None if flags is None else rt.to_device(flags)]
         return self.download(wait_for=[self.enqueue(*bufs)])

@@ -18,6 +18,7 @@ import numpy as np
 from radarcl import reference
 from radarcl.config import is_power_of_two
 from radarcl.errors import ConfigError, DeviceCapabilityError, ShapeError
+from radarcl.stages import check_array, upload
 
 # Measured on PoCL, 2 cores, paper frame (256 beams), kernel only, n_fft 512 / 1024:
 #   scalar (vector_width 1), 16 workers: 0.34 / 0.59 ms;  vector_width 8, 16 workers: 0.21 / 0.30 ms.
@@ -165,11 +166,7 @@ class RangeFFT:
 
     def check(self, samples):
         """Raise ShapeError unless ``samples`` is one frame of this plan's shape and dtype."""
-        samples = np.asarray(samples)
-        if samples.shape != self.input_shape or samples.dtype != self.dtype:
-            raise ShapeError(f"expected a frame of shape {self.input_shape} {self.dtype}, "
-                             f"got {samples.shape} {samples.dtype}")
-        return np.ascontiguousarray(samples)
+        return check_array(samples, self.input_shape, self.dtype, "a frame")
 
     def enqueue(self, samples_buf, wait_for=None):
         """Launch on a device buffer of samples; results stay in ``profiles_buf``/``flags_buf``.
@@ -181,10 +178,8 @@ class RangeFFT:
 
     def upload(self, samples):
         """Copy a checked frame into the plan's input buffer; returns the copy event."""
-        samples = self.check(samples)
-        if self.samples_buf is None:
-            self.samples_buf = self.runtime.empty(samples.nbytes)
-        return self._cl.enqueue_copy(self.runtime.queue, self.samples_buf, samples, is_blocking=False)
+        self.samples_buf, copy = upload(self.runtime, self.samples_buf, self.check(samples))
+        return copy
 
     def __call__(self, samples):
         """Process one frame: (n_az, n_el, n_samples) -> RangeFFTResult (blocking)."""
