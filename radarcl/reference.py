@@ -207,3 +207,47 @@ def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
             n_pulses[beam] += 1
             after_wide = after_wide or wide
     return evidence, pulses, n_pulses, flags_out
+
+
+def fuse(spec, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin=0.0):
+    """Eq. 9 for one frame with the beam volume of §3.4 (radarcl.geometry), brute force.
+
+    spec: a ``GridSpec``; evidence: (n_beams, n_bins) int eq. 12 updates [logodds units], beam
+    b = i * n_el + k; lattice, model: ``BeamLattice``, ``BeamModel``; poses: (4, 4) or
+    (n_beams, 4, 4); bins outside [first_bin, last_bin] give nothing.
+
+    Every beam is tested against every voxel centre p (no candidate windows): with (d, y, z)
+    the coordinates of p in the beam frame and r = |p - beam origin|, the voxel takes
+    rint(evidence[b, rint(r / spacing)] * weight(rho2)) when d > 0 and rho2 <= 1 (rint: half
+    to even). Returns (sums int64 (nz, ny, nx), updates int64 (nz, ny, nx): beams that
+    reached each voxel, ambiguous bool (nz, ny, nx)): voxels where some decision of a beam
+    whose rho2 <= 1 + margin, at a bin within one of [first_bin, last_bin], (rho2 vs 1, the
+    bin, d vs 0) lies within ``margin`` of its boundary, so float32 may decide it otherwise.
+    """
+    from radarcl.geometry import check_poses
+
+    evidence = np.asarray(evidence)
+    P = check_poses(poses, lattice.n_beams)
+    nz, ny, nx = spec.array_shape
+    iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)
+    centres = spec.index_to_world(np.stack([ix, iy, iz], axis=1))
+    rotations = lattice.beam_rotations()
+    sums = np.zeros(len(centres), np.int64)
+    updates = np.zeros(len(centres), np.int64)
+    ambiguous = np.zeros(len(centres), bool)
+    for b in range(lattice.n_beams):
+        T = P[b if len(P) > 1 else 0]
+        x = centres - T[:3, 3]
+        d, y, z = (x @ (T[:3, :3] @ rotations[b])).T
+        bins = np.linalg.norm(x, axis=1) / bin_spacing_m
+        j = np.rint(bins).astype(np.int64)
+        rho2 = model.rho2(d, y, z)
+        near = (rho2 <= 1 + margin) & (j >= first_bin - 1) & (j <= last_bin + 1)
+        ambiguous |= near & ((np.abs(rho2 - 1) < margin) | (np.abs(np.abs(bins - j) - 0.5) < margin)
+                             | (np.abs(d) < margin))
+        inside = (d > 0) & (rho2 <= 1) & (j >= first_bin) & (j <= last_bin)
+        e = evidence[b, j[inside]].astype(np.float64)
+        sums[inside] += np.rint(e * model.weight(rho2[inside])).astype(np.int64)
+        updates[inside] += 1
+    shape = (nz, ny, nx)
+    return sums.reshape(shape), updates.reshape(shape), ambiguous.reshape(shape)

@@ -23,3 +23,18 @@ DECISION_MARGIN = 1e-5
 # differ from float64 by ~1e-6 nat, so the rounding may fall one unit apart. Noise bins (E_h,
 # E_l, 0) carry no arithmetic and are compared exactly.
 EVIDENCE_UNITS_TOL = 1
+
+# Fusion decides in float32 whether a voxel centre is inside a beam (rho2 <= 1, d > 0) and which
+# bin its range falls in (rint(r / spacing)). Coordinates of ~100 m carry float32 errors of
+# ~1e-5 m, so decisions within this margin (in rho2, and in bins) of their boundary may go either
+# way; such voxels are not compared, and the tests assert that they are rare.
+FUSION_DECISION_MARGIN = 1e-3
+
+# With the Gaussian weight, an update is rint(e * 4^-rho2): float32 and float64 products agree
+# to ~1e-6 relative (e <= 16384 units, so < 0.02 unit), so the rounding may fall one unit apart
+# per update: |kernel - oracle| <= this x (updates the voxel received). Uniform weights are exact.
+FUSION_UNITS_PER_UPDATE = 1
+
+# Ambiguous voxels (see FUSION_DECISION_MARGIN) must stay below this fraction of the voxels
+# some beam reaches, or the comparison would prove little.
+FUSION_AMBIGUOUS_MAX = 0.02

@@ -1,0 +1,193 @@
+/* Beam-to-voxel fusion of one whole frame: eq. 9 with the beam volume of §3.4 (Fig. 7c).
+ *
+ * Equivalent to radarcl.reference.fuse(...): every voxel whose centre lies inside a beam's
+ * volume takes that beam's eq. 12 update for the range bin of its centre, scaled by the two-way
+ * weight (GAUSSIAN) and rounded half to even; the grid adds the voxel's sum of updates once.
+ * See radarcl/geometry.py for the frames and the beam volume, radarcl/grid.py for the storage.
+ *
+ * A gather: each voxel is owned by one work-item, which tests each candidate beam once, sums
+ * its updates in registers and writes the sum once. So each voxel gets at most one update per
+ * beam, no atomics are needed, and the integer grid does not depend on any ordering.
+ *   get_global_id(0) = listed brick * SUBS + sub-brick, a VEC x 4 x 4 block of the 8x8x8 brick;
+ *   the work-item walks its 16 rows of VEC voxels along x as SIMD lanes (VEC = 4 or 8).
+ *   Any local size is correct.
+ * Candidates: the host gives each listed brick a conservative window of beams (i, k)
+ * (radarcl.stages.fusion.candidate_windows). Each work-item first drops the candidates whose
+ * volume cannot reach its sub-brick's bounding sphere: |y_c| - R > W_az(d_c + R) (or the same
+ * in elevation) means no point of the sphere is inside, since |y| is 1-Lipschitz and W grows
+ * with d.
+ *
+ * -D: VEC (4 or 8), N_AZ, N_EL, N_BINS (frame shape); NEAR_FIELD (cylinder of the antenna's cross-section),
+ *     GAUSSIAN (two-way weight), PER_BEAM_POSES (each beam measures range from its own origin),
+ *     AZ_WRAP (the azimuths span a full turn, windows may run past either end).
+ */
+#include "radarcl_common.h"
+
+#define SUB 4                                 /* sub-brick edge along y and z */
+#define SUBS ((8 / VEC) * 4)                  /* sub-bricks per brick */
+#define CAT_(a, b) a##b
+#define CAT(a, b) CAT_(a, b)
+#define floatV CAT(float, VEC)
+#define intV CAT(int, VEC)
+#define convert_floatV CAT(convert_float, VEC)
+#define convert_intV_rte CAT(CAT(convert_int, VEC), _rte)
+#define vloadV CAT(vload, VEC)
+#define vstoreV CAT(vstore, VEC)
+#if VEC == 4
+#define LANES ((float4)(0.0f, 1.0f, 2.0f, 3.0f))
+#define GATHER(p, j) ((int4)(p[j.s0], p[j.s1], p[j.s2], p[j.s3]))
+#elif VEC == 8
+#define LANES ((float8)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f))
+#define GATHER(p, j) ((int8)(p[j.s0], p[j.s1], p[j.s2], p[j.s3], p[j.s4], p[j.s5], p[j.s6], p[j.s7]))
+#else
+#error "VEC must be 4 or 8"
+#endif
+#define LAST CAT(s, CAT(VEC, _LAST))
+#define s4_LAST s3
+#define s8_LAST s7
+/* row r of a sub-brick is y offset r & 3, z offset r >> 2 */
+#define ROW_Y ((float16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3))
+#define ROW_Z ((float16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3))
+/* bit r set where lane r of an int16 mask is true */
+#define ROW_BITS(m) ((uint)(as_uint(m.s0) & 1u) | (as_uint(m.s1) & 2u) | (as_uint(m.s2) & 4u) | (as_uint(m.s3) & 8u) \
+    | (as_uint(m.s4) & 16u) | (as_uint(m.s5) & 32u) | (as_uint(m.s6) & 64u) | (as_uint(m.s7) & 128u) \
+    | (as_uint(m.s8) & 256u) | (as_uint(m.s9) & 512u) | (as_uint(m.sa) & 1024u) | (as_uint(m.sb) & 2048u) \
+    | (as_uint(m.sc) & 4096u) | (as_uint(m.sd) & 8192u) | (as_uint(m.se) & 16384u) | (as_uint(m.sf) & 32768u))
+#define GRID_LIMIT (1 << 30)
+
+__kernel void fusion(
+    const __global int *evidence,     // (n_beams, N_BINS) eq. 12 updates [logodds units]
+    const __global float4 *beams,     // (n_beams, 3): u, v, w axes in grid coordinates; .w of the
+                                      //   three = the beam's origin x, y, z [m, from the grid origin]
+    const __global int4 *bricks,      // (n_listed,) bx, by, bz, slot
+    const __global int4 *windows,     // (n_listed,) candidate beams i_lo, i_hi, k_lo, k_hi
+    const float voxel,                // voxel edge [m]
+    const float inv_spacing,          // 1 / range bin spacing [1/m]
+    const int first_bin,              // bins that give evidence: [first_bin, last_bin]
+    const int last_bin,
+    const int nx,                     // grid shape [voxels]
+    const int ny,
+    const int nz,
+    const float tan_half_az,          // tan(half-power beamwidth / 2), azimuth
+    const float tan_half_el,          //   and elevation
+    const float a_az,                 // half apertures [m] (0 without NEAR_FIELD)
+    const float a_el,
+    const int n_items,                // listed bricks x SUBS: work-items past it do nothing
+    __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
+{
+    const int id = get_global_id(0);
+    if (id >= n_items)
+        return;
+    const int4 brick = bricks[id / SUBS];
+    const int4 w = windows[id / SUBS];
+    const int sub = id % SUBS;
+    const int3 corner = (int3)((sub >> 2) * VEC, (sub & 1) * SUB, ((sub >> 1) & 1) * SUB);   /* in the brick */
+    const int3 base = brick.xyz * 8 + corner;                                                /* in the grid */
+    const float3 centre = (convert_float3(base) + (float3)(0.5f * VEC, 0.5f * SUB, 0.5f * SUB)) * voxel;
+    const float radius = 0.5f * sqrt((float)(VEC * VEC + 2 * SUB * SUB)) * voxel;
+    const floatV px = (convert_float(base.x) + 0.5f + LANES) * voxel;
+    const intV in_x = (floatV)((float)base.x) + LANES < (float)nx;
+    intV acc[SUB * SUB];
+#ifndef PER_BEAM_POSES
+    /* one origin for the frame: one bin per voxel, -1 where no evidence can come */
+    intV bins[SUB * SUB];
+    {
+        const float3 o = (float3)(beams[0].w, beams[1].w, beams[2].w);
+        const floatV qx = px - o.x;
+        for (int row = 0; row < SUB * SUB; ++row) {
+            const float qy = (base.y + (row & 3) + 0.5f) * voxel - o.y;
+            const float qz = (base.z + (row >> 2) + 0.5f) * voxel - o.z;
+            const intV bin = convert_intV_rte(sqrt(qx * qx + (qy * qy + qz * qz)) * inv_spacing);
+            const int ok_row = base.y + (row & 3) < ny && base.z + (row >> 2) < nz;
+            bins[row] = select((intV)-1, bin, in_x & (bin >= first_bin) & (bin <= last_bin) & (ok_row ? -1 : 0));
+            acc[row] = 0;
+        }
+    }
+#else
+    for (int row = 0; row < SUB * SUB; ++row)
+        acc[row] = 0;
+#endif
+    int touched = 0;
+    for (int k = w.s2; k <= w.s3; ++k) {
+        for (int ii = w.s0; ii <= w.s1; ++ii) {
+#ifdef AZ_WRAP
+            const int i = ii < 0 ? ii + N_AZ : (ii >= N_AZ ? ii - N_AZ : ii);
+#else
+            const int i = ii;
+#endif
+            const int b = i * N_EL + k;
+            const float4 U = beams[3 * b], V = beams[3 * b + 1], W = beams[3 * b + 2];
+            const float3 o = (float3)(U.w, V.w, W.w);
+            /* can this beam reach the sub-brick's bounding sphere? */
+            const float3 c = centre - o;
+            const float dc = dot(c, U.xyz) + radius;
+#ifdef NEAR_FIELD
+            const float wa_c = fmax(dc * tan_half_az, a_az), we_c = fmax(dc * tan_half_el, a_el);
+#else
+            const float wa_c = dc * tan_half_az, we_c = dc * tan_half_el;
+#endif
+            if (dc <= 0.0f || fabs(dot(c, V.xyz)) - radius > wa_c || fabs(dot(c, W.xyz)) - radius > we_c)
+                continue;
+            touched = 1;
+            const __global int *row_ev = evidence + b * N_BINS;
+            const floatV qx = px - o.x;
+            const floatV dx = qx * U.x, yx = qx * V.x, zx = qx * W.x;
+            /* Rows that may hold an inside voxel. Inside needs d > 0 and |y| <= W_az(d) <=
+             * a_az + tan_az d (and the same for z): linear in x along a row, so a row whose
+             * first and last voxels both break one of these breaks it everywhere. */
+            const float16 qy16 = (ROW_Y + (float)base.y + 0.5f) * voxel - o.y;
+            const float16 qz16 = (ROW_Z + (float)base.z + 0.5f) * voxel - o.z;
+            const float16 d0 = dx.s0 + qy16 * U.y + qz16 * U.z, d1 = d0 + (dx.LAST - dx.s0);
+            const float16 y0 = yx.s0 + qy16 * V.y + qz16 * V.z, y1 = y0 + (yx.LAST - yx.s0);
+            const float16 z0 = zx.s0 + qy16 * W.y + qz16 * W.z, z1 = z0 + (zx.LAST - zx.s0);
+            const float16 wa0 = a_az + tan_half_az * d0, wa1 = a_az + tan_half_az * d1;
+            const float16 we0 = a_el + tan_half_el * d0, we1 = a_el + tan_half_el * d1;
+            const int16 maybe = (fmax(d0, d1) > 0.0f) & (fmin(y0 - wa0, y1 - wa1) <= 0.0f)
+                              & (fmin(-y0 - wa0, -y1 - wa1) <= 0.0f) & (fmin(z0 - we0, z1 - we1) <= 0.0f)
+                              & (fmin(-z0 - we0, -z1 - we1) <= 0.0f);
+            uint rows = ROW_BITS(maybe);
+            while (rows) {
+                const int row = 31 - clz(rows & (0u - rows));
+                rows &= rows - 1u;
+                const float qy = (base.y + (row & 3) + 0.5f) * voxel - o.y;
+                const float qz = (base.z + (row >> 2) + 0.5f) * voxel - o.z;
+#ifdef PER_BEAM_POSES
+                const intV raw = convert_intV_rte(sqrt(qx * qx + (qy * qy + qz * qz)) * inv_spacing);
+                const int ok_row = base.y + (row & 3) < ny && base.z + (row >> 2) < nz;
+                const intV bin = select((intV)-1, raw, in_x & (raw >= first_bin) & (raw <= last_bin) & (ok_row ? -1 : 0));
+#else
+                const intV bin = bins[row];
+#endif
+                const floatV d = dx + (qy * U.y + qz * U.z);
+                const floatV y = yx + (qy * V.y + qz * V.z);
+                const floatV z = zx + (qy * W.y + qz * W.z);
+#ifdef NEAR_FIELD
+                const floatV wa = fmax(d * tan_half_az, a_az), we = fmax(d * tan_half_el, a_el);
+#else
+                const floatV wa = d * tan_half_az, we = d * tan_half_el;
+#endif
+                /* rho2 = (y / wa)^2 + (z / we)^2 <= 1, without dividing by a vanishing width */
+                const floatV wa2 = wa * wa, we2 = we * we;
+                const floatV num = y * y * we2 + z * z * wa2, den = wa2 * we2;
+                const intV inside = (bin >= 0) & (d > 0.0f) & (den > 0.0f) & (num <= den);
+                if (!any(inside))
+                    continue;
+                const intV j = max(bin, 0);
+                intV e = GATHER(row_ev, j);
+#ifdef GAUSSIAN
+                e = convert_intV_rte(convert_floatV(e) * exp2(-2.0f * (num / den)));
+#endif
+                acc[row] += select((intV)0, e, inside);
+            }
+        }
+    }
+    if (!touched)
+        return;
+    __global int *cells = pool + brick.w * 512 + (corner.z * 8 + corner.y) * 8 + corner.x;
+    for (int row = 0; row < SUB * SUB; ++row) {
+        if (any(acc[row] != 0)) {
+            __global int *cell = cells + ((row >> 2) * 8 + (row & 3)) * 8;
+            vstoreV(clamp(add_sat(vloadV(0, cell), acc[row]), -GRID_LIMIT, GRID_LIMIT), 0, cell);
+        }
+    }
+}

@@ -1,0 +1,267 @@
+"""The evidence grid (paper §3.1, eq. 9): fixed-point log-odds in sparse bricks on the device.
+
+Convention (one place, used everywhere): index (ix, iy, iz) covers world points p with
+``origin + i * voxel <= p < origin + (i + 1) * voxel``; its coordinates are those of its CENTRE,
+``origin + (i + 0.5) * voxel``. Index tuples and ``shape`` are (x, y, z). Dense numpy
+snapshots are (nz, ny, nx), x fastest: the layout of a GL 3D texture of size (nx, ny, nz).
+
+Values are int32 in ``radarcl.logodds`` units (1/1024 nat). The grid stores exact integer sums
+of eq. 9 updates (each update already clamped to +-16 nat), so a map does not depend on the
+order of frames or beams. Sums saturate at +-``GRID_LIMIT`` (2^30 units, about 1e6 nat, where
+p = 1 in float64 anyway); only there would the order matter. Views (``log_odds``,
+``probability``) are computed from the sums on read.
+
+Storage: bricks of 8 x 8 x 8 voxels (2 KiB), allocated the first time some beam reaches them
+("leave out what the scene does not need"). A host table maps brick -> slot in one device pool.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from radarcl import logodds
+from radarcl.errors import ConfigError, DeviceCapabilityError, FrameFormatError, ShapeError
+
+BRICK = 8                           # voxels per brick edge
+BRICK_VOXELS = BRICK ** 3
+BRICK_BYTES = 4 * BRICK_VOXELS
+GRID_LIMIT = 2 ** 30                # stored sums saturate here [units]
+MAX_TABLE_BRICKS = 2 ** 28          # the host brick table (int32) stays below 1 GiB
+FILE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    """Where the grid lies: ``origin_m`` (x, y, z) of its low corner [m], cubic voxels of
+    ``voxel_m`` [m], ``shape`` (nx, ny, nz) voxels."""
+
+    origin_m: tuple
+    voxel_m: float
+    shape: tuple
+
+    def __post_init__(self):
+        origin = tuple(float(v) for v in np.asarray(self.origin_m, dtype=float).reshape(-1))
+        if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
+            raise ConfigError(f"origin_m must be 3 finite numbers, got {self.origin_m!r}")
+        if not (isinstance(self.voxel_m, (int, float)) and math.isfinite(self.voxel_m) and self.voxel_m > 0):
+            raise ConfigError(f"voxel_m must be a positive finite number, got {self.voxel_m!r}")
+        shape = tuple(self.shape)
+        if len(shape) != 3 or not all(isinstance(n, (int, np.integer)) and n >= 1 for n in shape):
+            raise ConfigError(f"shape must be 3 positive integers (nx, ny, nz), got {self.shape!r}")
+        if max(shape) > 2 ** 20:
+            raise ConfigError(f"shape {shape} exceeds 2^20 voxels along an axis")
+        object.__setattr__(self, "origin_m", origin)
+        object.__setattr__(self, "voxel_m", float(self.voxel_m))
+        object.__setattr__(self, "shape", tuple(int(n) for n in shape))
+
+    @classmethod
+    def around(cls, centre_m, size_m, voxel_m):
+        """A grid of at least ``size_m`` (x, y, z) [m] centred on ``centre_m``."""
+        size = np.asarray(size_m, dtype=float)
+        shape = tuple(int(n) for n in np.maximum(1, np.ceil(size / voxel_m - 1e-9)))
+        origin = np.asarray(centre_m, dtype=float) - 0.5 * np.asarray(shape) * voxel_m
+        return cls(tuple(origin), voxel_m, shape)
+
+    @property
+    def array_shape(self):
+        """Shape of a dense snapshot: (nz, ny, nx)."""
+        nx, ny, nz = self.shape
+        return nz, ny, nx
+
+    @property
+    def n_voxels(self):
+        """Voxels in the grid."""
+        return int(np.prod(self.shape, dtype=np.int64))
+
+    @property
+    def brick_shape(self):
+        """Bricks along (x, y, z); partial bricks at the high ends hold voxels outside the grid."""
+        return tuple(-(-n // BRICK) for n in self.shape)
+
+    @property
+    def dense_bytes(self):
+        """Bytes of the grid stored densely as int32."""
+        return 4 * self.n_voxels
+
+    def world_to_index(self, points):
+        """(..., 3) world points [m] -> (..., 3) int64 voxel indices floor((p - origin) / voxel),
+        possibly outside the grid (see ``contains``, ``world_to_index_checked``)."""
+        p = np.asarray(points, dtype=np.float64)
+        return np.floor((p - np.asarray(self.origin_m)) / self.voxel_m).astype(np.int64)
+
+    def index_to_world(self, index):
+        """(..., 3) voxel indices -> (..., 3) world coordinates [m] of the voxel centres."""
+        return np.asarray(self.origin_m) + (np.asarray(index, dtype=np.float64) + 0.5) * self.voxel_m
+
+    def contains(self, index):
+        """(...,) bool: index inside the grid."""
+        i = np.asarray(index)
+        return ((i >= 0) & (i < np.asarray(self.shape))).all(axis=-1)
+
+    def world_to_index_checked(self, points):
+        """As ``world_to_index``, but ConfigError names the first point outside the grid."""
+        p = np.asarray(points, dtype=np.float64)
+        if not np.isfinite(p).all():
+            raise ConfigError("points must be finite")
+        index = self.world_to_index(p)
+        inside = self.contains(index)
+        if not inside.all():
+            bad = p.reshape(-1, 3)[np.flatnonzero(~inside.reshape(-1))[0]]
+            upper = np.asarray(self.origin_m) + np.asarray(self.shape) * self.voxel_m
+            raise ConfigError(f"point {bad.tolist()} lies outside the grid [{list(self.origin_m)}, "
+                              f"{upper.tolist()}) m")
+        return index
+
+
+class EvidenceGrid:
+    """A fixed-point log-odds grid on one device, stored in sparse bricks.
+
+    runtime: a ``radarcl.cl.Runtime``; spec: a ``GridSpec``. ``dense=True`` allocates every
+    brick at once (to compare memory, or when the whole grid will be seen anyway).
+    """
+
+    def __init__(self, runtime, spec, *, dense=False):
+        if not isinstance(spec, GridSpec):
+            raise ConfigError(f"spec must be a GridSpec, got {type(spec).__name__}")
+        self.runtime = runtime
+        self.spec = spec
+        nbx, nby, nbz = spec.brick_shape
+        n_total = nbx * nby * nbz
+        if n_total > MAX_TABLE_BRICKS:
+            raise ConfigError(f"a grid of {spec.shape} voxels has {n_total} bricks, more than the "
+                              f"{MAX_TABLE_BRICKS} a brick table holds; use voxels of at least "
+                              f"{spec.voxel_m * (n_total / MAX_TABLE_BRICKS) ** (1 / 3):.3g} m or a smaller grid")
+        self.table = np.full((nbz, nby, nbx), -1, np.int32)     # brick (z, y, x) -> slot
+        self.keys = np.empty((0, 3), np.int32)                  # slot -> brick (bx, by, bz)
+        self.pool = None
+        self.capacity = 0
+        if dense:
+            self._check_fits(n_total)
+            bz, by, bx = np.indices(self.table.shape).reshape(3, -1)
+            self.allocate(np.stack([bx, by, bz], axis=1))
+
+    @property
+    def n_bricks(self):
+        """Bricks allocated so far."""
+        return len(self.keys)
+
+    def memory(self):
+        """Bytes of the grid stored densely and as allocated here, and the brick counts."""
+        table = self.table.nbytes
+        return {"dense_bytes": self.spec.dense_bytes, "sparse_bytes": self.n_bricks * BRICK_BYTES + table,
+                "bricks": self.n_bricks, "bricks_total": int(self.table.size)}
+
+    def _check_fits(self, needed):
+        limit = int(self.runtime.device.max_mem_alloc_size)
+        if needed * BRICK_BYTES > limit:
+            factor = (needed * BRICK_BYTES / limit) ** (1 / 3)
+            raise DeviceCapabilityError(
+                f"the grid needs {needed} bricks = {needed * BRICK_BYTES / 2**20:.0f} MiB but "
+                f"{self.runtime.name} allows buffers of {limit / 2**20:.0f} MiB; use voxels of at least "
+                f"{self.spec.voxel_m * factor:.3g} m, or a smaller grid (sparse bricks already leave out "
+                "space no beam reaches)")
+        return limit
+
+    def _grow(self, needed):
+        import pyopencl as cl
+
+        limit = self._check_fits(needed)
+        capacity = max(needed, min(int(self.capacity * 1.5) + 64, limit // BRICK_BYTES))
+        pool = self.runtime.empty(capacity * BRICK_BYTES)
+        q = self.runtime.queue
+        cl.enqueue_fill_buffer(q, pool, np.int32(0), 0, capacity * BRICK_BYTES)
+        if self.pool is not None and self.capacity:
+            cl.enqueue_copy(q, pool, self.pool, byte_count=self.n_bricks * BRICK_BYTES)
+        self.pool, self.capacity = pool, capacity
+
+    def allocate(self, bricks):
+        """Slots of bricks (n, 3) (bx, by, bz), allocating the missing ones in sorted order
+        (so a grid's layout depends only on the bricks seen). Returns (n,) int32 slots."""
+        b = np.asarray(bricks, dtype=np.int64).reshape(-1, 3)
+        if len(b) and ((b < 0).any() or (b >= np.asarray(self.spec.brick_shape)).any()):
+            raise ConfigError(f"brick indices must lie in [0, {self.spec.brick_shape}), got {b.min(0)}..{b.max(0)}")
+        slots = self.table[b[:, 2], b[:, 1], b[:, 0]]
+        missing = np.unique(b[slots < 0], axis=0)
+        if len(missing):
+            needed = self.n_bricks + len(missing)
+            if needed > self.capacity:
+                self._grow(needed)
+            new = np.arange(self.n_bricks, needed, dtype=np.int32)
+            self.table[missing[:, 2], missing[:, 1], missing[:, 0]] = new
+            self.keys = np.concatenate([self.keys, missing.astype(np.int32)])
+            slots = self.table[b[:, 2], b[:, 1], b[:, 0]]
+        return slots.astype(np.int32)
+
+    def bricks(self):
+        """Sparse snapshot: (keys (n, 3) int32 (bx, by, bz), data (n, 8, 8, 8) int32 [z, y, x])."""
+        import pyopencl as cl
+
+        data = np.zeros((self.n_bricks, BRICK, BRICK, BRICK), np.int32)
+        if self.n_bricks:
+            cl.enqueue_copy(self.runtime.queue, data, self.pool, is_blocking=True)
+        return self.keys.copy(), data
+
+    def snapshot(self):
+        """Dense int32 (nz, ny, nx) copy of the grid in logodds units; unseen voxels are 0."""
+        keys, data = self.bricks()
+        return assemble(self.spec, keys, data)
+
+    def log_odds(self):
+        """Dense float64 (nz, ny, nx) log-odds [nat]."""
+        return logodds.to_nats(self.snapshot())
+
+    def probability(self):
+        """Dense float64 (nz, ny, nx) occupancy probabilities."""
+        return logodds.probability(self.snapshot())
+
+    def clear(self):
+        """Forget all evidence and free the bricks."""
+        self.table.fill(-1)
+        self.keys = np.empty((0, 3), np.int32)
+        self.pool, self.capacity = None, 0
+
+    def save(self, path):
+        """Write the grid (spec and allocated bricks, not the dense volume) to an npz file."""
+        keys, data = self.bricks()
+        np.savez_compressed(path, version=FILE_VERSION, origin_m=np.asarray(self.spec.origin_m),
+                            voxel_m=self.spec.voxel_m, shape=np.asarray(self.spec.shape),
+                            keys=keys, data=data)
+
+    @classmethod
+    def load(cls, runtime, path):
+        """Read a grid written by ``save`` onto ``runtime``'s device."""
+        import pyopencl as cl
+
+        try:
+            with np.load(path) as f:
+                version = int(f["version"])
+                spec = GridSpec(tuple(f["origin_m"]), float(f["voxel_m"]), tuple(int(n) for n in f["shape"]))
+                keys, data = f["keys"], f["data"]
+        except (OSError, KeyError, ValueError) as exc:
+            raise FrameFormatError(f"{path} is not a radarcl grid file: {exc}") from exc
+        if version != FILE_VERSION:
+            raise FrameFormatError(f"{path} has grid file version {version}, this radarcl reads {FILE_VERSION}")
+        if data.dtype != np.int32 or data.shape != (len(keys), BRICK, BRICK, BRICK):
+            raise FrameFormatError(f"{path}: expected bricks ({len(keys)}, 8, 8, 8) int32, "
+                                   f"got {data.shape} {data.dtype}")
+        grid = cls(runtime, spec)
+        slots = grid.allocate(keys)
+        if len(keys):
+            ordered = np.empty_like(data)
+            ordered[slots] = data
+            cl.enqueue_copy(runtime.queue, grid.pool, ordered, is_blocking=True)
+        return grid
+
+
+def assemble(spec, keys, data):
+    """Dense int32 (nz, ny, nx) array from bricks (keys (n, 3) (bx, by, bz), data (n, 8, 8, 8))."""
+    if data.shape != (len(keys), BRICK, BRICK, BRICK):
+        raise ShapeError(f"expected bricks of shape ({len(keys)}, 8, 8, 8), got {data.shape}")
+    nbx, nby, nbz = spec.brick_shape
+    full = np.zeros((nbz * BRICK, nby * BRICK, nbx * BRICK), np.int32)
+    view = full.reshape(nbz, BRICK, nby, BRICK, nbx, BRICK).transpose(0, 2, 4, 1, 3, 5)
+    if len(keys):
+        view[keys[:, 2], keys[:, 1], keys[:, 0]] = data
+    nz, ny, nx = spec.array_shape
+    return np.ascontiguousarray(full[:nz, :ny, :nx])

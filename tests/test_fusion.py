@@ -1,0 +1,187 @@
+"""kernels/fusion.cl <-> radarcl/stages/fusion.py against radarcl.reference.fuse (eq. 9, §3.4).
+
+The integer grid is compared with the float64 oracle voxel by voxel, and is shown to be
+bit-identical across repetitions, frame orders, beam orders (splits), local sizes and vector
+widths, and to give each voxel at most one update per beam.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from radarcl import reference
+from radarcl.config import RadarConfig
+from radarcl.errors import ConfigError, ShapeError
+from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
+from radarcl.grid import GRID_LIMIT, EvidenceGrid, GridSpec
+from radarcl.stages.fusion import Fusion
+from tolerances import FUSION_AMBIGUOUS_MAX, FUSION_DECISION_MARGIN, FUSION_UNITS_PER_UPDATE
+
+RADAR = RadarConfig()
+N_BINS, SPACING, FIRST, LAST = 160, 0.1, 5, 150
+SMALL = GridSpec((-1.0, -6.0, -3.0), 0.25, (48, 48, 24))   # the sensor sits inside
+POSE = pose_from_xyz_rpy(0.3, 0.2, 0.1, roll=0.02, pitch=-0.03, yaw=0.05)
+
+
+def evidence(lattice, seed=0, low=-3000, high=3000):
+    return np.random.default_rng(seed).integers(low, high, (lattice.n_beams, N_BINS)).astype(np.int32)
+
+
+def fuse(runtime, spec, lattice, model, ev, poses, **options):
+    grid = EvidenceGrid(runtime, spec)
+    plan = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, **options)(ev, poses)
+    return grid, plan
+
+
+def check_against_oracle(got, spec, lattice, model, ev, poses, min_reached=100):
+    sums, updates, ambiguous = reference.fuse(spec, ev, lattice, model, poses, SPACING, FIRST, LAST,
+                                              margin=FUSION_DECISION_MARGIN)
+    reached = updates > 0
+    assert reached.sum() >= min_reached, "the case reaches too few voxels to test anything"
+    assert ambiguous.sum() <= FUSION_AMBIGUOUS_MAX * reached.sum()
+    clear = ~ambiguous
+    diff = np.abs(got.astype(np.int64) - sums)[clear]
+    if model.gaussian:
+        assert (diff <= FUSION_UNITS_PER_UPDATE * updates[clear]).all()
+    else:
+        assert (diff == 0).all()
+    return sums, updates
+
+
+LATTICES = {
+    "paper, tilt -10 deg": BeamLattice.from_radar(RADAR, tilt_deg=-10.0),
+    "spinning, 90 azimuths": BeamLattice.spinning(90, az0_rad=0.3),
+}
+MODELS = {f"near_field={n}, gaussian={g}": BeamModel.from_radar(RADAR, near_field=n, gaussian=g)
+          for n in (True, False) for g in (True, False)}
+
+
+@pytest.mark.parametrize("model", MODELS.values(), ids=MODELS.keys())
+@pytest.mark.parametrize("lattice", LATTICES.values(), ids=LATTICES.keys())
+def test_matches_oracle(runtime, lattice, model):
+    ev = evidence(lattice)
+    grid, _ = fuse(runtime, SMALL, lattice, model, ev, POSE)
+    check_against_oracle(grid.snapshot(), SMALL, lattice, model, ev, POSE)
+
+
+@pytest.mark.parametrize("voxel", [0.05, 0.6, 1.5], ids=["far below the footprint", "about it", "far above"])
+def test_voxel_sizes_match_oracle_without_holes(runtime, voxel):
+    """Small voxels: no aliasing holes (every centre inside a beam is updated, exactly as the
+    oracle's brute force says); voxels wider than the beam: only those whose centre is inside."""
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=False"]
+    extent = {0.05: (2.4, 2.4, 1.2), 0.6: (32.0, 32.0, 12.0), 1.5: (32.0, 32.0, 12.0)}[voxel]
+    spec = GridSpec.around((0.5 * extent[0] - 0.4, 0.0, -1.0), extent, voxel)
+    pose = pose_from_xyz_rpy(0.013, -0.021, 0.007, yaw=0.003)   # off the voxel lattice's symmetries
+    ev = np.full((lattice.n_beams, N_BINS), 700, np.int32)
+    grid, _ = fuse(runtime, spec, lattice, model, ev, pose)
+    got = grid.snapshot()
+    _, updates = check_against_oracle(got, spec, lattice, model, ev, pose, min_reached=20)
+    assert (got[updates > 0] >= 700).mean() >= 1 - FUSION_AMBIGUOUS_MAX
+
+
+def test_per_beam_poses_match_oracle(runtime):
+    lattice, model = LATTICES["spinning, 90 azimuths"], MODELS["near_field=True, gaussian=True"]
+    # the radar drives 1.5 m along x and turns 5 deg during the scan
+    poses = np.stack([pose_from_xyz_rpy(1.5 * f, 0.1 * f, 0.0, yaw=math.radians(5) * f)
+                      for f in np.linspace(0, 1, lattice.n_beams)])
+    ev = evidence(lattice, seed=3)
+    grid, _ = fuse(runtime, SMALL, lattice, model, ev, poses, per_beam_poses=True)
+    check_against_oracle(grid.snapshot(), SMALL, lattice, model, ev, poses)
+
+
+def test_sensor_outside_the_grid(runtime):
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
+    pose = pose_from_xyz_rpy(-6.0, 0.5, 1.0, yaw=0.1)
+    ev = evidence(lattice, seed=4)
+    grid, plan = fuse(runtime, SMALL, lattice, model, ev, pose)
+    assert plan.beams_outside == 0
+    check_against_oracle(grid.snapshot(), SMALL, lattice, model, ev, pose)
+
+
+def test_beams_outside_the_grid_are_counted(runtime):
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
+    behind = pose_from_xyz_rpy(20.0, 0.0, 0.0, yaw=0.0)         # looking away from the grid
+    grid, plan = fuse(runtime, SMALL, lattice, model, evidence(lattice), behind)
+    assert plan.beams_outside == lattice.n_beams
+    assert grid.n_bricks == 0 and not grid.snapshot().any()
+    sideways = pose_from_xyz_rpy(-3.0, -8.0, 0.0, yaw=math.radians(90))   # some azimuths miss it
+    _, plan = fuse(runtime, SMALL, lattice, model, evidence(lattice), sideways)
+    assert 0 < plan.beams_outside < lattice.n_beams
+
+
+def test_one_update_per_beam_per_voxel(runtime):
+    """Near the sensor a cone sampled by points hits voxels many times; the gather cannot."""
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=False"]
+    spec = GridSpec.around((2.0, 0.0, 0.0), (4.0, 4.0, 2.0), 0.02)
+    for beam in (0, 130):
+        ev = np.zeros((lattice.n_beams, N_BINS), np.int32)
+        ev[beam] = 1000
+        grid, _ = fuse(runtime, spec, lattice, model, ev, np.eye(4))
+        got = grid.snapshot()
+        assert set(np.unique(got)) == {0, 1000}
+
+
+def test_deterministic_across_orders_sizes_and_widths(runtime):
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
+    frames = [(evidence(lattice, seed=s), pose_from_xyz_rpy(0.4 * s, 0.1, 0.0, yaw=0.1 * s)) for s in range(3)]
+
+    def run(order, **options):
+        grid = EvidenceGrid(runtime, SMALL)
+        f = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, **options)
+        for i in order:
+            f(*frames[i])
+        return grid.snapshot()
+
+    first = run([0, 1, 2])
+    assert first.any()
+    assert np.array_equal(first, run([0, 1, 2]))                 # repetition
+    assert np.array_equal(first, run([2, 0, 1]))                 # frame order
+    for options in ({"local_size": 1}, {"local_size": 4}, {"vector_width": 4}):
+        assert np.array_equal(first, run([1, 2, 0], **options)), options
+    # beam order: the beams of each frame fused in two launches, odd azimuths first
+    grid = EvidenceGrid(runtime, SMALL)
+    f = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST)
+    odd = (np.arange(lattice.n_beams) // lattice.n_el) % 2 == 1
+    for ev, pose in frames[::-1]:
+        f(np.where(odd[:, None], ev, 0).astype(np.int32), pose)
+        f(np.where(odd[:, None], 0, ev).astype(np.int32), pose)
+    assert np.array_equal(first, grid.snapshot())
+
+
+def test_sums_saturate_at_the_grid_limit(runtime, tmp_path):
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=False"]
+    spec = GridSpec.around((3.0, 0.0, -0.5), (2.0, 2.0, 1.0), 0.25)
+    ev = np.full((lattice.n_beams, N_BINS), 16384, np.int32)
+    grid, _ = fuse(runtime, spec, lattice, model, ev, np.eye(4))
+    keys, data = grid.bricks()
+    reached = data > 0
+    data[reached] = GRID_LIMIT - 1
+    np.savez_compressed(tmp_path / "g.npz", version=1, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
+                        shape=np.asarray(spec.shape), keys=keys, data=data)
+    loaded = EvidenceGrid.load(runtime, tmp_path / "g.npz")
+    Fusion(runtime, loaded, lattice, model, N_BINS, SPACING, FIRST, LAST)(ev, np.eye(4))
+    _, after = loaded.bricks()
+    assert (after[reached] == GRID_LIMIT).all() and (after[~reached] == 0).all()
+
+
+def test_bad_input(runtime):
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
+    grid = EvidenceGrid(runtime, SMALL)
+    f = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST)
+    ev = evidence(lattice)
+    nan_pose = np.eye(4)
+    nan_pose[0, 3] = np.nan
+    scaled = np.diag([1.0, 1.0, 2.0, 1.0])
+    mirror = np.diag([1.0, -1.0, 1.0, 1.0])
+    for pose, words in ((nan_pose, "NaN"), (scaled, "not a proper rotation"), (mirror, "det"),
+                        (np.eye(3), r"\(4, 4\)"), (np.stack([np.eye(4)] * lattice.n_beams), "per_beam_poses")):
+        with pytest.raises(ConfigError, match=words):
+            f(ev, pose)
+    with pytest.raises(ShapeError, match="expected evidence of shape"):
+        f(ev.astype(np.float32), np.eye(4))
+    with pytest.raises(ShapeError, match="expected evidence of shape"):
+        f(ev[:, :10], np.eye(4))
+    with pytest.raises(ConfigError, match="no bin carries evidence"):
+        Fusion(runtime, grid, lattice, model, N_BINS, SPACING, 100, 50)
+    assert grid.n_bricks == 0, "a refused frame must leave the map untouched"
