@@ -2,13 +2,21 @@
 by events, with no host round trip in between.
 
 ``Detection`` runs range profiles (a Navtech scan, or a frame after the range FFT in power)
-through CFAR and the eq. 12 interpreter.
+through CFAR and the eq. 12 interpreter. ``Mapping`` runs raw frames (range FFT first) or
+range profiles through detection and fuses the evidence into an ``EvidenceGrid`` (eq. 9).
 """
 
 from dataclasses import dataclass
 
+import numpy as np
+
+from radarcl.errors import ConfigError
+from radarcl.geometry import BeamLattice, BeamModel, check_poses
+from radarcl.grid import EvidenceGrid
 from radarcl.stages.cfar import Cfar, CfarResult
+from radarcl.stages.fusion import Fusion
 from radarcl.stages.interpret import InterpretResult, Interpreter
+from radarcl.stages.range_fft import RangeFFT
 
 
 @dataclass(frozen=True)
@@ -46,3 +54,78 @@ class Detection:
             flags_buf = self.cfar.runtime.to_device(self.interpreter.check_flags(flags))
         done = self.enqueue(self.cfar.profiles_buf, flags_buf, wait_for=[copy])
         return DetectionResult(self.cfar.download(wait_for=[done]), self.interpreter.download(wait_for=[done]))
+
+
+class Mapping:
+    """Frames -> [range FFT] -> CFAR -> eq. 12 -> fusion into ``grid``, buffers allocated once.
+
+    runtime: a ``radarcl.cl.Runtime``; grid: the ``EvidenceGrid`` to build; lattice, model: the
+    frame's ``BeamLattice`` and ``BeamModel``.
+    Raw input: give ``radar`` (a ``RadarConfig``) and ``n_fft``; frames are (n_az, n_el,
+    n_samples) of ``dtype`` and go through the Hann-windowed range FFT in power.
+    Profile input (Navtech): give ``n_bins`` and ``bin_spacing_m``; frames are power profiles
+    (*lattice.batch, n_bins) float32 and enter at CFAR.
+    cfar_config, interpret_config: as for ``Detection``; per_beam_poses: as for ``Fusion``.
+    """
+
+    def __init__(self, runtime, grid, lattice, model, *, radar=None, n_fft=None, dtype=np.int16, n_bins=None,
+                 bin_spacing_m=None, cfar_config=None, interpret_config=None, per_beam_poses=False):
+        if not isinstance(grid, EvidenceGrid) or not isinstance(lattice, BeamLattice) or not isinstance(model, BeamModel):
+            raise ConfigError("Mapping needs an EvidenceGrid, a BeamLattice and a BeamModel")
+        if (radar is None) == (n_bins is None):
+            raise ConfigError("give either radar and n_fft (raw frames) or n_bins and bin_spacing_m (profiles)")
+        self.runtime, self.grid = runtime, grid
+        self.range_fft = None
+        if radar is not None:
+            if (radar.n_azimuth, radar.n_elevation) != (lattice.n_az, lattice.n_el):
+                raise ConfigError(f"the lattice has {lattice.n_az} x {lattice.n_el} beams, the radar "
+                                  f"{radar.n_azimuth} x {radar.n_elevation}")
+            n_fft = radar.check_n_fft(n_fft if n_fft is not None else 1024)
+            n_bins, bin_spacing_m = radar.n_bins(n_fft), radar.bin_spacing_m(n_fft)
+            self.range_fft = RangeFFT(runtime, (lattice.n_az, lattice.n_el), radar.n_samples, n_fft,
+                                      dtype=dtype, output="power")
+        elif bin_spacing_m is None:
+            raise ConfigError("profile input needs bin_spacing_m")
+        self.detection = Detection(runtime, lattice.batch, n_bins, bin_spacing_m, cfar_config, interpret_config)
+        it = self.detection.interpreter
+        self.fusion = Fusion(runtime, grid, lattice, model, n_bins, bin_spacing_m, it.first_bin, it.last_bin,
+                             per_beam_poses=per_beam_poses)
+        self.frames = 0
+
+    def fuse(self, frame, poses, flags=None):
+        """Fuse one frame taken at ``poses`` (4x4, or one per beam). The pose and the frame are
+        checked before anything runs, so a refused frame leaves the map as it was. Returns the
+        ``FramePlan`` (bricks reached, beams outside the grid); the device work is queued, not
+        waited for (``snapshot`` and ``flags`` wait)."""
+        check_poses(poses, self.fusion.lattice.n_beams)
+        if self.range_fft is not None:
+            if flags is not None:
+                raise ConfigError("raw frames carry their own flags; pass flags with profiles only")
+            copy = self.range_fft.upload(frame)
+            done = self.range_fft.enqueue(self.range_fft.samples_buf, wait_for=[copy])
+            profiles_buf, flags_buf = self.range_fft.profiles_buf, self.range_fft.flags_buf
+        else:
+            copy = self.detection.cfar.upload(frame)
+            flags_buf = None
+            if flags is not None:
+                flags_buf = self.runtime.to_device(self.detection.interpreter.check_flags(flags))
+            done, profiles_buf = copy, self.detection.cfar.profiles_buf
+        plan = self.fusion.plan(poses)
+        done = self.detection.enqueue(profiles_buf, flags_buf, wait_for=[done])
+        self.fusion.enqueue(self.detection.interpreter.evidence_buf, plan, wait_for=[done])
+        self.frames += 1
+        return plan
+
+    def flags(self):
+        """Per-beam flags (reference.FLAG_*) of the last frame, uint8 (*batch,)."""
+        import pyopencl as cl
+
+        it = self.detection.interpreter
+        out = np.empty(it.batch, np.uint8)
+        cl.enqueue_copy(self.runtime.queue, out, it.flags_buf, is_blocking=True)
+        return out
+
+    def snapshot(self):
+        """Dense int32 (nz, ny, nx) copy of the grid after every queued frame."""
+        self.runtime.queue.finish()
+        return self.grid.snapshot()

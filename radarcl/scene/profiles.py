@@ -71,10 +71,11 @@ def fig10_fence_and_tree(seed=0, n_fft=1024, fence_m=14.0, tree_m=23.0):
                         n_fft, seed=seed)
 
 
-def paper_like_frame(seed=0, tilt_deg=-7.0, n_fft=1024, radar=PAPER_RADAR):
-    """Power profiles (n_az, n_el, n_fft/2) float32 of one frame of the paper's radar on its
+def paper_like_samples(seed=0, tilt_deg=-7.0, radar=PAPER_RADAR):
+    """Raw samples (n_az, n_el, n_samples) float32 [V] of one frame of the paper's radar on its
     stand: ground in every beam that reaches it, and 0-3 point echoes per beam with amplitudes
-    0.5-5.5 decades above the per-sample noise (up to ~100 dB in power). Stacked beam k points at tilt + (k - 1.5) x 2 deg."""
+    0.5-5.5 decades above the per-sample noise (up to ~100 dB in power). Stacked beam k points
+    at tilt + (k - 1.5) x 2 deg."""
     rng = np.random.default_rng(seed)
     n_az, n_el = radar.n_azimuth, radar.n_elevation
     beams = []
@@ -93,5 +94,10 @@ def paper_like_frame(seed=0, tilt_deg=-7.0, n_fft=1024, radar=PAPER_RADAR):
     for j, (a, r, p) in enumerate(beams):
         amp[j, :len(a)], rng_m[j, :len(r)], phase[j, :len(p)] = a, r, p
     samples = simulate_beams(radar, amp, rng_m, phase, noise_rms=NOISE_RMS, seed=seed).samples
-    profiles = reference.range_profile(samples, n_fft, output="power").astype(np.float32)
-    return profiles.reshape(n_el, n_az, -1).transpose(1, 0, 2).copy()
+    return samples.reshape(n_el, n_az, -1).transpose(1, 0, 2).astype(np.float32)
+
+
+def paper_like_frame(seed=0, tilt_deg=-7.0, n_fft=1024, radar=PAPER_RADAR):
+    """Power profiles (n_az, n_el, n_fft/2) float32 of ``paper_like_samples``, by the oracle."""
+    samples = paper_like_samples(seed, tilt_deg, radar).astype(np.float64)
+    return reference.range_profile(samples, n_fft, output="power").astype(np.float32)

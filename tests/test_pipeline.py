@@ -1,0 +1,85 @@
+"""radarcl.pipeline.Mapping: the chained stages give exactly what the stages give one by one,
+and a refused frame leaves the map as it was."""
+
+import numpy as np
+import pytest
+
+from radarcl import reference
+from radarcl.config import PAPER_RADAR, InterpretConfig
+from radarcl.errors import ConfigError, ShapeError
+from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
+from radarcl.grid import EvidenceGrid, GridSpec
+from radarcl.pipeline import Detection, Mapping
+from radarcl.scene.profiles import paper_like_samples
+from radarcl.stages.fusion import Fusion
+from radarcl.stages.range_fft import RangeFFT
+
+TILT = -7.0
+SPEC = GridSpec((-2.0, -20.0, -6.0), 0.25, (96, 160, 40))
+N_FFT = 512
+
+
+def staged(runtime, samples, pose, lattice, model):
+    """The same frame through each stage separately, via the host."""
+    fft = RangeFFT(runtime, samples.shape[:2], samples.shape[2], N_FFT, dtype=np.float32, output="power")(samples)
+    spacing = PAPER_RADAR.bin_spacing_m(N_FFT)
+    det = Detection(runtime, samples.shape[:2], N_FFT // 2, spacing)(fft.profiles, fft.flags)
+    grid = EvidenceGrid(runtime, SPEC)
+    it = det.interpret
+    first, last = InterpretConfig().bin_interval(spacing, N_FFT // 2)
+    Fusion(runtime, grid, lattice, model, N_FFT // 2, spacing, first, last)(
+        it.evidence.reshape(lattice.n_beams, -1), pose)
+    return grid.snapshot(), it.flags
+
+
+def test_raw_frames_chain_exactly_like_the_stages(runtime):
+    lattice, model = BeamLattice.from_radar(PAPER_RADAR, tilt_deg=TILT), BeamModel.from_radar(PAPER_RADAR)
+    samples = paper_like_samples(seed=2, tilt_deg=TILT)
+    samples[3, 1, 7] = np.nan                       # one beam gives no evidence, its pair still does
+    pose = pose_from_xyz_rpy(0.0, 0.0, 1.5, yaw=0.02)
+    grid = EvidenceGrid(runtime, SPEC)
+    m = Mapping(runtime, grid, lattice, model, radar=PAPER_RADAR, n_fft=N_FFT, dtype=np.float32)
+    plan = m.fuse(samples, pose)
+    got = m.snapshot()
+    want, flags = staged(runtime, samples, pose, lattice, model)
+    assert np.array_equal(got, want)
+    assert np.array_equal(m.flags(), flags) and flags[3, 1] & reference.FLAG_NONFINITE and not flags[3, 0]
+    assert (got > 0).sum() > 1000 and (got < 0).sum() > 10000 and plan.beams_outside == 0
+
+
+def test_profiles_enter_at_cfar(runtime):
+    lattice, model = BeamLattice.spinning(64), BeamModel.from_radar(PAPER_RADAR)
+    rng = np.random.default_rng(0)
+    profiles = rng.exponential(size=(64, 256)).astype(np.float32)
+    profiles[:, 100] = 1e4
+    spacing = 0.1
+    spec = GridSpec.around((0, 0, 0), (60, 60, 1), 0.25)
+    grid = EvidenceGrid(runtime, spec)
+    m = Mapping(runtime, grid, lattice, model, n_bins=256, bin_spacing_m=spacing)
+    m.fuse(profiles, np.eye(4))
+    ev = Detection(runtime, (64,), 256, spacing)(profiles).interpret.evidence
+    ref = EvidenceGrid(runtime, spec)
+    it = m.detection.interpreter
+    Fusion(runtime, ref, lattice, model, 256, spacing, it.first_bin, it.last_bin)(ev, np.eye(4))
+    got = m.snapshot()
+    assert np.array_equal(got, ref.snapshot()) and got.max() > 0
+
+
+def test_a_refused_frame_leaves_the_map_as_it_was(runtime):
+    lattice, model = BeamLattice.from_radar(PAPER_RADAR, tilt_deg=TILT), BeamModel.from_radar(PAPER_RADAR)
+    grid = EvidenceGrid(runtime, SPEC)
+    m = Mapping(runtime, grid, lattice, model, radar=PAPER_RADAR, n_fft=N_FFT, dtype=np.float32)
+    samples = paper_like_samples(seed=1, tilt_deg=TILT)
+    m.fuse(samples, np.eye(4))
+    before = m.snapshot()
+    bad_pose = np.eye(4)
+    bad_pose[2, 2] = np.inf
+    with pytest.raises(ConfigError, match="NaN or Inf"):
+        m.fuse(samples, bad_pose)
+    with pytest.raises(ShapeError, match="expected a frame of shape"):
+        m.fuse(samples[:, :, :100], np.eye(4))
+    with pytest.raises(ShapeError):
+        m.fuse(samples.astype(np.float64), np.eye(4))
+    assert np.array_equal(m.snapshot(), before) and m.frames == 1
+    with pytest.raises(ConfigError, match="either radar"):
+        Mapping(runtime, grid, lattice, model)
