@@ -87,3 +87,22 @@ def scan_paths(directory):
     if not paths:
         raise FrameFormatError(f"no Navtech scans (*.png) in {directory}")
     return paths
+
+
+def load_odometry(path):
+    """Oxford ``radar_odometry.csv``: {(source_radar_us, destination_radar_us): (x, y, yaw)}.
+
+    Each row is the source scan's pose in the destination scan's frame (x forward, y right,
+    z down; yaw about z) [m, rad]; rows run from each scan to the one before it."""
+    import csv
+
+    path = Path(path)
+    out = {}
+    try:
+        with open(path, newline="") as f:
+            for row in csv.DictReader(f):
+                key = (int(row["source_radar_timestamp"]), int(row["destination_radar_timestamp"]))
+                out[key] = (float(row["x"]), float(row["y"]), float(row["yaw"]))
+    except (OSError, KeyError, ValueError) as exc:
+        raise FrameFormatError(f"{path}: not an Oxford radar odometry file ({exc})") from exc
+    return out
