@@ -32,13 +32,17 @@ def cmd_demo(args):
 
 def cmd_bench(args):
     """Run a benchmark."""
-    from radarcl.bench import cfar, range_fft
+    from radarcl.bench import cfar, fusion, range_fft
 
     if not args.json:
         print(f"measuring {args.which}, {args.repeat} repetitions per variant ...", file=sys.stderr)
     if args.which == "range-fft":
         result = range_fft.run(_runtime(), n_ffts=tuple(args.n_fft), repeat=args.repeat)
         lines = range_fft.format_table(result)
+    elif args.which == "fusion":
+        progress = None if args.json else (lambda line: print(line, file=sys.stderr))
+        result = fusion.run(_runtime(), repeat=min(args.repeat, 40), report=progress)
+        lines = fusion.format_table(result)
     else:
         result = cfar.run(_runtime(), repeat=args.repeat)
         lines = cfar.format_table(result)
@@ -88,8 +92,10 @@ def build_parser():
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("bench", help="benchmarks, each against a baseline measured in the same run")
-    p.add_argument("which", choices=["range-fft", "cfar"],
-                   help="range-fft: window+FFT+magnitude vs scipy; cfar: CFAR + eq. 12 vs numpy")
+    p.add_argument("which", choices=["range-fft", "cfar", "fusion"],
+                   help="range-fft: window+FFT+magnitude vs scipy; cfar: CFAR + eq. 12 vs numpy; fusion: one "
+                        "frame into the paper's 0.1 m grid vs the float64 oracle and the memory floor "
+                        "(--repeat capped at 40)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.add_argument("--repeat", type=int, default=200, help="timed repetitions per variant (default: %(default)s)")
     p.add_argument("--n-fft", type=int, nargs="+", default=[512, 1024],

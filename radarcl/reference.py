@@ -224,18 +224,27 @@ def fuse(spec, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_b
     whose rho2 <= 1 + margin, at a bin within one of [first_bin, last_bin], (rho2 vs 1, the
     bin, d vs 0) lies within ``margin`` of its boundary, so float32 may decide it otherwise.
     """
+    nz, ny, nx = spec.array_shape
+    iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)
+    centres = spec.index_to_world(np.stack([ix, iy, iz], axis=1))
+    out = fuse_points(centres, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin)
+    return tuple(a.reshape(nz, ny, nx) for a in out)
+
+
+def fuse_points(centres, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin=0.0,
+                beams=None):
+    """``fuse`` at voxel centres (n, 3) [m, world], over ``beams`` (indices; default all).
+    Returns (sums, updates, ambiguous), each (n,)."""
     from radarcl.geometry import check_poses
 
     evidence = np.asarray(evidence)
     P = check_poses(poses, lattice.n_beams)
-    nz, ny, nx = spec.array_shape
-    iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)
-    centres = spec.index_to_world(np.stack([ix, iy, iz], axis=1))
+    centres = np.asarray(centres, dtype=np.float64)
     rotations = lattice.beam_rotations()
     sums = np.zeros(len(centres), np.int64)
     updates = np.zeros(len(centres), np.int64)
     ambiguous = np.zeros(len(centres), bool)
-    for b in range(lattice.n_beams):
+    for b in range(lattice.n_beams) if beams is None else beams:
         T = P[b if len(P) > 1 else 0]
         x = centres - T[:3, 3]
         d, y, z = (x @ (T[:3, :3] @ rotations[b])).T
@@ -249,5 +258,4 @@ def fuse(spec, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_b
         e = evidence[b, j[inside]].astype(np.float64)
         sums[inside] += np.rint(e * model.weight(rho2[inside])).astype(np.int64)
         updates[inside] += 1
-    shape = (nz, ny, nx)
-    return sums.reshape(shape), updates.reshape(shape), ambiguous.reshape(shape)
+    return sums, updates, ambiguous

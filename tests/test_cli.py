@@ -14,7 +14,7 @@ def run_cli(*args, env=None):
 def test_help_lists_commands():
     out = run_cli("--help")
     assert out.returncode == 0
-    for command in ("info", "demo", "bench", "navtech"):
+    for command in ("info", "demo", "bench", "navtech", "navtech-map"):
         assert command in out.stdout
 
 
@@ -62,3 +62,18 @@ def test_bad_device_is_a_sentence_not_a_traceback():
 def test_unknown_benchmark_is_refused():
     out = run_cli("bench", "warp-drive")
     assert out.returncode == 2 and "invalid choice" in out.stderr
+
+
+def test_bench_fusion_has_the_issue_keys():
+    """The fusion bench on a coarse grid (the paper's 0.1 m grid takes ~25 s): keys and sanity."""
+    from radarcl.bench import fusion
+    from radarcl.cl import Runtime
+    from radarcl.grid import GridSpec
+
+    r = fusion.run(Runtime(), repeat=2, spec=GridSpec((-8.0, -35.0, -10.0), 0.5, (160, 140, 40)))
+    for key in ("fusion_ms_per_frame", "pipeline_ms_per_frame", "voxels_per_frame", "floor_ms_per_frame",
+                "ratio_vs_floor", "ratio_vs_numpy"):
+        assert r[key] > 0, key
+    assert r["max_error_units"] <= 1 and r["oracle_voxels_compared"] > 10000
+    assert r["sparse_mib"] < r["dense_mib"]
+    assert any("ratio_vs_floor" in line for line in fusion.format_table(r))
