@@ -136,6 +136,7 @@ class EvidenceGrid:
         self.keys = np.empty((0, 3), np.int32)                  # slot -> brick (bx, by, bz)
         self.pool = None
         self.capacity = 0
+        self.generation = 0                                     # bumped by clear(): slots change
         if dense:
             self._check_fits(n_total)
             bz, by, bx = np.indices(self.table.shape).reshape(3, -1)
@@ -220,6 +221,7 @@ class EvidenceGrid:
         self.table.fill(-1)
         self.keys = np.empty((0, 3), np.int32)
         self.pool, self.capacity = None, 0
+        self.generation += 1
 
     def save(self, path):
         """Write the grid (spec and allocated bricks, not the dense volume) to an npz file."""

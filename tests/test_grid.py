@@ -88,3 +88,22 @@ def test_a_grid_too_big_for_the_device_says_what_to_do(runtime):
     assert EvidenceGrid(runtime, huge).n_bricks == 0               # sparse: nothing allocated yet
     with pytest.raises(ConfigError, match="brick table"):
         EvidenceGrid(runtime, GridSpec((0, 0, 0), 0.01, (2 ** 14, 2 ** 14, 2 ** 12)))
+
+
+def test_clear_forgets_evidence_and_fusion_replans(runtime):
+    from radarcl.config import RadarConfig
+    from radarcl.geometry import BeamLattice, BeamModel
+    from radarcl.stages.fusion import Fusion
+
+    radar = RadarConfig()
+    spec = GridSpec.around((4.0, 0.0, 0.0), (8.0, 8.0, 2.0), 0.25)
+    grid = EvidenceGrid(runtime, spec)
+    lat = BeamLattice.from_radar(radar)
+    f = Fusion(runtime, grid, lat, BeamModel.from_radar(radar), 64, 0.125, 8, 60)
+    ev = np.full((lat.n_beams, 64), 500, np.int32)
+    f(ev, np.eye(4))
+    first = grid.snapshot()
+    grid.clear()
+    assert grid.n_bricks == 0 and not grid.snapshot().any()
+    f(ev, np.eye(4))                       # same pose: the cached plan's slots are stale
+    assert np.array_equal(grid.snapshot(), first) and first.max() >= 500

@@ -78,8 +78,7 @@ def run(runtime, repeat=20, report=None, spec=PAPER_GRID):
 
     def new_pose():
         for p in moved:
-            fusion._cached = (None, None)
-            fusion.plan(p)
+            fusion.plan(p, cache=False)
 
     say(f"timing fusion and the pipeline, {repeat} frames each ...")
     t = interleaved_medians(dict(fusion=fusion_only, pipeline=pipeline), repeat, block=5, warmup=2)

@@ -140,15 +140,16 @@ class Fusion:
         return (self.lattice.n_beams, self.n_bins)
 
     # -- host side: beams, reference frame, bricks ----------------------------------------------
-    def plan(self, poses):
+    def plan(self, poses, cache=True):
         """Prepare a frame taken at ``poses``: one 4x4 pose, or (n_beams, 4, 4) with
-        per_beam_poses. Allocates the bricks the beams may reach. Cached for a repeated pose."""
+        per_beam_poses. Allocates the bricks the beams may reach. The last plan is reused for
+        a repeated pose unless ``cache`` is False."""
         P = check_poses(poses, self.lattice.n_beams)
         if len(P) > 1 and not self.per_beam_poses:
             raise ConfigError("this Fusion takes one pose per frame; build it with per_beam_poses=True "
                               "to give one pose per beam")
-        key = P.tobytes()
-        if self._cached[0] == key:
+        key = (self.grid.generation, P.tobytes())
+        if cache and self._cached[0] == key:
             return self._cached[1]
         spec = self.grid.spec
         ref = P[len(P) // 2]
