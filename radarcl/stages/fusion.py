@@ -8,8 +8,9 @@ and within one unit per update of it (float32 vs float64 weights; tests/test_fus
 
 A frame is a gather over the bricks its beams can reach: the host lists those bricks (and
 allocates them in the grid) with ``candidate_windows``, a conservative bound in the frame's
-reference head frame; the kernel recomputes the same bound per 4x4x4 sub-brick to pick the
-beams each voxel tests. Plans for a repeated pose are cached (a radar on a stand).
+reference head frame that also gives each brick its window of candidate beams; the kernel
+narrows the window per 8x4x4 block (a bounding-sphere test) and per row of 8 voxels. Plans
+for a repeated pose are cached (a radar on a stand).
 """
 
 import math
