@@ -53,7 +53,6 @@
     | (as_uint(m.s4) & 16u) | (as_uint(m.s5) & 32u) | (as_uint(m.s6) & 64u) | (as_uint(m.s7) & 128u) \
     | (as_uint(m.s8) & 256u) | (as_uint(m.s9) & 512u) | (as_uint(m.sa) & 1024u) | (as_uint(m.sb) & 2048u) \
     | (as_uint(m.sc) & 4096u) | (as_uint(m.sd) & 8192u) | (as_uint(m.se) & 16384u) | (as_uint(m.sf) & 32768u))
-#define GRID_LIMIT (1 << 30)
 
 __kernel void fusion(
     const __global int *evidence,     // (n_beams, N_BINS) eq. 12 updates [logodds units]

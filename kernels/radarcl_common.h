@@ -12,5 +12,7 @@
 /* Fixed-point log-odds, the same values as radarcl.logodds. */
 #define LOGODDS_SCALE 1024.0f
 #define EVIDENCE_LIMIT_NATS 16.0f
+/* Grid sums saturate here [units], the same value as radarcl.grid.GRID_LIMIT. */
+#define GRID_LIMIT (1 << 30)
 
 #endif

@@ -229,7 +229,13 @@ def check_poses(poses, n_beams):
         return check_pose(P)[None]
     if P.shape != (n_beams, 4, 4):
         raise ConfigError(f"poses must be (4, 4) or ({n_beams}, 4, 4), got {P.shape}")
-    for b in range(n_beams):
+    # One vectorised pass; the first bad pose, if any, is named by check_pose's own message.
+    R = P[:, :3, :3]
+    err = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2))
+    bad = (~np.isfinite(P).all(axis=(1, 2)) | (P[:, 3] != [0.0, 0.0, 0.0, 1.0]).any(axis=1)
+           | ~(err <= ROTATION_TOLERANCE) | ~(np.linalg.det(np.nan_to_num(R)) >= 0))
+    if bad.any():
+        b = int(np.flatnonzero(bad)[0])
         check_pose(P[b], f"pose of beam {b}")
     return P
 

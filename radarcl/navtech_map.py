@@ -58,16 +58,20 @@ def scan_poses(stamps, odometry, invert=False):
     return np.stack(poses)
 
 
-def beam_poses(scans, poses, azimuth_sign=1.0):
+def beam_poses(scans, poses, azimuth_sign=1.0, motion=True):
     """(n_scans, N_AZ, 4, 4) per-azimuth poses: the scan poses interpolated at each azimuth's
     time (a line fitted to its bursty timestamps), times the rotation of its encoder angle
-    (times ``azimuth_sign``) less the lattice's i x 2 pi / N_AZ."""
+    (times ``azimuth_sign``) less the lattice's i x 2 pi / N_AZ. motion=False puts every
+    azimuth at its scan's pose (no motion within a scan; a consistency check)."""
     stamps = np.array([s.timestamps_us[0] for s in scans], np.float64)
     out = []
     for k, scan in enumerate(scans):
         i = np.arange(len(scan.timestamps_us))
         t = np.polyval(np.polyfit(i, scan.timestamps_us.astype(np.float64), 1), i)
-        if k + 1 < len(scans):
+        if not motion:
+            a = b = poses[k]
+            frac = np.zeros(len(i))
+        elif k + 1 < len(scans):
             a, b, t0, t1 = poses[k], poses[k + 1], stamps[k], stamps[k + 1]
             frac = (t - t0) / (t1 - t0)
         else:                                   # the last scan: extend the motion into it
@@ -136,37 +140,26 @@ def run(runtime, data_dir, voxel_m=0.3, range_max_m=80.0, split=5, report=print)
     true_beams = beam_poses(scans, poses)
     spec = grid_for(true_beams, range_max_m, voxel_m)
     half_a = build_map(runtime, spec, scans[:split], true_beams[:split], range_max_m).snapshot()
+    # case -> (per-azimuth poses, whether the first half is rebuilt with them too)
     cases = {
-        "true poses": true_beams,
-        "second half +1 m along x": _moved(true_beams, dx=1.0),
-        "second half +1 m along y": _moved(true_beams, dy=1.0),
-        "second half turned +2 deg": _moved(true_beams, dyaw=math.radians(2)),
-        "second half turned -2 deg": _moved(true_beams, dyaw=math.radians(-2)),
-        "one pose per scan (no motion within a scan)": _per_scan(scans, poses),
-        "azimuths counter-clockwise": beam_poses(scans, poses, azimuth_sign=-1.0),
-        "odometry inverted": beam_poses(scans, scan_poses(stamps, odometry, invert=True)),
+        "true poses": (true_beams, False),
+        "second half +1 m along x": (_moved(true_beams, dx=1.0), False),
+        "second half +1 m along y": (_moved(true_beams, dy=1.0), False),
+        "second half turned +2 deg": (_moved(true_beams, dyaw=math.radians(2)), False),
+        "second half turned -2 deg": (_moved(true_beams, dyaw=math.radians(-2)), False),
+        "one pose per scan (no motion within a scan)": (beam_poses(scans, poses, motion=False), False),
+        "azimuths counter-clockwise": (beam_poses(scans, poses, azimuth_sign=-1.0), True),
+        "odometry inverted": (beam_poses(scans, scan_poses(stamps, odometry, invert=True)), True),
     }
     results = {}
-    for name, per_beam in cases.items():
-        if name in ("azimuths counter-clockwise", "odometry inverted"):
-            a = build_map(runtime, spec, scans[:split], per_beam[:split], range_max_m).snapshot()
-        else:
-            a = half_a
+    for name, (per_beam, both_halves) in cases.items():
+        a = build_map(runtime, spec, scans[:split], per_beam[:split], range_max_m).snapshot() if both_halves else half_a
         b = build_map(runtime, spec, scans[split:], per_beam[split:], range_max_m).snapshot()
-        results[name] = consistency(a, b)
-        r = results[name]
+        r = results[name] = consistency(a, b)
         report(f"{name:45s} correlation {r['correlation']:.4f}  occupied overlap {r['occupied_jaccard']:.4f}  "
                f"({r['common_voxels']} voxels seen by both halves)")
     full = build_map(runtime, spec, scans, true_beams, range_max_m)
     return results, full, poses
-
-
-def _per_scan(scans, poses):
-    """Per-azimuth poses without motion within a scan: every azimuth at its scan's pose."""
-    still = np.stack([np.repeat(p[None], N_AZ, axis=0) for p in poses])
-    turn = np.stack([np.stack([se2_pose(0.0, 0.0, float(r)) for r in s.angles_rad - np.arange(N_AZ) * 2 * math.pi / N_AZ])
-                     for s in scans])
-    return still @ turn
 
 
 def plot_map(grid, poses, path, results=None):

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarcl.errors import ConfigError
-from radarcl.geometry import BeamLattice, BeamModel, check_poses
+from radarcl.geometry import BeamLattice, BeamModel
 from radarcl.grid import EvidenceGrid
 from radarcl.stages.cfar import Cfar, CfarResult
 from radarcl.stages.fusion import Fusion
@@ -97,20 +97,23 @@ class Mapping:
         checked before anything runs, so a refused frame leaves the map as it was. Returns the
         ``FramePlan`` (bricks reached, beams outside the grid); the device work is queued, not
         waited for (``snapshot`` and ``flags`` wait)."""
-        check_poses(poses, self.fusion.lattice.n_beams)
         if self.range_fft is not None:
             if flags is not None:
                 raise ConfigError("raw frames carry their own flags; pass flags with profiles only")
+            self.range_fft.check(frame)
+        else:
+            self.detection.cfar.check(frame)
+            if flags is not None:
+                flags = self.detection.interpreter.check_flags(flags)
+        plan = self.fusion.plan(poses)                  # checks the poses; allocates bricks
+        if self.range_fft is not None:
             copy = self.range_fft.upload(frame)
             done = self.range_fft.enqueue(self.range_fft.samples_buf, wait_for=[copy])
             profiles_buf, flags_buf = self.range_fft.profiles_buf, self.range_fft.flags_buf
         else:
-            copy = self.detection.cfar.upload(frame)
-            flags_buf = None
-            if flags is not None:
-                flags_buf = self.runtime.to_device(self.detection.interpreter.check_flags(flags))
-            done, profiles_buf = copy, self.detection.cfar.profiles_buf
-        plan = self.fusion.plan(poses)
+            done = self.detection.cfar.upload(frame)
+            profiles_buf = self.detection.cfar.profiles_buf
+            flags_buf = None if flags is None else self.runtime.to_device(flags)
         done = self.detection.enqueue(profiles_buf, flags_buf, wait_for=[done])
         self.fusion.enqueue(self.detection.interpreter.evidence_buf, plan, wait_for=[done])
         self.frames += 1

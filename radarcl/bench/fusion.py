@@ -63,7 +63,7 @@ def run(runtime, repeat=20, report=None, spec=PAPER_GRID):
     plan = mapping.fusion.plan(pose)
     first_plan_s = time.perf_counter() - start
     mapping.fuse(samples, pose)
-    snapshot_keys, data = grid.bricks()
+    _, data = grid.bricks()
     voxels = int(np.count_nonzero(data))
     fusion, it = mapping.fusion, mapping.detection.interpreter
 

@@ -15,10 +15,11 @@ for a repeated pose are cached (a radar on a stand).
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
-from radarcl.errors import ConfigError, DeviceCapabilityError
+from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, BeamModel, check_poses
 from radarcl.grid import BRICK, EvidenceGrid
 from radarcl.stages import check_array, work_group_size
@@ -33,7 +34,7 @@ from radarcl.stages import check_array, work_group_size
 DEFAULT_LOCAL_SIZE = 64
 VECTOR_WIDTHS = (4, 8)             # voxels along x per work-item, one per SIMD lane
 SUPER = 8                          # bricks per edge of the coarse level of the brick search
-WINDOW_SLACK = 1e-4                # [rad], as in fusion.cl
+WINDOW_SLACK = 1e-4                # [rad] added to the window half-widths (float rounding)
 
 
 @dataclass(frozen=True)
@@ -46,28 +47,49 @@ class FramePlan:
     beams_outside: int       # beams that reach no brick of the grid (they give nothing)
 
 
-def candidate_windows(centres, radius, frame, r_lo, r_hi, lattice, model):
-    """Beams that may reach balls of ``radius`` around ``centres`` (n, 3) [m, grid coords]:
-    (n, 4) int64 windows (i_lo, i_hi, k_lo, k_hi), empty where i_lo > i_hi or k_lo > k_hi.
-    The numpy twin of ``fusion_window`` in kernels/fusion.cl; its bounds are derived there."""
+class ReferenceFrame(NamedTuple):
+    """The head frame the windows are computed in, and how far any beam's own frame strays."""
+
+    rotation: np.ndarray     # (3, 3) head -> world
+    origin: np.ndarray       # (3,) [m, grid coordinates]
+    trans_margin: float      # max |beam origin - origin| [m]
+    rot_margin: float        # max rotation angle between a beam's frame and this one [rad]
+
+
+def candidate_windows(centres, radius, ref, r_lo, r_hi, lattice, model):
+    """Beams that may reach balls of ``radius`` around ``centres`` (n, 3) [m, grid coords],
+    seen from ``ref`` (a ``ReferenceFrame``), for ranges in [r_lo, r_hi]: (n, 4) int64 windows
+    (i_lo, i_hi, k_lo, k_hi), empty where i_lo > i_hi or k_lo > k_hi.
+
+    The bounds, for a point at range r >= r_min, elevation el and azimuth offset daz from beam
+    (i, k) in the head frame (a ball of radius rs = radius + trans_margin around the centre,
+    whose direction is known within delta = asin(rs / r_c) + rot_margin):
+    - inside needs |y| = r cos(el) |sin daz| <= max(a_az, r tan(theta_az / 2)), so
+      |sin daz| <= s_az = max(tan(theta_az / 2), a_az / r_min) / cos(el); this bounds daz
+      below 90 deg only when tan|el| tan|el_k| < sqrt(1 - s_az^2) (else d > 0 allows daz past
+      90 deg, and every azimuth is a candidate);
+    - z = r [sin(el - el_k) + sin(el_k) cos(el) (1 - cos daz)], so |sin(el - el_k)| <=
+      max(tan(theta_el / 2), a_el / r_min) + (1 - cos daz), and |el - el_k| < 90 deg since d > 0;
+    - a cap of radius delta at elevation el spans asin(sin delta / cos el) in azimuth.
+    """
     c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
     n = len(c)
-    rot = frame[:9].astype(np.float64).reshape(3, 3)
-    q = (c - frame[9:12]) @ rot
-    rs = radius + float(frame[12])
+    q = (c - ref.origin) @ ref.rotation
+    rs = radius + ref.trans_margin
+    tan_el_max = math.tan(float(np.abs(lattice.elevations).max()))
     r = np.linalg.norm(q, axis=1)
     out = np.empty((n, 4), np.int64)
     out[:] = (0, lattice.n_az - 1, 0, lattice.n_el - 1)
     none = (r + rs < r_lo) | (r - rs > r_hi)
     r_min = r - rs
     with np.errstate(divide="ignore", invalid="ignore"):
-        delta = np.arcsin(np.minimum(1.0, rs / r)) + float(frame[13]) + WINDOW_SLACK
+        delta = np.arcsin(np.minimum(1.0, rs / r)) + ref.rot_margin + WINDOW_SLACK
         el = np.arctan2(q[:, 2], np.hypot(q[:, 0], q[:, 1]))
         el_abs = np.abs(el) + delta
         a_az, a_el = model.apertures
         s_az = np.maximum(math.tan(model.beamwidth_az_rad / 2), a_az / r_min) / np.cos(el_abs)
         full = (r_min <= 0) | (el_abs >= 0.5 * math.pi - 1e-3) | (s_az >= 1)
-        full |= np.tan(el_abs) * float(frame[14]) >= np.sqrt(np.maximum(0.0, 1 - s_az ** 2))
+        full |= np.tan(el_abs) * tan_el_max >= np.sqrt(np.maximum(0.0, 1 - s_az ** 2))
         haz = np.arcsin(np.clip(s_az, 0, 1))
         daz = np.arcsin(np.minimum(1.0, np.sin(delta) / np.cos(np.abs(el))))
         s_el = np.maximum(math.tan(model.beamwidth_el_rad / 2), a_el / r_min) + (1 - np.cos(haz))
@@ -158,12 +180,10 @@ class Fusion:
         rots = (P[:, :3, :3] if len(P) > 1 else ref[:3, :3]) @ self._rotations
         origins = np.broadcast_to(P[:, :3, 3], (self.lattice.n_beams, 3)) - np.asarray(spec.origin_m)
         beams = np.concatenate([np.swapaxes(rots, 1, 2), origins[:, :, None]], axis=2)
-        trans = float(np.linalg.norm(P[:, :3, 3] - ref[:3, 3], axis=1).max())
         cos_rot = (np.trace(ref[:3, :3].T @ P[:, :3, :3], axis1=1, axis2=2) - 1) / 2
-        rot = float(np.arccos(np.clip(cos_rot, -1, 1)).max())
-        tan_el = math.tan(float(np.abs(self.lattice.elevations).max()))
-        frame = np.concatenate([head.reshape(-1), ref[:3, 3] - np.asarray(spec.origin_m),
-                                [trans, rot, tan_el, spec.voxel_m]])
+        frame = ReferenceFrame(head, ref[:3, 3] - np.asarray(spec.origin_m),
+                               float(np.linalg.norm(P[:, :3, 3] - ref[:3, 3], axis=1).max()),
+                               float(np.arccos(np.clip(cos_rot, -1, 1)).max()))
         bricks, windows = self._reached_bricks(frame)
         slots = self.grid.allocate(bricks)
         listed = np.concatenate([bricks, slots[:, None]], axis=1).astype(np.int32)
@@ -233,8 +253,10 @@ class Fusion:
     def __call__(self, evidence, poses):
         """Fuse one frame given on the host: evidence (n_beams, n_bins) or (*batch, n_bins)
         int32 in logodds units, taken at ``poses``. Blocks; returns the FramePlan used."""
-        ev = check_array(np.asarray(evidence).reshape(-1, self.n_bins) if np.ndim(evidence) > 1 else evidence,
-                         self.evidence_shape, np.int32, "evidence")
+        ev = np.asarray(evidence)
+        if ev.shape == (*self.lattice.batch, self.n_bins):
+            ev = ev.reshape(self.evidence_shape)
+        ev = check_array(ev, self.evidence_shape, np.int32, "evidence")
         plan = self.plan(poses)
         event = self.enqueue(self.runtime.to_device(ev), plan)
         if event is not None:
