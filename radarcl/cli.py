@@ -1,6 +1,7 @@
-"""Command line: `radarcl info | demo | bench | navtech | navtech-map`."""
+"""Command line: `radarcl info | demo | bench | tune | navtech | navtech-map`."""
 
 import argparse
+import dataclasses
 import json
 import logging
 import sys
@@ -22,11 +23,57 @@ def cmd_info(args):
     return 0
 
 
+class ProgressBar:
+    """A one-line progress bar on stderr: ``bar(done, total, what)``; a new ``what`` starts a new line."""
+
+    def __init__(self, stream=sys.stderr, width=30):
+        self.stream, self.width, self.what = stream, width, None
+
+    def __call__(self, done, total, what):
+        if not self.stream.isatty() and done < total:
+            return                                # a log file gets the finished line only
+        if what != self.what and self.what is not None:
+            self.stream.write("\n")
+        self.what = what
+        filled = int(self.width * done / max(1, total))
+        self.stream.write(f"\r[{'#' * filled}{'.' * (self.width - filled)}] {done}/{total} {what}")
+        if done >= total:
+            self.stream.write("\n")
+            self.what = None
+        self.stream.flush()
+
+
 def cmd_demo(args):
     """Run the main job on the built-in default."""
     from radarcl import demo
 
-    demo.run(_runtime(), args.out, seed=args.seed, report=print)
+    demo.run(_runtime(), args.out, seed=args.seed, quick=args.quick, replay=args.replay, report=print,
+             progress=None if args.no_progress else ProgressBar())
+    return 0
+
+
+def _reference_observations(args, say):
+    """The reference scene's observations: replayed, or simulated with ``args.seed``."""
+    from radarcl.config import PAPER_RADAR
+    from radarcl.io import recording
+    from radarcl.scene.observe import observe
+    from radarcl.scene.outdoor import PAPER_TILTS_DEG, paper_scene
+
+    if args.replay:
+        return recording.load(args.replay, PAPER_RADAR.n_azimuth, PAPER_RADAR.n_elevation, PAPER_RADAR.n_samples)
+    say(f"simulating the reference scene, seed {args.seed} ...")
+    return observe(paper_scene(), PAPER_TILTS_DEG, seed=args.seed)
+
+
+def cmd_tune(args):
+    """The documented search for the eq. 12 constants and CFAR settings (radarcl.tuning)."""
+    from radarcl import tuning
+    from radarcl.scene.outdoor import paper_grid, paper_scene
+
+    obs = _reference_observations(args, print)
+    truth = paper_scene().truth(paper_grid(tuning.TUNING_VOXEL_M))
+    best, _ = tuning.tune(_runtime(), obs, truth, report=print)
+    print(f"chosen: {best.label()}")
     return 0
 
 
@@ -39,6 +86,22 @@ def cmd_bench(args):
     if args.which == "range-fft":
         result = range_fft.run(_runtime(), n_ffts=tuple(args.n_fft), repeat=args.repeat)
         lines = range_fft.format_table(result)
+    elif args.which == "quality":
+        from radarcl.bench import quality
+        from radarcl.evaluate import MapConfig
+        from radarcl.scene.outdoor import paper_grid, paper_scene
+        from radarcl.tuning import EVALUATION_SEED, TUNED
+
+        say = (lambda line: None) if args.json else (lambda line: print(line, file=sys.stderr))
+        args.seed = EVALUATION_SEED if args.seed is None else args.seed
+        obs = _reference_observations(args, say)
+        scene = paper_scene()
+        reference = TUNED if not args.paper else MapConfig()
+        result = quality.run(_runtime(), obs, lambda v: scene.truth(paper_grid(v)),
+                             dataclasses.replace(reference, voxel_m=args.voxel), voxels=tuple(args.voxels), report=say)
+        quality.chart(result, args.chart)
+        say(f"wrote {args.chart}")
+        lines = quality.format_table(result)
     elif args.which == "fusion":
         progress = None if args.json else (lambda line: print(line, file=sys.stderr))
         result = fusion.run(_runtime(), repeat=min(args.repeat, 40), report=progress)
@@ -86,20 +149,41 @@ def build_parser():
     p = sub.add_parser("info", help="list OpenCL platforms and devices and what the kernels need")
     p.set_defaults(func=cmd_info)
 
-    p = sub.add_parser("demo", help="the main job: the paper's radar looking at point targets, plots like Fig. 9")
+    p = sub.add_parser("demo", help="the main job: the paper's reference scene simulated, fused at 0.1 m, scored "
+                                    "against ground truth and the OctoMap-style baseline, plotted",
+                       description="Simulates the outdoor scene of the paper's §4.3 (3,840 observations), fuses it "
+                                   "with the paper's and the tuned constants, prints metrics and timings and writes "
+                                   "the recording, the map, plots and summary.json to --out.")
     p.add_argument("--out", default="out/demo", help="output directory (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="simulation seed (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="simulation seed (default: %(default)s, the evaluation seed)")
+    p.add_argument("--quick", action="store_true", help="0.4 m voxels instead of the paper's 0.1 m (CI-sized)")
+    p.add_argument("--replay", default=None, help="replay a recording (reference_scene.npz) instead of simulating")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=cmd_demo)
 
+    p = sub.add_parser("tune", help="the documented search for k_occ, E_h, E_l and the CFAR settings on the "
+                                    "reference scene (tuning seed, 0.2 m)")
+    p.add_argument("--seed", type=int, default=2, help="simulation seed (default: %(default)s, the tuning seed)")
+    p.add_argument("--replay", default=None, help="tune on a recording instead of simulating")
+    p.set_defaults(func=cmd_tune)
+
     p = sub.add_parser("bench", help="benchmarks, each against a baseline measured in the same run")
-    p.add_argument("which", choices=["range-fft", "cfar", "fusion"],
+    p.add_argument("which", choices=["range-fft", "cfar", "fusion", "quality"],
                    help="range-fft: window+FFT+magnitude vs scipy; cfar: CFAR + eq. 12 vs numpy; fusion: one "
                         "frame into the paper's 0.1 m grid vs the float64 oracle and the memory floor "
-                        "(--repeat capped at 40)")
+                        "(--repeat capped at 40); quality: map error against run time on the reference scene "
+                        "(zero padding, beam model, voxel size, CFAR kind) with the OctoMap-style baseline")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.add_argument("--repeat", type=int, default=200, help="timed repetitions per variant (default: %(default)s)")
     p.add_argument("--n-fft", type=int, nargs="+", default=[512, 1024],
                    help="range-fft only: FFT lengths (default: 512 1024)")
+    p.add_argument("--voxel", type=float, default=0.2, help="quality only: voxel of the reference run (default: %(default)s)")
+    p.add_argument("--voxels", type=float, nargs="+", default=[0.4, 0.2, 0.1],
+                   help="quality only: voxel sizes swept (default: 0.4 0.2 0.1)")
+    p.add_argument("--paper", action="store_true", help="quality only: sweep around the paper's constants, not the tuned")
+    p.add_argument("--seed", type=int, default=None, help="quality only: simulation seed (default: the evaluation seed)")
+    p.add_argument("--replay", default=None, help="quality only: a recording instead of simulating")
+    p.add_argument("--chart", default="quality.png", help="quality only: PNG chart to write (default: %(default)s)")
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("navtech", help="CFAR and the eq. 12 interpreter on a Navtech polar scan (Oxford "

@@ -1,109 +1,156 @@
-"""The main job, as far as the pipeline exists: the paper's radar looking at point targets.
+"""The main job: the paper's reference scene simulated, fused, scored, plotted.
 
-Simulates one frame (64 x 4 beams) with a §4.1 pair 1.0 m apart in one beam and a few other
-targets, runs the range-FFT kernel at n_fft = 256, 512, 1024, and writes:
-  fig9.png       the pair's range profile without and with zero padding (paper Fig. 9)
-  frame.png      range x azimuth image of each stacked beam (n_fft = 1024), in dB
-  summary.json   device, timings, detected peak ranges, the §4.1 sweep fractions
+1. Fig. 9: the paper's radar looking at point targets, without and with zero padding
+   (``demo_fig9``).
+2. The outdoor scene of §4.3 (``scene.outdoor``): 15 tilts x 64 azimuths x 4 stacked beams =
+   3,840 observations simulated to raw samples (``scene.observe``, seed ``EVALUATION_SEED``), or
+   replayed from a recording, and saved as ``reference_scene.npz`` (replay it with --replay).
+3. The map with the paper's constants and with the tuned ones (``tuning.TUNED``) at 0.1 m
+   (--quick: 0.4 m), the OctoMap-style baseline on the same detections, and their metrics
+   against the exact ground truth (``metrics``), with timings.
+4. Plots: ``fig10_scene.png`` (two beams of the scene like the paper's Fig. 10),
+   ``topdown.png`` (the map seen from above beside the truth), ``quality.png`` (error against
+   run time, ``bench.quality`` at 0.4 m); the map itself as ``map.npz``
+   (``EvidenceGrid.load``); everything in ``summary.json``.
 """
 
 import json
-import logging
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from radarcl import demo_fig9, reference
+from radarcl.bench import quality
 from radarcl.config import PAPER_RADAR
-from radarcl.scene.fmcw import Adc, PointTarget, simulate_frame
-from radarcl.scene.resolution import count_peaks, two_target_experiment
-from radarcl.stages.range_fft import RangeFFT
+from radarcl.evaluate import MapConfig, baseline_map, interpret_config, map_observations, score
+from radarcl.io import recording
+from radarcl.scene.observe import observe
+from radarcl.scene.outdoor import OCCUPIED, PAPER_TILTS_DEG, paper_grid, paper_scene
+from radarcl.tuning import EVALUATION_SEED, TUNED
 
-log = logging.getLogger(__name__)
-
-PAIR_BEAM = (32, 1)
-# Whether a pair 1.0 m apart shows one peak without padding depends on its phase and sub-bin
-# position (tests/test_paper_4_1.py: 24 % of cases). This pair, 0.2 m beyond the paper's 7 and
-# 8 m with opposite phases, is one of them: one peak unpadded, two with padding, as in Fig. 9.
-PAIR_M = (7.2, 8.2)
-TARGETS = ([PointTarget(*PAIR_BEAM, PAIR_M[0], 0.25, 0.0), PointTarget(*PAIR_BEAM, PAIR_M[1], 0.25, np.pi)]
-           + [PointTarget(az, 2, 20.0, 0.05) for az in range(8, 20)]          # a fence
-           + [PointTarget(45, 1, 12.0, 0.4), PointTarget(50, 0, 35.0, 0.15),   # a drum, a tree
-              PointTarget(50, 1, 35.3, 0.1), PointTarget(5, 3, 55.0, 0.3)])    # a far rock
-N_FFTS = (256, 512, 1024)
+QUICK_VOXEL_M = 0.4
+METRIC_KEYS = ("auc", "iou", "iou_tol1", "brier", "false_free", "false_occupied", "coverage")
 
 
-def run(runtime, out_dir, seed=0, report=log.info):
-    """Run the demo; ``report`` receives progress lines. Returns the summary dict."""
+def _metrics_line(name, m, ms):
+    return (f"  {name:34s} " + " ".join(f"{m[k]:7.3f}" for k in METRIC_KEYS) + f" {ms:9.1f}")
+
+
+def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report=print, progress=None):
+    """Run the main job into ``out_dir``; ``report`` gets lines, ``progress(done, total, what)``
+    counts simulated frames and fused observations. Returns the summary dict."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    tick = (lambda what: (lambda d, t: progress(d, t, what))) if progress else (lambda what: None)
+    summary = dict(device=runtime.name, quick=bool(quick))
+    summary["fig9"] = demo_fig9.run(runtime, out, report=report)
+
+    scene, voxel = paper_scene(), QUICK_VOXEL_M if quick else 0.1
+    start = time.perf_counter()
+    if replay:
+        obs = recording.load(replay, PAPER_RADAR.n_azimuth, PAPER_RADAR.n_elevation, PAPER_RADAR.n_samples)
+        report(f"replaying {replay}: {len(obs.samples)} frames")
+    else:
+        report(f"simulating the reference scene: {len(PAPER_TILTS_DEG)} tilts x 64 x 4 beams, seed {seed} ...")
+        obs = observe(scene, PAPER_TILTS_DEG, seed=seed, progress=tick("frames simulated"))
+        recording.save(out / "reference_scene.npz", obs)
+    n_obs = int(np.prod(obs.samples.shape[:3]))
+    summary.update(observations=n_obs, seed=obs.seed, simulate_s=time.perf_counter() - start,
+                   clipped_samples=obs.n_clipped)
+    report(f"{n_obs} observations ({obs.rays_per_beam} rays per beam, {obs.n_clipped} clipped samples) in "
+           f"{summary['simulate_s']:.1f} s")
+
+    truth = scene.truth(paper_grid(voxel))
+    maps = {}
+    for name, config in (("paper constants", MapConfig(voxel_m=voxel)), ("tuned", replace(TUNED, voxel_m=voxel))):
+        report(f"fusing with the {name} ({config.label()}) at {voxel} m ...")
+        res = map_observations(runtime, obs, config, progress=tick("observations fused"))
+        maps[name] = (config, res, score(res.log_odds, res.observed, truth))
+    config, res, _ = maps["tuned"]
+    log_odds, _, base_ms = baseline_map(obs, res.detections, config)
+    base = score(log_odds, res.observed, truth)
+    report("metrics over the observed voxels (INTERIOR left out); ms per frame of the pipeline")
+    report(f"  {'map':34s} " + " ".join(f"{k[:7]:>7s}" for k in METRIC_KEYS) + f" {'ms/frame':>9s}")
+    for name, (config_n, res_n, m) in maps.items():
+        report(_metrics_line(name, m, res_n.ms_per_frame))
+    report(_metrics_line("baseline: CFAR points, OctoMap", base, base_ms))
+    summary["maps"] = {name: dict(config=c.as_dict(), ms_per_frame=r.ms_per_frame, metrics=m,
+                                  memory_mib=r.memory["sparse_bytes"] / 2 ** 20) for name, (c, r, m) in maps.items()}
+    summary["baseline"] = dict(ms_per_frame=base_ms, metrics=base)
+
+    res.grid.save(out / "map.npz")
+    _plot_profiles(obs, config, out / "fig10_scene.png")
+    _plot_topdown(res.log_odds, truth, res.spec, out / "topdown.png")
+    report("error against run time at 0.4 m (bench quality) ...")
+    q = quality.run(runtime, obs, lambda v: scene.truth(paper_grid(v)), replace(TUNED, voxel_m=QUICK_VOXEL_M),
+                    voxels=(QUICK_VOXEL_M,))
+    quality.chart(q, out / "quality.png")
+    for line in quality.format_table(q):
+        report(line)
+    summary["quality"] = q
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    report(f"wrote {', '.join(p.name for p in sorted(out.iterdir()))} in {out}")
+    return summary
+
+
+def _plot_profiles(obs, config, path, beams=((2, 32, 0), (14, 20, 3))):
+    """Two beams of the recording like the paper's Fig. 10: a steep one on the grass and a
+    near-horizontal one, each with its CFAR threshold and its eq. 12 evidence (float64 oracle)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    cfg = PAPER_RADAR
-    report(f"device: {runtime.name}")
-    report(f"radar: {cfg.carrier_hz / 1e9:g} GHz, {cfg.bandwidth_hz / 1e6:g} MHz in {cfg.sweep_time_s * 1e6:g} us, "
-           f"{cfg.n_samples} samples at {cfg.sample_rate_hz / 1e6:g} MHz; resolution {cfg.range_resolution_m:.3f} m "
-           f"(eq. 7), far field {cfg.far_field_m:.1f} m (eq. 2), beat {cfg.max_beat_frequency_hz / 1e3:.1f} kHz "
-           f"at {cfg.range_max_m:g} m (eq. 10)")
-    frame = simulate_frame(cfg, TARGETS, noise_rms=2e-3, adc=Adc(bits=12), seed=seed)
-    report(f"frame: {frame.samples.shape} {frame.samples.dtype}, {len(TARGETS)} point targets, "
-           f"{frame.n_clipped} clipped samples")
-
-    profiles, timings = {}, {}
-    for n_fft in N_FFTS:
-        plan = RangeFFT(runtime, frame.samples.shape[:2], cfg.n_samples, n_fft)
-        plan(frame.samples)                                   # warm-up: first launch builds caches
-        start = time.perf_counter()
-        result = plan(frame.samples)
-        timings[n_fft] = (time.perf_counter() - start) * 1e3
-        profiles[n_fft] = result.profiles
-        report(f"range FFT n_fft={n_fft:5d}: {timings[n_fft]:.2f} ms for the frame, "
-               f"{result.n_invalid} invalid / {result.n_clipped} clipped beams")
-
-    peaks = {n: count_peaks(profiles[n][PAIR_BEAM], cfg.bin_ranges_m(n), 5.5, 9.5) for n in N_FFTS}
-    for n in N_FFTS:
-        report(f"pair at {PAIR_M[0]} and {PAIR_M[1]} m, n_fft={n:5d}: peaks at {', '.join(f'{p:.2f}' for p in peaks[n])} m")
-    sweep = {sep: two_target_experiment(cfg, 7.0, sep).resolved_fraction for sep in (1.0, 0.5)}
-    for sep, fractions in sweep.items():
-        report(f"§4.1 sweep, {sep} m apart, fraction of 120 phase/offset cases resolved: "
-               + ", ".join(f"n_fft {n}: {f:.2f}" for n, f in fractions.items()))
-
-    fig, axes = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
-    for ax, n_fft, label in zip(axes, N_FFTS, ("no padding", "256 zeros", "768 zeros")):
-        axis = cfg.bin_ranges_m(n_fft)
-        ax.plot(axis, profiles[n_fft][PAIR_BEAM], ".-", ms=3)
-        for r in PAIR_M:
-            ax.axvline(r, color="grey", lw=0.8, ls="--")
-        ax.set_title(f"({'abc'[N_FFTS.index(n_fft)]}) n_fft = {n_fft}: {label}", fontsize=10)
-        ax.set_ylabel("amplitude [ADC codes]")
-    axes[-1].set_xlim(4, 11)
-    axes[-1].set_xlabel("range [m]")
-    fig.suptitle(f"Two point targets 1.0 m apart at {PAIR_M[0]} and {PAIR_M[1]} m (paper Fig. 9)")
+    spacing = PAPER_RADAR.bin_spacing_m(config.n_fft)
+    interpret = interpret_config(config, PAPER_RADAR)
+    fig, axes = plt.subplots(2, len(beams), figsize=(11, 6), sharex=True)
+    for col, (frame, az, el) in enumerate(beams):
+        prof = reference.range_profile(obs.samples[frame, az, el].astype(np.float64), config.n_fft, output="power")
+        noise, _, mask = reference.cfar(prof[None], config.cfar)
+        evidence = reference.interpret(prof[None], noise, mask, interpret, spacing)[0][0]
+        r = np.arange(len(prof)) * spacing
+        top, bottom = axes[0, col], axes[1, col]
+        top.semilogy(r, prof, lw=0.7, label="power")
+        top.semilogy(r, config.cfar.alpha * noise[0], lw=0.8, label="CFAR threshold")
+        top.plot(r[mask[0]], prof[mask[0]], ".", ms=2, label="detections")
+        elevation = obs.tilts_deg[frame] + 2 * el
+        top.set_title(f"tilt {obs.tilts_deg[frame]:.1f} deg, beam {el} ({elevation:.1f} deg), azimuth {az}", fontsize=9)
+        bottom.plot(r, evidence / 1024, lw=0.8)
+        bottom.set_xlabel("range [m]")
+    axes[0, 0].set_ylabel("power")
+    axes[1, 0].set_ylabel("eq. 12 evidence [nat]")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle("Two beams of the reference scene (as the paper's Fig. 10), tuned constants")
     fig.tight_layout()
-    fig.savefig(out_dir / "fig9.png", dpi=110)
+    fig.savefig(path, dpi=100)
     plt.close(fig)
 
-    fig, axes = plt.subplots(1, 4, figsize=(12, 4), sharey=True)
-    p = profiles[1024]
-    db = 20 * np.log10(np.maximum(p, 1e-3))
-    for el, ax in enumerate(axes):
-        ax.imshow(db[:, el, :].T, origin="lower", aspect="auto", vmin=db.max() - 70, vmax=db.max(),
-                  extent=(-0.5, 63.5, 0, cfg.bin_ranges_m(1024)[-1]))
-        ax.set_title(f"stacked beam {el}", fontsize=10)
-        ax.set_xlabel("azimuth index")
-    axes[0].set_ylabel("range [m]")
-    fig.suptitle("One frame, range x azimuth, n_fft = 1024 [dB]")
-    fig.tight_layout()
-    fig.savefig(out_dir / "frame.png", dpi=90)
-    plt.close(fig)
 
-    summary = dict(device=runtime.name, frame_shape=list(frame.samples.shape),
-                   range_fft_ms={str(n): t for n, t in timings.items()},
-                   pair_peaks_m={str(n): v for n, v in peaks.items()},
-                   resolved_fraction={str(s): {str(n): f for n, f in fr.items()} for s, fr in sweep.items()})
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
-    report(f"wrote {out_dir / 'fig9.png'}, {out_dir / 'frame.png'}, {out_dir / 'summary.json'}")
-    return summary
+def _plot_topdown(log_odds, truth, spec, path):
+    """Largest log-odds over z per (x, y) (Fig. 11 seen from above) beside the truth."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    extent = (spec.origin_m[0], spec.origin_m[0] + spec.shape[0] * spec.voxel_m,
+              spec.origin_m[1], spec.origin_m[1] + spec.shape[1] * spec.voxel_m)
+    above = np.arange(spec.shape[2]) * spec.voxel_m + spec.origin_m[2] >= 0.0 - 1e-9
+    fig, axes = plt.subplots(1, 2, figsize=(12, 5.5), sharey=True)
+    top = np.max(np.where(log_odds[above] > 0, log_odds[above], 0), axis=0)
+    axes[0].imshow(top.T, origin="lower", extent=(extent[2], extent[3], extent[0], extent[1]), cmap="magma",
+                   vmax=np.percentile(top[top > 0], 99) if (top > 0).any() else 1, aspect="equal")
+    axes[0].set_title("map: largest positive log-odds above the grass")
+    occupied = (truth[above] == OCCUPIED)
+    axes[1].imshow(occupied[1:].any(axis=0).T, origin="lower", extent=(extent[2], extent[3], extent[0], extent[1]),
+                   cmap="Greys", aspect="equal")
+    axes[1].set_title("truth: occupied voxels above the grass layer")
+    for ax in axes:
+        ax.set_xlabel("y [m]")
+        ax.invert_xaxis()
+    axes[0].set_ylabel("x [m] (forward from the stand)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

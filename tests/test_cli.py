@@ -23,13 +23,34 @@ def test_info(capsys):
     assert "(* = chosen" in capsys.readouterr().out
 
 
-def test_demo_writes_its_outputs(tmp_path, capsys):
-    assert main(["demo", "--out", str(tmp_path)]) == 0
-    for name in ("fig9.png", "frame.png", "summary.json"):
-        assert (tmp_path / name).stat().st_size > 0
-    summary = json.loads((tmp_path / "summary.json").read_text())
-    assert len(summary["pair_peaks_m"]["256"]) == 1 and len(summary["pair_peaks_m"]["1024"]) == 2
-    assert "§4.1 sweep" in capsys.readouterr().out
+def test_demo_quick_runs_the_main_job_and_replays_its_recording(tmp_path, capsys):
+    """--quick: the whole main job at 0.4 m; then --replay of the recording it wrote gives the
+    same maps (the pipeline is deterministic)."""
+    assert main(["demo", "--quick", "--no-progress", "--out", str(tmp_path / "a")]) == 0
+    for name in ("fig9.png", "frame.png", "fig10_scene.png", "topdown.png", "quality.png", "map.npz",
+                 "reference_scene.npz", "summary.json"):
+        assert (tmp_path / "a" / name).stat().st_size > 0
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert summary["observations"] == 3840
+    assert len(summary["fig9"]["pair_peaks_m"]["256"]) == 1 and len(summary["fig9"]["pair_peaks_m"]["1024"]) == 2
+    q = summary["quality"]
+    assert q["baseline"]["auc"] is not None and any(r["pareto"] for r in q["runs"])
+    for r in q["runs"]:
+        assert {"config", "ms_per_frame", "auc", "iou", "false_free", "max_dev_nats"} <= set(r)
+    out = capsys.readouterr().out
+    assert "baseline: CFAR points, OctoMap" in out and "§4.1 sweep" in out
+    assert main(["demo", "--quick", "--no-progress", "--out", str(tmp_path / "b"),
+                 "--replay", str(tmp_path / "a" / "reference_scene.npz")]) == 0
+    again = json.loads((tmp_path / "b" / "summary.json").read_text())
+    for name in ("paper constants", "tuned"):
+        assert again["maps"][name]["metrics"] == summary["maps"][name]["metrics"]
+
+
+def test_demo_refuses_a_file_that_is_not_a_recording(tmp_path, capsys):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip file")
+    assert main(["demo", "--quick", "--no-progress", "--out", str(tmp_path), "--replay", str(bad)]) == 2
+    assert "not a readable .npz recording" in capsys.readouterr().err
 
 
 def test_bench_json_has_the_issue_keys(capsys):

@@ -1,0 +1,183 @@
+"""`radarcl bench quality`: map error against run time on the reference scene.
+
+One recording of the paper's 3,840 observations (``tuning.EVALUATION_SEED``) is mapped with the
+tuned configuration (``tuning.TUNED``) and with one setting changed at a time: zero padding
+(n_fft 256 = none, 512 = x2, 1024 = x4), the beam model (``evaluate.BEAM_MODELS``), the voxel
+size (0.4, 0.2, 0.1 m) and the CFAR kind. For each run, measured in this process:
+``ms_per_frame`` (the device pipeline, planning included), AUC, IoU, false-free rate, Brier, and
+``max_dev_nats``: the largest |kernel - float64 oracle| over the voxels that ``ORACLE_BEAMS`` of
+the middle frame reach, the oracle being ``reference`` end to end (range profile, CFAR, eq. 12,
+``fuse_points``), voxels whose decisions lie within ``FUSION_DECISION_MARGIN`` of a boundary left
+out. The baseline entry is the OctoMap-style map (radarcl.baseline) of the reference run's
+detections, timed in numpy. Runs on the Pareto front (no other run both faster and better in
+AUC) are marked; ``chart`` draws AUC against ms per frame.
+"""
+
+from dataclasses import replace
+
+import numpy as np
+
+from radarcl import logodds, reference
+from radarcl.config import PAPER_RADAR
+from radarcl.evaluate import BEAM_MODELS, MapConfig, baseline_map, beam_model, interpret_config, map_observations, score
+from radarcl.geometry import BeamLattice
+from radarcl.grid import BRICK, EvidenceGrid
+from radarcl.scene.outdoor import paper_grid
+from radarcl.stages.fusion import Fusion
+
+ORACLE_BEAMS = (0, 85, 170, 255)
+DECISION_MARGIN = 1e-3           # as tests/tolerances.FUSION_DECISION_MARGIN
+VOXELS = (0.4, 0.2, 0.1)
+N_FFTS = (256, 512, 1024)
+CFAR_KINDS = ("ca", "go", "so", "os")
+
+
+def variants(reference_config, voxels=VOXELS):
+    """(dimension, MapConfig) for the reference and each one-setting change of it."""
+    from radarcl.tuning import cfar_config
+
+    out = [("reference", reference_config)]
+    for n in N_FFTS:
+        out.append(("zero padding", replace(reference_config, n_fft=n)))
+    for b in BEAM_MODELS:
+        out.append(("beam model", replace(reference_config, beam=b)))
+    for v in voxels:
+        out.append(("voxel", replace(reference_config, voxel_m=v)))
+    for k in CFAR_KINDS:
+        c = reference_config.cfar
+        out.append(("cfar", replace(reference_config, cfar=cfar_config(k, c.pfa, c.train, c.guard))))
+    seen, unique = set(), []
+    for dim, c in out:                   # the reference reappears in each dimension: run it once
+        if c not in seen:
+            seen.add(c)
+            unique.append((dim, c))
+    return unique
+
+
+def oracle_deviation(runtime, obs, config, radar=PAPER_RADAR, beams=ORACLE_BEAMS):
+    """Max |kernel map - float64 oracle map| [nat] of ``beams`` of the middle frame, the
+    fraction of compared voxels that agree exactly, and how many were compared."""
+    j = len(obs.samples) // 2
+    spec = paper_grid(config.voxel_m)
+    lattice, model = BeamLattice.from_radar(radar), beam_model(config.beam, radar, config.voxel_m)
+    interpret = interpret_config(config, radar)
+    from radarcl.pipeline import Mapping
+
+    mapping = Mapping(runtime, EvidenceGrid(runtime, spec), lattice, model, radar=radar, n_fft=config.n_fft,
+                      dtype=np.int16, cfar_config=config.cfar, interpret_config=interpret)
+    mapping.fuse(obs.samples[j], obs.poses[j])
+    runtime.queue.finish()
+    it, fusion = mapping.detection.interpreter, mapping.fusion
+    import pyopencl as cl
+
+    evidence = np.empty((lattice.n_beams, it.n_bins), np.int32)
+    cl.enqueue_copy(runtime.queue, evidence, it.evidence_buf, is_blocking=True)
+    only = np.zeros_like(evidence)
+    only[list(beams)] = evidence[list(beams)]
+    check = EvidenceGrid(runtime, spec)
+    Fusion(runtime, check, lattice, model, it.n_bins, fusion.bin_spacing_m, fusion.first_bin, fusion.last_bin)(
+        only, obs.poses[j])
+    keys, data = check.bricks()
+    keys = keys[(data != 0).reshape(len(keys), -1).any(axis=1)]
+    offsets = np.stack(np.meshgrid(*[np.arange(BRICK)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    index = (keys[:, None, :3].astype(np.int64) * BRICK + offsets[None]).reshape(-1, 3)
+    index = index[spec.contains(index)]
+
+    profiles = reference.range_profile(obs.samples[j].astype(np.float64), config.n_fft, output="power")
+    noise, _, mask = reference.cfar(profiles, config.cfar)
+    ev64 = reference.interpret(profiles, noise, mask, interpret, fusion.bin_spacing_m)[0]
+    sums, _, ambiguous = reference.fuse_points(spec.index_to_world(index), ev64.reshape(lattice.n_beams, -1), lattice,
+                                               model, obs.poses[j], fusion.bin_spacing_m, fusion.first_bin,
+                                               fusion.last_bin, margin=DECISION_MARGIN, beams=beams)
+    got = check.snapshot()[index[:, 2], index[:, 1], index[:, 0]].astype(np.int64)
+    err = np.abs(got - sums)[~ambiguous]
+    if not err.size:
+        return 0.0, 1.0, 0
+    return float(err.max()) / logodds.SCALE, float((err == 0).mean()), int(err.size)
+
+
+def pareto(runs):
+    """Flags: run i is on the front when no run is at least as fast and as good, one strictly."""
+    flags = []
+    for r in runs:
+        dominated = any(o["ms_per_frame"] <= r["ms_per_frame"] and o["auc"] >= r["auc"]
+                        and (o["ms_per_frame"] < r["ms_per_frame"] or o["auc"] > r["auc"]) for o in runs)
+        flags.append(not dominated)
+    return flags
+
+
+def run(runtime, obs, truth_for, reference_config, voxels=VOXELS, report=None):
+    """Measure every variant; ``truth_for(voxel_m)`` gives the truth labels of that grid.
+    Returns the --json dict."""
+    say = report or (lambda _: None)
+    runs, baseline = [], None
+    for dim, config in variants(reference_config, voxels):
+        say(f"{dim}: {config.label()} ...")
+        res = map_observations(runtime, obs, config)
+        truth = truth_for(config.voxel_m)
+        m = score(res.log_odds, res.observed, truth)
+        dev, exact, compared = oracle_deviation(runtime, obs, config)
+        runs.append(dict(dimension=dim, label=config.label(), config=config.as_dict(), ms_per_frame=res.ms_per_frame,
+                         auc=m["auc"], iou=m["iou"], iou_tol1=m["iou_tol1"], false_free=m["false_free"],
+                         brier=m["brier"], coverage=m["coverage"], max_dev_nats=dev, exact_fraction=exact,
+                         oracle_voxels=compared, memory_mib=res.memory["sparse_bytes"] / 2 ** 20))
+        if config == reference_config:
+            log_odds, _, ms = baseline_map(obs, res.detections, config)
+            b = score(log_odds, res.observed, truth)
+            baseline = dict(label="CFAR points, OctoMap-style (numpy)", config=config.as_dict(), ms_per_frame=ms,
+                            auc=b["auc"], iou=b["iou"], iou_tol1=b["iou_tol1"], false_free=b["false_free"],
+                            brier=b["brier"], coverage=b["coverage"])
+        del res
+    for r, front in zip(runs, pareto(runs)):
+        r["pareto"] = front
+    return dict(benchmark="quality", device=runtime.name, frames=len(obs.samples),
+                observations=int(np.prod(obs.samples.shape[:3])), seed=obs.seed, runs=runs, baseline=baseline)
+
+
+def format_table(r):
+    """Human-readable lines for a ``run`` result."""
+    lines = [f"reference scene, {r['observations']} observations (seed {r['seed']}) on {r['device']}; "
+             f"* = Pareto front (no run both faster and higher in AUC)",
+             f"  {'dimension':13s} {'configuration':64s} {'ms/frame':>9s} {'AUC':>6s} {'IoU':>6s} {'IoU1':>6s} "
+             f"{'f-free':>6s} {'Brier':>6s} {'dev[nat]':>8s}"]
+    for x in r["runs"]:
+        lines.append(f"{'*' if x['pareto'] else ' '} {x['dimension']:13s} {x['label'][:64]:64s} {x['ms_per_frame']:9.1f} "
+                     f"{x['auc']:6.3f} {x['iou']:6.3f} {x['iou_tol1']:6.3f} {x['false_free']:6.3f} {x['brier']:6.3f} "
+                     f"{x['max_dev_nats']:8.3f}")
+    b = r["baseline"]
+    if b:
+        lines.append(f"  {'baseline':13s} {b['label'][:64]:64s} {b['ms_per_frame']:9.1f} {b['auc']:6.3f} "
+                     f"{b['iou']:6.3f} {b['iou_tol1']:6.3f} {b['false_free']:6.3f} {b['brier']:6.3f}")
+    return lines
+
+
+def chart(r, path):
+    """AUC against ms per frame (log axis), the Pareto front joined, the baseline marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    colours = dict(zip(("reference", "zero padding", "beam model", "voxel", "cfar"), plt.cm.tab10.colors))
+    for x in r["runs"]:
+        ax.scatter(x["ms_per_frame"], x["auc"], color=colours.get(x["dimension"], "k"), s=40,
+                   edgecolor="k" if x["pareto"] else "none", zorder=3)
+        ax.annotate(x["label"].replace("defaults (the paper's)", "reference")[:38], (x["ms_per_frame"], x["auc"]),
+                    fontsize=6.5, xytext=(4, 2), textcoords="offset points")
+    front = sorted((x["ms_per_frame"], x["auc"]) for x in r["runs"] if x["pareto"])
+    ax.plot(*zip(*front), "k--", lw=0.8, label="Pareto front")
+    for dim, c in colours.items():
+        ax.scatter([], [], color=c, label=dim)
+    b = r["baseline"]
+    if b:
+        ax.scatter(b["ms_per_frame"], b["auc"], marker="x", color="k", s=60, label="baseline: CFAR points, OctoMap-style")
+    ax.set_xscale("log")
+    ax.set_xlabel(f"ms per frame (pipeline, {r['device'][:40]})")
+    ax.set_ylabel("ROC-AUC over observed voxels")
+    ax.set_title(f"Error against run time: the reference scene, {r['observations']} observations")
+    ax.legend(fontsize=7, loc="lower right")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
