@@ -47,10 +47,10 @@ class OctoMapBaseline:
         """One scan: beams from ``origin`` (3,) along unit ``directions`` (n_beams, 3); bins at
         ``ranges`` (n_bins,) [m]; ``mask`` (n_beams, n_bins) the CFAR detections. Only bins in
         [min_range, max_range] are points."""
-        origin = np.asarray(origin, float)
-        mask = np.asarray(mask, bool) & ((ranges >= min_range) & (ranges <= max_range))[None]
+        origin, mask = np.asarray(origin, float), np.asarray(mask, bool)
         if mask.shape != (len(directions), len(ranges)):
             raise ConfigError(f"mask must be (n_beams, n_bins) = ({len(directions)}, {len(ranges)}), got {mask.shape}")
+        mask = mask & ((ranges >= min_range) & (ranges <= max_range))[None]
         beam, bin_ = np.nonzero(mask)
         self.points += len(beam)
         hits = np.unique(self._linear(origin + ranges[bin_, None] * directions[beam]))

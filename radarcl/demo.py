@@ -115,7 +115,7 @@ def _plot_profiles(obs, config, path, beams=((2, 32, 0), (14, 20, 3))):
         top.semilogy(r, prof, lw=0.7, label="power")
         top.semilogy(r, config.cfar.alpha * noise[0], lw=0.8, label="CFAR threshold")
         top.plot(r[mask[0]], prof[mask[0]], ".", ms=2, label="detections")
-        elevation = obs.tilts_deg[frame] + 2 * el
+        elevation = obs.tilts_deg[frame] + PAPER_RADAR.elevation_step_deg * el
         top.set_title(f"tilt {obs.tilts_deg[frame]:.1f} deg, beam {el} ({elevation:.1f} deg), azimuth {az}", fontsize=9)
         bottom.plot(r, evidence / 1024, lw=0.8)
         bottom.set_xlabel("range [m]")

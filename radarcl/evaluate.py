@@ -141,9 +141,9 @@ def baseline_map(obs, detections, config=MapConfig(), radar=PAPER_RADAR):
     base = OctoMapBaseline(spec)
     axes = BeamLattice.from_radar(radar).beam_rotations()[:, :, 0]
     ranges = radar.bin_ranges_m(config.n_fft)
+    i = interpret_config(config, radar)
     start = time.perf_counter()
     for pose, mask in zip(obs.poses, detections):
-        i = interpret_config(config, radar)
         base.insert_scan(pose[:3, 3], axes @ pose[:3, :3].T, ranges, mask, i.range_min_m, i.range_max_m)
     ms = (time.perf_counter() - start) * 1e3 / max(1, len(obs.poses))
     return base.log_odds, base.touched, ms

@@ -94,6 +94,14 @@ class GridSpec:
         """(..., 3) voxel indices -> (..., 3) world coordinates [m] of the voxel centres."""
         return np.asarray(self.origin_m) + (np.asarray(index, dtype=np.float64) + 0.5) * self.voxel_m
 
+    def brick_voxels(self, bricks):
+        """(n, 3) int64 indices (x, y, z) of the voxels of ``bricks`` (m, >= 3) (bx, by, bz, ...)
+        that lie inside the grid (partial bricks at the high ends hold voxels outside it)."""
+        b = np.asarray(bricks)[:, :3].astype(np.int64)
+        offsets = np.stack(np.meshgrid(*[np.arange(BRICK)] * 3, indexing="ij"), -1).reshape(-1, 3)
+        index = (b[:, None, :] * BRICK + offsets[None]).reshape(-1, 3)
+        return index[self.contains(index)]
+
     def contains(self, index):
         """(...,) bool: index inside the grid."""
         i = np.asarray(index)

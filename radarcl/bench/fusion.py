@@ -23,7 +23,7 @@ from radarcl import reference
 from radarcl.bench import interleaved_medians
 from radarcl.config import PAPER_RADAR
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
-from radarcl.grid import BRICK, EvidenceGrid, GridSpec
+from radarcl.grid import EvidenceGrid, GridSpec
 from radarcl.pipeline import Mapping
 from radarcl.scene.profiles import paper_like_samples
 from radarcl.stages.fusion import Fusion
@@ -89,10 +89,7 @@ def run(runtime, repeat=20, report=None, spec=PAPER_GRID):
     say(f"float64 oracle on {len(ORACLE_BEAMS)} of {lattice.n_beams} beams over {len(plan.bricks)} bricks ...")
     evidence = np.empty((lattice.n_beams, it.n_bins), np.int32)
     cl.enqueue_copy(runtime.queue, evidence, it.evidence_buf, is_blocking=True)
-    b = plan.bricks[:, :3].astype(np.int64)
-    offsets = np.stack(np.meshgrid(*[np.arange(BRICK)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    index = (b[:, None, :] * BRICK + offsets[None]).reshape(-1, 3)
-    index = index[spec.contains(index)]
+    index = spec.brick_voxels(plan.bricks)
     start = time.perf_counter()
     sums, updates, ambiguous = reference.fuse_points(spec.index_to_world(index), evidence, lattice, model,
                                                      pose, fusion.bin_spacing_m, fusion.first_bin, fusion.last_bin,

@@ -19,11 +19,12 @@ import numpy as np
 
 from radarcl import logodds, reference
 from radarcl.config import PAPER_RADAR
-from radarcl.evaluate import BEAM_MODELS, MapConfig, baseline_map, beam_model, interpret_config, map_observations, score
+from radarcl.evaluate import BEAM_MODELS, baseline_map, beam_model, interpret_config, map_observations, score
 from radarcl.geometry import BeamLattice
-from radarcl.grid import BRICK, EvidenceGrid
+from radarcl.grid import EvidenceGrid
 from radarcl.scene.outdoor import paper_grid
 from radarcl.stages.fusion import Fusion
+from radarcl.tuning import cfar_config
 
 ORACLE_BEAMS = (0, 85, 170, 255)
 DECISION_MARGIN = 1e-3           # as tests/tolerances.FUSION_DECISION_MARGIN
@@ -34,8 +35,6 @@ CFAR_KINDS = ("ca", "go", "so", "os")
 
 def variants(reference_config, voxels=VOXELS):
     """(dimension, MapConfig) for the reference and each one-setting change of it."""
-    from radarcl.tuning import cfar_config
-
     out = [("reference", reference_config)]
     for n in N_FFTS:
         out.append(("zero padding", replace(reference_config, n_fft=n)))
@@ -78,10 +77,7 @@ def oracle_deviation(runtime, obs, config, radar=PAPER_RADAR, beams=ORACLE_BEAMS
     Fusion(runtime, check, lattice, model, it.n_bins, fusion.bin_spacing_m, fusion.first_bin, fusion.last_bin)(
         only, obs.poses[j])
     keys, data = check.bricks()
-    keys = keys[(data != 0).reshape(len(keys), -1).any(axis=1)]
-    offsets = np.stack(np.meshgrid(*[np.arange(BRICK)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    index = (keys[:, None, :3].astype(np.int64) * BRICK + offsets[None]).reshape(-1, 3)
-    index = index[spec.contains(index)]
+    index = spec.brick_voxels(keys[(data != 0).reshape(len(keys), -1).any(axis=1)])
 
     profiles = reference.range_profile(obs.samples[j].astype(np.float64), config.n_fft, output="power")
     noise, _, mask = reference.cfar(profiles, config.cfar)
