@@ -15,7 +15,7 @@ from radarcl.grid import GRID_LIMIT, EvidenceGrid, GridSpec
 from radarcl.pipeline import Detection, Mapping
 from radarcl.scene.fmcw import simulate_beams
 from radarcl.stages.fusion import Fusion
-from test_fusion import MODELS, N_BINS, check_against_oracle, evidence, fuse
+from test_fusion import MODELS, check_against_oracle, evidence, fuse
 from tolerances import CFAR_RTOL, DECISION_MARGIN, EVIDENCE_UNITS_TOL
 
 COARSE = GridSpec((-8.0, -35.0, -10.0), 1.0, (80, 70, 20))
