@@ -243,18 +243,7 @@ class EvidenceGrid:
         """Read a grid written by ``save`` onto ``runtime``'s device."""
         import pyopencl as cl
 
-        try:
-            with np.load(path) as f:
-                version = int(f["version"])
-                spec = GridSpec(tuple(f["origin_m"]), float(f["voxel_m"]), tuple(int(n) for n in f["shape"]))
-                keys, data = f["keys"], f["data"]
-        except (OSError, KeyError, ValueError) as exc:
-            raise FrameFormatError(f"{path} is not a radarcl grid file: {exc}") from exc
-        if version != FILE_VERSION:
-            raise FrameFormatError(f"{path} has grid file version {version}, this radarcl reads {FILE_VERSION}")
-        if data.dtype != np.int32 or data.shape != (len(keys), BRICK, BRICK, BRICK):
-            raise FrameFormatError(f"{path}: expected bricks ({len(keys)}, 8, 8, 8) int32, "
-                                   f"got {data.shape} {data.dtype}")
+        spec, keys, data = read(path)
         grid = cls(runtime, spec)
         slots = grid.allocate(keys)
         if len(keys):
@@ -262,6 +251,35 @@ class EvidenceGrid:
             ordered[slots] = data
             cl.enqueue_copy(runtime.queue, grid.pool, ordered, is_blocking=True)
         return grid
+
+
+def read(path):
+    """Read a grid file written by ``EvidenceGrid.save`` without a device (numpy only, for the
+    viewer): returns (spec, keys (n, 3) int32, data (n, 8, 8, 8) int32). A file that is not a
+    radarcl grid raises ``FrameFormatError`` saying what was wrong."""
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            missing = {"version", "origin_m", "voxel_m", "shape", "keys", "data"} - set(f.files)
+            if missing:
+                raise FrameFormatError(f"{path} is not a radarcl grid file: it lacks {sorted(missing)} "
+                                       f"(expected an npz written by EvidenceGrid.save, e.g. radarcl demo's map.npz)")
+            version = int(f["version"])
+            if version != FILE_VERSION:
+                raise FrameFormatError(f"{path} has grid file version {version}, this radarcl reads {FILE_VERSION}")
+            spec = GridSpec(tuple(f["origin_m"]), float(f["voxel_m"]), tuple(int(n) for n in f["shape"]))
+            keys, data = f["keys"], f["data"]
+    except (OSError, ValueError, EOFError) as exc:   # not a zip, truncated, pickled arrays
+        if isinstance(exc, FrameFormatError):
+            raise
+        raise FrameFormatError(f"{path} is not a radarcl grid file (an npz written by EvidenceGrid.save): "
+                               f"{exc}") from exc
+    if data.dtype != np.int32 or data.shape != (len(keys), BRICK, BRICK, BRICK):
+        raise FrameFormatError(f"{path}: expected bricks ({len(keys)}, 8, 8, 8) int32, got {data.shape} {data.dtype}")
+    if keys.dtype != np.int32 or keys.ndim != 2 or keys.shape[1] != 3:
+        raise FrameFormatError(f"{path}: expected brick keys (n, 3) int32, got {keys.shape} {keys.dtype}")
+    if len(keys) and ((keys < 0).any() or (keys >= np.asarray(spec.brick_shape)).any()):
+        raise FrameFormatError(f"{path}: brick keys outside the grid's {spec.brick_shape} bricks")
+    return spec, keys, data
 
 
 def assemble(spec, keys, data):

@@ -1,0 +1,94 @@
+"""The render modes, registered in this one place, and the transfer-function settings they share.
+
+Every mode maps a log-odds value v [nat] through the transfer function
+clamp -> normalise -> gamma -> colormap:  x = clamp((v - lo) / (hi - lo), 0, 1) ** gamma.
+
+- ``occupancy``: translucent occupancy, front-to-back compositing of x as opacity (per voxel
+  length, ``density``) and colormap(x) as colour; early exit at alpha > 0.99.
+- ``mip``: maximum-evidence projection, colormap of the largest v along the ray.
+- ``iso``: the isosurface v = ``threshold`` (the occupancy threshold), refined by bisection and
+  lit by its gradient; coloured by height.
+- ``spheres``: the paper's Fig. 11, one instanced sphere per cell with positive log-odds,
+  radius proportional to v (half a voxel at ``hi``), coloured by x.
+
+A ray-marched mode names its ``#define`` and the coarse-cell test that lets a ray skip a brick:
+the largest value any sample in the brick can read, ``cmax``, must be able to change the pixel.
+"""
+
+from dataclasses import dataclass
+
+from radarcl.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One render mode: ``name``, its ``key`` in the app, ``program`` (shader file stem),
+    ``define`` (the GLSL macro selecting it), ``description``."""
+
+    name: str
+    key: str
+    program: str
+    define: str
+    description: str
+
+
+MODES = {m.name: m for m in (
+    Mode("occupancy", "1", "volume", "MODE_OCCUPANCY", "translucent occupancy (positive evidence as opacity)"),
+    Mode("mip", "2", "volume", "MODE_MIP", "maximum-evidence projection"),
+    Mode("iso", "3", "volume", "MODE_ISO", "isosurface at the occupancy threshold, coloured by height"),
+    Mode("spheres", "4", "spheres", "MODE_SPHERES", "Fig. 11: a sphere per positive cell, radius ~ log-odds"),
+)}
+
+COLORMAPS = ("inferno", "viridis", "magma", "turbo", "gray")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Transfer function and march: ``threshold`` [nat] (isosurface; also ``lo`` unless given),
+    ``lo``/``hi`` the clamp [nat] (None: ``threshold`` and the map's 99.9th percentile of
+    values above it), ``gamma``, ``colormap``, ``density`` (opacity per voxel of length at
+    x = 1), ``step`` [voxels] between samples, ``skip`` empty-space skipping on/off,
+    ``clip`` ((x0, x1), (y0, y1), (z0, z1)) fractions of the grid kept (axis-aligned slices),
+    ``background`` RGB in [0, 1]."""
+
+    threshold: float = 1.0
+    lo: float = None
+    hi: float = None
+    gamma: float = 1.0
+    colormap: str = "inferno"
+    density: float = 0.5
+    step: float = 1.0
+    skip: bool = True
+    clip: tuple = ((0.0, 1.0), (0.0, 1.0), (0.0, 1.0))
+    background: tuple = (0.06, 0.06, 0.08)
+
+    def __post_init__(self):
+        if self.colormap not in COLORMAPS:
+            raise ConfigError(f"unknown colormap {self.colormap!r}; expected one of {COLORMAPS}")
+        if not 0.05 <= self.step <= 8:
+            raise ConfigError(f"step must lie in [0.05, 8] voxels, got {self.step}")
+        if not 0.05 <= self.gamma <= 20:
+            raise ConfigError(f"gamma must lie in [0.05, 20], got {self.gamma}")
+        if self.density <= 0:
+            raise ConfigError(f"density must be positive, got {self.density}")
+        if self.lo is not None and self.hi is not None and not self.hi > self.lo:
+            raise ConfigError(f"the clamp needs hi > lo, got lo={self.lo} hi={self.hi}")
+        for a, b in self.clip:
+            if not 0.0 <= a < b <= 1.0:
+                raise ConfigError(f"clip ranges must satisfy 0 <= a < b <= 1, got {self.clip}")
+
+    def clamp_range(self, volume):
+        """(lo, hi) [nat] for ``volume``: the given ones or the defaults described above."""
+        lo = self.threshold if self.lo is None else self.lo
+        hi = self.hi
+        if hi is None:
+            hi = volume.percentile_above(lo)
+            hi = lo + 1.0 if hi is None else hi
+        return lo, max(hi, lo + 1e-3)
+
+
+def mode(name):
+    """The registered mode ``name``; an unknown one is a ``ConfigError`` listing the others."""
+    if name not in MODES:
+        raise ConfigError(f"unknown render mode {name!r}; expected one of {', '.join(MODES)}")
+    return MODES[name]

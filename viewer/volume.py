@@ -1,0 +1,223 @@
+"""What the renderer draws, prepared with numpy alone: the map as texture values, its coarse
+max-mip for empty-space skipping, downsampling to the GL limit, and the bricks that changed.
+
+A ``Volume`` holds a grid snapshot as float16 log-odds [nat] in the (nz, ny, nx) layout of
+``radarcl.grid`` (x fastest), which is byte for byte a GL 3D texture of size (nx, ny, nz): the
+numpy (z, y, x) -> GL (x, y, z) swap is that sentence and nothing else. Texel i's centre,
+texture coordinate (i + 0.5) / n, is voxel i's centre ``origin + (i + 0.5) * voxel`` in world
+coordinates, so the box [origin, origin + n * voxel] carries the texture exactly.
+
+The coarse max-mip has one cell per 8^3 brick of the grid holding the largest log-odds any
+trilinear sample inside that brick can read: the brick's voxels and a one-voxel apron around
+it (a sample at voxel coordinate u reads voxels floor(u - 1/2) and floor(u - 1/2) + 1). A ray
+may jump over a cell whose maximum its mode cannot see, and the picture does not change.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from radarcl import logodds
+from radarcl.errors import ConfigError, ShapeError
+from radarcl.grid import BRICK, GridSpec, assemble, read
+
+TEXTURE_LIMIT_NATS = 1000.0        # texture values are clamped here: float16 holds them to 0.5 nat
+
+
+@dataclass
+class Volume:
+    """A map ready to render: ``spec`` (the grid, possibly downsampled), ``values`` float16
+    (nz, ny, nx) log-odds [nat], ``coarse`` float16 (nbz, nby, nbx) max-mip, ``note`` what was
+    done to fit (empty when nothing), ``keys``/``bricks`` the sparse source when it has one."""
+
+    spec: GridSpec
+    values: np.ndarray
+    coarse: np.ndarray
+    note: str = ""
+    keys: np.ndarray = field(default=None, repr=False)
+    bricks: np.ndarray = field(default=None, repr=False)
+    _percentiles: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def positive(self):
+        """Number of cells with positive log-odds (the Fig. 11 spheres)."""
+        return int(np.count_nonzero(self.values > 0))
+
+    def percentile_above(self, lo, q=99.9):
+        """The ``q``-th percentile [nat] of the values above ``lo``, or None when there are
+        none; remembered until the next ``update`` (a full pass costs about 0.25 s on the paper grid)."""
+        key = (float(lo), float(q))
+        if key not in self._percentiles:
+            bricks = self.coarse > lo                   # only bricks that hold such values are read
+            above = []
+            for bz, by, bx in np.argwhere(bricks):
+                block = self.values[bz * BRICK:(bz + 1) * BRICK, by * BRICK:(by + 1) * BRICK,
+                                    bx * BRICK:(bx + 1) * BRICK]
+                above.append(block[block > lo])
+            above = np.concatenate(above).astype(np.float32) if above else np.empty(0, np.float32)
+            self._percentiles[key] = float(np.percentile(above, q)) if above.size else None
+        return self._percentiles[key]
+
+    def content_box(self, lo, keep=0.98):
+        """World box (lo, hi) [m] around the bricks holding values above ``lo`` (what a view at
+        that clamp shows), leaving out the ``1 - keep`` most outlying along each axis (isolated
+        false alarms would otherwise frame the whole grid); None when there are none."""
+        cells = np.argwhere(self.coarse > lo)[:, ::-1]             # (bx, by, bz)
+        if len(cells) == 0:
+            return None
+        q = 50 * (1 - keep)
+        first = np.floor(np.percentile(cells, q, axis=0))
+        last = np.ceil(np.percentile(cells, 100 - q, axis=0)) + 1
+        v, o = self.spec.voxel_m, np.asarray(self.spec.origin_m)
+        top = np.asarray(self.spec.shape)
+        return o + first * BRICK * v, o + np.minimum(last * BRICK, top) * v
+
+    def value_range(self):
+        """(min, max) of the log-odds [nat]."""
+        return float(self.values.min()), float(self.values.max())
+
+
+def to_texture(units):
+    """int32 logodds units -> float16 nats, clamped to +-TEXTURE_LIMIT_NATS."""
+    nats = np.multiply(units, np.float32(1.0 / logodds.SCALE), dtype=np.float32)
+    np.clip(nats, -TEXTURE_LIMIT_NATS, TEXTURE_LIMIT_NATS, out=nats)
+    return nats.astype(np.float16)
+
+
+def _apron_max(a, axis, first, count, start, n):
+    """Bricks ``first`` .. ``first + count - 1`` along ``axis`` of ``a``, a slice of an axis of
+    length ``n`` that begins at ``start``: each the max over its BRICK voxels and one either
+    side, indices clamped to [0, n) as clamp-to-edge sampling clamps them."""
+    idx = np.clip(np.arange(first * BRICK - 1, (first + count) * BRICK + 1), 0, n - 1) - start
+    taken = np.take(a, idx, axis=axis)                  # element j is voxel first*8 - 1 + j
+    body = np.take(taken, np.arange(1, count * BRICK + 1), axis=axis)
+    m = body.reshape(a.shape[:axis] + (count, BRICK) + a.shape[axis + 1:]).max(axis=axis + 1)
+    left = np.take(taken, np.arange(count) * BRICK, axis=axis)              # voxel 8b - 1
+    right = np.take(taken, np.arange(count) * BRICK + BRICK + 1, axis=axis)  # voxel 8b + 8
+    return np.maximum(m, np.maximum(left, right))
+
+
+def coarse_max(values, lo=(0, 0, 0), hi=None):
+    """The max-mip of ``values`` (nz, ny, nx): one cell per 8^3 brick with its one-voxel apron,
+    for the bricks [lo, hi) (bx, by, bz), all of them by default; returns (nbz, nby, nbx)."""
+    shape = values.shape
+    hi = hi if hi is not None else tuple(-(-n // BRICK) for n in shape[::-1])
+    cut = tuple(slice(max(lo[2 - a] * BRICK - 1, 0), min(hi[2 - a] * BRICK + 1, shape[a])) for a in range(3))
+    out = values[cut]                                   # the region and its apron, a view
+    for axis in (2, 1, 0):                              # x first: the largest reduction on the big array
+        out = _apron_max(out, axis, lo[2 - axis], hi[2 - axis] - lo[2 - axis], cut[axis].start, shape[axis])
+    return np.ascontiguousarray(out)
+
+
+def coarser_max(coarse, factor=4):
+    """The next level of the max-mip: the max of ``factor``^3 coarse cells (32^3 voxels)."""
+    nz, ny, nx = coarse.shape
+    cz, cy, cx = (-(-n // factor) for n in (nz, ny, nx))
+    padded = np.pad(coarse, ((0, cz * factor - nz), (0, cy * factor - ny), (0, cx * factor - nx)), mode="edge")
+    return np.ascontiguousarray(padded.reshape(cz, factor, cy, factor, cx, factor).max(axis=(1, 3, 5)))
+
+
+def active_box(coarse, visible):
+    """The voxel box ((x0, y0, z0), (x1, y1, z1)) holding every brick whose coarse maximum
+    passes ``visible`` (a vectorised predicate), or None when none does."""
+    z, y, x = np.nonzero(visible(coarse))
+    if len(z) == 0:
+        return None
+    return (np.array([x.min(), y.min(), z.min()]) * BRICK, (np.array([x.max(), y.max(), z.max()]) + 1) * BRICK)
+
+
+def downsample(units, spec, max_size):
+    """Max-pool ``units`` (nz, ny, nx) by the smallest integer factor that brings every axis to
+    ``max_size`` or below (cubic voxels kept). Max keeps occupied evidence visible. Returns
+    (units, spec, factor)."""
+    factor = max(1, -(-max(spec.shape) // max_size))
+    if factor == 1:
+        return units, spec, 1
+    nz, ny, nx = units.shape
+    cz, cy, cx = (-(-n // factor) for n in (nz, ny, nx))
+    padded = np.pad(units, ((0, cz * factor - nz), (0, cy * factor - ny), (0, cx * factor - nx)), mode="edge")
+    pooled = padded.reshape(cz, factor, cy, factor, cx, factor).max(axis=(1, 3, 5))
+    return np.ascontiguousarray(pooled), GridSpec(spec.origin_m, spec.voxel_m * factor, (cx, cy, cz)), factor
+
+
+def from_units(spec, units, max_size=2048):
+    """A ``Volume`` from a dense int32 snapshot (nz, ny, nx) in logodds units. A grid with an
+    axis over ``max_size`` (the GL 3D-texture limit) is max-pooled to fit and says so in ``note``."""
+    units = np.asarray(units)
+    if units.shape != spec.array_shape:
+        raise ShapeError(f"expected a snapshot of shape {spec.array_shape} (nz, ny, nx), got {units.shape}")
+    if units.dtype.kind not in "iu":
+        raise ShapeError(f"expected integer logodds units (a grid snapshot), got {units.dtype}")
+    note = ""
+    small, small_spec, factor = downsample(units, spec, max_size)
+    if factor > 1:
+        note = (f"grid {spec.shape} exceeds this GL's 3D texture limit of {max_size} per axis: shown max-pooled "
+                f"by {factor} to {small_spec.shape} at {small_spec.voxel_m:g} m voxels")
+    values = to_texture(small)
+    return Volume(small_spec, values, coarse_max(values), note)
+
+
+def from_nats(spec, nats, max_size=2048):
+    """A ``Volume`` from dense log-odds [nat] (nz, ny, nx); NaN is refused, infinities clamp."""
+    nats = np.asarray(nats, dtype=np.float64)
+    if nats.shape != spec.array_shape:
+        raise ShapeError(f"expected log-odds of shape {spec.array_shape} (nz, ny, nx), got {nats.shape}")
+    if np.isnan(nats).any():
+        raise ConfigError("log-odds must not be NaN")
+    units = np.rint(np.clip(nats, -TEXTURE_LIMIT_NATS, TEXTURE_LIMIT_NATS) * logodds.SCALE).astype(np.int32)
+    return from_units(spec, units, max_size)
+
+
+def load_map(path, max_size=2048):
+    """Read a map file (``EvidenceGrid.save``'s npz, e.g. ``radarcl demo``'s map.npz) into a
+    ``Volume``; anything else raises ``FrameFormatError`` with the reason."""
+    spec, keys, bricks = read(path)
+    volume = from_units(spec, assemble(spec, keys, bricks), max_size)
+    if not volume.note:
+        volume.keys, volume.bricks = keys, bricks
+    return volume
+
+
+def changed_bricks(old_keys, old_bricks, new_keys, new_bricks):
+    """Brick keys (n, 3) (bx, by, bz) whose contents differ between two sparse snapshots: new
+    bricks, dropped bricks and bricks with any changed voxel."""
+    def ids(keys):
+        k = keys.astype(np.int64)
+        return (k[:, 2] << 42) | (k[:, 1] << 21) | k[:, 0]
+
+    old_ids, new_ids = ids(old_keys), ids(new_keys)
+    common, i_old, i_new = np.intersect1d(old_ids, new_ids, assume_unique=True, return_indices=True)
+    differs = (old_bricks[i_old] != new_bricks[i_new]).reshape(len(common), -1).any(axis=1)
+    added = np.setdiff1d(new_ids, old_ids, assume_unique=True)
+    dropped = np.setdiff1d(old_ids, new_ids, assume_unique=True)
+    out = np.concatenate([common[differs], added, dropped])
+    mask = (1 << 21) - 1
+    return np.stack([out & mask, (out >> 21) & mask, out >> 42], axis=1).astype(np.int32)
+
+
+def update(volume, keys, bricks, changed):
+    """Write the ``changed`` bricks of a new sparse snapshot (``keys``, ``bricks``) into
+    ``volume.values`` and recompute the coarse cells they touch; returns the voxel boxes
+    ((z0, z1), (y0, y1), (x0, x1)) written, for the texture upload, and the coarse box."""
+    spec = volume.spec
+    if volume.keys is None:
+        raise ConfigError("this volume was downsampled or built from a dense array; reload it instead")
+    lookup = {tuple(k): i for i, k in enumerate(keys.tolist())}
+    nz, ny, nx = spec.array_shape
+    boxes = []
+    for bx, by, bz in changed.tolist():
+        z0, y0, x0 = bz * BRICK, by * BRICK, bx * BRICK
+        z1, y1, x1 = min(z0 + BRICK, nz), min(y0 + BRICK, ny), min(x0 + BRICK, nx)
+        i = lookup.get((bx, by, bz))
+        block = np.zeros((BRICK,) * 3, np.int32) if i is None else bricks[i]
+        volume.values[z0:z1, y0:y1, x0:x1] = to_texture(block[:z1 - z0, :y1 - y0, :x1 - x0])
+        boxes.append(((z0, z1), (y0, y1), (x0, x1)))
+    volume.keys, volume.bricks = keys, bricks
+    volume._percentiles.clear()
+    if not boxes:
+        return boxes, None
+    c = np.asarray(changed)
+    lo = np.maximum(c.min(axis=0) - 1, 0)              # a neighbour's apron may reach a changed voxel
+    hi = np.minimum(c.max(axis=0) + 2, np.asarray(spec.brick_shape))
+    volume.coarse[lo[2]:hi[2], lo[1]:hi[1], lo[0]:hi[0]] = coarse_max(volume.values, lo, hi)
+    return boxes, (tuple(lo), tuple(hi))
