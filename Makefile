@@ -1,22 +1,40 @@
 # The README's two commands: `make demo` (the main job on the paper's radar) and `make test`.
-# Both build a virtual environment in .venv from pyproject.toml first; nothing else is needed
-# on a fresh machine with Python 3.10+ (PoCL, the OpenCL CPU device, comes from PyPI).
+# Both build a virtual environment in .venv from pyproject.toml first (PoCL, the OpenCL CPU
+# device, comes from PyPI) and check the system libraries the viewer needs: Mesa's EGL for
+# headless rendering and Xvfb for the window test. Missing ones are installed with apt-get when
+# running as root (CI, a fresh machine); otherwise make stops and names them.
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test bench info clean
+SYSTEM_PACKAGES_EGL := libegl1 libegl-mesa0 libgl1-mesa-dri
+SYSTEM_PACKAGES_X := xvfb xauth
+
+.PHONY: demo test bench info clean system
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,serial]'
+	$(BIN)/python -m pip install --quiet -e '.[test,serial,viewer]'
 	touch $@
 
-demo: $(BIN)/.installed
+system:
+	@missing=""; \
+	ldconfig -p | grep -q 'libEGL_mesa.so' || missing="$$missing $(SYSTEM_PACKAGES_EGL)"; \
+	command -v xvfb-run >/dev/null || missing="$$missing $(SYSTEM_PACKAGES_X)"; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "installing$$missing (apt-get)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
+	  else \
+	    echo "missing system packages:$$missing; install them (apt-get install$$missing) and rerun"; exit 1; \
+	  fi; \
+	fi
+
+demo: system $(BIN)/.installed
 	$(BIN)/radarcl demo --out out/demo
 
-test: $(BIN)/.installed
+test: system $(BIN)/.installed
 	$(BIN)/python -m pytest -q
 
 bench: $(BIN)/.installed

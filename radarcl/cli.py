@@ -1,4 +1,4 @@
-"""Command line: `radarcl info | demo | bench | tune | navtech | navtech-map | render | view`."""
+"""Command line: `radarcl info | demo | bench | tune | navtech | navtech-map | fuse | render | view`."""
 
 import argparse
 import dataclasses
@@ -143,6 +143,15 @@ def cmd_navtech_map(args):
     return 0
 
 
+def cmd_fuse(args):
+    """Fuse a recording into a map file."""
+    from radarcl import fuse
+
+    fuse.run(_runtime(), args.recording, args.out, voxel_m=args.voxel, paper=args.paper, every=args.every,
+             progress=None if args.no_progress else ProgressBar())
+    return 0
+
+
 def _settings(args):
     from radarcl.viewer.modes import Settings
 
@@ -270,6 +279,16 @@ def build_parser():
     p.add_argument("--out", default="navtech_map.png", help="PNG to write (default: %(default)s)")
     p.add_argument("--json", default=None, help="also write the consistency numbers to this JSON file")
     p.set_defaults(func=cmd_navtech_map)
+
+    p = sub.add_parser("fuse", help="fuse a recording of raw frames into a map file (rewritten every --every "
+                                    "frames for radarcl view --live)")
+    p.add_argument("recording", help="a radarcl recording, e.g. radarcl demo's reference_scene.npz")
+    p.add_argument("--out", default="map.npz", help="map file to write (default: %(default)s)")
+    p.add_argument("--voxel", type=float, default=0.1, help="voxel edge [m] (default: %(default)s)")
+    p.add_argument("--paper", action="store_true", help="the paper's constants instead of the tuned ones")
+    p.add_argument("--every", type=int, default=None, help="rewrite the map file every N frames")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.set_defaults(func=cmd_fuse)
 
     p = sub.add_parser("render", help="render a map file to a PNG through EGL (no display needed)",
                        description="Ray-marches the map as a 3D texture (or draws the Fig. 11 spheres) offscreen "

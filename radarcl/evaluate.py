@@ -94,6 +94,15 @@ class MapResult:
     grid: object = None
 
 
+def make_mapping(runtime, config=MapConfig(), radar=PAPER_RADAR):
+    """The ``Mapping`` (int16 raw frames -> paper grid) that ``config`` describes."""
+    lattice = BeamLattice.from_radar(radar)
+    model = beam_model(config.beam, radar, config.voxel_m)
+    grid = EvidenceGrid(runtime, paper_grid(config.voxel_m))
+    return Mapping(runtime, grid, lattice, model, radar=radar, n_fft=config.n_fft, dtype=np.int16,
+                   cfar_config=config.cfar, interpret_config=interpret_config(config, radar))
+
+
 def map_observations(runtime, obs, config=MapConfig(), radar=PAPER_RADAR, progress=None):
     """Fuse ``obs`` (``scene.observe.Observations``) with ``config``; returns a ``MapResult``.
 
@@ -101,13 +110,8 @@ def map_observations(runtime, obs, config=MapConfig(), radar=PAPER_RADAR, progre
     the pipeline of every frame (upload, range FFT, CFAR, eq. 12, planning the new pose, fusion)
     until the device is idle; the observed mask and the detections for the baseline are
     computed afterwards."""
-    spec = paper_grid(config.voxel_m)
-    lattice = BeamLattice.from_radar(radar)
-    model = beam_model(config.beam, radar, config.voxel_m)
-    interpret = interpret_config(config, radar)
-    grid = EvidenceGrid(runtime, spec)
-    mapping = Mapping(runtime, grid, lattice, model, radar=radar, n_fft=config.n_fft, dtype=np.int16,
-                      cfar_config=config.cfar, interpret_config=interpret)
+    mapping = make_mapping(runtime, config, radar)
+    grid, spec, lattice, model = mapping.grid, mapping.grid.spec, mapping.fusion.lattice, mapping.fusion.model
     n_frames, per_frame = len(obs.samples), lattice.n_beams
     mapping.fuse(obs.samples[0], obs.poses[0])         # warm-up: kernel builds, first allocations
     runtime.queue.finish()

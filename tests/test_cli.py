@@ -28,9 +28,10 @@ def test_demo_quick_runs_the_main_job_and_replays_its_recording(tmp_path, capsys
     same maps (the pipeline is deterministic)."""
     assert main(["demo", "--quick", "--no-progress", "--out", str(tmp_path / "a")]) == 0
     for name in ("fig9.png", "frame.png", "fig10_scene.png", "topdown.png", "quality.png", "map.npz",
-                 "reference_scene.npz", "summary.json"):
+                 "reference_scene.npz", "summary.json", "view.png"):
         assert (tmp_path / "a" / name).stat().st_size > 0
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert summary["view"]["mode"] == "iso" and "error" not in summary["view"]
     assert summary["observations"] == 3840
     assert len(summary["fig9"]["pair_peaks_m"]["256"]) == 1 and len(summary["fig9"]["pair_peaks_m"]["1024"]) == 2
     q = summary["quality"]
@@ -44,6 +45,24 @@ def test_demo_quick_runs_the_main_job_and_replays_its_recording(tmp_path, capsys
     again = json.loads((tmp_path / "b" / "summary.json").read_text())
     for name in ("paper constants", "tuned"):
         assert again["maps"][name]["metrics"] == summary["maps"][name]["metrics"]
+
+
+def test_fuse_writes_a_map_the_viewer_reads(tmp_path, capsys):
+    """radarcl fuse on a two-frame recording at 0.4 m, saving after each frame: the map holds
+    positive evidence, no temporary file is left and the viewer renders it."""
+    from radarcl.io import recording
+    from radarcl.scene.observe import observe
+    from radarcl.scene.outdoor import paper_scene
+
+    rec = tmp_path / "rec.npz"
+    recording.save(rec, observe(paper_scene(), (-9.2, -5.2), seed=1))
+    out = tmp_path / "map.npz"
+    assert main(["fuse", str(rec), "--out", str(out), "--voxel", "0.4", "--every", "1", "--no-progress"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    from radarcl.viewer.volume import load_map
+    assert load_map(out).positive > 0
+    assert main(["render", str(out), "--out", str(tmp_path / "v.png"), "--size", "64", "48"]) == 0
+    assert not list(tmp_path.glob("*.tmp"))
 
 
 def test_demo_refuses_a_file_that_is_not_a_recording(tmp_path, capsys):

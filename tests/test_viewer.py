@@ -1,0 +1,295 @@
+"""The volume renderer looked at pixel by pixel (EGL, Mesa llvmpipe in CI), and its numpy side.
+
+Where a voxel must appear comes from ``Camera.project``, the matrices the shaders get. A
+trilinear sample reads voxels up to one voxel away, so a lone occupied voxel may light pixels
+within the projection of its box grown by one voxel on each side, and nowhere else."""
+
+import numpy as np
+import pytest
+
+from radarcl.errors import ConfigError, FrameFormatError, ShapeError
+from radarcl.grid import BRICK, GridSpec, read
+from radarcl.viewer import volume as V
+from radarcl.viewer.camera import Camera
+from radarcl.viewer.modes import MODES, Settings
+from radarcl.viewer.renderer import Renderer, ViewerError, create_context
+
+SIZE = (160, 120)
+RAY_MODES = [m for m in MODES if m != "spheres"]
+# a non-cubic grid, off the origin, with an odd number of voxels along each axis
+SPEC = GridSpec((-3.0, 2.0, -1.0), 0.25, (41, 23, 13))
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    return create_context()
+
+
+def _nats(fill=-1.0):
+    return np.full(SPEC.array_shape, fill, np.float64)
+
+
+def _lit(img, background):
+    return (img != np.asarray(np.asarray(background) * 255 + 0.5, np.uint8)).any(axis=-1)
+
+
+def _background_u8(settings=Settings()):
+    """The background as the framebuffer stores it (RGBA8 rounds to nearest)."""
+    return np.round(np.asarray(settings.background) * 255).astype(np.uint8)
+
+
+def _box_pixels(camera, lo, hi):
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    px = camera.project(corners, *SIZE)
+    return px.min(axis=0), px.max(axis=0)
+
+
+def _voxel_box(index, grow=1.0):
+    lo = np.asarray(SPEC.origin_m) + (np.asarray(index) - grow) * SPEC.voxel_m
+    return lo, lo + (1 + 2 * grow) * SPEC.voxel_m
+
+
+@pytest.mark.parametrize("mode_name", list(MODES))
+@pytest.mark.parametrize("preset", ["iso", "top", "front"])
+def test_a_single_cube_appears_where_its_projection_says_and_nowhere_else(ctx, mode_name, preset):
+    index = (30, 5, 9)                                   # asymmetric: an axis swap puts it elsewhere
+    nats = _nats()
+    nats[index[2], index[1], index[0]] = 5.0
+    renderer = Renderer(ctx, V.from_nats(SPEC, nats))
+    camera = Camera.fit(SPEC, preset)
+    img = renderer.image(camera, mode_name, Settings(), SIZE)
+    lit = np.argwhere((img != _background_u8()).any(axis=-1))[:, ::-1]      # (column, row)
+    assert len(lit), "the cube did not appear"
+    grow = 0.5 if mode_name == "spheres" else 1.0      # a sphere stays inside its voxel
+    lo, hi = _box_pixels(camera, *_voxel_box(index, grow - 0.5))
+    assert (lit >= np.floor(lo) - 1).all() and (lit <= np.ceil(hi) + 1).all(), (lit.min(0), lit.max(0), lo, hi)
+    centre = camera.project(SPEC.index_to_world(np.array(index)), *SIZE)[0]
+    assert _lit(img, Settings().background)[int(centre[1]), int(centre[0])]
+
+
+@pytest.mark.parametrize("fill", [0.0, -2.0])
+@pytest.mark.parametrize("mode_name", list(MODES))
+def test_an_empty_grid_renders_background_only(ctx, mode_name, fill):
+    renderer = Renderer(ctx, V.from_nats(SPEC, _nats(fill)))
+    for preset in ("iso", "top"):
+        img = renderer.image(Camera.fit(SPEC, preset), mode_name, Settings(), SIZE)
+        assert (img == _background_u8()).all()
+
+
+@pytest.mark.parametrize("mode_name", RAY_MODES)
+def test_no_wrap_around_at_the_faces(ctx, mode_name):
+    """A patch on the last layer of each axis must not show on the first layer, where GL's
+    default REPEAT would blend it into samples within half a voxel of the face. Threshold 0
+    and quarter-voxel steps put samples there; the oblique camera puts the two faces apart."""
+    settings = Settings(threshold=0.0, step=0.25, skip=False)   # the plain march reads every sample
+    for axis in range(3):
+        nats = _nats()
+        index = [3, 3, 3]
+        index[axis] = SPEC.shape[axis] - 1
+        patch = [slice(i - 1, i + 2) for i in index]
+        patch[axis] = slice(index[axis], index[axis] + 1)
+        nats[patch[2], patch[1], patch[0]] = 5.0
+        renderer = Renderer(ctx, V.from_nats(SPEC, nats))
+        camera = Camera.fit(SPEC, "iso")
+        img = renderer.image(camera, mode_name, settings, SIZE)
+        lit = np.argwhere((img != _background_u8(settings)).any(axis=-1))[:, ::-1]
+        lo = np.asarray(SPEC.origin_m) + (np.array([p.start for p in patch]) - 1) * SPEC.voxel_m
+        hi = np.asarray(SPEC.origin_m) + (np.array([p.stop for p in patch]) + 1) * SPEC.voxel_m
+        p_lo, p_hi = _box_pixels(camera, lo, hi)
+        assert len(lit) and (lit >= np.floor(p_lo) - 1).all() and (lit <= np.ceil(p_hi) + 1).all(), axis
+
+
+def test_textures_clamp_to_edge(ctx):
+    renderer = Renderer(ctx, V.from_nats(SPEC, _nats()))
+    for tex in (renderer.texture, renderer.coarse, renderer.coarser):
+        assert not (tex.repeat_x or tex.repeat_y or tex.repeat_z)
+
+
+@pytest.mark.parametrize("mode_name", list(MODES))
+def test_every_mode_renders_without_gl_errors(ctx, mode_name):
+    rng = np.random.default_rng(3)
+    nats = rng.normal(0.0, 2.0, SPEC.array_shape)
+    renderer = Renderer(ctx, V.from_nats(SPEC, nats))
+    assert ctx.error == "GL_NO_ERROR"
+    for settings in (Settings(), Settings(skip=False), Settings(gamma=0.5, colormap="viridis", step=0.5),
+                     Settings(clip=((0.2, 0.4), (0.0, 1.0), (0.0, 1.0)))):
+        img = renderer.image(Camera.fit(SPEC, "iso"), mode_name, settings, SIZE)
+        assert ctx.error == "GL_NO_ERROR"
+        assert _lit(img, settings.background).any()
+
+
+def test_spheres_draw_one_instance_per_positive_cell(ctx):
+    rng = np.random.default_rng(4)
+    nats = _nats()
+    cells = rng.choice(SPEC.n_voxels, 57, replace=False)
+    nats.ravel()[cells] = rng.uniform(0.01, 6.0, len(cells))
+    nats.ravel()[cells[:5]] = 0.0                         # zero is not positive
+    renderer = Renderer(ctx, V.from_nats(SPEC, nats))
+    fbo = renderer.framebuffer(SIZE)
+    fbo.use()
+    with ctx.query(primitives=True) as q:
+        renderer.render(Camera.fit(SPEC), "spheres", Settings(), SIZE)
+    positive = int((renderer.volume.values > 0).sum())
+    assert positive == 52 and renderer.sphere_count == positive
+    assert q.primitives == positive * renderer.sphere_triangles
+    centres, values = renderer.sphere_instances()
+    np.testing.assert_allclose(np.sort(values), np.sort(renderer.volume.values[renderer.volume.values > 0]))
+    # centres are voxel centres in world coordinates
+    idx = SPEC.world_to_index(centres)
+    np.testing.assert_allclose(SPEC.index_to_world(idx), centres, atol=1e-5)
+
+
+def _blobs(seed=5):
+    rng = np.random.default_rng(seed)
+    nats = _nats(-0.5)
+    z, y, x = np.indices(SPEC.array_shape)
+    for _ in range(6):
+        c = rng.uniform(0, 1, 3) * SPEC.shape
+        nats += 6 * np.exp(-((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2) / 3.0)
+    return nats
+
+
+@pytest.mark.parametrize("mode_name", RAY_MODES)
+def test_skipping_changes_time_not_pixels(ctx, mode_name):
+    renderer = Renderer(ctx, V.from_nats(SPEC, _blobs()))
+    for preset in ("iso", "top", "side"):
+        camera = Camera.fit(SPEC, preset)
+        a = renderer.image(camera, mode_name, Settings(skip=True), SIZE)
+        b = renderer.image(camera, mode_name, Settings(skip=False), SIZE)
+        assert _lit(a, Settings().background).sum() > 50
+        assert np.array_equal(a, b), f"{preset}: {np.abs(a.astype(int) - b).max()}"
+    inside = Camera(tuple(np.asarray(SPEC.origin_m) + np.asarray(SPEC.shape) * SPEC.voxel_m / 2), 0.5, 30, 10)
+    a = renderer.image(inside, mode_name, Settings(skip=True), SIZE)         # the camera inside the box
+    assert np.array_equal(a, renderer.image(inside, mode_name, Settings(skip=False), SIZE))
+
+
+def test_partial_update_equals_a_fresh_upload(ctx, tmp_path):
+    units = np.rint(_blobs() * 1024).astype(np.int32)
+    spec = SPEC
+    keys = np.argwhere(np.ones(spec.brick_shape, bool)).astype(np.int32)            # (bx, by, bz)
+    nbx, nby, nbz = spec.brick_shape
+    full = np.zeros((nbz * BRICK, nby * BRICK, nbx * BRICK), np.int32)
+    full[:units.shape[0], :units.shape[1], :units.shape[2]] = units
+    bricks = full.reshape(nbz, BRICK, nby, BRICK, nbx, BRICK).transpose(0, 2, 4, 1, 3, 5)[keys[:, 2], keys[:, 1], keys[:, 0]]
+    old = V.from_units(spec, units)
+    old.keys, old.bricks = keys, bricks.copy()
+    renderer = Renderer(ctx, old)
+    new_bricks = bricks.copy()
+    new_bricks[3] += 4096                                # one brick gains evidence
+    new_bricks[-1] = 0                                   # a corner brick is cleared
+    new_keys = keys[:-2]                                 # and one brick disappears entirely
+    new_bricks = new_bricks[:-2]
+    new_bricks[-1] -= 2048
+    changed = V.changed_bricks(old.keys, old.bricks, new_keys, new_bricks)
+    assert {tuple(k) for k in changed.tolist()} == {tuple(keys[3]), tuple(keys[-1]), tuple(keys[-2]), tuple(keys[-3])}
+    boxes, coarse_box = V.update(old, new_keys, new_bricks, changed)
+    renderer.update(boxes, coarse_box)
+    from radarcl.grid import assemble
+    fresh = V.from_units(spec, assemble(spec, new_keys, new_bricks))
+    assert np.array_equal(old.values, fresh.values) and np.array_equal(old.coarse, fresh.coarse)
+    camera = Camera.fit(spec)
+    for mode_name in MODES:
+        a = renderer.image(camera, mode_name, Settings(hi=6.0), SIZE)
+        b = Renderer(ctx, fresh).image(camera, mode_name, Settings(hi=6.0), SIZE)
+        assert np.array_equal(a, b), mode_name
+
+
+# -- the numpy side -------------------------------------------------------------------------
+
+def test_coarse_max_holds_every_readable_value():
+    rng = np.random.default_rng(6)
+    values = rng.standard_normal((19, 27, 35)).astype(np.float32)
+    coarse = V.coarse_max(values)
+    nz, ny, nx = values.shape
+    for bz, by, bx in np.ndindex(coarse.shape):
+        idx = [np.clip(np.arange(b * 8 - 1, b * 8 + 9), 0, n - 1) for b, n in ((bz, nz), (by, ny), (bx, nx))]
+        assert coarse[bz, by, bx] == values[np.ix_(*idx)].max()
+    assert np.array_equal(V.coarse_max(values, (1, 1, 0), (3, 3, 2)), coarse[0:2, 1:3, 1:3])
+    coarser = V.coarser_max(coarse)
+    assert coarser.shape == (1, 1, 2) and coarser[0, 0, 0] == coarse[:, :, :4].max()
+
+
+def test_texture_values_and_voxel_centres():
+    units = np.array([0, 1024, -1024, 2 ** 30, -(2 ** 30), 1536], np.int32)
+    assert V.to_texture(units).tolist() == [0.0, 1.0, -1.0, 1000.0, -1000.0, 1.5]
+    spec = GridSpec((1.0, -2.0, 0.5), 0.5, (4, 3, 2))
+    camera = Camera.fit(spec)
+    # the box's corners are the grid's outer faces: voxel centres sit half a voxel inside
+    lo, hi = np.asarray(spec.origin_m), np.asarray(spec.origin_m) + np.asarray(spec.shape) * spec.voxel_m
+    np.testing.assert_allclose(spec.index_to_world(np.array([0, 0, 0])), lo + 0.25)
+    np.testing.assert_allclose(spec.index_to_world(np.array([3, 2, 1])), hi - 0.25)
+    np.testing.assert_allclose(camera.project(np.asarray(camera.target)[None], 64, 48)[0], (32, 24), atol=1e-9)
+
+
+def test_a_grid_over_the_texture_limit_is_downsampled_and_says_so():
+    units = np.zeros(SPEC.array_shape, np.int32)
+    units[12, 22, 40] = 5000                             # the far corner voxel
+    vol = V.from_units(SPEC, units, max_size=16)
+    assert "texture limit of 16" in vol.note and "max-pooled by 3" in vol.note
+    assert vol.spec.shape == (14, 8, 5) and vol.spec.voxel_m == pytest.approx(0.75)
+    assert vol.values.max() == pytest.approx(5000 / 1024, abs=1e-3) and vol.values[4, 7, 13] == vol.values.max()
+
+
+def test_renderer_refuses_a_volume_over_its_limit(ctx):
+    big = GridSpec((0, 0, 0), 1.0, (int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"]) + 1, 1, 1))
+    vol = V.Volume(big, np.zeros(big.array_shape, np.float16), np.zeros((1, 1, 257), np.float16))
+    with pytest.raises(ConfigError, match="3D texture limit"):
+        Renderer(ctx, vol)
+
+
+def _save(path, **arrays):
+    with open(path, "wb") as f:
+        np.savez(f, **arrays)
+
+
+def test_a_file_that_is_not_a_map_gets_a_sentence(tmp_path):
+    text = tmp_path / "notes.txt"
+    text.write_text("hello")
+    with pytest.raises(FrameFormatError, match="is not a radarcl grid file"):
+        V.load_map(text)
+    with pytest.raises(FrameFormatError, match="is not a radarcl grid file"):
+        V.load_map(tmp_path / "missing.npz")
+    other = tmp_path / "recording.npz"
+    _save(other, samples=np.zeros(3))
+    with pytest.raises(FrameFormatError, match="lacks"):
+        V.load_map(other)
+    ok = dict(version=1, origin_m=np.zeros(3), voxel_m=0.5, shape=np.array([8, 8, 8]),
+              keys=np.zeros((1, 3), np.int32), data=np.zeros((1, 8, 8, 8), np.int32))
+    for change, message in ((dict(version=7), "version 7"), (dict(data=np.zeros((1, 8, 8, 8), np.float32)), "int32"),
+                            (dict(keys=np.full((1, 3), 5, np.int32)), "outside the grid"),
+                            (dict(voxel_m=-1.0), "voxel_m")):
+        bad = tmp_path / "bad.npz"
+        _save(bad, **{**ok, **change})
+        with pytest.raises(FrameFormatError, match=message):
+            read(bad)
+    with pytest.raises(ShapeError):
+        V.from_units(SPEC, np.zeros((2, 2, 2), np.int32))
+    with pytest.raises(ConfigError, match="NaN"):
+        V.from_nats(SPEC, np.full(SPEC.array_shape, np.nan))
+
+
+def test_no_egl_or_no_moderngl_says_what_to_install(monkeypatch):
+    import moderngl
+
+    def fail(**kwargs):
+        raise Exception("libEGL.so.1: cannot open shared object file")
+
+    monkeypatch.setattr(moderngl, "create_standalone_context", fail)
+    with pytest.raises(ViewerError, match="apt-get install libegl1 libegl-mesa0"):
+        create_context()
+    monkeypatch.setitem(__import__("sys").modules, "moderngl", None)
+    with pytest.raises(ViewerError, match=r"pip install 'radarcl\[viewer\]'"):
+        create_context()
+
+
+def test_settings_and_camera_refuse_impossible_values():
+    for bad in (dict(colormap="rainbow"), dict(step=0.0), dict(gamma=0), dict(lo=2.0, hi=1.0),
+                dict(clip=((0.5, 0.4), (0, 1), (0, 1)))):
+        with pytest.raises(ConfigError):
+            Settings(**bad)
+    with pytest.raises(ConfigError, match="preset"):
+        Camera.parse("sideways", SPEC)
+    with pytest.raises(ConfigError, match="distance"):
+        Camera((0, 0, 0), -1.0)
+    cam = Camera.parse("30,20,15,1,2,3", SPEC)
+    assert (cam.azimuth_deg, cam.elevation_deg, cam.distance, cam.target) == (30.0, 20.0, 15.0, (1.0, 2.0, 3.0))
