@@ -190,3 +190,12 @@ def test_bench_viewer_on_a_small_map(tmp_path):
         assert result["modes"][name]["max_pixel_diff"] == 0 and result["modes"][name]["lit_pixels"] > 0
     assert result["modes"]["spheres"]["instances"] == 8 ** 3
     assert result["update"]["partial_ms"] > 0
+
+
+def test_no_display_says_what_to_do(tmp_path):
+    m = write_map(tmp_path / "map.npz")
+    env = {k: v for k, v in __import__("os").environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    res = subprocess.run([sys.executable, "-m", "radarcl", "view", str(m), "--frames", "1"], capture_output=True,
+                         text=True, timeout=60, env=env)
+    assert res.returncode == 2 and "there is no display" in res.stderr and "xvfb-run" in res.stderr
+    assert "Traceback" not in res.stderr

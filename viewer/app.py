@@ -200,19 +200,17 @@ def open_window(backend, size, title):
         import moderngl_window
     except ImportError as exc:
         raise ViewerError(f"the window needs moderngl-window: pip install 'radarcl[viewer]' ({exc})") from exc
+    if backend != "headless" and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        hint = ("there is no display: set DISPLAY, run under xvfb-run (apt-get install xvfb), "
+                "use --window headless, or render to a file with radarcl render")
+    else:
+        hint = "check the OpenGL driver (Debian/Ubuntu: apt-get install libgl1-mesa-dri libegl-mesa0)"
     try:
         cls = moderngl_window.get_local_window_cls(backend)
-    except Exception as exc:
-        raise ViewerError(f"window backend {backend!r} is not available ({exc}); try --window pyglet, or "
-                          f"render headless with radarcl render") from exc
-    kwargs = dict(backend="egl") if backend == "headless" else {}
-    try:
-        window = cls(title=title, size=size, gl_version=(3, 3), vsync=False, **kwargs)
-    except Exception as exc:
-        hint = ("no display: set DISPLAY, run under xvfb-run (apt-get install xvfb), or use radarcl render"
-                if not os.environ.get("DISPLAY") and backend != "headless" else
-                "check the OpenGL driver (Debian/Ubuntu: apt-get install libgl1-mesa-dri libegl-mesa0)")
-        raise ViewerError(f"could not open a {backend} window: {exc}; {hint}") from exc
+        window = cls(title=title, size=size, gl_version=(3, 3), vsync=False,
+                     **(dict(backend="egl") if backend == "headless" else {}))
+    except Exception as exc:    # pyglet, glfw and EGL raise their own types, with useful text
+        raise ViewerError(f"could not open a {backend!r} window ({exc}); {hint}") from exc
     moderngl_window.activate_context(window=window)
     return window
 
