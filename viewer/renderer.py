@@ -121,7 +121,7 @@ class Renderer:
             raise ConfigError(f"grid {volume.spec.shape} exceeds this GL's 3D texture limit {self.max_texture}; "
                               f"build the volume with max_size={self.max_texture} to downsample it")
         self._programs, self._vaos, self._luts = {}, {}, {}
-        self._sphere_key, self._sphere_vao, self._sphere_count = None, None, 0
+        self._spheres_stale, self._sphere_vao, self._sphere_count = True, None, 0
         self.volume = None
         self.upload(volume)
 
@@ -143,7 +143,7 @@ class Renderer:
         self.coarse.repeat_x = self.coarse.repeat_y = self.coarse.repeat_z = False
         self.coarser = self._coarser_texture(volume.coarse)
         self.volume = volume
-        self._sphere_key = None
+        self._spheres_stale = True
 
     def update(self, boxes, coarse_box):
         """Write the changed voxel boxes ((z0, z1), (y0, y1), (x0, x1)) and coarse cells
@@ -159,7 +159,7 @@ class Renderer:
             self.coarse.write(block.tobytes(), viewport=(bx0, by0, bz0, bx1 - bx0, by1 - by0, bz1 - bz0))
             self.coarser.release()
             self.coarser = self._coarser_texture(self.volume.coarse)   # 1/64 of the coarse level: whole
-        self._sphere_key = None
+        self._spheres_stale = True
 
     def _coarser_texture(self, coarse):
         level = coarser_max(coarse)
@@ -247,7 +247,7 @@ class Renderer:
 
     def _draw_spheres(self, camera, mvp, lo, hi, settings, lut, clip):
         prog = self._program("spheres", ("MODE_SPHERES",))
-        if self._sphere_key is None:
+        if self._spheres_stale:
             centres, vals = self.sphere_instances()
             mesh = icosphere(1 if len(vals) < 200_000 else 0).reshape(-1, 3)
             inst = np.concatenate([centres, vals[:, None]], axis=1).astype(np.float32)
@@ -257,7 +257,7 @@ class Renderer:
                 (self.ctx.buffer(mesh.tobytes()), "3f", "in_pos"),
                 (self.ctx.buffer(inst.tobytes() if len(inst) else np.zeros(4, np.float32).tobytes()),
                  "3f 1f/i", "in_centre", "in_value")])
-            self._sphere_count, self._sphere_vertices, self._sphere_key = len(vals), len(mesh), True
+            self._sphere_count, self._sphere_vertices, self._spheres_stale = len(vals), len(mesh), False
         spec = self.volume.spec
         lo_w, hi_w = box(spec)
         _set_uniforms(prog, dict(mvp=mvp, voxel=spec.voxel_m, hi=hi, gamma=settings.gamma,
