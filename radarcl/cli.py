@@ -172,9 +172,11 @@ def cmd_view(args):
     """The interactive viewer."""
     from radarcl.viewer.app import run
 
-    return run(args.map, mode_name=args.mode, camera=args.camera, size=tuple(args.size), settings=_settings(args),
-               live=args.live, frames=args.frames, screenshot=args.screenshot, keys=args.keys,
-               window=args.window)
+    status = run(args.map, mode_name=args.mode, camera=args.camera, size=tuple(args.size), settings=_settings(args),
+                 live=args.live, frames=args.frames, screenshot=args.screenshot, keys=args.keys, window=args.window)
+    if args.screenshot:
+        print(f"saved {args.screenshot}")
+    return status
 
 
 def _view_options(p, size):

@@ -240,7 +240,7 @@ def run(path, mode_name="occupancy", camera="iso", size=(1024, 768), settings=Se
         drawn += 1
         if wnd.is_closing or (frames is not None and drawn >= frames):
             if screenshot:                              # the frame just drawn, before any swap
-                print(f"saved {app.screenshot(screenshot)}")
+                app.screenshot(screenshot)
             break
         wnd.swap_buffers()
     wnd.destroy()
