@@ -67,7 +67,8 @@ class RangeFFT:
     local_size: work-group size (a power of two dividing n_fft/4); default 16 on a CPU device,
         n_fft/4 (or the device limit) on a GPU.
     vector_width: jobs (beam pairs, or I/Q beams) per work-group, one per SIMD lane: 1, 2, 4, 8;
-        default 8 on a CPU device, 1 on a GPU.
+        default 8 on a CPU device (halved until its buffers fit the device's local memory), 1 on
+        a GPU.
 
     Float outputs are finite while |X|^2 fits float32: keep |sample| * n_samples below ~1e19.
     """
@@ -114,12 +115,20 @@ class RangeFFT:
 
         m = 1 << max(1, math.ceil(math.log2(self.n_samples)))  # sub-transform length >= n_samples
         device = runtime.device
+        def local_bytes_for(width):          # two complex ping-pong buffers + the lanes' flags
+            return 2 * self.n_fft * 8 * width + 8 * width
+
         if vector_width is None:
+            # The widest lane count up to the device default whose buffers fit local memory
+            # (PoCL reports 512 KiB on some CPUs, 4 MiB on others: n_fft 4096 x 8 lanes needs
+            # 512 KiB + 64 bytes).
             vector_width = CPU_VECTOR_WIDTH if runtime.is_cpu else 1
+            while vector_width > 1 and local_bytes_for(vector_width) > device.local_mem_size:
+                vector_width //= 2
         if vector_width not in VECTOR_WIDTHS:
             raise ConfigError(f"vector_width must be one of {VECTOR_WIDTHS}, got {vector_width!r}")
         self.vector_width = int(vector_width)
-        local_bytes = 2 * self.n_fft * 8 * self.vector_width + 8 * self.vector_width
+        local_bytes = local_bytes_for(self.vector_width)
         if local_bytes > device.local_mem_size:
             raise DeviceCapabilityError(f"n_fft = {self.n_fft} with vector_width {self.vector_width} needs "
                                         f"{local_bytes} bytes of local memory; {device.name} has "
