@@ -45,7 +45,7 @@ class ProgressBar:
 
 def cmd_demo(args):
     """Run the main job on the built-in default."""
-    from radarcl import demo
+    from radarcl.jobs import demo
 
     demo.run(_runtime(), args.out, seed=args.seed, quick=args.quick, replay=args.replay, report=print,
              progress=None if args.no_progress else ProgressBar())
@@ -67,7 +67,7 @@ def _reference_observations(args, say):
 
 def cmd_tune(args):
     """The documented search for the eq. 12 constants and CFAR settings (radarcl.tuning)."""
-    from radarcl import tuning
+    from radarcl.evaluation import tuning
     from radarcl.scene.outdoor import paper_grid, paper_scene
 
     obs = _reference_observations(args, print)
@@ -94,9 +94,9 @@ def cmd_bench(args):
         lines = range_fft.format_table(result)
     elif args.which == "quality":
         from radarcl.bench import quality
-        from radarcl.evaluate import MapConfig
+        from radarcl.evaluation.evaluate import MapConfig
         from radarcl.scene.outdoor import paper_grid, paper_scene
-        from radarcl.tuning import EVALUATION_SEED, TUNED
+        from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
 
         say = (lambda line: None) if args.json else (lambda line: print(line, file=sys.stderr))
         args.seed = EVALUATION_SEED if args.seed is None else args.seed
@@ -121,7 +121,7 @@ def cmd_bench(args):
 
 def cmd_navtech(args):
     """CFAR + eq. 12 on a Navtech scan; plot one azimuth like the paper's Fig. 10."""
-    from radarcl.navtech_report import report
+    from radarcl.jobs.navtech_report import report
 
     report(_runtime(), args, print)
     return 0
@@ -129,7 +129,7 @@ def cmd_navtech(args):
 
 def cmd_navtech_map(args):
     """Fuse the Navtech scans with their odometry; consistency numbers and a top-down PNG."""
-    from radarcl import navtech_map
+    from radarcl.jobs import navtech_map
 
     results, grid, poses = navtech_map.run(_runtime(), args.data, voxel_m=args.voxel, range_max_m=args.range_max,
                                            report=print)
@@ -145,9 +145,9 @@ def cmd_navtech_map(args):
 
 def cmd_fuse(args):
     """Fuse a recording into a map file."""
-    from radarcl import fuse
+    from radarcl.jobs import fuse_recording
 
-    fuse.run(_runtime(), args.recording, args.out, voxel_m=args.voxel, paper=args.paper, every=args.every,
+    fuse_recording.run(_runtime(), args.recording, args.out, voxel_m=args.voxel, paper=args.paper, every=args.every,
              progress=None if args.no_progress else ProgressBar())
     return 0
 

@@ -173,7 +173,7 @@ PAPER_RADAR = RadarConfig()
 
 @dataclass(frozen=True)
 class CfarConfig:
-    """A CFAR detector (paper §3.3, Fig. 6) on power profiles; see ``radarcl.detection``.
+    """A CFAR detector (paper §3.3, Fig. 6) on power profiles; see ``radarcl.cfar_theory``.
 
     kind: "ca" (cell averaging, the paper's), "go" (greatest of), "so" (smallest of), "os"
         (ordered statistic).
@@ -193,7 +193,7 @@ class CfarConfig:
     Near an end, the cells the missing side cannot give are taken further out on the other
     side, outside the guard band. The estimate then has the same statistics at every bin, so
     one alpha gives the design P_fa everywhere (zero padding would bias it low, wrap-around
-    would mix the two ends). The oracle is ``radarcl.reference.cfar``.
+    would mix the two ends). The oracle is ``radarcl.oracle.cfar``.
     """
 
     kind: str = "ca"
@@ -204,10 +204,10 @@ class CfarConfig:
     noise_floor: float = 1e-30
 
     def __post_init__(self):
-        from radarcl import detection
+        from radarcl import cfar_theory
 
-        _require(self.kind in detection.CFAR_KINDS,
-                 f"CFAR kind must be one of {detection.CFAR_KINDS}, got {self.kind!r}")
+        _require(self.kind in cfar_theory.CFAR_KINDS,
+                 f"CFAR kind must be one of {cfar_theory.CFAR_KINDS}, got {self.kind!r}")
         _require(isinstance(self.guard, (int, np.integer)) and not isinstance(self.guard, bool)
                  and self.guard >= 0, f"guard must be an integer >= 0, got {self.guard!r}")
         _positive_int("train", self.train)
@@ -215,7 +215,7 @@ class CfarConfig:
                  f"pfa must lie strictly between 0 and 1, got {self.pfa!r}")
         if self.kind == "os":
             if self.rank is None:
-                object.__setattr__(self, "rank", detection.default_rank(self.n_train))
+                object.__setattr__(self, "rank", cfar_theory.default_rank(self.n_train))
             _require(isinstance(self.rank, (int, np.integer)) and 1 <= self.rank <= self.n_train,
                      f"OS-CFAR rank must be in [1, {self.n_train}] (2 x train cells), got {self.rank!r}")
         else:
@@ -239,11 +239,11 @@ class CfarConfig:
 
     @functools.cached_property
     def alpha(self):
-        """Threshold factor on the noise estimate for the design pfa (``detection.threshold_factor``;
+        """Threshold factor on the noise estimate for the design pfa (``cfar_theory.threshold_factor``;
         solved once per config: GO, SO and OS need a bisection)."""
-        from radarcl import detection
+        from radarcl import cfar_theory
 
-        return detection.threshold_factor(self.kind, float(self.pfa), self.n_train,
+        return cfar_theory.threshold_factor(self.kind, float(self.pfa), self.n_train,
                                           int(self.rank) if self.rank is not None else None)
 
     def check_profile_length(self, n_bins):

@@ -120,7 +120,7 @@ class Mapping:
         return plan
 
     def flags(self):
-        """Per-beam flags (reference.FLAG_*) of the last frame, uint8 (*batch,)."""
+        """Per-beam flags (oracle.FLAG_*) of the last frame, uint8 (*batch,)."""
         import pyopencl as cl
 
         it = self.detection.interpreter

@@ -1,9 +1,9 @@
-"""kernels/cfar.cl <-> radarcl/stages/cfar.py against radarcl.reference.cfar (edge rule "shift")."""
+"""kernels/cfar.cl <-> radarcl/stages/cfar.py against radarcl.oracle.cfar (edge rule "shift")."""
 
 import numpy as np
 import pytest
 
-from radarcl import reference
+from radarcl import oracle
 from radarcl.config import CfarConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.stages.cfar import Cfar
@@ -13,7 +13,7 @@ from tolerances import CFAR_RTOL, DECISION_MARGIN
 def check_against_oracle(got, profiles, config):
     """noise and ratio within CFAR_RTOL (NaN where the oracle has NaN); masks identical outside
     DECISION_MARGIN of the threshold, and bins inside it rare."""
-    noise, ratio, mask = reference.cfar(profiles, config)
+    noise, ratio, mask = oracle.cfar(profiles, config)
     assert np.array_equal(np.isnan(got.noise), np.isnan(noise))
     assert np.array_equal(np.isnan(got.ratio), np.isnan(ratio))
     finite = np.isfinite(noise)
@@ -71,7 +71,7 @@ def test_shift_edge_rule_cells():
     """Every bin has 2 train distinct cells inside the profile, none within the guard band,
     and the interior uses the textbook symmetric window."""
     n, guard, train = 40, 2, 5
-    cells = reference.training_cells(n, guard, train)
+    cells = oracle.training_cells(n, guard, train)
     for i in range(n):
         row = cells[i]
         assert len(set(row)) == 2 * train and row.min() >= 0 and row.max() < n
@@ -87,7 +87,7 @@ def test_exact_on_integer_valued_profiles(runtime):
     x = np.random.default_rng(5).integers(0, 50, (32, 128)).astype(np.float32)
     config = CfarConfig(guard=2, train=4, pfa=0.05)
     got = Cfar(runtime, (32,), 128, config)(x)
-    noise, ratio, mask = reference.cfar(x, config)
+    noise, ratio, mask = oracle.cfar(x, config)
     assert np.array_equal(got.noise, noise.astype(np.float32))
 
 

@@ -1,5 +1,5 @@
 """CFAR calibration on simulated noise: the measured false-alarm rate is the design P_fa within
-+-10 %, and a Swerling 1 target is detected as often as theory says (radarcl.detection).
++-10 %, and a Swerling 1 target is detected as often as theory says (radarcl.cfar_theory).
 
 Statistics. Noise is independent exponential power (a square-law detector in Gaussian noise),
 8192 beams x 512 bins = 4.19 M decisions per case. Decisions in one beam share training cells,
@@ -12,7 +12,7 @@ runs), then that the measured rate lies inside it. Seeds are fixed: the outcome 
 import numpy as np
 import pytest
 
-from radarcl import detection
+from radarcl import cfar_theory
 from radarcl.config import CfarConfig
 from radarcl.stages.cfar import Cfar
 
@@ -25,7 +25,7 @@ def noise():
     return np.random.default_rng(2026).exponential(size=(N_BEAMS, N_BINS)).astype(np.float32)
 
 
-CONFIGS = [CfarConfig(kind=k, guard=2, train=8, pfa=p) for k in detection.CFAR_KINDS for p in (1e-2, 1e-3)]
+CONFIGS = [CfarConfig(kind=k, guard=2, train=8, pfa=p) for k in cfar_theory.CFAR_KINDS for p in (1e-2, 1e-3)]
 CONFIGS += [CfarConfig(pfa=1e-2), CfarConfig(pfa=1e-3)]   # the paper's defaults: CA, 16 + 16 cells
 
 
@@ -56,7 +56,7 @@ def test_edge_bins_keep_the_design_rate(runtime, noise):
 SNR_DB = (0.0, 6.0, 10.0, 13.0, 16.0, 20.0)
 
 
-@pytest.mark.parametrize("kind", detection.CFAR_KINDS)
+@pytest.mark.parametrize("kind", cfar_theory.CFAR_KINDS)
 def test_swerling1_detection_probability(runtime, noise, kind):
     """A Swerling 1 target (exponential power of mean 1 + SNR) every 32 bins, 16 per beam, so
     no target lies in another's window (guard 2 + train 8). 131,072 trials per SNR;
@@ -72,7 +72,7 @@ def test_swerling1_detection_probability(runtime, noise, kind):
         x = noise.copy()
         x[:, bins] = rng.exponential(1 + snr, size=(N_BEAMS, len(bins)))
         detected = plan(x).mask[:, bins]
-        want = detection.detection_probability_swerling1(kind, config.alpha, config.n_train, snr, config.rank)
+        want = cfar_theory.detection_probability_swerling1(kind, config.alpha, config.n_train, snr, config.rank)
         got = detected.mean()
         se = np.sqrt(want * (1 - want) / detected.size)
         print(f"{kind} SNR {snr_db:4.1f} dB: P_d measured {got:.4f}, theory {want:.4f} (+-{se:.4f})")

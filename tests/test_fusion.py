@@ -1,4 +1,4 @@
-"""kernels/fusion.cl <-> radarcl/stages/fusion.py against radarcl.reference.fuse (eq. 9, §3.4).
+"""kernels/fusion.cl <-> radarcl/stages/fusion.py against radarcl.oracle.fusion (eq. 9, §3.4).
 
 The integer grid is compared with the float64 oracle voxel by voxel, and is shown to be
 bit-identical across repetitions, frame orders, beam orders (splits), local sizes and vector
@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from radarcl import reference
+from radarcl import oracle
 from radarcl.config import RadarConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
@@ -28,14 +28,14 @@ def evidence(lattice, seed=0, low=-3000, high=3000):
     return np.random.default_rng(seed).integers(low, high, (lattice.n_beams, N_BINS)).astype(np.int32)
 
 
-def fuse(runtime, spec, lattice, model, ev, poses, **options):
+def fuse_frame(runtime, spec, lattice, model, ev, poses, **options):
     grid = EvidenceGrid(runtime, spec)
     plan = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, **options)(ev, poses)
     return grid, plan
 
 
 def check_against_oracle(got, spec, lattice, model, ev, poses, min_reached=100):
-    sums, updates, ambiguous = reference.fuse(spec, ev, lattice, model, poses, SPACING, FIRST, LAST,
+    sums, updates, ambiguous = oracle.fusion(spec, ev, lattice, model, poses, SPACING, FIRST, LAST,
                                               margin=FUSION_DECISION_MARGIN)
     reached = updates > 0
     assert reached.sum() >= min_reached, "the case reaches too few voxels to test anything"
@@ -61,7 +61,7 @@ MODELS = {f"near_field={n}, gaussian={g}": BeamModel.from_radar(RADAR, near_fiel
 @pytest.mark.parametrize("lattice", LATTICES.values(), ids=LATTICES.keys())
 def test_matches_oracle(runtime, lattice, model):
     ev = evidence(lattice)
-    grid, _ = fuse(runtime, SMALL, lattice, model, ev, POSE)
+    grid, _ = fuse_frame(runtime, SMALL, lattice, model, ev, POSE)
     check_against_oracle(grid.snapshot(), SMALL, lattice, model, ev, POSE)
 
 
@@ -74,7 +74,7 @@ def test_voxel_sizes_match_oracle_without_holes(runtime, voxel):
     spec = GridSpec.around((0.5 * extent[0] - 0.4, 0.0, -1.0), extent, voxel)
     pose = pose_from_xyz_rpy(0.013, -0.021, 0.007, yaw=0.003)   # off the voxel lattice's symmetries
     ev = np.full((lattice.n_beams, N_BINS), 700, np.int32)
-    grid, _ = fuse(runtime, spec, lattice, model, ev, pose)
+    grid, _ = fuse_frame(runtime, spec, lattice, model, ev, pose)
     got = grid.snapshot()
     _, updates = check_against_oracle(got, spec, lattice, model, ev, pose, min_reached=20)
     assert (got[updates > 0] >= 700).mean() >= 1 - FUSION_AMBIGUOUS_MAX
@@ -86,7 +86,7 @@ def test_per_beam_poses_match_oracle(runtime):
     poses = np.stack([pose_from_xyz_rpy(1.5 * f, 0.1 * f, 0.0, yaw=math.radians(5) * f)
                       for f in np.linspace(0, 1, lattice.n_beams)])
     ev = evidence(lattice, seed=3)
-    grid, _ = fuse(runtime, SMALL, lattice, model, ev, poses, per_beam_poses=True)
+    grid, _ = fuse_frame(runtime, SMALL, lattice, model, ev, poses, per_beam_poses=True)
     check_against_oracle(grid.snapshot(), SMALL, lattice, model, ev, poses)
 
 
@@ -94,7 +94,7 @@ def test_sensor_outside_the_grid(runtime):
     lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
     pose = pose_from_xyz_rpy(-6.0, 0.5, 1.0, yaw=0.1)
     ev = evidence(lattice, seed=4)
-    grid, plan = fuse(runtime, SMALL, lattice, model, ev, pose)
+    grid, plan = fuse_frame(runtime, SMALL, lattice, model, ev, pose)
     assert plan.beams_outside == 0
     check_against_oracle(grid.snapshot(), SMALL, lattice, model, ev, pose)
 
@@ -102,11 +102,11 @@ def test_sensor_outside_the_grid(runtime):
 def test_beams_outside_the_grid_are_counted(runtime):
     lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
     behind = pose_from_xyz_rpy(20.0, 0.0, 0.0, yaw=0.0)         # looking away from the grid
-    grid, plan = fuse(runtime, SMALL, lattice, model, evidence(lattice), behind)
+    grid, plan = fuse_frame(runtime, SMALL, lattice, model, evidence(lattice), behind)
     assert plan.beams_outside == lattice.n_beams
     assert grid.n_bricks == 0 and not grid.snapshot().any()
     sideways = pose_from_xyz_rpy(-3.0, -8.0, 0.0, yaw=math.radians(90))   # some azimuths miss it
-    _, plan = fuse(runtime, SMALL, lattice, model, evidence(lattice), sideways)
+    _, plan = fuse_frame(runtime, SMALL, lattice, model, evidence(lattice), sideways)
     assert 0 < plan.beams_outside < lattice.n_beams
 
 
@@ -117,7 +117,7 @@ def test_one_update_per_beam_per_voxel(runtime):
     for beam in (0, 130):
         ev = np.zeros((lattice.n_beams, N_BINS), np.int32)
         ev[beam] = 1000
-        grid, _ = fuse(runtime, spec, lattice, model, ev, np.eye(4))
+        grid, _ = fuse_frame(runtime, spec, lattice, model, ev, np.eye(4))
         got = grid.snapshot()
         assert set(np.unique(got)) == {0, 1000}
 
@@ -153,7 +153,7 @@ def test_sums_saturate_at_the_grid_limit(runtime, tmp_path):
     lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=False"]
     spec = GridSpec.around((3.0, 0.0, -0.5), (2.0, 2.0, 1.0), 0.25)
     ev = np.full((lattice.n_beams, N_BINS), 16384, np.int32)
-    grid, _ = fuse(runtime, spec, lattice, model, ev, np.eye(4))
+    grid, _ = fuse_frame(runtime, spec, lattice, model, ev, np.eye(4))
     keys, data = grid.bricks()
     reached = data > 0
     data[reached] = GRID_LIMIT - 1

@@ -1,9 +1,9 @@
-"""kernels/interpret.cl <-> radarcl/stages/interpret.py against radarcl.reference.interpret (eq. 12)."""
+"""kernels/interpret.cl <-> radarcl/stages/interpret.py against radarcl.oracle.interpret (eq. 12)."""
 
 import numpy as np
 import pytest
 
-from radarcl import logodds, reference
+from radarcl import logodds, oracle
 from radarcl.config import CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.pipeline import Detection
@@ -15,7 +15,7 @@ SPACING = 0.125
 
 def check_against_oracle(got, profiles, noise, mask, config, flags=None):
     """Pulses, counts and flags identical; evidence identical off pulses, within one unit on them."""
-    evidence, pulses, n_pulses, flags_out = reference.interpret(profiles, noise, mask, config, SPACING, flags)
+    evidence, pulses, n_pulses, flags_out = oracle.interpret(profiles, noise, mask, config, SPACING, flags)
     assert np.array_equal(got.flags, flags_out)
     assert np.array_equal(got.n_pulses, n_pulses)
     assert np.array_equal(got.pulses, pulses)
@@ -77,11 +77,11 @@ def test_flags_and_invalid_beams_give_no_evidence(runtime):
     x[2, 70] = np.nan                 # bad profile
     x[3, 10] = -1.0                   # negative power: not a power profile
     flags = np.zeros(6, np.uint8)
-    flags[4] = reference.FLAG_NONFINITE   # invalid upstream
-    flags[5] = reference.FLAG_CLIPPED     # clipped upstream: still gives evidence
+    flags[4] = oracle.FLAG_NONFINITE   # invalid upstream
+    flags[5] = oracle.FLAG_CLIPPED     # clipped upstream: still gives evidence
     got, (evidence, _, n_pulses, flags_out) = run_both(runtime, x, flags=flags)
-    assert list(flags_out) == [0, reference.FLAG_SILENT, reference.FLAG_BAD_PROFILE,
-                               reference.FLAG_BAD_PROFILE, reference.FLAG_NONFINITE, reference.FLAG_CLIPPED]
+    assert list(flags_out) == [0, oracle.FLAG_SILENT, oracle.FLAG_BAD_PROFILE,
+                               oracle.FLAG_BAD_PROFILE, oracle.FLAG_NONFINITE, oracle.FLAG_CLIPPED]
     assert np.all(evidence[1:5] == 0) and np.all(n_pulses[1:5] == 0)
     assert np.all(got.interpret.pulses[1:5] == -1)
     assert np.any(evidence[5] != 0) and list(got.interpret.valid) == [True, False, False, False, False, True]

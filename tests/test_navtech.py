@@ -4,7 +4,7 @@ with the kernels against the float64 oracle; the `radarcl navtech` command."""
 import numpy as np
 import pytest
 
-from radarcl import reference
+from radarcl import oracle
 from radarcl.cli import main
 from radarcl.config import CfarConfig, InterpretConfig
 from radarcl.errors import FrameFormatError
@@ -68,7 +68,7 @@ def test_detection_on_a_real_scan_matches_the_oracle(runtime, scans):
     assert per_azimuth.min() >= 1 and per_azimuth.max() < 0.3 * scan.n_bins
     # the interpreter on 40 azimuths (the plain oracle walks bins in Python)
     rows = slice(0, 400, 10)
-    evidence, pulses, n_pulses, flags = reference.interpret(
+    evidence, pulses, n_pulses, flags = oracle.interpret(
         power[rows], result.cfar.noise[rows], result.cfar.mask[rows], interpret_config, scan.bin_spacing_m)
     got = result.interpret
     assert np.array_equal(got.n_pulses[rows], n_pulses) and np.array_equal(got.pulses[rows], pulses)

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from radarcl import navtech_map as nm
+from radarcl.jobs import navtech_map as nm
 from radarcl.errors import ConfigError
 from radarcl.io import navtech
 

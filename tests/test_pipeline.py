@@ -4,7 +4,7 @@ and a refused frame leaves the map as it was."""
 import numpy as np
 import pytest
 
-from radarcl import reference
+from radarcl import oracle
 from radarcl.config import PAPER_RADAR, InterpretConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
@@ -43,7 +43,7 @@ def test_raw_frames_chain_exactly_like_the_stages(runtime):
     got = m.snapshot()
     want, flags = staged(runtime, samples, pose, lattice, model)
     assert np.array_equal(got, want)
-    assert np.array_equal(m.flags(), flags) and flags[3, 1] & reference.FLAG_NONFINITE and not flags[3, 0]
+    assert np.array_equal(m.flags(), flags) and flags[3, 1] & oracle.FLAG_NONFINITE and not flags[3, 0]
     assert (got > 0).sum() > 1000 and (got < 0).sum() > 10000 and plan.beams_outside == 0
 
 

@@ -1,9 +1,9 @@
-"""kernels/range_fft.cl <-> radarcl/stages/range_fft.py against radarcl.reference.range_profile."""
+"""kernels/range_fft.cl <-> radarcl/stages/range_fft.py against radarcl.oracle.range_profile."""
 
 import numpy as np
 import pytest
 
-from radarcl import reference
+from radarcl import oracle
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.stages.range_fft import RangeFFT
 from tolerances import RANGE_FFT_RTOL, WEAK_TONE_RTOL
@@ -39,18 +39,18 @@ def test_matches_oracle(runtime, dtype, n, n_fft, window, output):
     x = make_samples(np.random.default_rng(n_fft + n), (5, 3, n), dtype)  # 15 beams: odd pair count
     plan = RangeFFT(runtime, (5, 3), n, n_fft, dtype=dtype, window=window, output=output)
     got = plan(x)
-    want = reference.range_profile(x, n_fft, window=window, output=output)
+    want = oracle.range_profile(x, n_fft, window=window, output=output)
     assert got.profiles.shape == want.shape == (5, 3, n_fft if dtype == np.complex64 else n_fft // 2)
     assert got.profiles.dtype == np.float32
     assert rel_err(got.profiles, want) <= RANGE_FFT_RTOL
-    assert np.array_equal(got.flags, reference.beam_flags(x, plan.clip_level))
+    assert np.array_equal(got.flags, oracle.beam_flags(x, plan.clip_level))
 
 
 @pytest.mark.parametrize("local_size", [1, 2, 16, 64, 256])
 @pytest.mark.parametrize("vector_width", [1, 2, 4, 8])
 def test_local_sizes_and_vector_widths_agree(runtime, local_size, vector_width):
     x = make_samples(np.random.default_rng(7), (64, 4, 256), np.int16)
-    want = reference.range_profile(x, 1024)
+    want = oracle.range_profile(x, 1024)
     got = RangeFFT(runtime, (64, 4), 256, 1024, local_size=local_size, vector_width=vector_width)(x)
     assert rel_err(got.profiles, want) <= RANGE_FFT_RTOL
 
@@ -62,7 +62,7 @@ def test_partial_last_group(runtime, dtype, batch):
     x = make_samples(np.random.default_rng(8), (*batch, 64), dtype)
     x[0, 0, 5] = np.nan
     got = RangeFFT(runtime, batch, 64, 256, dtype=dtype, vector_width=8)(x)
-    want = reference.range_profile(x, 256)
+    want = oracle.range_profile(x, 256)
     valid = got.valid
     assert got.n_invalid == 1 and np.isnan(got.profiles[0, 0]).all()
     if valid.any():
@@ -89,7 +89,7 @@ def test_full_scale_clipped_frame(runtime):
     x = np.broadcast_to(square, (8, 4, 256)).copy()
     got = RangeFFT(runtime, (8, 4), 256, 1024)(x)
     assert np.isfinite(got.profiles).all()
-    assert rel_err(got.profiles, reference.range_profile(x, 1024)) <= RANGE_FFT_RTOL
+    assert rel_err(got.profiles, oracle.range_profile(x, 1024)) <= RANGE_FFT_RTOL
     assert got.n_clipped == 32 and got.n_invalid == 0
 
 
@@ -98,7 +98,7 @@ def test_single_impulse_is_flat(runtime):
     x = np.zeros((2, 1, 256), np.float32)
     x[:, :, 100] = 1.0
     got = RangeFFT(runtime, (2, 1), 256, 1024, dtype=np.float32)(x)
-    w = reference.window_coefficients("hann", 256)
+    w = oracle.window_coefficients("hann", 256)
     np.testing.assert_allclose(got.profiles, w[100] / w.sum(), rtol=RANGE_FFT_RTOL)
 
 
@@ -108,7 +108,7 @@ def test_120_db_spread_between_two_tones(runtime):
     x = (1.0 * np.exp(2j * np.pi * 40 * j / n) + 1e-6 * np.exp(2j * np.pi * 200 * j / n))
     x = x.astype(np.complex64)[None, None, :]
     got = RangeFFT(runtime, (1, 1), n, n_fft, dtype=np.complex64, window="rect")(x).profiles[0, 0]
-    want = reference.range_profile(x, n_fft, window="rect")[0, 0]
+    want = oracle.range_profile(x, n_fft, window="rect")[0, 0]
     assert want[40] == pytest.approx(1.0, rel=1e-6)
     assert abs(got[200] - want[200]) / want[200] <= WEAK_TONE_RTOL   # the -120 dB tone survives
     assert rel_err(got, want) <= RANGE_FFT_RTOL
@@ -116,9 +116,9 @@ def test_120_db_spread_between_two_tones(runtime):
 
 def test_range_gain_compensation(runtime):
     x = make_samples(np.random.default_rng(11), (4, 4, 256), np.int16)
-    gain = reference.range_gain(256, 0.25, 2.0)
+    gain = oracle.range_gain(256, 0.25, 2.0)
     got = RangeFFT(runtime, (4, 4), 256, 512, gain=gain)(x)
-    assert rel_err(got.profiles, reference.range_profile(x, 512, gain=gain)) <= RANGE_FFT_RTOL
+    assert rel_err(got.profiles, oracle.range_profile(x, 512, gain=gain)) <= RANGE_FFT_RTOL
     assert np.array_equal(got.profiles[..., 0], np.zeros((4, 4), np.float32))   # r = 0 gets gain 0
 
 
@@ -127,12 +127,12 @@ def test_nonfinite_beams_flagged_and_partner_untouched(runtime, bad):
     x = make_samples(np.random.default_rng(5), (4, 2, 256), np.float32)
     x[1, 0, 17] = bad                      # beam 2 is paired with beam 3 in one FFT
     got = RangeFFT(runtime, (4, 2), 256, 512, dtype=np.float32)(x)
-    want = reference.range_profile(x, 512)
+    want = oracle.range_profile(x, 512)
     assert np.isnan(got.profiles[1, 0]).all() and np.isnan(want[1, 0]).all()
     valid = got.valid
     assert valid.sum() == 7 and not valid[1, 0] and got.n_invalid == 1
     assert rel_err(got.profiles[valid], want[valid]) <= RANGE_FFT_RTOL
-    assert got.flags[1, 0] == reference.FLAG_NONFINITE
+    assert got.flags[1, 0] == oracle.FLAG_NONFINITE
 
 
 def test_nonfinite_complex_sample(runtime):
@@ -140,7 +140,7 @@ def test_nonfinite_complex_sample(runtime):
     x[0, 0, 3] = complex(1.0, np.nan)
     got = RangeFFT(runtime, (2, 1), 64, 128, dtype=np.complex64)(x)
     assert got.n_invalid == 1 and np.isnan(got.profiles[0, 0]).all()
-    assert rel_err(got.profiles[1], reference.range_profile(x, 128)[1]) <= RANGE_FFT_RTOL
+    assert rel_err(got.profiles[1], oracle.range_profile(x, 128)[1]) <= RANGE_FFT_RTOL
 
 
 def test_wrong_shape_or_dtype_is_refused(runtime):

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from radarcl import baseline, metrics
+from radarcl.evaluation import baseline, metrics
 from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.grid import GridSpec
 from radarcl.io import recording
@@ -92,7 +92,7 @@ def test_paper_scene_truth_holds_every_object():
 def test_observation_of_one_plate_puts_its_echo_at_its_range():
     """A metal plate 20 m ahead of a level beam (no ground): the strongest bin of the centre
     beam's profile lies within one bin of 20 m, and the same seed gives the same samples."""
-    from radarcl import reference
+    from radarcl import oracle
     from radarcl.config import PAPER_RADAR
 
     plate = outdoor.SceneObject("plate", Box((20.0, -2.0, -1.0), (20.1, 2.0, 4.0)), outdoor.METAL)
@@ -100,7 +100,7 @@ def test_observation_of_one_plate_puts_its_echo_at_its_range():
     a = observe(scene, [-3.0], seed=5)
     b = observe(scene, [-3.0], seed=5)
     assert np.array_equal(a.samples, b.samples) and a.samples.dtype == np.int16
-    profile = reference.range_profile(a.samples[0, 32, 1].astype(float), 1024, output="power")
+    profile = oracle.range_profile(a.samples[0, 32, 1].astype(float), 1024, output="power")
     spacing = PAPER_RADAR.bin_spacing_m(1024)
     assert abs(np.argmax(profile) * spacing - 20.0) <= spacing
 

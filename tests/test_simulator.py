@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from radarcl import reference
+from radarcl import oracle
 from radarcl.config import PAPER_RADAR, RadarConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.scene.fmcw import Adc, PointTarget, beat_signal, simulate_beams, simulate_frame
@@ -12,20 +12,20 @@ from radarcl.scene.fmcw import Adc, PointTarget, beat_signal, simulate_beams, si
 def test_tone_lands_at_its_range():
     for r in (3.0, 17.25, 40.0, 63.0):
         x = beat_signal(PAPER_RADAR, [1.0], [r])
-        p = reference.range_profile(x, 4096)
+        p = oracle.range_profile(x, 4096)
         assert PAPER_RADAR.bin_ranges_m(4096)[np.argmax(p)] == pytest.approx(r, abs=PAPER_RADAR.bin_spacing_m(4096))
 
 
 def test_amplitude_is_calibrated():
     # A real tone of amplitude a on a bin centre reads a / 2 after the calibrated range FFT.
     r = 20 * PAPER_RADAR.bin_spacing_m(256)
-    p = reference.range_profile(beat_signal(PAPER_RADAR, [0.8], [r]), 256)
+    p = oracle.range_profile(beat_signal(PAPER_RADAR, [0.8], [r]), 256)
     assert p.max() == pytest.approx(0.4, rel=1e-6)
 
 
 def test_complex_tone_has_positive_frequency_only():
     iq = RadarConfig(complex_samples=True)
-    p = reference.range_profile(beat_signal(iq, [1.0], [30 * iq.bin_spacing_m(256)]), 256)
+    p = oracle.range_profile(beat_signal(iq, [1.0], [30 * iq.bin_spacing_m(256)]), 256)
     assert np.argmax(p) == 30 and p.max() == pytest.approx(1.0, rel=1e-6)
 
 
@@ -51,7 +51,7 @@ def test_frame_from_point_targets():
                            noise_rms=1e-3, adc=adc, seed=1)
     assert frame.samples.shape == (64, 4, 256) and frame.samples.dtype == np.int16
     assert frame.n_clipped == 0
-    p = reference.range_profile(frame.samples, 1024)
+    p = oracle.range_profile(frame.samples, 1024)
     axis = PAPER_RADAR.bin_ranges_m(1024)
     assert axis[np.argmax(p[10, 2])] == pytest.approx(12.0, abs=0.2)
     assert p[10, 2].max() > 100 * p[0, 0].max()   # an empty beam holds only noise

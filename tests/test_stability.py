@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from radarcl import reference
+from radarcl import oracle
 from radarcl.config import PAPER_RADAR, CfarConfig, InterpretConfig, RadarConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
@@ -15,7 +15,7 @@ from radarcl.grid import GRID_LIMIT, EvidenceGrid, GridSpec
 from radarcl.pipeline import Detection, Mapping
 from radarcl.scene.fmcw import simulate_beams
 from radarcl.stages.fusion import Fusion
-from test_fusion import MODELS, check_against_oracle, evidence, fuse
+from test_fusion import MODELS, check_against_oracle, evidence, fuse_frame
 from tolerances import CFAR_RTOL, DECISION_MARGIN, EVIDENCE_UNITS_TOL
 
 COARSE = GridSpec((-8.0, -35.0, -10.0), 1.0, (80, 70, 20))
@@ -40,10 +40,10 @@ def detection_vs_oracle(runtime, samples):
 
     got = np.empty((LATTICE.n_beams, it.n_bins), np.int32)
     cl.enqueue_copy(runtime.queue, got, it.evidence_buf, is_blocking=True)
-    profiles = reference.range_profile(samples.astype(np.float64), 512, output="power")
-    flags = reference.beam_flags(samples, clip_level=32767 if samples.dtype == np.int16 else np.inf)
-    noise, ratio, mask = reference.cfar(profiles, CfarConfig())
-    ev = reference.interpret(profiles, noise, mask, InterpretConfig(), PAPER_RADAR.bin_spacing_m(512), flags)[0]
+    profiles = oracle.range_profile(samples.astype(np.float64), 512, output="power")
+    flags = oracle.beam_flags(samples, clip_level=32767 if samples.dtype == np.int16 else np.inf)
+    noise, ratio, mask = oracle.cfar(profiles, CfarConfig())
+    ev = oracle.interpret(profiles, noise, mask, InterpretConfig(), PAPER_RADAR.bin_spacing_m(512), flags)[0]
     alpha = CfarConfig().alpha
     with np.errstate(invalid="ignore", divide="ignore"):
         close = np.abs(profiles / (alpha * noise) - 1) < DECISION_MARGIN
@@ -69,7 +69,7 @@ def test_full_scale_clipped_adc(runtime):
     samples = np.where(np.arange(256) % 8 < 4, 32767, -32768).astype(np.int16)
     frame = np.broadcast_to(samples, (64, 4, 256)).copy()
     got, ev, grid, m, close = detection_vs_oracle(runtime, frame)
-    assert (m.flags() & reference.FLAG_CLIPPED).all()
+    assert (m.flags() & oracle.FLAG_CLIPPED).all()
     assert got.any() and np.abs(got - ev)[~close].max() <= EVIDENCE_UNITS_TOL
     assert np.isfinite(grid.snapshot()).all()
 
@@ -87,7 +87,7 @@ def test_nan_and_inf_beams(runtime):
     assert not got_bad[beams].any() and np.array_equal(got_bad[beams], ev_bad[beams])
     keep = np.setdiff1d(np.arange(256), beams)
     assert np.array_equal(got_bad[keep], got_clean[keep])
-    assert (m.flags().reshape(-1)[beams] & reference.FLAG_NONFINITE).all()
+    assert (m.flags().reshape(-1)[beams] & oracle.FLAG_NONFINITE).all()
 
 
 def test_120_db_corner_reflector_beside_a_weak_target(runtime):
@@ -97,12 +97,12 @@ def test_120_db_corner_reflector_beside_a_weak_target(runtime):
     samples = simulate_beams(PAPER_RADAR, np.array([[1.0, 1e-4]]), np.array([[12.0, 30.0]]),
                              noise_rms=1e-6, seed=1).samples.astype(np.float32)
     det = Detection(runtime, (1,), 256, PAPER_RADAR.bin_spacing_m(512), CfarConfig(), InterpretConfig())
-    profiles = reference.range_profile(samples.astype(np.float64), 512, output="power").astype(np.float32)
+    profiles = oracle.range_profile(samples.astype(np.float64), 512, output="power").astype(np.float32)
     result = det(profiles)
     spacing = PAPER_RADAR.bin_spacing_m(512)
     hits = np.flatnonzero(result.cfar.mask[0]) * spacing
     assert (np.abs(hits - 12.0) < 1).any() and (np.abs(hits - 30.0) < 1).any()
-    noise, _, _ = reference.cfar(profiles.astype(np.float64), CfarConfig())
+    noise, _, _ = oracle.cfar(profiles.astype(np.float64), CfarConfig())
     weak = slice(int(29 / spacing), int(31 / spacing))
     np.testing.assert_allclose(result.cfar.noise[0, weak], noise[0, weak], rtol=CFAR_RTOL)
 
@@ -140,7 +140,7 @@ def test_degenerate_beam_geometry(runtime, case):
     for name in ("near_field=True, gaussian=True", "near_field=False, gaussian=False"):
         model = MODELS[name]
         ev = evidence(lattice, seed=3)
-        grid, _ = fuse(runtime, spec, lattice, model, ev, pose)
+        grid, _ = fuse_frame(runtime, spec, lattice, model, ev, pose)
         check_against_oracle(grid.snapshot(), spec, lattice, model, ev, pose, min_reached=20)
 
 

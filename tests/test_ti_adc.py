@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from radarcl import reference
+from radarcl import oracle
 from radarcl.errors import FrameFormatError
 from radarcl.io.ti_adc import TI_OPENRADAR, load_capture, words_to_int16
 from radarcl.stages.range_fft import RangeFFT
@@ -25,7 +25,7 @@ def test_chirp_strongest_return_near_1_37_m(runtime, shared_data):
     assert chirp.shape == (128,) and chirp.dtype == np.complex64
     x = chirp[None, None, :]
     got = RangeFFT(runtime, (1, 1), 128, 128, dtype=np.complex64)(x).profiles[0, 0]
-    assert np.abs(got - reference.range_profile(x, 128)[0, 0]).max() / got.max() <= RANGE_FFT_RTOL
+    assert np.abs(got - oracle.range_profile(x, 128)[0, 0]).max() / got.max() <= RANGE_FFT_RTOL
     # Bins 1-2 (< 0.15 m) hold the transmitter-to-receiver coupling every FMCW radar shows, and
     # bins 106-107 a fixed receiver spur (see test_fixed_spur_in_every_capture). Outside those the
     # strongest return is bin 28, 1.37 m: the data README's figure.
@@ -43,7 +43,7 @@ def test_fixed_spur_in_every_capture(shared_data, name):
     # Measured: bin 107 (5.2 m, i.e. -21 bins) is among the three strongest bins of every
     # 128-sample capture, scenes differing: a receiver artefact, not a target.
     capture = load_capture(shared_data / "ti_adc_openradar" / name).reshape(-1, 128)
-    mean_profile = reference.range_profile(capture, 128).mean(axis=0)
+    mean_profile = oracle.range_profile(capture, 128).mean(axis=0)
     assert 107 in np.argsort(mean_profile)[-3:]
 
 
@@ -53,7 +53,7 @@ def test_captures_match_oracle(runtime, shared_data, name, n_fft):
     capture = load_capture(shared_data / "ti_adc_openradar" / name)
     frame = capture.reshape(capture.shape[0], -1, capture.shape[-1])   # chirps x antennas as beams
     got = RangeFFT(runtime, frame.shape[:2], frame.shape[2], n_fft, dtype=np.complex64)(frame)
-    want = reference.range_profile(frame, n_fft)
+    want = oracle.range_profile(frame, n_fft)
     assert np.abs(got.profiles - want).max() / want.max() <= RANGE_FFT_RTOL
     assert got.n_invalid == 0
 

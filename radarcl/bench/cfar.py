@@ -10,7 +10,7 @@ pulse per beam from one scatter-min. The kernel's figure includes uploading the 
 
 import numpy as np
 
-from radarcl import logodds, reference
+from radarcl import logodds, oracle
 from radarcl.bench import interleaved_medians
 from radarcl.config import PAPER_RADAR, CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError
@@ -29,7 +29,7 @@ class NumpyDetection:
         i = np.arange(n_bins)
         # The shift edge rule's cells (one definition, the oracle's) as a run below and a run
         # above each bin; sum of x[a:b] = C[b] - C[a] with C[0] = 0; an empty run is 0:0.
-        cells = reference.training_cells(n_bins, c.guard, c.train)
+        cells = oracle.training_cells(n_bins, c.guard, c.train)
         n_below = (cells < i[:, None]).sum(axis=1)
         n_above = c.n_train - n_below
         self.b_lo = np.where(n_below > 0, cells[:, 0], 0)
@@ -111,8 +111,8 @@ def run(runtime, repeat=200):
     kernels()
     t = interleaved_medians(dict(kernels=kernels, cfar=cfar_only, numpy=with_numpy), repeat)
     result = detection(profiles)
-    noise, ratio, mask = reference.cfar(profiles, cfar_config)
-    evidence, _, n_pulses, _ = reference.interpret(profiles, noise, mask, interpret_config, spacing)
+    noise, ratio, mask = oracle.cfar(profiles, cfar_config)
+    evidence, _, n_pulses, _ = oracle.interpret(profiles, noise, mask, interpret_config, spacing)
     np_noise, np_mask, np_evidence, _ = with_numpy()
     return dict(
         benchmark="cfar", device=runtime.name, repeat=repeat, n_beams=int(np.prod(batch)), n_bins=n_bins,

@@ -4,7 +4,7 @@ Columns, all measured in the same run:
 - fusion alone: the kernel on evidence already on the device, the frame's plan cached (a
   radar on its stand); planning a new pose (the host's brick listing) is timed apart;
 - the whole pipeline: upload raw samples, range FFT, CFAR, eq. 12, fusion;
-- the float64 numpy oracle (``reference.fuse_points``), timed on ``ORACLE_BEAMS`` beams over
+- the float64 numpy oracle (``oracle.fusion_at_points``), timed on ``ORACLE_BEAMS`` beams over
   the voxels of the reached bricks and scaled to the frame (it is linear in beams); the
   kernel's error is measured on those beams;
 - the memory floor: one int32 read-modify-write of every voxel the frame updates, at the copy
@@ -19,7 +19,7 @@ import time
 import numpy as np
 import pyopencl as cl
 
-from radarcl import reference
+from radarcl import oracle
 from radarcl.bench import interleaved_medians
 from radarcl.config import PAPER_RADAR
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
@@ -91,7 +91,7 @@ def run(runtime, repeat=20, report=None, spec=PAPER_GRID):
     cl.enqueue_copy(runtime.queue, evidence, it.evidence_buf, is_blocking=True)
     index = spec.brick_voxels(plan.bricks)
     start = time.perf_counter()
-    sums, updates, ambiguous = reference.fuse_points(spec.index_to_world(index), evidence, lattice, model,
+    sums, updates, ambiguous = oracle.fusion_at_points(spec.index_to_world(index), evidence, lattice, model,
                                                      pose, fusion.bin_spacing_m, fusion.first_bin, fusion.last_bin,
                                                      margin=1e-3, beams=ORACLE_BEAMS)
     oracle_s = (time.perf_counter() - start) * lattice.n_beams / len(ORACLE_BEAMS)

@@ -7,7 +7,7 @@ size (0.4, 0.2, 0.1 m) and the CFAR kind. For each run, measured in this process
 ``ms_per_frame`` (the device pipeline, planning included), AUC, IoU, false-free rate, Brier, and
 ``max_dev_nats``: the largest |kernel - float64 oracle| over the voxels that ``ORACLE_BEAMS`` of
 the middle frame reach, the oracle being ``reference`` end to end (range profile, CFAR, eq. 12,
-``fuse_points``), voxels whose decisions lie within ``FUSION_DECISION_MARGIN`` of a boundary left
+``fusion_at_points``), voxels whose decisions lie within ``FUSION_DECISION_MARGIN`` of a boundary left
 out. The baseline entry is the OctoMap-style map (radarcl.baseline) of the reference run's
 detections, timed in numpy. Runs on the Pareto front (no other run both faster and better in
 AUC) are marked; ``chart`` draws AUC against ms per frame.
@@ -17,14 +17,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from radarcl import logodds, reference
+from radarcl import logodds, oracle
 from radarcl.config import PAPER_RADAR
-from radarcl.evaluate import BEAM_MODELS, baseline_map, beam_model, interpret_config, map_observations, score
+from radarcl.evaluation.evaluate import BEAM_MODELS, baseline_map, beam_model, interpret_config, map_observations, score
 from radarcl.geometry import BeamLattice
 from radarcl.grid import EvidenceGrid
 from radarcl.scene.outdoor import paper_grid
 from radarcl.stages.fusion import Fusion
-from radarcl.tuning import cfar_config
+from radarcl.evaluation.tuning import cfar_config
 
 ORACLE_BEAMS = (0, 85, 170, 255)
 DECISION_MARGIN = 1e-3           # as tests/tolerances.FUSION_DECISION_MARGIN
@@ -79,10 +79,10 @@ def oracle_deviation(runtime, obs, config, radar=PAPER_RADAR, beams=ORACLE_BEAMS
     keys, data = check.bricks()
     index = spec.brick_voxels(keys[(data != 0).reshape(len(keys), -1).any(axis=1)])
 
-    profiles = reference.range_profile(obs.samples[j].astype(np.float64), config.n_fft, output="power")
-    noise, _, mask = reference.cfar(profiles, config.cfar)
-    ev64 = reference.interpret(profiles, noise, mask, interpret, fusion.bin_spacing_m)[0]
-    sums, _, ambiguous = reference.fuse_points(spec.index_to_world(index), ev64.reshape(lattice.n_beams, -1), lattice,
+    profiles = oracle.range_profile(obs.samples[j].astype(np.float64), config.n_fft, output="power")
+    noise, _, mask = oracle.cfar(profiles, config.cfar)
+    ev64 = oracle.interpret(profiles, noise, mask, interpret, fusion.bin_spacing_m)[0]
+    sums, _, ambiguous = oracle.fusion_at_points(spec.index_to_world(index), ev64.reshape(lattice.n_beams, -1), lattice,
                                                model, obs.poses[j], fusion.bin_spacing_m, fusion.first_bin,
                                                fusion.last_bin, margin=DECISION_MARGIN, beams=beams)
     got = check.snapshot()[index[:, 2], index[:, 1], index[:, 0]].astype(np.int64)

@@ -9,7 +9,7 @@ pays per frame; the profiles stay on the device for CFAR). Errors are against th
 
 import numpy as np
 
-from radarcl import reference
+from radarcl import oracle
 from radarcl.bench import interleaved_medians
 from radarcl.config import PAPER_RADAR
 from radarcl.scene.fmcw import Adc, PointTarget, simulate_frame
@@ -31,7 +31,7 @@ def run(runtime, n_ffts=(512, GOAL_N_FFT), repeat=200):
     import scipy.fft
 
     frame = paper_frame()
-    w = reference.window_coefficients("hann", frame.shape[-1])
+    w = oracle.window_coefficients("hann", frame.shape[-1])
     w32 = (w / w.sum()).astype(np.float32)
     runs = []
     for n_fft in n_ffts:
@@ -56,16 +56,16 @@ def run(runtime, n_ffts=(512, GOAL_N_FFT), repeat=200):
         plan.upload(frame).wait()
         t = interleaved_medians(dict(kernel=kernel_only, pipeline=upload_and_kernel, round_trip=round_trip,
                                      scipy=with_scipy, numpy=with_numpy), repeat)
-        oracle = reference.range_profile(frame, n_fft)
-        scale = np.abs(oracle).max()
+        expected = oracle.range_profile(frame, n_fft)
+        scale = np.abs(expected).max()
         runs.append(dict(
             n_fft=n_fft, n_beams=plan.n_beams, local_size=plan.local_size,
             ms_per_frame=t["pipeline"] * 1e3, kernel_ms_per_frame=t["kernel"] * 1e3,
             round_trip_ms_per_frame=t["round_trip"] * 1e3,
             scipy_ms_per_frame=t["scipy"] * 1e3, numpy_ms_per_frame=t["numpy"] * 1e3,
             ratio_vs_scipy=t["pipeline"] / t["scipy"], ratio_vs_numpy=t["pipeline"] / t["numpy"],
-            max_rel_err=float(np.abs(plan(frame).profiles - oracle).max() / scale),
-            scipy_max_rel_err=float(np.abs(with_scipy() - oracle).max() / scale),
+            max_rel_err=float(np.abs(plan(frame).profiles - expected).max() / scale),
+            scipy_max_rel_err=float(np.abs(with_scipy() - expected).max() / scale),
         ))
     goal = next((r for r in runs if r["n_fft"] == GOAL_N_FFT), runs[-1])
     return dict(benchmark="range-fft", device=runtime.name, repeat=repeat,

@@ -1,6 +1,6 @@
 """Power range profiles of simple scenes through the paper's radar: flat ground lit by a tilted
 beam (a distributed echo) and point echoes, via the eq. 5 simulator and the float64 range
-processing of ``radarcl.reference`` (Hann window, zero padding, |X|^2).
+processing of ``radarcl.oracle`` (Hann window, zero padding, |X|^2).
 
 These feed the detection tests (the two cases of the paper's Fig. 10) and the CFAR bench. The
 ground is a line of independent scatterers with random phases (Rayleigh speckle) whose power
@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from radarcl import reference
+from radarcl import oracle
 from radarcl.config import PAPER_RADAR, PAPER_SENSOR_HEIGHT_M
 from radarcl.errors import ConfigError
 from radarcl.scene.fmcw import simulate_beams
@@ -49,7 +49,7 @@ def beam_profile(amplitude, range_m, phase, n_fft=1024, radar=PAPER_RADAR, noise
     if len(amplitude) == 0:
         amplitude, range_m, phase = np.zeros(1), np.ones(1), np.zeros(1)
     samples = simulate_beams(radar, amplitude, range_m, phase, noise_rms=noise_rms, seed=seed).samples
-    return reference.range_profile(samples, n_fft, output="power")
+    return oracle.range_profile(samples, n_fft, output="power")
 
 
 def fig10_ground_beam(seed=0, n_fft=1024):
@@ -100,4 +100,4 @@ def paper_like_samples(seed=0, tilt_deg=-7.0, radar=PAPER_RADAR):
 def paper_like_frame(seed=0, tilt_deg=-7.0, n_fft=1024, radar=PAPER_RADAR):
     """Power profiles (n_az, n_el, n_fft/2) float32 of ``paper_like_samples``, by the oracle."""
     samples = paper_like_samples(seed, tilt_deg, radar).astype(np.float64)
-    return reference.range_profile(samples, n_fft, output="power").astype(np.float32)
+    return oracle.range_profile(samples, n_fft, output="power").astype(np.float32)

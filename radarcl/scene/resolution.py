@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl import reference
+from radarcl import oracle
 from radarcl.config import RadarConfig
 from radarcl.scene.fmcw import simulate_beams
 
@@ -61,10 +61,10 @@ def two_target_experiment(config: RadarConfig, near_m=7.0, separation_m=1.0, n_f
     count the cases with two peaks for each padded FFT length.
 
     transform(samples (n_cases, n), n_fft) -> profiles; default the float64 oracle
-    ``reference.range_profile`` with this window (pass a kernel plan's call to test the kernel)."""
+    ``oracle.range_profile`` with this window (pass a kernel plan's call to test the kernel)."""
     if transform is None:
         def transform(samples, n_fft):
-            return reference.range_profile(samples, n_fft, window=window)
+            return oracle.range_profile(samples, n_fft, window=window)
     phases = np.linspace(0, 2 * np.pi, n_phases, endpoint=False)
     offsets = np.linspace(0, config.range_resolution_m, n_offsets, endpoint=False)
     shape = (n_offsets, n_phases, 2)

@@ -1,6 +1,6 @@
 """CFAR detection of whole frames of power profiles (paper §3.3, Fig. 6).
 
-``Cfar`` wraps ``kernels/cfar.cl``; it is equivalent to ``radarcl.reference.cfar(profiles,
+``Cfar`` wraps ``kernels/cfar.cl``; it is equivalent to ``radarcl.oracle.cfar(profiles,
 config)`` (edge rule "shift", see ``CfarConfig``): noise estimates and ratios within
 ``CFAR_RTOL`` of the float64 oracle, masks identical except where r_i lies within
 ``DECISION_MARGIN`` of the threshold (see tests/test_cfar.py).
@@ -40,7 +40,7 @@ class Cfar:
     local_size: work-items per group along the bins (default 64, capped by the device).
     vector_width: bins per work-item, one per SIMD lane: 1, 2, 4, 8, 16; default 16 on a CPU
         device (PoCL does not vectorise across work-items here), 1 on a GPU.
-    Profiles are power (square-law), float32, non-negative; see ``reference.cfar`` for NaN.
+    Profiles are power (square-law), float32, non-negative; see ``oracle.cfar`` for NaN.
     """
 
     def __init__(self, runtime, batch, n_bins, config=None, *, local_size=None, vector_width=None):

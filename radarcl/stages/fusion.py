@@ -1,6 +1,6 @@
 """Fusion of whole frames into the evidence grid (paper §3.1 eq. 9, §3.4, Fig. 7c).
 
-``Fusion`` wraps ``kernels/fusion.cl``; it is equivalent to ``radarcl.reference.fuse(...)``:
+``Fusion`` wraps ``kernels/fusion.cl``; it is equivalent to ``radarcl.oracle.fusion(...)``:
 each voxel whose centre is inside a beam's volume takes that beam's eq. 12 update for the bin
 of its centre, times the two-way weight, rounded half to even; identical to the oracle wherever
 no decision (inside or not, which bin) lies within ``FUSION_DECISION_MARGIN`` of its boundary,
@@ -8,7 +8,7 @@ and within one unit per update of it (float32 vs float64 weights; tests/test_fus
 
 A frame is a gather over the bricks its beams can reach: the host lists those bricks (and
 allocates them in the grid) with ``candidate_windows``, a conservative bound in the frame's
-reference head frame that also gives each brick its window of candidate beams; the kernel
+head frame (the middle beam's pose) that also gives each brick its window of candidate beams; the kernel
 narrows the window per 8x4x4 block (a bounding-sphere test) and per row of 8 voxels. Plans
 for a repeated pose are cached (a radar on a stand).
 """
@@ -47,7 +47,7 @@ class FramePlan:
     beams_outside: int       # beams that reach no brick of the grid (they give nothing)
 
 
-class ReferenceFrame(NamedTuple):
+class HeadFrame(NamedTuple):
     """The head frame the windows are computed in, and how far any beam's own frame strays."""
 
     rotation: np.ndarray     # (3, 3) head -> world
@@ -58,7 +58,7 @@ class ReferenceFrame(NamedTuple):
 
 def candidate_windows(centres, radius, ref, r_lo, r_hi, lattice, model):
     """Beams that may reach balls of ``radius`` around ``centres`` (n, 3) [m, grid coords],
-    seen from ``ref`` (a ``ReferenceFrame``), for ranges in [r_lo, r_hi]: (n, 4) int64 windows
+    seen from ``ref`` (a ``HeadFrame``), for ranges in [r_lo, r_hi]: (n, 4) int64 windows
     (i_lo, i_hi, k_lo, k_hi), empty where i_lo > i_hi or k_lo > k_hi.
 
     The bounds, for a point at range r >= r_min, elevation el and azimuth offset daz from beam
@@ -162,7 +162,7 @@ class Fusion:
         """Shape of one frame's evidence: (n_beams, n_bins) int32."""
         return (self.lattice.n_beams, self.n_bins)
 
-    # -- host side: beams, reference frame, bricks ----------------------------------------------
+    # -- host side: beams, head frame, bricks ---------------------------------------------------
     def plan(self, poses, cache=True):
         """Prepare a frame taken at ``poses``: one 4x4 pose, or (n_beams, 4, 4) with
         per_beam_poses. Allocates the bricks the beams may reach. The last plan is reused for
@@ -181,7 +181,7 @@ class Fusion:
         origins = np.broadcast_to(P[:, :3, 3], (self.lattice.n_beams, 3)) - np.asarray(spec.origin_m)
         beams = np.concatenate([np.swapaxes(rots, 1, 2), origins[:, :, None]], axis=2)
         cos_rot = (np.trace(ref[:3, :3].T @ P[:, :3, :3], axis1=1, axis2=2) - 1) / 2
-        frame = ReferenceFrame(head, ref[:3, 3] - np.asarray(spec.origin_m),
+        frame = HeadFrame(head, ref[:3, 3] - np.asarray(spec.origin_m),
                                float(np.linalg.norm(P[:, :3, 3] - ref[:3, 3], axis=1).max()),
                                float(np.arccos(np.clip(cos_rot, -1, 1)).max()))
         bricks, windows = self._reached_bricks(frame)

@@ -1,7 +1,7 @@
 """The down-range interpreter, eq. 12, on whole frames (paper §3.3, Fig. 10).
 
 ``Interpreter`` wraps ``kernels/interpret.cl``; it is equivalent to
-``radarcl.reference.interpret(profiles, noise, mask, config, bin_spacing_m, flags)``: pulses,
+``radarcl.oracle.interpret(profiles, noise, mask, config, bin_spacing_m, flags)``: pulses,
 counts and flags identical, evidence identical on noise bins and within
 ``EVIDENCE_UNITS_TOL`` fixed-point unit on pulse bins (float32 vs float64 logs; see
 tests/test_interpret.py). Evidence is int32 in ``radarcl.logodds`` units.
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl import logodds, reference
+from radarcl import logodds, oracle
 from radarcl.config import InterpretConfig
 from radarcl.errors import ConfigError
 from radarcl.stages import beam_batch, check_array, work_group_size
@@ -27,12 +27,12 @@ class InterpretResult:
     evidence: np.ndarray   # int32 (*batch, n_bins), logodds units
     pulses: np.ndarray     # int32 (*batch, max_pulses, 4): start, end, peak, wide; -1 unused
     n_pulses: np.ndarray   # int32 (*batch,): pulses found, may exceed max_pulses
-    flags: np.ndarray      # uint8 (*batch,): reference.FLAG_* bits
+    flags: np.ndarray      # uint8 (*batch,): oracle.FLAG_* bits
 
     @property
     def valid(self):
         """Beams that give evidence."""
-        return (self.flags & reference.NO_EVIDENCE_FLAGS) == 0
+        return (self.flags & oracle.NO_EVIDENCE_FLAGS) == 0
 
 
 class Interpreter:

@@ -1,8 +1,8 @@
 """Range FFT of whole frames: window, zero padding, FFT, magnitude or power (paper §3.2).
 
 ``RangeFFT`` wraps ``kernels/range_fft.cl``; it is equivalent to
-``radarcl.reference.range_profile(samples, n_fft, window=..., output=..., gain=...)`` and
-``radarcl.reference.beam_flags(samples, clip_level)``, within ``RANGE_FFT_RTOL`` of the
+``radarcl.oracle.range_profile(samples, n_fft, window=..., output=..., gain=...)`` and
+``radarcl.oracle.beam_flags(samples, clip_level)``, within ``RANGE_FFT_RTOL`` of the
 float64 oracle (see tests/test_range_fft.py).
 
 Bad samples: a beam with a NaN or Inf sample is flagged ``FLAG_NONFINITE``, written as NaN,
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl import reference
+from radarcl import oracle
 from radarcl.config import is_power_of_two
 from radarcl.errors import ConfigError, DeviceCapabilityError, ShapeError
 from radarcl.stages import check_array, upload
@@ -40,7 +40,7 @@ class RangeFFTResult:
     @property
     def valid(self):
         """Boolean mask of beams that may give evidence (no NaN/Inf sample)."""
-        return (self.flags & reference.FLAG_NONFINITE) == 0
+        return (self.flags & oracle.FLAG_NONFINITE) == 0
 
     @property
     def n_invalid(self):
@@ -50,7 +50,7 @@ class RangeFFTResult:
     @property
     def n_clipped(self):
         """Beams with at least one sample at the clip level."""
-        return int(np.count_nonzero(self.flags & reference.FLAG_CLIPPED))
+        return int(np.count_nonzero(self.flags & oracle.FLAG_CLIPPED))
 
 
 class RangeFFT:
@@ -61,7 +61,7 @@ class RangeFFT:
     n_samples: samples per beam; n_fft: padded length, a power of two >= max(n_samples, 4).
     dtype: float32 or int16 (real ADC samples) or complex64 (I/Q).
     window: "hann" or "rect". output: "magnitude" or "power".
-    gain: optional (n_bins,) factor per bin, e.g. ``reference.range_gain`` for r^k compensation.
+    gain: optional (n_bins,) factor per bin, e.g. ``oracle.range_gain`` for r^k compensation.
     clip_level: |sample| at or above this flags the beam CLIPPED (default: int16 rails
         for int16 input, never for floats).
     local_size: work-group size (a power of two dividing n_fft/4); default 16 on a CPU device,
@@ -94,10 +94,10 @@ class RangeFFT:
             raise ConfigError(f"dtype must be one of float32, int16, complex64, got {self.dtype}")
         self.complex_input = self.dtype == np.complex64
         self.n_bins = self.n_fft if self.complex_input else self.n_fft // 2
-        if output not in reference.OUTPUTS:
-            raise ConfigError(f"output must be one of {reference.OUTPUTS}, got {output!r}")
+        if output not in oracle.OUTPUTS:
+            raise ConfigError(f"output must be one of {oracle.OUTPUTS}, got {output!r}")
         self.window_kind, self.output = window, output
-        w = reference.window_coefficients(window, self.n_samples)
+        w = oracle.window_coefficients(window, self.n_samples)
 
         # Calibration: divide by the window's coherent gain (squared for power), times gain.
         calibration = (1.0 / w.sum()) ** (2 if output == "power" else 1)

@@ -14,12 +14,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from radarcl import logodds
-from radarcl.baseline import OctoMapBaseline
+from radarcl.evaluation.baseline import OctoMapBaseline
 from radarcl.config import PAPER_RADAR, CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, BeamModel
 from radarcl.grid import EvidenceGrid
-from radarcl.metrics import evaluate
+from radarcl.evaluation.metrics import evaluate
 from radarcl.pipeline import Mapping
 from radarcl.scene.outdoor import paper_grid
 from radarcl.stages.fusion import Fusion

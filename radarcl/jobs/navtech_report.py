@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from radarcl import plots
+from radarcl.jobs import plots
 from radarcl.config import CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError
 from radarcl.io import navtech

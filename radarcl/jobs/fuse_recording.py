@@ -7,9 +7,9 @@ import time
 from dataclasses import replace
 
 from radarcl.config import PAPER_RADAR
-from radarcl.evaluate import MapConfig, make_mapping
+from radarcl.evaluation.evaluate import MapConfig, make_mapping
 from radarcl.io import recording
-from radarcl.tuning import TUNED
+from radarcl.evaluation.tuning import TUNED
 
 
 def run(runtime, recording_path, out, voxel_m=0.1, paper=False, every=None, progress=None, report=print):

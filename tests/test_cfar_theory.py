@@ -1,4 +1,4 @@
-"""Detection theory (radarcl.detection), the wide-pulse geometry (radarcl.physics) and the
+"""Detection theory (radarcl.cfar_theory), the wide-pulse geometry (radarcl.physics) and the
 fixed-point log-odds unit (radarcl.logodds)."""
 
 import math
@@ -6,49 +6,49 @@ import math
 import numpy as np
 import pytest
 
-from radarcl import detection, logodds, physics
+from radarcl import cfar_theory, logodds, physics
 from radarcl.config import PAPER_WIDE_PULSE_M, CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError
 
 
-@pytest.mark.parametrize("kind", detection.CFAR_KINDS)
+@pytest.mark.parametrize("kind", cfar_theory.CFAR_KINDS)
 @pytest.mark.parametrize("pfa", [1e-1, 1e-3, 1e-6])
 @pytest.mark.parametrize("n", [2, 16, 32])
 def test_threshold_factor_inverts_pfa(kind, pfa, n):
-    rank = detection.default_rank(n) if kind == "os" else None
+    rank = cfar_theory.default_rank(n) if kind == "os" else None
     try:
-        alpha = detection.threshold_factor(kind, pfa, n, rank)
+        alpha = cfar_theory.threshold_factor(kind, pfa, n, rank)
     except ConfigError as exc:     # SO/OS with few cells cannot reach a large pfa: said so
         assert "cannot reach" in str(exc) and kind in ("so", "os")
         return
-    assert math.isclose(detection.false_alarm_probability(kind, alpha, n, rank), pfa, rel_tol=1e-9)
+    assert math.isclose(cfar_theory.false_alarm_probability(kind, alpha, n, rank), pfa, rel_tol=1e-9)
 
 
 def test_ca_closed_form_and_textbook_pd():
     n, pfa = 16, 1e-3
-    alpha = detection.threshold_factor("ca", pfa, n)
+    alpha = cfar_theory.threshold_factor("ca", pfa, n)
     assert math.isclose(alpha, n * (pfa ** (-1 / n) - 1))
     snr = 10 ** 1.3
     want = (1 + alpha / (n * (1 + snr))) ** -n
-    assert math.isclose(detection.detection_probability_swerling1("ca", alpha, n, snr), want)
+    assert math.isclose(cfar_theory.detection_probability_swerling1("ca", alpha, n, snr), want)
 
 
 def test_go_and_so_split_two_one_sided_detectors():
     """P_go + P_so = P(left alone) + P(right alone): an identity of the order statistics."""
     m, t = 8, 0.9
-    total = detection.false_alarm_probability("go", t * m, 2 * m) + detection.false_alarm_probability("so", t * m, 2 * m)
+    total = cfar_theory.false_alarm_probability("go", t * m, 2 * m) + cfar_theory.false_alarm_probability("so", t * m, 2 * m)
     assert math.isclose(total, 2 * (1 + t) ** -m)
 
 
 def test_refuses_impossible_detectors():
     with pytest.raises(ConfigError, match="strictly between 0 and 1"):
-        detection.threshold_factor("ca", 1.0, 16)
+        cfar_theory.threshold_factor("ca", 1.0, 16)
     with pytest.raises(ConfigError, match="even integer"):
-        detection.threshold_factor("go", 1e-3, 7)
+        cfar_theory.threshold_factor("go", 1e-3, 7)
     with pytest.raises(ConfigError, match="rank must be an integer in"):
-        detection.threshold_factor("os", 1e-3, 16, 0)
+        cfar_theory.threshold_factor("os", 1e-3, 16, 0)
     with pytest.raises(ConfigError, match="snr must be >= 0"):
-        detection.detection_probability_swerling1("ca", 5.0, 16, -1.0)
+        cfar_theory.detection_probability_swerling1("ca", 5.0, 16, -1.0)
 
 
 def test_wide_pulse_rule_from_geometry():

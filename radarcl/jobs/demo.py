@@ -22,14 +22,15 @@ from pathlib import Path
 
 import numpy as np
 
-from radarcl import demo_fig9, reference
+from radarcl import oracle
+from radarcl.jobs import demo_fig9
 from radarcl.bench import quality
 from radarcl.config import PAPER_RADAR
-from radarcl.evaluate import MapConfig, baseline_map, interpret_config, map_observations, score
+from radarcl.evaluation.evaluate import MapConfig, baseline_map, interpret_config, map_observations, score
 from radarcl.io import recording
 from radarcl.scene.observe import observe
 from radarcl.scene.outdoor import OCCUPIED, PAPER_TILTS_DEG, paper_grid, paper_scene
-from radarcl.tuning import EVALUATION_SEED, TUNED
+from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
 
 QUICK_VOXEL_M = 0.4
 VIEW_CAMERA = "-160,30"               # behind and left of the stand, looking down the field
@@ -123,9 +124,9 @@ def _plot_profiles(obs, config, path, beams=((2, 32, 0), (14, 20, 3))):
     interpret = interpret_config(config, PAPER_RADAR)
     fig, axes = plt.subplots(2, len(beams), figsize=(11, 6), sharex=True)
     for col, (frame, az, el) in enumerate(beams):
-        prof = reference.range_profile(obs.samples[frame, az, el].astype(np.float64), config.n_fft, output="power")
-        noise, _, mask = reference.cfar(prof[None], config.cfar)
-        evidence = reference.interpret(prof[None], noise, mask, interpret, spacing)[0][0]
+        prof = oracle.range_profile(obs.samples[frame, az, el].astype(np.float64), config.n_fft, output="power")
+        noise, _, mask = oracle.cfar(prof[None], config.cfar)
+        evidence = oracle.interpret(prof[None], noise, mask, interpret, spacing)[0][0]
         r = np.arange(len(prof)) * spacing
         top, bottom = axes[0, col], axes[1, col]
         top.semilogy(r, prof, lw=0.7, label="power")

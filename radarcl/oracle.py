@@ -209,7 +209,7 @@ def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
     return evidence, pulses, n_pulses, flags_out
 
 
-def fuse(spec, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin=0.0):
+def fusion(spec, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin=0.0):
     """Eq. 9 for one frame with the beam volume of §3.4 (radarcl.geometry), brute force.
 
     spec: a ``GridSpec``; evidence: (n_beams, n_bins) int eq. 12 updates [logodds units], beam
@@ -227,13 +227,13 @@ def fuse(spec, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_b
     nz, ny, nx = spec.array_shape
     iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)
     centres = spec.index_to_world(np.stack([ix, iy, iz], axis=1))
-    out = fuse_points(centres, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin)
+    out = fusion_at_points(centres, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin)
     return tuple(a.reshape(nz, ny, nx) for a in out)
 
 
-def fuse_points(centres, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin=0.0,
-                beams=None):
-    """``fuse`` at voxel centres (n, 3) [m, world], over ``beams`` (indices; default all).
+def fusion_at_points(centres, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin=0.0,
+                     beams=None):
+    """``fusion`` at voxel centres (n, 3) [m, world], over ``beams`` (indices; default all).
     Returns (sums, updates, ambiguous), each (n,)."""
     from radarcl.geometry import check_poses
 

@@ -22,7 +22,7 @@ is in the README); a change to the scene or the simulator means running it again
 from dataclasses import replace
 
 from radarcl.config import CfarConfig, InterpretConfig
-from radarcl.evaluate import MapConfig, map_observations, score
+from radarcl.evaluation.evaluate import MapConfig, map_observations, score
 
 TUNING_SEED = 2
 EVALUATION_SEED = 0
