@@ -1,18 +1,19 @@
-/* Shared definitions for radarcl's OpenCL kernels. Included with -I <kernels dir>. */
+/* Shared definitions for radarcl's OpenCL kernels. Included with -I <kernels dir>.
+ *
+ * The constants the kernels share with Python have one source, Python: radarcl.stages.
+ * COMMON_DEFINES passes them to every build as -D (beam flags from radarcl.oracle.FLAG_*, the
+ * fixed-point log-odds unit from radarcl.logodds, the grid's saturation from radarcl.grid).
+ * A build without them stops here instead of compiling with values that may have drifted.
+ */
 #ifndef RADARCL_COMMON_H
 #define RADARCL_COMMON_H
 
-/* Per-beam flags, the same values as radarcl.reference.FLAG_*. */
-#define FLAG_NONFINITE 1     /* a NaN/Inf sample (range_fft) */
-#define FLAG_CLIPPED 2       /* a sample at the clip level (range_fft) */
-#define FLAG_BAD_PROFILE 4   /* a NaN, Inf or negative power bin (interpret) */
-#define FLAG_SILENT 8        /* all bins exactly 0 (interpret) */
-#define NO_EVIDENCE_FLAGS (FLAG_NONFINITE | FLAG_BAD_PROFILE | FLAG_SILENT)
-
-/* Fixed-point log-odds, the same values as radarcl.logodds. */
-#define LOGODDS_SCALE 1024.0f
-#define EVIDENCE_LIMIT_NATS 16.0f
-/* Grid sums saturate here [units], the same value as radarcl.grid.GRID_LIMIT. */
-#define GRID_LIMIT (1 << 30)
+#if !defined(FLAG_NONFINITE) || !defined(FLAG_CLIPPED) || !defined(FLAG_BAD_PROFILE) \
+    || !defined(FLAG_SILENT) || !defined(NO_EVIDENCE_FLAGS)
+#error "beam flags come from radarcl.stages.COMMON_DEFINES (-D FLAG_...)"
+#endif
+#if !defined(LOGODDS_SCALE) || !defined(EVIDENCE_LIMIT_NATS) || !defined(GRID_LIMIT)
+#error "LOGODDS_SCALE, EVIDENCE_LIMIT_NATS and GRID_LIMIT come from radarcl.stages.COMMON_DEFINES"
+#endif
 
 #endif

@@ -40,19 +40,20 @@ class Detection:
         self.cfar = Cfar(runtime, batch, n_bins, cfar_config, **cfar_options)
         self.interpreter = Interpreter(runtime, batch, n_bins, bin_spacing_m, interpret_config)
 
-    def enqueue(self, profiles_buf, flags_buf=None, wait_for=None):
-        """Launch both stages on a device buffer of power profiles; returns the last event."""
+    def enqueue(self, profiles=None, flags=None, wait_for=None):
+        """Launch both stages on a device array of power profiles (default: the CFAR's own, as
+        ``upload`` filled it) and optional per-beam flags; returns the last event."""
         c = self.cfar
-        done = c.enqueue(profiles_buf, wait_for=wait_for)
-        return self.interpreter.enqueue(profiles_buf, c.noise_buf, c.mask_buf, flags_buf, wait_for=[done])
+        done = c.enqueue(profiles, wait_for=wait_for)
+        profiles = c.device("profiles", profiles)
+        return self.interpreter.enqueue(profiles, c.arrays["noise"], c.arrays["mask"], flags, wait_for=[done])
 
     def __call__(self, profiles, flags=None):
         """One frame of power profiles (*batch, n_bins) float32 (host) -> DetectionResult."""
-        copy = self.cfar.upload(profiles)
-        flags_buf = None
+        events = [self.cfar.upload(profiles)]
         if flags is not None:
-            flags_buf = self.cfar.runtime.to_device(self.interpreter.check_flags(flags))
-        done = self.enqueue(self.cfar.profiles_buf, flags_buf, wait_for=[copy])
+            events += self.interpreter.upload(flags_in=flags)
+        done = self.enqueue(flags=None if flags is None else self.interpreter.arrays["flags_in"], wait_for=events)
         return DetectionResult(self.cfar.download(wait_for=[done]), self.interpreter.download(wait_for=[done]))
 
 
@@ -82,11 +83,13 @@ class Mapping:
                                   f"{radar.n_azimuth} x {radar.n_elevation}")
             n_fft = radar.check_n_fft(n_fft if n_fft is not None else 1024)
             n_bins, bin_spacing_m = radar.n_bins(n_fft), radar.bin_spacing_m(n_fft)
-            self.range_fft = RangeFFT(runtime, (lattice.n_az, lattice.n_el), radar.n_samples, n_fft,
-                                      dtype=dtype, output="power")
+            batch = (lattice.n_az, lattice.n_el)     # raw frames are (n_az, n_el, n_samples), always
+            self.range_fft = RangeFFT(runtime, batch, radar.n_samples, n_fft, dtype=dtype, output="power")
         elif bin_spacing_m is None:
             raise ConfigError("profile input needs bin_spacing_m")
-        self.detection = Detection(runtime, lattice.batch, n_bins, bin_spacing_m, cfar_config, interpret_config)
+        else:
+            batch = lattice.batch
+        self.detection = Detection(runtime, batch, n_bins, bin_spacing_m, cfar_config, interpret_config)
         it = self.detection.interpreter
         self.fusion = Fusion(runtime, grid, lattice, model, n_bins, bin_spacing_m, it.first_bin, it.last_bin,
                              per_beam_poses=per_beam_poses)
@@ -107,26 +110,23 @@ class Mapping:
                 flags = self.detection.interpreter.check_flags(flags)
         plan = self.fusion.plan(poses)                  # checks the poses; allocates bricks
         if self.range_fft is not None:
-            copy = self.range_fft.upload(frame)
-            done = self.range_fft.enqueue(self.range_fft.samples_buf, wait_for=[copy])
-            profiles_buf, flags_buf = self.range_fft.profiles_buf, self.range_fft.flags_buf
+            done = self.range_fft.enqueue(wait_for=[self.range_fft.upload(frame)])
+            profiles, flags_array = self.range_fft.arrays["profiles"], self.range_fft.arrays["flags"]
         else:
-            done = self.detection.cfar.upload(frame)
-            profiles_buf = self.detection.cfar.profiles_buf
-            flags_buf = None if flags is None else self.runtime.to_device(flags)
-        done = self.detection.enqueue(profiles_buf, flags_buf, wait_for=[done])
-        self.fusion.enqueue(self.detection.interpreter.evidence_buf, plan, wait_for=[done])
+            events = [self.detection.cfar.upload(frame)]
+            flags_array = None
+            if flags is not None:
+                events += self.detection.interpreter.upload(flags_in=flags)
+                flags_array = self.detection.interpreter.arrays["flags_in"]
+            profiles, done = None, events
+        done = self.detection.enqueue(profiles, flags_array, wait_for=done if isinstance(done, list) else [done])
+        self.fusion.enqueue(self.detection.interpreter.arrays["evidence"], plan, wait_for=[done])
         self.frames += 1
         return plan
 
     def flags(self):
         """Per-beam flags (oracle.FLAG_*) of the last frame, uint8 (*batch,)."""
-        import pyopencl as cl
-
-        it = self.detection.interpreter
-        out = np.empty(it.batch, np.uint8)
-        cl.enqueue_copy(self.runtime.queue, out, it.flags_buf, is_blocking=True)
-        return out
+        return self.detection.interpreter.arrays["flags_out"].get(self.runtime.queue)
 
     def snapshot(self):
         """Dense int32 (nz, ny, nx) copy of the grid after every queued frame."""

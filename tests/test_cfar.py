@@ -160,3 +160,7 @@ def test_refuses_bad_input(runtime):
         plan(np.zeros((4, 64)))
     with pytest.raises(ConfigError, match="local_size"):
         Cfar(runtime, (4,), 64, CfarConfig(guard=1, train=2), local_size=0)
+    import pyopencl.array as cla
+
+    with pytest.raises(ShapeError, match=r"expected power profiles of shape \(4, 64\) float32 on the device"):
+        plan.enqueue(cla.to_device(runtime.queue, np.zeros(8, np.float32)))     # once 1,470 "targets"

@@ -185,3 +185,33 @@ def test_bad_input(runtime):
     with pytest.raises(ConfigError, match="no bin carries evidence"):
         Fusion(runtime, grid, lattice, model, N_BINS, SPACING, 100, 50)
     assert grid.n_bricks == 0, "a refused frame must leave the map untouched"
+
+
+def test_low_level_enqueue_refuses_foreign_stale_and_wrong_arrays(runtime):
+    """Fusion.enqueue with a plan of another Fusion, a plan made before grid.clear(), or a device
+    array of the wrong size or dtype is refused before any launch (each of these once wrote
+    garbage into the map or crashed the process); the map is unchanged."""
+    import pyopencl.array as cla
+
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
+    grid, other_grid = EvidenceGrid(runtime, SMALL), EvidenceGrid(runtime, SMALL)
+    f = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST)
+    other = Fusion(runtime, other_grid, lattice, model, N_BINS, SPACING, FIRST, LAST)
+    ev = evidence(lattice)
+    f(ev, POSE)
+    before = grid.snapshot()
+    q = runtime.queue
+    with pytest.raises(ConfigError, match="made by this Fusion"):
+        f.enqueue(plan=other.plan(POSE))
+    with pytest.raises(ShapeError, match="expected evidence of shape"):
+        f.enqueue(cla.to_device(q, np.zeros(16, np.int32)), f.plan(POSE))
+    with pytest.raises(ShapeError, match="expected evidence of shape"):
+        f.enqueue(cla.to_device(q, ev.astype(np.float32)), f.plan(POSE))
+    with pytest.raises(ShapeError, match="device array"):
+        f.enqueue(ev, f.plan(POSE))
+    assert np.array_equal(grid.snapshot(), before)
+    stale = f.plan(POSE)
+    grid.clear()
+    with pytest.raises(ConfigError, match="before grid.clear"):
+        f.enqueue(plan=stale)
+    assert grid.n_bricks == 0

@@ -124,3 +124,9 @@ def test_refuses_bad_input(runtime):
         plan(ok, ok[:, :32], ok > 0)
     with pytest.raises(ShapeError, match=r"expected flags of shape \(4,\) uint8"):
         plan(ok, ok, ok > 0, flags=np.zeros(4, np.int32))
+    import pyopencl.array as cla
+
+    detection = Detection(runtime, (4,), 64, SPACING, CfarConfig(guard=1, train=2), InterpretConfig())
+    with pytest.raises(ShapeError, match=r"expected power profiles of shape \(4, 64\) float32 on the device, "
+                                         r"got \(4, 64\) float64"):
+        detection.enqueue(cla.to_device(runtime.queue, np.ones((4, 64))))     # once read the wrong bytes

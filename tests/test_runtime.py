@@ -48,6 +48,48 @@ def test_build_failure_names_file_options_and_log(runtime, tmp_path, monkeypatch
     assert "broken.cl" in message and "-DANSWER=42" in message and "undefined_name" in message
 
 
+def test_shared_constants_have_one_source(runtime):
+    """The header holds no values: a build without radarcl's -D constants stops with a sentence,
+    and the kernels see exactly the Python values (interpret flags a silent beam with
+    oracle.FLAG_SILENT and clamps evidence at logodds.EVIDENCE_LIMIT)."""
+    from radarcl import logodds, oracle
+    from radarcl.config import CfarConfig, InterpretConfig
+    from radarcl.pipeline import Detection
+
+    bare = {k: v for k, v in _defines().items() if not k.startswith(("FLAG_", "NO_EVIDENCE", "LOGODDS", "EVIDENCE", "GRID"))}
+    with pytest.raises(KernelBuildError, match="come from radarcl.stages.COMMON_DEFINES"):
+        runtime.kernels("range_fft", bare)
+    profiles = np.ones((2, 64), np.float32)
+    profiles[0] = 0.0                                     # silent beam
+    profiles[1, 30] = 1e30                                # a pulse beyond 16 nat
+    detection = Detection(runtime, (2,), 64, 0.5, CfarConfig(guard=2, train=4),
+                          InterpretConfig(k_occ=10.0, range_min_m=0.0, range_max_m=31.5))
+    result = detection(profiles).interpret
+    assert result.flags[0] == oracle.FLAG_SILENT
+    assert result.evidence[1].max() == logodds.EVIDENCE_LIMIT
+
+
+def test_kernels_are_called_by_name_as_their_source_declares(runtime):
+    """The signature is read from the .cl file: a missing, unknown or ill-typed argument is a
+    sentence, not a wrong launch."""
+    import pyopencl.array as cla
+
+    from radarcl.errors import ConfigError, ShapeError
+
+    f = runtime.kernels("range_fft", _defines())["range_fft"]
+    assert f.names == ("samples", "window", "twiddle", "scale", "clip_level", "n_beams", "profiles", "flags")
+    q = runtime.queue
+    bufs = {n: cla.empty(q, 64, np.float32) for n in ("samples", "window", "twiddle", "scale", "profiles", "flags")}
+    with pytest.raises(ConfigError, match="missing \\['n_beams'\\]"):
+        f(q, (2,), (2,), clip_level=1.0, **bufs)
+    with pytest.raises(ConfigError, match="unknown \\['beams'\\]"):
+        f(q, (2,), (2,), clip_level=1.0, n_beams=1, beams=2, **bufs)
+    with pytest.raises(ConfigError, match="n_beams = 4294967296 does not fit int"):
+        f(q, (2,), (2,), clip_level=1.0, n_beams=2 ** 32, **bufs)
+    with pytest.raises(ShapeError, match="samples must be a device array"):
+        f(q, (2,), (2,), clip_level=1.0, n_beams=1, **{**bufs, "samples": np.zeros(8, np.float32)})
+
+
 def test_missing_kernel_name_is_explained(runtime):
     with pytest.raises(KeyError, match="range_fft.cl has no kernel 'nope'"):
         runtime.kernels("range_fft", _defines())["nope"]
@@ -64,7 +106,9 @@ def test_kernels_dir_has_the_common_header():
 
 
 def _defines():
-    return dict(N_FFT=8, N_SAMPLES=8, M=8, LOG2_M=3, P=1, LOG2_P=0, N_BINS=4, LOCAL_SIZE=2,
+    from radarcl.stages import COMMON_DEFINES
+
+    return dict(COMMON_DEFINES, N_FFT=8, N_SAMPLES=8, M=8, LOG2_M=3, P=1, LOG2_P=0, N_BINS=4, LOCAL_SIZE=2,
                 INPUT_KIND=0, WINDOWED=1, POWER=0, CHECK_FINITE=1, VEC=1)
 
 

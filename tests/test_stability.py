@@ -36,10 +36,7 @@ def detection_vs_oracle(runtime, samples):
     m.fuse(samples, POSE)
     runtime.queue.finish()
     it = m.detection.interpreter
-    import pyopencl as cl
-
-    got = np.empty((LATTICE.n_beams, it.n_bins), np.int32)
-    cl.enqueue_copy(runtime.queue, got, it.evidence_buf, is_blocking=True)
+    got = it.arrays["evidence"].get(runtime.queue).reshape(LATTICE.n_beams, it.n_bins)
     profiles = oracle.range_profile(samples.astype(np.float64), 512, output="power")
     flags = oracle.beam_flags(samples, clip_level=32767 if samples.dtype == np.int16 else np.inf)
     noise, ratio, mask = oracle.cfar(profiles, CfarConfig())
@@ -117,10 +114,10 @@ def test_a_million_updates_of_one_voxel_on_a_one_voxel_grid(runtime):
     grid = EvidenceGrid(runtime, spec)
     fusion = Fusion(runtime, grid, lattice, model, 64, 0.1, 1, 63)
     for sign, expected in ((1, GRID_LIMIT), (-1, -GRID_LIMIT)):
-        ev = runtime.to_device(np.full((lattice.n_beams, 64), sign * 16384, np.int32))
+        fusion.upload(np.full((lattice.n_beams, 64), sign * 16384, np.int32))
         plan = fusion.plan(np.eye(4))
         for _ in range(200):                                            # 200 x 10^4 = 2 x 10^6 updates
-            fusion.enqueue(ev, plan)
+            fusion.enqueue(plan=plan)
         assert grid.snapshot().item() == expected
 
 

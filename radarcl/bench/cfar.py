@@ -100,10 +100,10 @@ def run(runtime, repeat=200):
 
     def kernels():
         copy = detection.cfar.upload(profiles)
-        detection.enqueue(detection.cfar.profiles_buf, wait_for=[copy]).wait()
+        detection.enqueue(wait_for=[copy]).wait()
 
     def cfar_only():
-        detection.cfar.enqueue(detection.cfar.profiles_buf).wait()
+        detection.cfar.enqueue().wait()
 
     def with_numpy():
         return baseline(flat)

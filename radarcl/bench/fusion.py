@@ -68,7 +68,7 @@ def run(runtime, repeat=20, report=None, spec=PAPER_GRID):
     fusion, it = mapping.fusion, mapping.detection.interpreter
 
     def fusion_only():
-        fusion.enqueue(it.evidence_buf, plan).wait()
+        fusion.enqueue(it.arrays["evidence"], plan).wait()
 
     def pipeline():
         mapping.fuse(samples, pose)
@@ -87,8 +87,7 @@ def run(runtime, repeat=20, report=None, spec=PAPER_GRID):
     plan_s = (time.perf_counter() - start) / len(moved)
 
     say(f"float64 oracle on {len(ORACLE_BEAMS)} of {lattice.n_beams} beams over {len(plan.bricks)} bricks ...")
-    evidence = np.empty((lattice.n_beams, it.n_bins), np.int32)
-    cl.enqueue_copy(runtime.queue, evidence, it.evidence_buf, is_blocking=True)
+    evidence = it.arrays["evidence"].get(runtime.queue).reshape(lattice.n_beams, it.n_bins)
     index = spec.brick_voxels(plan.bricks)
     start = time.perf_counter()
     sums, updates, ambiguous = oracle.fusion_at_points(spec.index_to_world(index), evidence, lattice, model,

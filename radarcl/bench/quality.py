@@ -67,10 +67,7 @@ def oracle_deviation(runtime, obs, config, radar=PAPER_RADAR, beams=ORACLE_BEAMS
     mapping.fuse(obs.samples[j], obs.poses[j])
     runtime.queue.finish()
     it, fusion = mapping.detection.interpreter, mapping.fusion
-    import pyopencl as cl
-
-    evidence = np.empty((lattice.n_beams, it.n_bins), np.int32)
-    cl.enqueue_copy(runtime.queue, evidence, it.evidence_buf, is_blocking=True)
+    evidence = it.arrays["evidence"].get(runtime.queue).reshape(lattice.n_beams, it.n_bins)
     only = np.zeros_like(evidence)
     only[list(beams)] = evidence[list(beams)]
     check = EvidenceGrid(runtime, spec)

@@ -39,10 +39,10 @@ def run(runtime, n_ffts=(512, GOAL_N_FFT), repeat=200):
         half = n_fft // 2
 
         def kernel_only():
-            plan.enqueue(plan.samples_buf).wait()
+            plan.enqueue().wait()
 
         def upload_and_kernel():
-            plan.enqueue(plan.samples_buf, wait_for=[plan.upload(frame)]).wait()
+            plan.enqueue(wait_for=[plan.upload(frame)]).wait()
 
         def round_trip():
             plan(frame)

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from radarcl.cl.signature import KernelFunction, parse_kernels
 from radarcl.errors import KernelBuildError, NoOpenCLError
 
 log = logging.getLogger(__name__)
@@ -119,15 +120,24 @@ def device_report():
 
 class KernelSet:
     """The kernels of one built program, fetched once (``program.name`` would make a new
-    ``cl.Kernel`` on every access)."""
+    ``cl.Kernel`` on every access), each called by argument name as its ``.cl`` signature
+    declares them (``radarcl.cl.signature``)."""
 
-    def __init__(self, program, source_path, options):
+    def __init__(self, program, source_path, options, source):
         self.program = program
         self.source_path = source_path
         self.options = options
-        self._kernels = {k.function_name: k for k in program.all_kernels()}
+        signatures = parse_kernels(source, source_path)
+        self._kernels = {}
+        for kernel in program.all_kernels():
+            name = kernel.function_name
+            if name not in signatures:
+                raise KernelBuildError(f"{source_path}: kernel {name} was built but its signature was not "
+                                       "found in the source")
+            self._kernels[name] = KernelFunction(kernel, signatures[name], source_path)
 
     def __getitem__(self, name):
+        """The ``KernelFunction`` called ``name``."""
         try:
             return self._kernels[name]
         except KeyError:
@@ -189,21 +199,17 @@ class Runtime:
             raise KernelBuildError(f"building {path} failed on {self.name}\n"
                                    f"options: {' '.join(options)}\nlog:\n{build_log or exc}") from exc
         log.debug("built %s with %s", path.name, options)
-        kernel_set = KernelSet(program, path, options)
+        kernel_set = KernelSet(program, path, options, source)
         self._programs[key] = kernel_set
         return kernel_set
 
     def max_local_size(self, kernel):
-        """Largest work-group size this device allows for ``kernel``."""
+        """Largest work-group size this device allows for ``kernel`` (a ``KernelFunction`` or
+        a ``pyopencl.Kernel``)."""
         cl = _cl()
+        kernel = getattr(kernel, "kernel", kernel)
         return int(min(self.device.max_work_group_size,
                        kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.device)))
-
-    def to_device(self, array):
-        """Copy a host array into a new read-only device buffer."""
-        cl = _cl()
-        array = np.ascontiguousarray(array)
-        return cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=array)
 
     def empty(self, nbytes):
         """A new read-write device buffer of ``nbytes`` bytes (at least 1)."""

@@ -128,10 +128,10 @@ def map_observations(runtime, obs, config=MapConfig(), radar=PAPER_RADAR, progre
     fusion = mapping.fusion
     counter = Fusion(runtime, count, lattice, model, fusion.n_bins, fusion.bin_spacing_m, fusion.first_bin,
                      fusion.last_bin)
-    ones = runtime.to_device(np.full(counter.evidence_shape, logodds.SCALE, np.int32))
+    counter.upload(np.full(counter.evidence_shape, logodds.SCALE, np.int32)).wait()
     detections = []
     for j in range(n_frames):
-        counter.enqueue(ones, counter.plan(obs.poses[j]))
+        counter.enqueue(plan=counter.plan(obs.poses[j]))
         profiles = mapping.range_fft(obs.samples[j]).profiles
         detections.append(mapping.detection.cfar(profiles).mask.reshape(lattice.n_beams, -1))
     runtime.queue.finish()

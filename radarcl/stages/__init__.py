@@ -1,26 +1,64 @@
 """One plan object per kernel file: an expensive constructor, a cheap checked call.
 
-The checks every plan makes the same way live here, so their messages read alike.
+Every stage has the same surface (``Stage``), as silx's ``OpenclProcessing`` does: device
+arrays allocated once in the constructor (``arrays``, one ``pyopencl.array.Array`` per input and
+output named after its kernel argument), ``check`` (host frame -> checked array), ``upload``
+(host -> its input arrays), ``enqueue`` (launch on device arrays: its own, or another stage's
+outputs when chained, each checked for shape, dtype and context), ``download`` (outputs -> a
+result object) and ``__call__`` (all four, blocking).
+
+The constants the kernels share with Python (beam flags, the fixed-point log-odds unit, the grid
+limit) are defined in Python only and reach every build as ``-D`` (``COMMON_DEFINES``);
+``kernels/radarcl_common.h`` refuses to compile without them.
 """
+
+from dataclasses import dataclass
 
 import numpy as np
 
+from radarcl import logodds, oracle
 from radarcl.errors import ConfigError, ShapeError
+from radarcl.grid import GRID_LIMIT
+
+COMMON_DEFINES = dict(
+    FLAG_NONFINITE=oracle.FLAG_NONFINITE, FLAG_CLIPPED=oracle.FLAG_CLIPPED,
+    FLAG_BAD_PROFILE=oracle.FLAG_BAD_PROFILE, FLAG_SILENT=oracle.FLAG_SILENT,
+    NO_EVIDENCE_FLAGS=oracle.NO_EVIDENCE_FLAGS,
+    LOGODDS_SCALE=float(logodds.SCALE), EVIDENCE_LIMIT_NATS=float(logodds.EVIDENCE_LIMIT_NATS),
+    GRID_LIMIT=GRID_LIMIT,
+)
+
+
+def build(runtime, stem, defines):
+    """``runtime.kernels(stem, ...)`` with the shared constants added to ``defines``."""
+    clash = set(defines) & set(COMMON_DEFINES)
+    if clash:
+        raise ConfigError(f"{stem}: defines {sorted(clash)} are shared constants and come from radarcl")
+    return runtime.kernels(stem, {**COMMON_DEFINES, **defines})
 
 
 def beam_batch(batch):
     """A frame's beam shape as a tuple of positive ints, and its number of beams."""
-    shape = tuple(int(b) for b in batch)
+    try:
+        shape = tuple(_integer(b, "batch") for b in batch)
+    except TypeError:
+        raise ConfigError(f"batch must be a shape (a tuple of positive integers), got {batch!r}") from None
     if not shape or min(shape) < 1:
         raise ConfigError(f"batch must be a non-empty shape of positive sizes, got {batch!r}")
     return shape, int(np.prod(shape))
+
+
+def _integer(value, what):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise ConfigError(f"{what} must hold integers, got {value!r}")
+    return int(value)
 
 
 def work_group_size(runtime, kernel, requested, default):
     """``requested`` (or ``default``, capped by the device) checked against the kernel's limit."""
     limit = runtime.max_local_size(kernel)
     size = min(default, limit) if requested is None else requested
-    if not (isinstance(size, (int, np.integer)) and 1 <= size <= limit):
+    if isinstance(size, bool) or not (isinstance(size, (int, np.integer)) and 1 <= size <= limit):
         raise ConfigError(f"local_size must be an integer in [1, {limit}], got {requested!r}")
     return int(size)
 
@@ -35,10 +73,86 @@ def check_array(array, shape, dtype, what):
     return np.ascontiguousarray(array)
 
 
-def upload(runtime, buffer, array):
-    """Copy ``array`` into ``buffer`` (allocated on first use); returns (buffer, copy event)."""
-    import pyopencl as cl
+@dataclass(frozen=True)
+class Port:
+    """A device array of a stage: the kernel argument it is passed as, its shape and dtype, and
+    what to call it in an error message."""
 
-    if buffer is None:
-        buffer = runtime.empty(array.nbytes)
-    return buffer, cl.enqueue_copy(runtime.queue, buffer, array, is_blocking=False)
+    name: str
+    shape: tuple
+    dtype: np.dtype
+    what: str
+    aliases: tuple = ()      # other shapes of the same elements a device array may have
+
+
+class Stage:
+    """The surface every plan shares (see the module docstring).
+
+    A subclass builds its kernel, then calls ``_allocate(inputs, outputs)`` with its ``Port``s,
+    and implements ``enqueue`` and ``_result``.
+    """
+
+    runtime = None
+    inputs = ()
+    outputs = ()
+
+    def _allocate(self, inputs, outputs):
+        import pyopencl.array as cla
+
+        self.inputs, self.outputs = tuple(inputs), tuple(outputs)
+        q = self.runtime.queue
+        self.arrays = {p.name: cla.empty(q, p.shape, p.dtype) for p in self.inputs + self.outputs}
+        self._ports = {p.name: p for p in self.inputs + self.outputs}
+
+    def check_input(self, name, array):
+        """Host ``array`` for input ``name`` as a contiguous ndarray, or ShapeError."""
+        p = self._ports[name]
+        return check_array(array, p.shape, p.dtype, p.what)
+
+    def upload(self, **host):
+        """Copy checked host arrays into the inputs named by the keywords (non-blocking);
+        returns the copy events. Every array is checked before anything is copied."""
+        import pyopencl as cl
+
+        checked = {name: self.check_input(name, a) for name, a in host.items()}
+        return [cl.enqueue_copy(self.runtime.queue, self.arrays[name].data, a, is_blocking=False)
+                for name, a in checked.items()]
+
+    def device(self, name, array=None):
+        """The device array for input ``name``: this stage's own when ``array`` is None, or
+        ``array`` (a ``pyopencl.array.Array`` of this context) checked for shape and dtype."""
+        import pyopencl.array as cla
+
+        if array is None:
+            return self.arrays[name]
+        p = self._ports[name]
+        if not isinstance(array, cla.Array):
+            raise ShapeError(f"expected {p.what} as a device array (pyopencl.array.Array) of shape {p.shape} "
+                             f"{np.dtype(p.dtype)}, got {type(array).__name__}")
+        if array.shape in p.aliases and array.dtype == p.dtype and array.flags.c_contiguous:
+            array = array.reshape(p.shape)
+        if array.shape != tuple(p.shape) or array.dtype != p.dtype:
+            raise ShapeError(f"expected {p.what} of shape {tuple(p.shape)} {np.dtype(p.dtype)} on the device, "
+                             f"got {array.shape} {array.dtype}")
+        if array.context != self.runtime.context:
+            raise ShapeError(f"{p.what} lives in another OpenCL context than this plan")
+        if not array.flags.c_contiguous:
+            raise ShapeError(f"{p.what} must be a contiguous device array")
+        return array
+
+    def download(self, wait_for=None):
+        """Copy the outputs to the host (blocking) and return the stage's result object."""
+        import pyopencl as cl
+
+        host = {}
+        for p in self.outputs:
+            host[p.name] = np.empty(p.shape, p.dtype)
+            cl.enqueue_copy(self.runtime.queue, host[p.name], self.arrays[p.name].data, wait_for=wait_for)
+        return self._result(**host)
+
+    def _result(self, **host):
+        raise NotImplementedError
+
+    def enqueue(self, *args, **kwargs):
+        """Launch the kernel; returns its event."""
+        raise NotImplementedError

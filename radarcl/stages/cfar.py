@@ -12,7 +12,7 @@ import numpy as np
 
 from radarcl.config import CfarConfig
 from radarcl.errors import ConfigError
-from radarcl.stages import beam_batch, check_array, upload, work_group_size
+from radarcl.stages import Port, Stage, beam_batch, build, work_group_size
 
 _KINDS = {"ca": 0, "go": 1, "so": 2, "os": 3}
 # Measured on PoCL, 2 cores, paper frame (256 beams x 512 bins, CA 16+16 cells), kernel only:
@@ -32,7 +32,7 @@ class CfarResult:
     mask: np.ndarray    # bool, r_i > alpha n_i
 
 
-class Cfar:
+class Cfar(Stage):
     """A compiled CFAR plan for frames of one shape.
 
     runtime: a ``radarcl.cl.Runtime``; batch: the beam shape of a frame, e.g. (64, 4) or (400,);
@@ -44,8 +44,6 @@ class Cfar:
     """
 
     def __init__(self, runtime, batch, n_bins, config=None, *, local_size=None, vector_width=None):
-        import pyopencl as cl
-
         self.runtime = runtime
         self.config = config if config is not None else CfarConfig()
         if not isinstance(self.config, CfarConfig):
@@ -58,57 +56,46 @@ class Cfar:
         if vector_width not in VECTOR_WIDTHS:
             raise ConfigError(f"vector_width must be one of {VECTOR_WIDTHS}, got {vector_width!r}")
         self.vector_width = int(vector_width)
-        self._kernel = runtime.kernels("cfar", dict(
+        self._kernel = build(runtime, "cfar", dict(
             N_BINS=self.n_bins, GUARD=self.config.guard, TRAIN=self.config.train,
             KIND=_KINDS[self.config.kind], RANK=self.config.rank or 0, VEC=self.vector_width))["cfar"]
-        self._kernel.set_scalar_arg_dtypes([None, np.float32, np.float32, np.int32, None, None, None])
         self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
-        size = self.n_beams * self.n_bins
-        self.noise_buf = runtime.empty(4 * size)
-        self.ratio_buf = runtime.empty(4 * size)
-        self.mask_buf = runtime.empty(size)
-        self.profiles_buf = None   # device copy of the last uploaded frame (see upload)
-        self._cl = cl
+        f32 = np.dtype(np.float32)
+        self._allocate([Port("profiles", self.input_shape, f32, "power profiles")],
+                       [Port("noise", self.input_shape, f32, "CFAR noise estimates"),
+                        Port("ratio", self.input_shape, f32, "CFAR ratios"),
+                        Port("mask", self.input_shape, np.dtype(np.uint8), "CFAR detections")])
 
     @property
     def input_shape(self):
         """Shape one frame of profiles must have: (*batch, n_bins)."""
         return (*self.batch, self.n_bins)
 
-    def check(self, profiles):
+    def check(self, profiles, name="profiles"):
         """Raise ShapeError unless ``profiles`` is one float32 frame of this plan's shape."""
-        return check_array(profiles, self.input_shape, np.float32, "power profiles")
+        return self.check_input(name, profiles)
 
-    def enqueue(self, profiles_buf, wait_for=None):
-        """Launch on a device buffer of profiles (e.g. ``RangeFFT.profiles_buf`` in power);
-        results stay in ``noise_buf``, ``ratio_buf``, ``mask_buf``. Returns the kernel event."""
-        if profiles_buf is None:
-            raise ConfigError("no profiles buffer: upload a frame first or pass a device buffer")
+    def upload(self, profiles):
+        """Copy a checked frame into the plan's input array; returns the copy event."""
+        return super().upload(profiles=profiles)[0]
+
+    def enqueue(self, profiles=None, wait_for=None):
+        """Launch on a device array of power profiles (default: this plan's; or e.g. a
+        ``RangeFFT``'s ``arrays["profiles"]`` in power); results stay in ``arrays["noise"]``,
+        ``["ratio"]`` and ``["mask"]``. Returns the kernel event."""
         ls = self.local_size
         items = -(-self.n_bins // self.vector_width)
         gsize = (-(-items // ls) * ls, self.n_beams)
-        return self._kernel(self.runtime.queue, gsize, (ls, 1), profiles_buf, self.alpha,
-                            float(self.config.noise_floor), self.n_beams,
-                            self.noise_buf, self.ratio_buf, self.mask_buf, wait_for=wait_for)
+        a = self.arrays
+        return self._kernel(self.runtime.queue, gsize, (ls, 1), wait_for=wait_for,
+                            profiles=self.device("profiles", profiles), alpha=self.alpha,
+                            noise_floor=float(self.config.noise_floor), n_beams=self.n_beams,
+                            noise=a["noise"], ratio=a["ratio"], mask=a["mask"])
 
-    def upload(self, profiles):
-        """Copy a checked frame into the plan's input buffer; returns the copy event."""
-        self.profiles_buf, copy = upload(self.runtime, self.profiles_buf, self.check(profiles))
-        return copy
-
-    def download(self, wait_for=None):
-        """Copy the last results to the host (blocking) as a CfarResult."""
-        cl, q = self._cl, self.runtime.queue
-        noise = np.empty(self.input_shape, np.float32)
-        ratio = np.empty(self.input_shape, np.float32)
-        mask = np.empty(self.input_shape, np.uint8)
-        cl.enqueue_copy(q, noise, self.noise_buf, wait_for=wait_for)
-        cl.enqueue_copy(q, ratio, self.ratio_buf, wait_for=wait_for)
-        cl.enqueue_copy(q, mask, self.mask_buf, wait_for=wait_for)
+    def _result(self, noise, ratio, mask):
         return CfarResult(noise, ratio, mask.astype(bool))
 
     def __call__(self, profiles):
         """Process one frame of profiles (*batch, n_bins) float32 -> CfarResult (blocking)."""
         copy = self.upload(profiles)
-        done = self.enqueue(self.profiles_buf, wait_for=[copy])
-        return self.download(wait_for=[done])
+        return self.download(wait_for=[self.enqueue(wait_for=[copy])])

@@ -14,7 +14,7 @@ for a repeated pose are cached (a radar on a stand).
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -22,7 +22,7 @@ import numpy as np
 from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, BeamModel, check_poses
 from radarcl.grid import BRICK, EvidenceGrid
-from radarcl.stages import check_array, work_group_size
+from radarcl.stages import Port, Stage, build, work_group_size
 
 # Measured on PoCL, 2 cores, the paper's frame at 0.1 m (35k bricks), ms per frame:
 #   one work-item per voxel, window per 4^3 sub-brick in the kernel: 450; the same without
@@ -45,6 +45,8 @@ class FramePlan:
     bricks: np.ndarray       # (n, 4) int32: bx, by, bz, slot of every brick the beams may reach
     windows: np.ndarray      # (n, 4) int32: candidate beams of each brick, i_lo, i_hi, k_lo, k_hi
     beams_outside: int       # beams that reach no brick of the grid (they give nothing)
+    owner: object = field(default=None, compare=False, repr=False)   # the Fusion that made it
+    generation: int = -1     # the grid's generation it was made for (slots die with grid.clear())
 
 
 class HeadFrame(NamedTuple):
@@ -116,7 +118,7 @@ def _nonempty(windows):
     return (windows[:, 0] <= windows[:, 1]) & (windows[:, 2] <= windows[:, 3])
 
 
-class Fusion:
+class Fusion(Stage):
     """A compiled fusion plan for frames of one lattice into one grid.
 
     runtime: a ``radarcl.cl.Runtime``; grid: the ``EvidenceGrid`` to update; lattice: the
@@ -148,14 +150,17 @@ class Fusion:
         defines = dict(VEC=self.vector_width, N_AZ=lattice.n_az, N_EL=lattice.n_el, N_BINS=self.n_bins,
                        NEAR_FIELD=model.near_field, GAUSSIAN=model.gaussian,
                        PER_BEAM_POSES=self.per_beam_poses, AZ_WRAP=lattice.wraps)
-        self._kernel = runtime.kernels("fusion", {k: v for k, v in defines.items() if v is not False})["fusion"]
-        self._kernel.set_scalar_arg_dtypes([None] * 4 + [np.float32] * 2 + [np.int32] * 5 + [np.float32] * 4 + [np.int32, None])
+        self._kernel = build(runtime, "fusion", {k: v for k, v in defines.items() if v is not False})["fusion"]
         self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
         self._rotations = lattice.beam_rotations()
         self.r_lo = (self.first_bin - 0.5) * self.bin_spacing_m
         self.r_hi = (self.last_bin + 0.5) * self.bin_spacing_m
         self._cached = (None, None)
-        self._beams_buf = self._bricks_buf = self._windows_buf = self._uploaded = None
+        self._plan_arrays, self._uploaded = None, None
+        # Evidence from a raw radar's detection comes as (n_az, n_el, n_bins) even for one
+        # elevation; (n_beams, n_bins) is the same rows.
+        aliases = ((lattice.n_az, lattice.n_el, self.n_bins), (lattice.n_beams, self.n_bins))
+        self._allocate([Port("evidence", (*lattice.batch, self.n_bins), np.dtype(np.int32), "evidence", aliases)], [])
 
     @property
     def evidence_shape(self):
@@ -187,8 +192,8 @@ class Fusion:
         bricks, windows = self._reached_bricks(frame)
         slots = self.grid.allocate(bricks)
         listed = np.concatenate([bricks, slots[:, None]], axis=1).astype(np.int32)
-        plan = FramePlan(beams.astype(np.float32), listed, windows.astype(np.int32),
-                         self._beams_outside(windows))
+        plan = FramePlan(np.ascontiguousarray(beams, np.float32), listed, np.ascontiguousarray(windows, np.int32),
+                         self._beams_outside(windows), self, self.grid.generation)
         self._cached = (key, plan)
         return plan
 
@@ -228,37 +233,62 @@ class Fusion:
         return int(np.count_nonzero(~reached))
 
     # -- device side ------------------------------------------------------------------------------
-    def enqueue(self, evidence_buf, plan, wait_for=None):
-        """Fuse one frame of evidence (a device buffer (n_beams, n_bins) int32) taken as
-        ``plan`` says. Returns the kernel event (None when no brick is reached)."""
+    def check(self, evidence, name="evidence"):
+        """One frame of evidence, (n_beams, n_bins) or (*batch, n_bins) int32, as the
+        (*batch, n_bins) array the kernel reads; ShapeError otherwise."""
+        ev = np.asarray(evidence)
+        if ev.shape == self.evidence_shape:
+            ev = ev.reshape(*self.lattice.batch, self.n_bins)
+        return self.check_input(name, ev)
+
+    def upload(self, evidence):
+        """Copy a checked frame of evidence into the plan's input array; returns the copy event."""
+        return super().upload(evidence=self.check(evidence))[0]
+
+    def enqueue(self, evidence=None, plan=None, wait_for=None):
+        """Fuse one frame of evidence (a device array (*batch, n_bins) int32, e.g. an
+        ``Interpreter``'s ``arrays["evidence"]``; None: this plan's own) taken as ``plan``
+        (from this Fusion's ``plan``, for the grid as it is now) says. Returns the kernel event
+        (None when no brick is reached)."""
+        if not isinstance(plan, FramePlan) or plan.owner is not self:
+            raise ConfigError("plan must be a FramePlan made by this Fusion's plan() (a plan of another "
+                              "Fusion lists bricks of another grid)")
+        if plan.generation != self.grid.generation:
+            raise ConfigError("the plan was made before grid.clear(): its bricks are gone; call plan() again")
+        evidence = self.device("evidence", evidence)
         rt, m = self.runtime, self.model
         if not len(plan.bricks):
             return None
         if self._uploaded is not plan:
-            self._beams_buf = rt.to_device(plan.beams)
-            self._bricks_buf = rt.to_device(plan.bricks)
-            self._windows_buf = rt.to_device(plan.windows)
+            import pyopencl.array as cla
+
+            q = rt.queue
+            self._plan_arrays = dict(beams=cla.to_device(q, plan.beams), bricks=cla.to_device(q, plan.bricks),
+                                     windows=cla.to_device(q, plan.windows))
             self._uploaded = plan
         a_az, a_el = m.apertures
         n_items = len(plan.bricks) * (8 // self.vector_width) * 4
         ls = self.local_size
         gsize = (-(-n_items // ls) * ls,)
         nx, ny, nz = self.grid.spec.shape
-        return self._kernel(rt.queue, gsize, (ls,), evidence_buf, self._beams_buf, self._bricks_buf,
-                            self._windows_buf, self.grid.spec.voxel_m, 1.0 / self.bin_spacing_m,
-                            self.first_bin, self.last_bin, nx, ny, nz,
-                            math.tan(m.beamwidth_az_rad / 2), math.tan(m.beamwidth_el_rad / 2), a_az, a_el,
-                            n_items, self.grid.pool, wait_for=wait_for)
+        return self._kernel(rt.queue, gsize, (ls,), wait_for=wait_for, evidence=evidence, **self._plan_arrays,
+                            voxel=self.grid.spec.voxel_m, inv_spacing=1.0 / self.bin_spacing_m,
+                            first_bin=self.first_bin, last_bin=self.last_bin, nx=nx, ny=ny, nz=nz,
+                            tan_half_az=math.tan(m.beamwidth_az_rad / 2), tan_half_el=math.tan(m.beamwidth_el_rad / 2),
+                            a_az=a_az, a_el=a_el, n_items=n_items, pool=self.grid.pool)
+
+    def download(self, wait_for=None):
+        """Fusion writes the grid, not arrays of its own: read the map with ``grid.snapshot()``."""
+        raise ConfigError("Fusion has no outputs to download; read the map with grid.snapshot() or grid.bricks()")
 
     def __call__(self, evidence, poses):
         """Fuse one frame given on the host: evidence (n_beams, n_bins) or (*batch, n_bins)
         int32 in logodds units, taken at ``poses``. Blocks; returns the FramePlan used."""
-        ev = np.asarray(evidence)
-        if ev.shape == (*self.lattice.batch, self.n_bins):
-            ev = ev.reshape(self.evidence_shape)
-        ev = check_array(ev, self.evidence_shape, np.int32, "evidence")
+        self.check(evidence)
         plan = self.plan(poses)
-        event = self.enqueue(self.runtime.to_device(ev), plan)
+        event = self.enqueue(plan=plan, wait_for=[self.upload(evidence)])
         if event is not None:
             event.wait()
+        else:
+            self.runtime.queue.finish()
         return plan

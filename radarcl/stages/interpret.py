@@ -14,7 +14,7 @@ import numpy as np
 from radarcl import logodds, oracle
 from radarcl.config import InterpretConfig
 from radarcl.errors import ConfigError
-from radarcl.stages import beam_batch, check_array, work_group_size
+from radarcl.stages import Port, Stage, beam_batch, build, work_group_size
 
 # Beams per work-group. One work-item walks one beam; any size is correct.
 DEFAULT_LOCAL_SIZE = 16
@@ -35,7 +35,7 @@ class InterpretResult:
         return (self.flags & oracle.NO_EVIDENCE_FLAGS) == 0
 
 
-class Interpreter:
+class Interpreter(Stage):
     """A compiled eq. 12 plan for frames of one shape.
 
     runtime: a ``radarcl.cl.Runtime``; batch: the beam shape, e.g. (64, 4) or (400,);
@@ -44,8 +44,6 @@ class Interpreter:
     """
 
     def __init__(self, runtime, batch, n_bins, bin_spacing_m, config=None, *, local_size=None):
-        import pyopencl as cl
-
         self.runtime = runtime
         self.config = config if config is not None else InterpretConfig()
         if not isinstance(self.config, InterpretConfig):
@@ -58,17 +56,19 @@ class Interpreter:
         self.first_bin, self.last_bin = self.config.bin_interval(self.bin_spacing_m, self.n_bins)
         self.wide_bins = self.config.wide_bins(self.bin_spacing_m)
         self.e_high, self.e_low = (int(v) for v in logodds.to_fixed([self.config.e_high, self.config.e_low]))
-        self._kernel = runtime.kernels("interpret", dict(N_BINS=self.n_bins,
-                                                         MAX_PULSES=self.config.max_pulses))["interpret"]
-        self._kernel.set_scalar_arg_dtypes([None, None, None, None, np.float32] + [np.int32] * 6
-                                           + [None] * 4)
+        self._kernel = build(runtime, "interpret", dict(N_BINS=self.n_bins,
+                                                        MAX_PULSES=self.config.max_pulses))["interpret"]
         self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
-        self.evidence_buf = runtime.empty(4 * self.n_beams * self.n_bins)
-        self.pulses_buf = runtime.empty(16 * self.n_beams * self.config.max_pulses)
-        self.n_pulses_buf = runtime.empty(4 * self.n_beams)
-        self.flags_buf = runtime.empty(self.n_beams)
-        self._no_flags = runtime.to_device(np.zeros(self.n_beams, np.uint8))
-        self._cl = cl
+        f32, u8, i32 = np.dtype(np.float32), np.dtype(np.uint8), np.dtype(np.int32)
+        shape = self.input_shape
+        self._allocate([Port("profiles", shape, f32, "profiles"), Port("noise", shape, f32, "noise"),
+                        Port("mask", shape, u8, "mask"), Port("flags_in", self.batch, u8, "flags")],
+                       [Port("evidence", shape, i32, "evidence"),
+                        Port("pulses", (*self.batch, self.config.max_pulses, 4), i32, "pulses"),
+                        Port("n_pulses", self.batch, i32, "pulse counts"),
+                        Port("flags_out", self.batch, u8, "flags")])
+        self._no_flags = self.arrays["flags_in"].copy()     # all zero: "no flags from upstream"
+        self._no_flags.fill(0)
 
     @property
     def input_shape(self):
@@ -77,41 +77,37 @@ class Interpreter:
 
     def check_flags(self, flags):
         """Per-beam flags as a contiguous uint8 array of shape ``batch``, or ShapeError."""
-        return check_array(flags, self.batch, np.uint8, "flags")
+        return self.check_input("flags_in", flags)
 
-    def enqueue(self, profiles_buf, noise_buf, mask_buf, flags_buf=None, wait_for=None):
-        """Launch on device buffers (profiles float32, CFAR noise float32 and mask uint8,
-        per-beam uint8 flags or None). Results stay in ``evidence_buf``, ``pulses_buf``,
-        ``n_pulses_buf``, ``flags_buf``. Returns the kernel event."""
+    def enqueue(self, profiles=None, noise=None, mask=None, flags=None, wait_for=None):
+        """Launch on device arrays (profiles float32, CFAR noise float32 and mask uint8, e.g. a
+        ``Cfar``'s ``arrays``; per-beam uint8 flags or None for none; None for the others means
+        this plan's own, as ``upload`` filled them). Results stay in ``arrays["evidence"]``,
+        ``["pulses"]``, ``["n_pulses"]``, ``["flags_out"]``. Returns the kernel event."""
         ls = self.local_size
         gsize = (-(-self.n_beams // ls) * ls,)
-        return self._kernel(self.runtime.queue, gsize, (ls,), profiles_buf, noise_buf, mask_buf,
-                            self._no_flags if flags_buf is None else flags_buf,
-                            float(self.config.k_occ), self.e_high, self.e_low, self.first_bin,
-                            self.last_bin, self.wide_bins, self.n_beams, self.evidence_buf,
-                            self.pulses_buf, self.n_pulses_buf, self.flags_buf, wait_for=wait_for)
+        a = self.arrays
+        return self._kernel(self.runtime.queue, gsize, (ls,), wait_for=wait_for,
+                            profiles=self.device("profiles", profiles), noise=self.device("noise", noise),
+                            mask=self.device("mask", mask),
+                            flags_in=self._no_flags if flags is None else self.device("flags_in", flags),
+                            k_occ=float(self.config.k_occ), e_high=self.e_high, e_low=self.e_low,
+                            first_bin=self.first_bin, last_bin=self.last_bin, wide_bins=self.wide_bins,
+                            n_beams=self.n_beams, evidence=a["evidence"], pulses=a["pulses"],
+                            n_pulses=a["n_pulses"], flags_out=a["flags_out"])
 
-    def download(self, wait_for=None):
-        """Copy the last results to the host (blocking) as an InterpretResult."""
-        cl, q = self._cl, self.runtime.queue
-        evidence = np.empty(self.input_shape, np.int32)
-        pulses = np.empty((*self.batch, self.config.max_pulses, 4), np.int32)
-        n_pulses = np.empty(self.batch, np.int32)
-        flags = np.empty(self.batch, np.uint8)
-        for host, buf in ((evidence, self.evidence_buf), (pulses, self.pulses_buf),
-                          (n_pulses, self.n_pulses_buf), (flags, self.flags_buf)):
-            cl.enqueue_copy(q, host, buf, wait_for=wait_for)
-        return InterpretResult(evidence, pulses, n_pulses, flags)
+    def _result(self, evidence, pulses, n_pulses, flags_out):
+        return InterpretResult(evidence, pulses, n_pulses, flags_out)
 
     def __call__(self, profiles, noise, mask, flags=None):
         """Interpret one frame given on the host (blocking): profiles and noise float32,
         mask bool or uint8, all (*batch, n_bins); flags uint8 (*batch,) or None."""
-        rt = self.runtime
-        profiles = check_array(profiles, self.input_shape, np.float32, "profiles")
-        noise = check_array(noise, self.input_shape, np.float32, "noise")
-        mask = check_array(mask, self.input_shape, None, "mask")
+        mask = np.asarray(mask)
+        if mask.dtype == bool:
+            mask = mask.astype(np.uint8)
+        host = dict(profiles=profiles, noise=noise, mask=mask)
         if flags is not None:
-            flags = self.check_flags(flags)
-        bufs = [rt.to_device(profiles), rt.to_device(noise), rt.to_device(mask.astype(np.uint8)),
-                None if flags is None else rt.to_device(flags)]
-        return self.download(wait_for=[self.enqueue(*bufs)])
+            host["flags_in"] = flags
+        copies = self.upload(**host)
+        done = self.enqueue(flags=None if flags is None else self.arrays["flags_in"], wait_for=copies)
+        return self.download(wait_for=[done])

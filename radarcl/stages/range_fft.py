@@ -18,7 +18,7 @@ import numpy as np
 from radarcl import oracle
 from radarcl.config import is_power_of_two
 from radarcl.errors import ConfigError, DeviceCapabilityError, ShapeError
-from radarcl.stages import check_array, upload
+from radarcl.stages import Port, Stage, beam_batch, build
 
 # Measured on PoCL, 2 cores, paper frame (256 beams), kernel only, n_fft 512 / 1024:
 #   scalar (vector_width 1), 16 workers: 0.34 / 0.59 ms;  vector_width 8, 16 workers: 0.21 / 0.30 ms.
@@ -32,7 +32,7 @@ _INPUT_KINDS = {np.dtype(np.float32): 0, np.dtype(np.int16): 1, np.dtype(np.comp
 
 @dataclass(frozen=True)
 class RangeFFTResult:
-    """Profiles (n_az, n_el, n_bins) float32 and per-beam flags (n_az, n_el) uint8."""
+    """Profiles (*batch, n_bins) float32 and per-beam flags (*batch,) uint8."""
 
     profiles: np.ndarray
     flags: np.ndarray
@@ -53,11 +53,11 @@ class RangeFFTResult:
         return int(np.count_nonzero(self.flags & oracle.FLAG_CLIPPED))
 
 
-class RangeFFT:
+class RangeFFT(Stage):
     """A compiled range-FFT plan for frames of one shape and dtype.
 
     runtime: a ``radarcl.cl.Runtime``.
-    batch: (n_az, n_el) beams per frame.
+    batch: the beam shape of a frame, e.g. (n_az, n_el) = (64, 4), or (1,) for one chirp.
     n_samples: samples per beam; n_fft: padded length, a power of two >= max(n_samples, 4).
     dtype: float32 or int16 (real ADC samples) or complex64 (I/Q).
     window: "hann" or "rect". output: "magnitude" or "power".
@@ -75,13 +75,8 @@ class RangeFFT:
 
     def __init__(self, runtime, batch, n_samples, n_fft, *, dtype=np.int16, window="hann",
                  output="magnitude", gain=None, clip_level=None, local_size=None, vector_width=None):
-        import pyopencl as cl
-
         self.runtime = runtime
-        self.batch = tuple(int(b) for b in batch)
-        if len(self.batch) != 2 or min(self.batch) < 1:
-            raise ConfigError(f"batch must be (n_az, n_el) with both >= 1, got {batch!r}")
-        self.n_beams = self.batch[0] * self.batch[1]
+        self.batch, self.n_beams = beam_batch(batch)
         self.n_samples = int(n_samples)
         if self.n_samples < 2:
             raise ConfigError(f"n_samples must be at least 2, got {n_samples!r}")
@@ -146,21 +141,22 @@ class RangeFFT:
                        LOCAL_SIZE=self.local_size, VEC=self.vector_width, INPUT_KIND=_INPUT_KINDS[self.dtype],
                        WINDOWED=window != "rect", POWER=output == "power",
                        CHECK_FINITE=self.dtype != np.int16)
-        self._kernel = runtime.kernels("range_fft", defines)["range_fft"]
-        self._kernel.set_scalar_arg_dtypes([None, None, None, None, np.float32, np.int32, None, None])
+        self._kernel = build(runtime, "range_fft", defines)["range_fft"]
+        import pyopencl.array as cla
 
         j = np.arange(self.n_fft)
-        self._window = runtime.to_device(w.astype(np.float32))
-        self._twiddle = runtime.to_device(np.exp(-2j * np.pi * j / self.n_fft).astype(np.complex64))
-        self._scale = runtime.to_device(per_bin.astype(np.float32))
-        self.profiles_buf = runtime.empty(self.n_beams * self.n_bins * 4)
-        self.flags_buf = runtime.empty(self.n_beams)
-        self.samples_buf = None   # device copy of the last uploaded frame (see upload)
-        self._cl = cl
+        q = runtime.queue
+        self._constants = dict(
+            window=cla.to_device(q, w.astype(np.float32)),
+            twiddle=cla.to_device(q, np.exp(-2j * np.pi * j / self.n_fft).astype(np.complex64)),
+            scale=cla.to_device(q, per_bin.astype(np.float32)))
+        self._allocate([Port("samples", self.input_shape, self.dtype, "a frame")],
+                       [Port("profiles", (*self.batch, self.n_bins), np.dtype(np.float32), "range profiles"),
+                        Port("flags", self.batch, np.dtype(np.uint8), "beam flags")])
 
     @property
     def input_shape(self):
-        """Shape one frame must have: (n_az, n_el, n_samples)."""
+        """Shape one frame must have: (*batch, n_samples)."""
         return (*self.batch, self.n_samples)
 
     @property
@@ -173,30 +169,28 @@ class RangeFFT:
         """Work-groups per frame: one per vector_width jobs."""
         return -(-self.n_jobs // self.vector_width)
 
-    def check(self, samples):
+    def check(self, samples, name="samples"):
         """Raise ShapeError unless ``samples`` is one frame of this plan's shape and dtype."""
-        return check_array(samples, self.input_shape, self.dtype, "a frame")
-
-    def enqueue(self, samples_buf, wait_for=None):
-        """Launch on a device buffer of samples; results stay in ``profiles_buf``/``flags_buf``.
-        Returns the kernel event (for chaining stages without host round trips)."""
-        gsize = (self.n_groups * self.local_size,)
-        return self._kernel(self.runtime.queue, gsize, (self.local_size,), samples_buf, self._window,
-                            self._twiddle, self._scale, self.clip_level, self.n_beams,
-                            self.profiles_buf, self.flags_buf, wait_for=wait_for)
+        return self.check_input(name, samples)
 
     def upload(self, samples):
-        """Copy a checked frame into the plan's input buffer; returns the copy event."""
-        self.samples_buf, copy = upload(self.runtime, self.samples_buf, self.check(samples))
-        return copy
+        """Copy a checked frame into the plan's input array; returns the copy event."""
+        return super().upload(samples=samples)[0]
+
+    def enqueue(self, samples=None, wait_for=None):
+        """Launch on a device array of samples (default: this plan's, as ``upload`` filled it);
+        results stay in ``arrays["profiles"]`` and ``arrays["flags"]``. Returns the kernel
+        event (for chaining stages without host round trips)."""
+        gsize = (self.n_groups * self.local_size,)
+        return self._kernel(self.runtime.queue, gsize, (self.local_size,), wait_for=wait_for,
+                            samples=self.device("samples", samples), clip_level=self.clip_level,
+                            n_beams=self.n_beams, profiles=self.arrays["profiles"], flags=self.arrays["flags"],
+                            **self._constants)
+
+    def _result(self, profiles, flags):
+        return RangeFFTResult(profiles, flags)
 
     def __call__(self, samples):
-        """Process one frame: (n_az, n_el, n_samples) -> RangeFFTResult (blocking)."""
-        cl = self._cl
+        """Process one frame: (*batch, n_samples) -> RangeFFTResult (blocking)."""
         copy = self.upload(samples)
-        done = self.enqueue(self.samples_buf, wait_for=[copy])
-        profiles = np.empty((*self.batch, self.n_bins), np.float32)
-        flags = np.empty(self.batch, np.uint8)
-        cl.enqueue_copy(self.runtime.queue, profiles, self.profiles_buf, wait_for=[done])
-        cl.enqueue_copy(self.runtime.queue, flags, self.flags_buf, wait_for=[done])
-        return RangeFFTResult(profiles, flags)
+        return self.download(wait_for=[self.enqueue(wait_for=[copy])])
