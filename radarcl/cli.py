@@ -1,26 +1,94 @@
-"""Command line: `radarcl info | demo | bench | tune | navtech | navtech-map | fuse | render | view`."""
+"""The `radarcl` command: argument parsing only; each subcommand is a small function that calls a
+library or job module. Subcommands, and the benchmarks under `radarcl bench`, own their options.
+
+Exit status: 0 done, 2 a radarcl error or a bad argument (one sentence on stderr), 130 Ctrl-C,
+143 SIGTERM, 70 an unexpected error (a bug: one sentence, and the traceback with --debug or
+RADARCL_DEBUG=1).
+"""
 
 import argparse
-import dataclasses
 import json
 import logging
+import os
+import signal
 import sys
+from pathlib import Path
 
 from radarcl.errors import RadarclError
 
-
-def _runtime():
-    from radarcl.cl import Runtime
-
-    return Runtime()
+DATA_ENV = "RADARCL_DATA"
 
 
-def cmd_info(args):
-    """List OpenCL platforms and devices."""
-    from radarcl.cl import device_report
+# -- argument types and shared option groups ------------------------------------------------------------
+def positive_int(text):
+    """argparse type: an integer >= 1."""
+    return bounded_int(1, None)(text)
 
-    print("\n".join(device_report()))
-    return 0
+
+def bounded_int(lo, hi):
+    """argparse type: an integer in [lo, hi] (hi None: no upper bound)."""
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < lo or (hi is not None and value > hi):
+            raise argparse.ArgumentTypeError(f"must lie in [{lo}, {hi if hi is not None else 'inf'}], got {value}")
+        return value
+    return parse
+
+
+def positive_float(text):
+    """argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
+    return value
+
+
+def add_output(p, flag, default, what):
+    """``flag`` (an output file) and --force."""
+    p.add_argument(flag, default=default, help=f"{what} (default: %(default)s); an existing file is kept unless --force")
+    if not any(a.dest == "force" for a in p._actions):
+        p.add_argument("--force", action="store_true", help="replace existing output files")
+
+
+def add_config(p, sensor_default=None):
+    """--sensor, --config, --set, --voxel: the map configuration (radarcl.mapconfig)."""
+    from radarcl import sensors
+
+    default = sensor_default or sensors.DEFAULT_SENSOR
+    p.add_argument("--sensor", default=None, metavar="NAME|FILE",
+                   help=f"sensor profile: {', '.join(sensors.builtin_names())} or a TOML file "
+                        f"(default: the --config file's sensor, else {default}; `radarcl sensors` lists them)")
+    p.add_argument("--config", default=None, metavar="FILE", help="map configuration file (TOML), e.g. from "
+                                                                  "`radarcl tune --save`")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="set one configuration value, e.g. --set cfar.guard_m=0.6 (repeatable; "
+                        "`radarcl config show` lists the keys)")
+    p.add_argument("--voxel", type=positive_float, default=None, help="voxel edge [m] (= --set grid.voxel_m=...)")
+    p.set_defaults(sensor_default=default)
+
+
+def resolve_config(args, program=None):
+    """The ``mapconfig.Resolved`` the options of ``add_config`` describe."""
+    from radarcl import mapconfig
+
+    flags = dict(mapconfig.parse_flag(text) for text in args.set)
+    if args.voxel is not None:
+        flags["grid.voxel_m"] = args.voxel
+    sensor = args.sensor if args.sensor is not None or args.config is not None else args.sensor_default
+    return mapconfig.resolve(sensor, args.config, flags, program)
+
+
+def default_data(name):
+    """The shared data set ``name``: under $RADARCL_DATA, else ../shared/data beside the source
+    checkout (never relative to the current directory)."""
+    root = Path(os.environ[DATA_ENV]) if os.environ.get(DATA_ENV) else Path(__file__).resolve().parents[2] / "shared" / "data"
+    return root / name
 
 
 class ProgressBar:
@@ -43,112 +111,136 @@ class ProgressBar:
         self.stream.flush()
 
 
+def _progress(args):
+    return None if getattr(args, "no_progress", False) else ProgressBar()
+
+
+def _runtime():
+    from radarcl.cl import Runtime
+
+    return Runtime()
+
+
+# -- the subcommands ------------------------------------------------------------------------------------------
+def cmd_info(args):
+    from radarcl.cl import device_report
+
+    print("\n".join(device_report()))
+    return 0
+
+
+def cmd_sensors(args):
+    from radarcl import sensors
+
+    if args.name:
+        print(sensors.load(args.name).toml(), end="")
+        return 0
+    for name in sensors.builtin_names():
+        s = sensors.load(name)
+        print(f"{name:20s} {s.input:8s} {s.description}")
+    print("(radarcl sensors NAME prints a profile; --sensor takes a name or a TOML file)")
+    return 0
+
+
+def cmd_config(args):
+    from radarcl import mapconfig, outputs
+
+    config = resolve_config(args)
+    if args.action == "save":
+        path = outputs.check(args.file, args.force, inputs=[args.config], what="configuration file")
+        config.save(path, header=("radarcl map configuration", "written by radarcl config save"), overwrite=True)
+        print(f"wrote {path}")
+        return 0
+    print("\n".join(mapconfig.show(config)))
+    return 0
+
+
 def cmd_demo(args):
-    """Run the main job on the built-in default."""
     from radarcl.jobs import demo
 
     demo.run(_runtime(), args.out, seed=args.seed, quick=args.quick, replay=args.replay, report=print,
-             progress=None if args.no_progress else ProgressBar())
+             progress=_progress(args))
     return 0
-
-
-def _reference_observations(args, say):
-    """The reference scene's observations: replayed, or simulated with ``args.seed``."""
-    from radarcl.config import PAPER_RADAR
-    from radarcl.io import recording
-    from radarcl.scene.observe import observe
-    from radarcl.scene.outdoor import PAPER_TILTS_DEG, paper_scene
-
-    if args.replay:
-        return recording.load(args.replay, PAPER_RADAR.n_azimuth, PAPER_RADAR.n_elevation, PAPER_RADAR.n_samples)
-    say(f"simulating the reference scene, seed {args.seed} ...")
-    return observe(paper_scene(), PAPER_TILTS_DEG, seed=args.seed)
 
 
 def cmd_tune(args):
-    """The documented search for the eq. 12 constants and CFAR settings (radarcl.tuning)."""
+    from radarcl import outputs
     from radarcl.evaluation import tuning
-    from radarcl.scene.outdoor import paper_grid, paper_scene
+    from radarcl.evaluation.evaluate import paper_config
+    from radarcl.io import recording
+    from radarcl.scene.observe import observe
+    from radarcl.scene.outdoor import PAPER_TILTS_DEG, paper_grid, paper_scene
 
-    obs = _reference_observations(args, print)
-    truth = paper_scene().truth(paper_grid(tuning.TUNING_VOXEL_M))
-    best, _ = tuning.tune(_runtime(), obs, truth, report=print)
-    print(f"chosen: {best.label()}")
-    return 0
-
-
-def cmd_bench(args):
-    """Run a benchmark."""
-    from radarcl.bench import cfar, fusion, range_fft
-
-    if not args.json:
-        print(f"measuring {args.which}, {args.repeat} repetitions per variant ...", file=sys.stderr)
-    if args.which == "viewer":
-        from radarcl.bench import viewer
-
-        say = (lambda line: None) if args.json else (lambda line: print(line, file=sys.stderr))
-        result = viewer.run(args.map, repeat=min(args.repeat, 12), report=say)
-        lines = viewer.format_table(result)
-    elif args.which == "range-fft":
-        result = range_fft.run(_runtime(), n_ffts=tuple(args.n_fft), repeat=args.repeat)
-        lines = range_fft.format_table(result)
-    elif args.which == "quality":
-        from radarcl.bench import quality
-        from radarcl.evaluation.evaluate import MapConfig
-        from radarcl.scene.outdoor import paper_grid, paper_scene
-        from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
-
-        say = (lambda line: None) if args.json else (lambda line: print(line, file=sys.stderr))
-        args.seed = EVALUATION_SEED if args.seed is None else args.seed
-        obs = _reference_observations(args, say)
-        scene = paper_scene()
-        reference = TUNED if not args.paper else MapConfig()
-        result = quality.run(_runtime(), obs, lambda v: scene.truth(paper_grid(v)),
-                             dataclasses.replace(reference, voxel_m=args.voxel), voxels=tuple(args.voxels), report=say)
-        quality.chart(result, args.chart)
-        say(f"wrote {args.chart}")
-        lines = quality.format_table(result)
-    elif args.which == "fusion":
-        progress = None if args.json else (lambda line: print(line, file=sys.stderr))
-        result = fusion.run(_runtime(), repeat=min(args.repeat, 40), report=progress)
-        lines = fusion.format_table(result)
+    save = outputs.check(args.save, args.force, inputs=[args.replay], what="configuration file") if args.save else None
+    if args.replay:
+        obs = recording.load_observations(args.replay)
     else:
-        result = cfar.run(_runtime(), repeat=args.repeat)
-        lines = cfar.format_table(result)
-    print(json.dumps(result) if args.json else "\n".join(lines))
-    return 0
-
-
-def cmd_navtech(args):
-    """CFAR + eq. 12 on a Navtech scan; plot one azimuth like the paper's Fig. 10."""
-    from radarcl.jobs.navtech_report import report
-
-    report(_runtime(), args, print)
-    return 0
-
-
-def cmd_navtech_map(args):
-    """Fuse the Navtech scans with their odometry; consistency numbers and a top-down PNG."""
-    from radarcl.jobs import navtech_map
-
-    results, grid, poses = navtech_map.run(_runtime(), args.data, voxel_m=args.voxel, range_max_m=args.range_max,
-                                           report=print)
-    navtech_map.plot_map(grid, poses, args.out, results)
-    mem = grid.memory()
-    print(f"map: {mem['bricks']} bricks, {mem['sparse_bytes'] / 2**20:.1f} MiB allocated "
-          f"({mem['dense_bytes'] / 2**20:.1f} MiB dense); wrote {args.out}")
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(results, f, indent=1)
+        print(f"simulating the reference scene, seed {args.seed} ...")
+        obs = observe(paper_scene(), PAPER_TILTS_DEG, seed=args.seed)
+    base = paper_config(args.voxel)
+    truth = paper_scene().truth(paper_grid(args.voxel))
+    best, _ = tuning.tune(_runtime(), obs, truth, base, report=print, progress=_progress(args))
+    print(f"chosen: {best.label(base)}")
+    if save:
+        best.save(save, header=("radarcl map configuration chosen by `radarcl tune`",
+                                f"reference scene, seed {obs.seed}, {args.voxel} m; the search of radarcl/evaluation/tuning.py"),
+                  overwrite=True)
+        print(f"wrote {save} (use it with --config)")
     return 0
 
 
 def cmd_fuse(args):
-    """Fuse a recording into a map file."""
+    from radarcl import outputs
     from radarcl.jobs import fuse_recording
 
-    fuse_recording.run(_runtime(), args.recording, args.out, voxel_m=args.voxel, paper=args.paper, every=args.every,
-             progress=None if args.no_progress else ProgressBar())
+    config = resolve_config(args)
+    out = outputs.check(args.out, args.force, inputs=[args.input, args.config, args.odometry], what="map file")
+    source = fuse_recording.open_source(config.sensor, args.input, args.odometry)
+    if source.sensor is not config.sensor:                   # the reader learnt the bin count
+        config = config.for_sensor(source.sensor)
+    fuse_recording.run(_runtime(), source, config, out, every=args.every, progress=_progress(args))
+    return 0
+
+
+def cmd_navtech(args):
+    from radarcl import outputs
+    from radarcl.jobs.navtech_report import report
+
+    out = outputs.check(args.out, args.force, inputs=[args.scan], what="figure")
+    report(_runtime(), resolve_config(args), args.scan, args.azimuth, out, print)
+    return 0
+
+
+def cmd_navtech_map(args):
+    from radarcl import outputs
+    from radarcl.jobs import navtech_map
+
+    data = Path(args.data) if args.data else default_data("navtech_oxford")
+    if not data.is_dir():
+        from radarcl.errors import ConfigError
+
+        raise ConfigError(f"no data directory {data}; give DATA (radar/*.png and gt/radar_odometry.csv) or set "
+                          f"{DATA_ENV}")
+    out = outputs.check(args.out, args.force, what="figure")
+    map_out = outputs.check(args.map, args.force, what="map file") if args.map else None
+    json_out = outputs.check(args.json, args.force, what="JSON file") if args.json else None
+    config = resolve_config(args)
+    results, grid, poses, pulses = navtech_map.run(_runtime(), config, data, report=print, progress=_progress(args))
+    print(f"detector: {pulses['cfar']['kind'].upper()}-CFAR guard {pulses['cfar']['guard_bins']} train "
+          f"{pulses['cfar']['train_bins']} bins; {pulses['detections_per_scan']:.0f} detections and "
+          f"{pulses['pulses_per_scan']:.0f} pulses per scan, pulse width median {pulses['pulse_width_median_m']:.3f} m "
+          f"(90 % below {pulses['pulse_width_p90_m']:.3f} m), {100 * pulses['wide_fraction']:.1f} % wide")
+    with outputs.atomic(out) as tmp:
+        navtech_map.plot_map(grid, poses, tmp, results, title=config.sensor.name)
+    mem = grid.memory()
+    print(f"map: {mem['bricks']} bricks, {mem['sparse_bytes'] / 2**20:.1f} MiB allocated "
+          f"({mem['dense_bytes'] / 2**20:.1f} MiB dense); wrote {out}")
+    if map_out:
+        grid.save(map_out)
+        print(f"wrote {map_out} (radarcl render / view open it)")
+    if json_out:
+        with outputs.atomic(json_out) as tmp:
+            tmp.write_text(json.dumps(dict(consistency=results, detector=pulses, config=config.as_dict()), indent=1))
     return 0
 
 
@@ -160,26 +252,38 @@ def _settings(args):
 
 
 def cmd_render(args):
-    """Render a map file to a PNG through EGL, no display needed."""
+    from radarcl import outputs
     from radarcl.viewer.headless import render_map
 
-    render_map(args.map, args.out, args.mode, args.camera, tuple(args.size), _settings(args),
-               colorbar=not args.no_colorbar)
+    out = outputs.check(args.out, args.force, inputs=[args.map], what="image")
+    with outputs.atomic(out) as tmp:
+        render_map(args.map, tmp, args.mode, args.camera, tuple(args.size), _settings(args),
+                   colorbar=not args.no_colorbar, report=lambda line: print(line.replace(str(tmp), str(out))))
     return 0
 
 
 def cmd_view(args):
-    """The interactive viewer."""
+    from radarcl import outputs
     from radarcl.viewer.app import run
 
+    shot = outputs.check(args.screenshot, args.force, inputs=[args.map], what="screenshot") if args.screenshot else None
     status = run(args.map, mode_name=args.mode, camera=args.camera, size=tuple(args.size), settings=_settings(args),
-                 live=args.live, frames=args.frames, screenshot=args.screenshot, keys=args.keys, window=args.window)
-    if args.screenshot:
-        print(f"saved {args.screenshot}")
+                 live=args.live, frames=args.frames, screenshot=shot, keys=args.keys, window=args.window)
+    if shot:
+        print(f"saved {shot}")
     return status
 
 
-def _view_options(p, size):
+def cmd_bench(args):
+    say = (lambda line: None) if args.json else (lambda line: print(line, file=sys.stderr))
+    say(f"measuring {args.bench} ...")
+    result, lines = args.module.command(args, _runtime, say)
+    print(json.dumps(result) if args.json else "\n".join(lines))
+    return 0
+
+
+# -- the parser ----------------------------------------------------------------------------------------------
+def _view_options(p):
     from radarcl.viewer.modes import COLORMAPS, MODES
 
     p.add_argument("map", help="a map file: the npz that EvidenceGrid.save writes (radarcl demo's map.npz)")
@@ -187,142 +291,200 @@ def _view_options(p, size):
                    help="; ".join(f"{m.name}: {m.description}" for m in MODES.values()) + " (default: %(default)s)")
     p.add_argument("--camera", default="iso",
                    help="iso, top, front, side or AZ,EL[,DIST[,X,Y,Z]] in degrees and metres (default: %(default)s)")
-    p.add_argument("--size", type=int, nargs=2, default=size, metavar=("W", "H"), help="pixels (default: %(default)s)")
+    p.add_argument("--size", type=bounded_int(1, 16384), nargs=2, default=[1024, 768], metavar=("W", "H"),
+                   help="pixels, 1-16384 (default: %(default)s)")
     p.add_argument("--threshold", type=float, default=1.0,
                    help="occupancy threshold [nat]: the isosurface and the low end of the colours (default: %(default)s)")
     p.add_argument("--lo", type=float, default=None, help="low end of the transfer function [nat] (default: --threshold)")
     p.add_argument("--hi", type=float, default=None,
                    help="high end [nat] (default: the 99.9th percentile of the values above --lo)")
-    p.add_argument("--gamma", type=float, default=1.0, help="transfer-function gamma (default: %(default)s)")
+    p.add_argument("--gamma", type=positive_float, default=1.0, help="transfer-function gamma (default: %(default)s)")
     p.add_argument("--colormap", choices=COLORMAPS, default="inferno", help="(default: %(default)s)")
-    p.add_argument("--step", type=float, default=1.0, help="ray-march step [voxels] (default: %(default)s)")
+    p.add_argument("--step", type=positive_float, default=1.0, help="ray-march step [voxels] (default: %(default)s)")
+
+
+BENCHES = {
+    "range-fft": ("radarcl.bench.range_fft", "window + FFT + magnitude of a paper frame vs scipy.fft, same run"),
+    "cfar": ("radarcl.bench.cfar", "CFAR + eq. 12 of a paper frame vs vectorised numpy, same run"),
+    "fusion": ("radarcl.bench.fusion", "one paper frame into the 0.1 m grid vs the float64 oracle and the "
+                                       "memory floor, same run"),
+    "quality": ("radarcl.bench.quality", "map error against run time on the reference scene (zero padding, beam "
+                                         "model, voxel, CFAR kind) with the OctoMap-style baseline"),
+    "viewer": ("radarcl.bench.viewer", "the paper's full grid rendered at 512 x 512 through EGL vs a plain ray "
+                                       "march, same run"),
+}
 
 
 def build_parser():
     """The argparse parser of the `radarcl` command."""
+    import importlib
+
     parser = argparse.ArgumentParser(
         prog="radarcl",
         description="FMCW radar to 3D evidence grids (Foessel-Bunting sensor model) with OpenCL kernels. "
                     "The device comes from RADARCL_DEVICE (P:D or a name substring); PoCL's CPU is the fallback.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages (kernel builds...)")
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an error (or RADARCL_DEBUG=1)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("info", help="list OpenCL platforms and devices and what the kernels need")
-    p.set_defaults(func=cmd_info)
+    def command(name, func, summary, description=None):
+        p = sub.add_parser(name, help=summary, description=description or summary[0].upper() + summary[1:] + ".")
+        p.set_defaults(func=func)
+        return p
 
-    p = sub.add_parser("demo", help="the main job: the paper's reference scene simulated, fused at 0.1 m, scored "
-                                    "against ground truth and the OctoMap-style baseline, plotted",
-                       description="Simulates the outdoor scene of the paper's §4.3 (3,840 observations), fuses it "
-                                   "with the paper's and the tuned constants, prints metrics and timings and writes "
-                                   "the recording, the map, plots and summary.json to --out.")
+    command("info", cmd_info, "list OpenCL platforms and devices and what the kernels need")
+
+    p = command("sensors", cmd_sensors, "list the built-in sensor profiles, or print one",
+                "Lists the built-in sensor profiles (radarcl/profiles/*.toml), or prints one as TOML: copy it to "
+                "describe your own radar and pass the file to --sensor.")
+    p.add_argument("name", nargs="?", help="a profile name or file to print")
+
+    p = command("config", cmd_config, "show or save the effective map configuration",
+                "`config show` prints every configuration key with its value and where it came from (radarcl "
+                "default, the sensor's geometry, its profile, the --config file, a flag), and how the windows in "
+                "metres become bins. `config save FILE` writes it as a file for --config.")
+    p.add_argument("action", choices=["show", "save"])
+    p.add_argument("file", nargs="?", help="config save: the file to write")
+    p.add_argument("--force", action="store_true", help="config save: replace an existing file")
+    add_config(p)
+
+    p = command("demo", cmd_demo, "the main job: the paper's reference scene simulated, fused at 0.1 m, scored "
+                                  "against ground truth and the OctoMap-style baseline, plotted",
+                "Simulates the outdoor scene of the paper's §4.3 (3,840 observations), fuses it with the paper's "
+                "and the tuned constants, prints metrics and timings and writes the recording, the map, plots and "
+                "summary.json to --out.")
     p.add_argument("--out", default="out/demo", help="output directory (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="simulation seed (default: %(default)s, the evaluation seed)")
     p.add_argument("--quick", action="store_true", help="0.4 m voxels instead of the paper's 0.1 m (CI-sized)")
     p.add_argument("--replay", default=None, help="replay a recording (reference_scene.npz) instead of simulating")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
-    p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("tune", help="the documented search for k_occ, E_h, E_l and the CFAR settings on the "
-                                    "reference scene (tuning seed, 0.2 m)")
+    p = command("tune", cmd_tune, "the documented search for the CFAR settings and the eq. 12 constants on the "
+                                  "reference scene; --save writes the choice as a configuration file",
+                "Runs the coordinate search of radarcl/evaluation/tuning.py (CFAR kind and P_fa, wide-pulse width, "
+                "E_h and E_l, common scale) on the reference scene simulated with the tuning seed, and with --save "
+                "writes the chosen configuration for --config.")
     p.add_argument("--seed", type=int, default=2, help="simulation seed (default: %(default)s, the tuning seed)")
-    p.add_argument("--replay", default=None, help="tune on a recording instead of simulating")
-    p.set_defaults(func=cmd_tune)
+    p.add_argument("--replay", default=None, help="tune on a recording of the reference scene instead of simulating")
+    p.add_argument("--voxel", type=positive_float, default=0.2, help="voxel edge [m] (default: %(default)s)")
+    p.add_argument("--save", default=None, metavar="FILE", help="write the chosen configuration to FILE")
+    p.add_argument("--force", action="store_true", help="replace an existing --save file")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
-    p = sub.add_parser("bench", help="benchmarks, each against a baseline measured in the same run")
-    p.add_argument("which", choices=["range-fft", "cfar", "fusion", "quality", "viewer"],
-                   help="range-fft: window+FFT+magnitude vs scipy; cfar: CFAR + eq. 12 vs numpy; fusion: one "
-                        "frame into the paper's 0.1 m grid vs the float64 oracle and the memory floor "
-                        "(--repeat capped at 40); quality: map error against run time on the reference scene "
-                        "(zero padding, beam model, voxel size, CFAR kind) with the OctoMap-style baseline; viewer: the paper's "
-                        "full grid rendered at 512 x 512 through EGL vs a plain ray march (--repeat capped at 12)")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
-    p.add_argument("--repeat", type=int, default=200, help="timed repetitions per variant (default: %(default)s)")
-    p.add_argument("--n-fft", type=int, nargs="+", default=[512, 1024],
-                   help="range-fft only: FFT lengths (default: 512 1024)")
-    p.add_argument("--voxel", type=float, default=0.2, help="quality only: voxel of the reference run (default: %(default)s)")
-    p.add_argument("--voxels", type=float, nargs="+", default=[0.4, 0.2, 0.1],
-                   help="quality only: voxel sizes swept (default: 0.4 0.2 0.1)")
-    p.add_argument("--paper", action="store_true", help="quality only: sweep around the paper's constants, not the tuned")
-    p.add_argument("--seed", type=int, default=None, help="quality only: simulation seed (default: the evaluation seed)")
-    p.add_argument("--replay", default=None, help="quality only: a recording instead of simulating")
-    p.add_argument("--chart", default="quality.png", help="quality only: PNG chart to write (default: %(default)s)")
-    p.add_argument("--map", default=None, help="viewer only: time this map file instead of the reference scene's")
-    p.set_defaults(func=cmd_bench)
+    p = command("fuse", cmd_fuse, "fuse any sensor's frames into a map file (rewritten every --every frames for "
+                                  "radarcl view --live)",
+                "Reads INPUT as the sensor's reader says (a radarcl recording; a directory of polar PNG scans, "
+                "with radar_odometry.csv beside them or in ../gt; a TI capture .npy/.txt), fuses every frame with "
+                "the map configuration and writes the map file.")
+    p.add_argument("input", help="a recording (.npz), a directory of polar scans, or a TI capture")
+    add_output(p, "--out", "map.npz", "map file to write")
+    add_config(p)
+    p.add_argument("--odometry", default=None, help="polar scans: the radar_odometry.csv (default: found beside them)")
+    p.add_argument("--every", type=positive_int, default=None, help="rewrite the map file every N frames")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
-    p = sub.add_parser("navtech", help="CFAR and the eq. 12 interpreter on a Navtech polar scan (Oxford "
-                                       "format PNG); plot one azimuth like the paper's Fig. 10",
-                       description="Reads a scan, converts its dB levels to power (1 dB per level), runs "
-                                   "CFAR and eq. 12 on every azimuth with the kernels, prints what was "
-                                   "found and writes a Fig. 10 style PNG of one azimuth.")
+    p = command("navtech", cmd_navtech, "CFAR and the eq. 12 interpreter on one polar scan; plot one azimuth "
+                                        "like the paper's Fig. 10",
+                "Reads a polar PNG scan (1 dB per level), runs CFAR and eq. 12 on every azimuth with the kernels, "
+                "prints what was found and writes a Fig. 10 style PNG of one azimuth.")
     p.add_argument("scan", help="a <unix_us>.png scan")
     p.add_argument("--azimuth", type=int, default=0, help="azimuth index to plot (default: %(default)s)")
-    p.add_argument("--out", default="navtech_fig10.png", help="PNG to write (default: %(default)s)")
-    p.add_argument("--kind", choices=["ca", "go", "so", "os"], default="ca", help="CFAR kind (default: %(default)s)")
-    p.add_argument("--guard", type=int, default=16, help="guard cells per side (default: %(default)s)")
-    p.add_argument("--train", type=int, default=16, help="training cells per side (default: %(default)s)")
-    p.add_argument("--pfa", type=float, default=1e-3, help="design false-alarm probability (default: %(default)s)")
-    p.add_argument("--range-min", type=float, default=2.0,
-                   help="no evidence nearer than this [m]; the radome echo fills the first ~1.5 m (default: %(default)s)")
-    p.add_argument("--range-max", type=float, default=None, help="no evidence beyond this [m] (default: the last bin)")
-    p.add_argument("--wide-m", type=float, default=None,
-                   help="wide-pulse width at the threshold [m] (default: the paper's geometry, 1.87 m)")
-    p.set_defaults(func=cmd_navtech)
+    add_output(p, "--out", "navtech_fig10.png", "PNG to write")
+    add_config(p, "navtech-cts350x")
 
-    p = sub.add_parser("navtech-map", help="fuse the Navtech scans with their ground-truth odometry into a map; "
-                                           "check the geometry by half-map consistency",
-                       description="Fuses scans 1-5 and 6-11 into two maps and prints how well they agree "
-                                   "with the true poses and with the second half moved 1 m, turned 2 deg, "
-                                   "without motion within a scan, with the azimuths or the odometry reversed; "
-                                   "then fuses all scans and writes a top-down PNG.")
-    p.add_argument("data", nargs="?", default="../shared/data/navtech_oxford",
-                   help="directory with radar/ and gt/radar_odometry.csv (default: %(default)s)")
-    p.add_argument("--voxel", type=float, default=0.3, help="voxel edge [m] (default: %(default)s)")
-    p.add_argument("--range-max", type=float, default=80.0, help="no evidence beyond this [m] (default: %(default)s)")
-    p.add_argument("--out", default="navtech_map.png", help="PNG to write (default: %(default)s)")
-    p.add_argument("--json", default=None, help="also write the consistency numbers to this JSON file")
-    p.set_defaults(func=cmd_navtech_map)
-
-    p = sub.add_parser("fuse", help="fuse a recording of raw frames into a map file (rewritten every --every "
-                                    "frames for radarcl view --live)")
-    p.add_argument("recording", help="a radarcl recording, e.g. radarcl demo's reference_scene.npz")
-    p.add_argument("--out", default="map.npz", help="map file to write (default: %(default)s)")
-    p.add_argument("--voxel", type=float, default=0.1, help="voxel edge [m] (default: %(default)s)")
-    p.add_argument("--paper", action="store_true", help="the paper's constants instead of the tuned ones")
-    p.add_argument("--every", type=int, default=None, help="rewrite the map file every N frames")
+    p = command("navtech-map", cmd_navtech_map, "fuse polar scans with their odometry into a map; check the "
+                                                "geometry by half-map consistency",
+                "Fuses the first and second half of the scans into two maps and prints how well they agree with "
+                "the true poses and with the second half moved 1 m, turned 2 deg, without motion within a scan, "
+                "with the azimuths or the odometry reversed; prints the detector's pulse statistics; fuses all "
+                "scans into a top-down PNG and, with --map, a map file.")
+    p.add_argument("data", nargs="?", default=None,
+                   help=f"directory with radar/*.png and gt/radar_odometry.csv (default: the Oxford scans in "
+                        f"${DATA_ENV} or ../shared/data beside the source)")
+    add_output(p, "--out", "navtech_map.png", "PNG to write")
+    p.add_argument("--map", default=None, help="also write the fused map file (npz)")
+    p.add_argument("--json", default=None, help="also write the numbers to this JSON file")
+    add_config(p, "navtech-cts350x")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
-    p.set_defaults(func=cmd_fuse)
 
-    p = sub.add_parser("render", help="render a map file to a PNG through EGL (no display needed)",
-                       description="Ray-marches the map as a 3D texture (or draws the Fig. 11 spheres) offscreen "
-                                   "through EGL and writes a PNG with a colour bar.")
-    _view_options(p, [1024, 768])
-    p.add_argument("--out", default="view.png", help="PNG to write (default: %(default)s)")
+    p = command("render", cmd_render, "render a map file to a PNG through EGL (no display needed)",
+                "Ray-marches the map as a 3D texture (or draws the Fig. 11 spheres) offscreen through EGL and "
+                "writes a PNG with a colour bar.")
+    _view_options(p)
+    add_output(p, "--out", "view.png", "PNG to write")
     p.add_argument("--no-colorbar", action="store_true", help="leave the colour bar out")
-    p.set_defaults(func=cmd_render)
 
-    p = sub.add_parser("view", help="the interactive volume viewer (press h in the window for the keys)",
-                       description="Opens a window on the map: drag to orbit, right-drag or shift-drag to pan, "
-                                   "wheel to zoom; 1-4 modes, t/T threshold, x/y/z slices, c colormap, s screenshot, "
-                                   "h help. --live follows a map file that a running fusion rewrites.")
-    _view_options(p, [1024, 768])
-    p.add_argument("--live", action="store_true",
-                   help="watch MAP and upload the bricks that changed whenever it is rewritten")
+    p = command("view", cmd_view, "the interactive volume viewer (press h in the window for the keys)",
+                "Opens a window on the map: drag to orbit, right-drag or shift-drag to pan, wheel to zoom; 1-4 "
+                "modes, t/T threshold, x/y/z slices, c colormap, s screenshot, h help. --live follows a map file "
+                "that a running fusion rewrites.")
+    _view_options(p)
+    p.add_argument("--live", action="store_true", help="watch MAP and upload the bricks that changed whenever it is "
+                                                       "rewritten")
     p.add_argument("--window", default="pyglet", help="moderngl-window backend: pyglet, glfw, headless "
                                                       "(default: %(default)s)")
     p.add_argument("--screenshot", default=None, help="save the last frame to this PNG when the window closes")
-    p.add_argument("--frames", type=int, default=None, help="close after this many frames (scripts, tests)")
+    p.add_argument("--force", action="store_true", help="replace an existing screenshot")
+    p.add_argument("--frames", type=positive_int, default=None, help="close after this many frames (scripts, tests)")
     p.add_argument("--keys", default="", help="keys pressed one per frame at the start, e.g. '2t' (scripts, tests)")
-    p.set_defaults(func=cmd_view)
+
+    p = command("bench", cmd_bench, "benchmarks, each against a baseline measured in the same run",
+                "Each benchmark prints its figures and their ratio to a baseline measured in the same run "
+                "(interleaved, medians). `radarcl bench NAME --help` for its options.")
+    benches = p.add_subparsers(dest="bench", required=True, metavar="NAME")
+    for name, (module_name, summary) in BENCHES.items():
+        module = importlib.import_module(module_name)
+        b = benches.add_parser(name, help=summary, description=summary[0].upper() + summary[1:] + ".")
+        b.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+        module.add_arguments(b)
+        b.set_defaults(module=module)
     return parser
 
 
 def main(argv=None):
-    """Entry point; returns the exit status (2 for a radarcl error, with its message)."""
-    args = build_parser().parse_args(argv)
+    """Entry point; returns the exit status (see the module docstring)."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    debug = args.debug or os.environ.get("RADARCL_DEBUG", "") not in ("", "0")
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
+    previous = signal.getsignal(signal.SIGTERM)
+
+    def terminated(signum, frame):
+        raise SystemExit(143)                         # unwinds: temporary files are removed
+
+    if threading_main():
+        signal.signal(signal.SIGTERM, terminated)
     try:
         return args.func(args)
+    except KeyboardInterrupt:
+        print("radarcl: interrupted", file=sys.stderr)
+        return 130
     except RadarclError as exc:
+        if debug:
+            raise
         print(f"radarcl: error: {exc}", file=sys.stderr)
         return 2
+    except (OSError, MemoryError) as exc:
+        if debug:
+            raise
+        what = exc.strerror if isinstance(exc, OSError) and exc.strerror else (str(exc) or type(exc).__name__)
+        where = f" ({exc.filename})" if isinstance(exc, OSError) and exc.filename else ""
+        print(f"radarcl: error: {what}{where}", file=sys.stderr)
+        return 2
+    except Exception as exc:                          # a bug: say so in one line
+        if debug:
+            raise
+        print(f"radarcl: unexpected error (a bug, please report it with --debug's traceback): "
+              f"{type(exc).__name__}: {exc}", file=sys.stderr)
+        return 70
+    finally:
+        if threading_main():
+            signal.signal(signal.SIGTERM, previous)
+
+
+def threading_main():
+    """True in the main thread (only there may signal handlers be set)."""
+    import threading
+
+    return threading.current_thread() is threading.main_thread()

@@ -115,6 +115,28 @@ class BeamModel:
         return two_way_weight(rho2) if self.gaussian else np.ones_like(np.asarray(rho2, dtype=float))
 
 
+# The beam volumes compared (``bench quality``): the axis alone (what a point cloud sees), a
+# uniform cone, a cone weighted by the two-way Gaussian, and the paper's cylindrical-conical
+# volume with the Gaussian (Fig. 7c).
+BEAM_MODELS = ("axis", "uniform-cone", "gaussian-cone", "cylindrical-conical")
+AXIS_BEAMWIDTH_RAD = 1e-6        # "axis": a cylinder of half a voxel around the beam axis
+
+
+def beam_model(name, beamwidth_az_rad, beamwidth_el_rad, wavelength_m, voxel_m):
+    """The ``BeamModel`` called ``name`` (one of BEAM_MODELS) for a radar with these
+    half-power beamwidths and wavelength (apertures from eq. 1), mapping at ``voxel_m``."""
+    a_az, a_el = (float(half_aperture(wavelength_m, b)) for b in (beamwidth_az_rad, beamwidth_el_rad))
+    if name == "axis":
+        return BeamModel(AXIS_BEAMWIDTH_RAD, AXIS_BEAMWIDTH_RAD, 0.5 * voxel_m, 0.5 * voxel_m, True, False)
+    if name == "uniform-cone":
+        return BeamModel(beamwidth_az_rad, beamwidth_el_rad, a_az, a_el, near_field=False, gaussian=False)
+    if name == "gaussian-cone":
+        return BeamModel(beamwidth_az_rad, beamwidth_el_rad, a_az, a_el, near_field=False, gaussian=True)
+    if name == "cylindrical-conical":
+        return BeamModel(beamwidth_az_rad, beamwidth_el_rad, a_az, a_el, near_field=True, gaussian=True)
+    raise ConfigError(f"beam model must be one of {', '.join(BEAM_MODELS)}, got {name!r}")
+
+
 # -- the frame's beam lattice ------------------------------------------------------------------------
 @dataclass(frozen=True)
 class BeamLattice:

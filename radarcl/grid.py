@@ -235,15 +235,12 @@ class EvidenceGrid:
         """Write the grid (spec and allocated bricks, not the dense volume) to an npz file.
         The file is written beside ``path`` and renamed over it, so a reader (``radarcl view
         --live``) sees the old map or the new one, never half of one."""
-        import os
+        from radarcl.outputs import atomic
 
         keys, data = self.bricks()
-        path = os.fspath(path)
-        tmp = f"{path}.{os.getpid()}.tmp"
-        with open(tmp, "wb") as f:
+        with atomic(path) as tmp, open(tmp, "wb") as f:
             np.savez_compressed(f, version=FILE_VERSION, origin_m=np.asarray(self.spec.origin_m),
                                 voxel_m=self.spec.voxel_m, shape=np.asarray(self.spec.shape), keys=keys, data=data)
-        os.replace(tmp, path)
 
     @classmethod
     def load(cls, runtime, path):

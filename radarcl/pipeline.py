@@ -70,7 +70,7 @@ class Mapping:
     """
 
     def __init__(self, runtime, grid, lattice, model, *, radar=None, n_fft=None, dtype=np.int16, n_bins=None,
-                 bin_spacing_m=None, cfar_config=None, interpret_config=None, per_beam_poses=False):
+                 bin_spacing_m=None, cfar_config=None, interpret_config=None, per_beam_poses=False, window="hann"):
         if not isinstance(grid, EvidenceGrid) or not isinstance(lattice, BeamLattice) or not isinstance(model, BeamModel):
             raise ConfigError("Mapping needs an EvidenceGrid, a BeamLattice and a BeamModel")
         if (radar is None) == (n_bins is None):
@@ -84,7 +84,8 @@ class Mapping:
             n_fft = radar.check_n_fft(n_fft if n_fft is not None else 1024)
             n_bins, bin_spacing_m = radar.n_bins(n_fft), radar.bin_spacing_m(n_fft)
             batch = (lattice.n_az, lattice.n_el)     # raw frames are (n_az, n_el, n_samples), always
-            self.range_fft = RangeFFT(runtime, batch, radar.n_samples, n_fft, dtype=dtype, output="power")
+            self.range_fft = RangeFFT(runtime, batch, radar.n_samples, n_fft, dtype=dtype, window=window,
+                                      output="power")
         elif bin_spacing_m is None:
             raise ConfigError("profile input needs bin_spacing_m")
         else:
@@ -94,6 +95,46 @@ class Mapping:
         self.fusion = Fusion(runtime, grid, lattice, model, n_bins, bin_spacing_m, it.first_bin, it.last_bin,
                              per_beam_poses=per_beam_poses)
         self.frames = 0
+        self.config = None          # the mapconfig.Resolved it was built from (from_config)
+
+    @classmethod
+    def from_config(cls, runtime, sensor=None, config=None, *, grid=None, per_beam_poses=None):
+        """The pipeline of a sensor and a map configuration: the one way radarcl builds one.
+
+        sensor: a ``sensors.SensorProfile``, a built-in name or a profile file (default: the
+        paper's radar, or the configuration's own sensor); config: a ``mapconfig.Resolved``,
+        a configuration file, or None for the sensor's defaults; grid: an ``EvidenceGrid`` to
+        fuse into (default: a new one as [grid] says); per_beam_poses: one pose per beam
+        (default: for a spinning radar, which moves during its turn)."""
+        from radarcl import mapconfig, sensors
+
+        if not isinstance(config, mapconfig.Resolved):
+            config = mapconfig.resolve(sensor, config)
+        elif sensor is not None and sensors.load(sensor).name != config.sensor.name:
+            raise ConfigError(f"the configuration is for sensor {config.sensor.name!r}, not {sensors.load(sensor).name!r}")
+        sensor = config.sensor
+        if grid is None:
+            grid = EvidenceGrid(runtime, config.grid_spec())
+        model = sensor.beam_model(config["beam.model"], grid.spec.voxel_m)
+        per_beam = sensor.spinning if per_beam_poses is None else per_beam_poses
+        common = dict(cfar_config=config.cfar_config(), interpret_config=config.interpret_config(),
+                      per_beam_poses=per_beam)
+        if sensor.raw:
+            mapping = cls(runtime, grid, sensor.lattice(), model, radar=sensor.radar, n_fft=config.n_fft,
+                          dtype=sensor.sample_dtype, window=config["range_fft.window"], **common)
+        else:
+            if sensor.n_bins() is None:
+                raise ConfigError(f"sensor {sensor.name} does not say how many range bins it has; the reader "
+                                  "learns it from the data (SensorProfile.with_bins)")
+            mapping = cls(runtime, grid, sensor.lattice(), model, n_bins=sensor.n_bins(),
+                          bin_spacing_m=sensor.bin_spacing_m(), **common)
+        mapping.config, mapping.sensor = config, sensor
+        return mapping
+
+    @property
+    def frame_shape(self):
+        """Shape of one frame: (n_az, n_el, n_samples) raw, (*batch, n_bins) profiles."""
+        return self.range_fft.input_shape if self.range_fft is not None else self.detection.cfar.input_shape
 
     def fuse(self, frame, poses, flags=None):
         """Fuse one frame taken at ``poses`` (4x4, or one per beam). The pose and the frame are

@@ -68,8 +68,9 @@ def test_fuse_writes_a_map_the_viewer_reads(tmp_path, capsys):
 def test_demo_refuses_a_file_that_is_not_a_recording(tmp_path, capsys):
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a zip file")
-    assert main(["demo", "--quick", "--no-progress", "--out", str(tmp_path), "--replay", str(bad)]) == 2
-    assert "not a readable .npz recording" in capsys.readouterr().err
+    assert main(["demo", "--quick", "--no-progress", "--out", str(tmp_path / "out"), "--replay", str(bad)]) == 2
+    assert "bad.npz is not a readable .npz file" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists(), "nothing may be written before the input is read"
 
 
 def test_bench_json_has_the_issue_keys(capsys):

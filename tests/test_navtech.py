@@ -8,8 +8,9 @@ from radarcl import oracle
 from radarcl.cli import main
 from radarcl.config import CfarConfig, InterpretConfig
 from radarcl.errors import FrameFormatError
-from radarcl.io import navtech
+from radarcl.io import polar_png as navtech
 from radarcl.pipeline import Detection
+from radarcl.sensors import load as load_sensor
 from test_cfar import check_against_oracle
 from tolerances import EVIDENCE_UNITS_TOL
 
@@ -25,12 +26,14 @@ def test_reader_decodes_every_scan(scans):
         scan = navtech.load_scan(path)
         assert scan.levels.shape == (400, 3768) and scan.levels.dtype == np.uint8
         assert scan.valid.all()
-        # one revolution: 400 azimuths 0.9 deg apart, timestamps inside ~1/4 s after the name
-        assert np.allclose(np.diff(scan.angles_rad), 2 * np.pi / 400, atol=1e-9)
+        # one revolution: 400 azimuths 0.9 deg apart, counter-clockwise (REP-103: the sensor turns
+        # clockwise, so the rows come in reverse order after the first); the first row is the
+        # first in time (the file's name), the turn takes ~1/4 s
+        assert np.allclose(np.diff(np.unwrap(scan.angles_rad)), 2 * np.pi / 400, atol=1e-9)
         assert 0 <= scan.angles_rad.min() and scan.angles_rad.max() < 2 * np.pi
-        assert np.all(np.diff(scan.timestamps_us) >= 0)
-        assert scan.timestamps_us[0] == int(path.stem)
-        assert 0.2e6 < scan.timestamps_us[-1] - scan.timestamps_us[0] < 0.3e6
+        assert scan.timestamps_us[0] == int(path.stem) and np.all(np.diff(scan.timestamps_us[1:]) <= 0)
+        assert np.array_equal(scan.acquired, (-np.arange(400)) % 400)
+        assert 0.2e6 < scan.timestamps_us.max() - scan.timestamps_us.min() < 0.3e6
 
 
 def test_levels_are_decibels_of_integer_amplitudes(scans):
@@ -51,7 +54,7 @@ def test_bad_files_are_refused(tmp_path):
     Image.fromarray(np.zeros((4, 8), np.uint8)).save(tmp_path / "2.png")
     with pytest.raises(FrameFormatError, match=r"expected an 8-bit greyscale image of shape \(azimuths, 11 \+ bins\)"):
         navtech.load_scan(tmp_path / "2.png")
-    with pytest.raises(FrameFormatError, match="no Navtech scans"):
+    with pytest.raises(FrameFormatError, match="not a directory of polar PNG scans"):
         navtech.scan_paths(tmp_path / "empty")
 
 
@@ -60,7 +63,8 @@ def test_detection_on_a_real_scan_matches_the_oracle(runtime, scans):
     power = scan.power()
     cfar_config = CfarConfig()
     interpret_config = InterpretConfig(range_min_m=2.0, range_max_m=160.0, max_pulses=128)
-    result = Detection(runtime, (400,), scan.n_bins, scan.bin_spacing_m, cfar_config, interpret_config)(power)
+    spacing = load_sensor("navtech-cts350x").bin_spacing_m()
+    result = Detection(runtime, (400,), scan.n_bins, spacing, cfar_config, interpret_config)(power)
     assert np.isfinite(result.cfar.noise).all() and np.isfinite(result.cfar.ratio).all()
     mask = check_against_oracle(result.cfar, power, cfar_config)
     per_azimuth = mask.sum(axis=1)
@@ -69,7 +73,7 @@ def test_detection_on_a_real_scan_matches_the_oracle(runtime, scans):
     # the interpreter on 40 azimuths (the plain oracle walks bins in Python)
     rows = slice(0, 400, 10)
     evidence, pulses, n_pulses, flags = oracle.interpret(
-        power[rows], result.cfar.noise[rows], result.cfar.mask[rows], interpret_config, scan.bin_spacing_m)
+        power[rows], result.cfar.noise[rows], result.cfar.mask[rows], interpret_config, spacing)
     got = result.interpret
     assert np.array_equal(got.n_pulses[rows], n_pulses) and np.array_equal(got.pulses[rows], pulses)
     assert np.array_equal(got.flags[rows], flags) and got.valid.all()
@@ -83,5 +87,7 @@ def test_cli_plots_one_azimuth(scans, tmp_path, capsys):
     assert main(["navtech", str(scans[0]), "--azimuth", "100", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert out.stat().st_size > 10_000 and "pulses per azimuth" in text and "azimuth 100:" in text
-    assert main(["navtech", str(scans[0]), "--azimuth", "400", "--out", str(out)]) == 2
+    assert main(["navtech", str(scans[0]), "--azimuth", "100", "--out", str(out)]) == 2
+    assert "exists; pass --force to replace it" in capsys.readouterr().err
+    assert main(["navtech", str(scans[0]), "--azimuth", "400", "--out", str(out), "--force"]) == 2
     assert "--azimuth must be in [0, 399]" in capsys.readouterr().err

@@ -6,46 +6,58 @@ import math
 import numpy as np
 import pytest
 
-from radarcl.jobs import navtech_map as nm
+from radarcl import mapconfig
 from radarcl.errors import ConfigError
-from radarcl.io import navtech
+from radarcl.io import polar_png
+from radarcl.jobs import navtech_map as nm
 
 VOXEL, RANGE = 0.5, 40.0
 
 
 @pytest.fixture(scope="module")
 def data(shared_data):
-    root = shared_data / "navtech_oxford"
-    scans = [navtech.load_scan(p) for p in navtech.scan_paths(root / "radar")]
-    odometry = navtech.load_odometry(root / "gt" / "radar_odometry.csv")
-    return scans, odometry, [int(s.path.stem) for s in scans]
+    config = mapconfig.resolve("navtech-cts350x", flags={"grid.voxel_m": VOXEL, "interpret.range_max_m": RANGE})
+    scans, poses, stamps, odometry = nm.load(config, shared_data / "navtech_oxford")
+    return config, scans, odometry, stamps
 
 
-def test_scan_poses_chain_the_odometry(data):
-    scans, odometry, stamps = data
-    poses = nm.scan_poses(stamps, odometry)
+def test_scan_poses_chain_the_odometry_in_rep103(data):
+    """The Oxford odometry (y right) arrives with y left: the car drives ~19 m forward and its
+    rows are (x, -y, -yaw) of the file's."""
+    _, scans, odometry, stamps = data
+    poses = polar_png.scan_poses(stamps, odometry)
     assert np.array_equal(poses[0], np.eye(4))
     step = odometry[(stamps[1], stamps[0])]
     assert np.allclose(poses[1][:2, 3], step[:2])
     assert 15 < np.linalg.norm(poses[-1][:2, 3]) < 25 and poses[-1][0, 3] > 0     # ~19 m forward
     with pytest.raises(ConfigError, match="no odometry row"):
-        nm.scan_poses([stamps[0], stamps[2]], odometry)
+        polar_png.scan_poses([stamps[0], stamps[2]], odometry)
+
+
+def test_odometry_is_converted_from_the_oxford_frame(shared_data, tmp_path):
+    path = shared_data / "navtech_oxford" / "gt" / "radar_odometry.csv"
+    import csv
+
+    with open(path, newline="") as f:
+        row = next(csv.DictReader(f))
+    key = (int(row["source_radar_timestamp"]), int(row["destination_radar_timestamp"]))
+    assert polar_png.load_odometry(path)[key] == (float(row["x"]), -float(row["y"]), -float(row["yaw"]))
 
 
 def test_true_geometry_is_the_most_self_consistent(runtime, data):
-    scans, odometry, stamps = data
-    poses = nm.scan_poses(stamps, odometry)
-    true = nm.beam_poses(scans, poses)
+    config, scans, odometry, stamps = data
+    poses = polar_png.scan_poses(stamps, odometry)
+    true = polar_png.beam_poses(scans, poses, 400)
     spec = nm.grid_for(true, RANGE, VOXEL)
 
     def agreement(per_beam, both=False):
-        a = nm.build_map(runtime, spec, scans[:5], (per_beam if both else true)[:5], RANGE).snapshot()
-        b = nm.build_map(runtime, spec, scans[5:], per_beam[5:], RANGE).snapshot()
+        a = nm.build_map(runtime, config, spec, scans[:5], (per_beam if both else true)[:5]).snapshot()
+        b = nm.build_map(runtime, config, spec, scans[5:], per_beam[5:]).snapshot()
         return nm.consistency(a, b)["correlation"]
 
     best = agreement(true)
     assert best > 0.3
     for altered in (nm._moved(true, dx=1.0), nm._moved(true, dyaw=math.radians(2)),
-                    nm._moved(true, dyaw=math.radians(-2)), nm.beam_poses(scans, poses, motion=False)):
+                    nm._moved(true, dyaw=math.radians(-2)), polar_png.beam_poses(scans, poses, 400, motion=False)):
         assert agreement(altered) < best - 0.05
-    assert agreement(nm.beam_poses(scans, poses, azimuth_sign=-1.0), both=True) < best - 0.05
+    assert agreement(polar_png.beam_poses(scans, poses, 400, azimuth_sign=-1.0), both=True) < best - 0.05

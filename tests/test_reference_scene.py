@@ -109,19 +109,24 @@ def test_recording_round_trip_and_refusals(tmp_path):
     obs = observe(outdoor.paper_scene(), [-7.2], seed=3)
     path = tmp_path / "rec.npz"
     recording.save(path, obs)
-    back = recording.load(path, 64, 4, 256)
+    back = recording.load_observations(path)
     assert np.array_equal(back.samples, obs.samples) and np.array_equal(back.poses, obs.poses)
+    assert back.seed == 3 and np.array_equal(back.tilts_deg, obs.tilts_deg)
+    assert recording.load(path).sensor == "paper"
     with pytest.raises(FrameFormatError, match="exists"):
         recording.save(path, obs, overwrite=False)
-    with pytest.raises(FrameFormatError, match="frames are"):
-        recording.load(path, 32, 4, 256)
+    other = tmp_path / "other.npz"
+    recording.save(other, recording.Recording(obs.samples[:, :32], obs.poses, "half-paper"))
+    with pytest.raises(FrameFormatError, match=r"frames are \(32, 4, 256\) int16; the paper radar's are"):
+        recording.load_observations(other)
     bad = tmp_path / "bad.npz"
-    np.savez(bad, samples=obs.samples)
+    np.savez(bad, version=2, samples=obs.samples)
     with pytest.raises(FrameFormatError, match="missing"):
         recording.load(bad)
     bad.write_bytes(b"\x00" * 10)
     with pytest.raises(FrameFormatError, match="not a readable"):
         recording.load(bad)
+    assert not list(tmp_path.glob(".*.tmp")), "a temporary file was left behind"
 
 
 def test_roc_auc_equals_the_pairwise_definition():

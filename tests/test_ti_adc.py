@@ -5,7 +5,10 @@ import pytest
 
 from radarcl import oracle
 from radarcl.errors import FrameFormatError
-from radarcl.io.ti_adc import TI_OPENRADAR, load_capture, words_to_int16
+from radarcl.io.ti_adc import load_capture, words_to_int16
+from radarcl.sensors import load as load_sensor
+
+TI_OPENRADAR = load_sensor("ti-xwr-openradar").radar
 from radarcl.stages.range_fft import RangeFFT
 from tolerances import RANGE_FFT_RTOL
 

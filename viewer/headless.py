@@ -53,7 +53,7 @@ def render_map(path, out, mode_name="occupancy", camera="iso", size=(1024, 768),
     cam = camera if isinstance(camera, Camera) else Camera.parse(camera, volume.spec, region)
     image, (lo, hi) = compose(renderer, cam, mode_name, settings, size, colorbar)
     Path(out).parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(image).save(out)
+    Image.fromarray(image).save(out, format="PNG")
     info = dict(out=str(out), mode=mode_name, size=list(size), lo=lo, hi=hi, grid=list(volume.spec.shape),
                 voxel_m=volume.spec.voxel_m, renderer=ctx.info["GL_RENDERER"], note=volume.note,
                 seconds=time.perf_counter() - start)

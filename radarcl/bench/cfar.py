@@ -147,3 +147,17 @@ def format_table(result):
         f"{result['numpy_evidence_max_abs_err_units']})",
         f"  {result['detections']} detections in {result['pulses']} pulses",
     ]
+
+
+def add_arguments(parser):
+    """`radarcl bench cfar` options."""
+    from radarcl.cli import positive_int
+
+    parser.add_argument("--repeat", type=positive_int, default=200, help="timed repetitions per variant "
+                                                                          "(default: %(default)s)")
+
+
+def command(args, runtime, say):
+    """Run the bench; returns (result dict, table lines)."""
+    result = run(runtime(), repeat=args.repeat)
+    return result, format_table(result)

@@ -139,3 +139,17 @@ def format_table(r):
         f"{r['oracle_voxels_compared']} voxels ({r['ambiguous_voxels']} ambiguous not compared)",
         f"  memory: {r['sparse_mib']:.0f} MiB in bricks vs {r['dense_mib']:.0f} MiB dense",
     ]
+
+
+def add_arguments(parser):
+    """`radarcl bench fusion` options."""
+    from radarcl.cli import bounded_int
+
+    parser.add_argument("--repeat", type=bounded_int(1, 400), default=20,
+                        help="timed frames per variant, 1-400 (default: %(default)s)")
+
+
+def command(args, runtime, say):
+    """Run the bench; returns (result dict, table lines)."""
+    result = run(runtime(), repeat=args.repeat, report=say)
+    return result, format_table(result)

@@ -2,29 +2,25 @@
 
 One recording of the paper's 3,840 observations (``tuning.EVALUATION_SEED``) is mapped with the
 tuned configuration (``tuning.TUNED``) and with one setting changed at a time: zero padding
-(n_fft 256 = none, 512 = x2, 1024 = x4), the beam model (``evaluate.BEAM_MODELS``), the voxel
+(n_fft 256 = none, 512 = x2, 1024 = x4), the beam model (``geometry.BEAM_MODELS``), the voxel
 size (0.4, 0.2, 0.1 m) and the CFAR kind. For each run, measured in this process:
 ``ms_per_frame`` (the device pipeline, planning included), AUC, IoU, false-free rate, Brier, and
 ``max_dev_nats``: the largest |kernel - float64 oracle| over the voxels that ``ORACLE_BEAMS`` of
-the middle frame reach, the oracle being ``reference`` end to end (range profile, CFAR, eq. 12,
+the middle frame reach, the oracle being ``radarcl.oracle`` end to end (range profile, CFAR, eq. 12,
 ``fusion_at_points``), voxels whose decisions lie within ``FUSION_DECISION_MARGIN`` of a boundary left
-out. The baseline entry is the OctoMap-style map (radarcl.baseline) of the reference run's
+out. The baseline entry is the OctoMap-style map (``evaluation.baseline``) of the reference run's
 detections, timed in numpy. Runs on the Pareto front (no other run both faster and better in
 AUC) are marked; ``chart`` draws AUC against ms per frame.
 """
 
-from dataclasses import replace
-
 import numpy as np
 
 from radarcl import logodds, oracle
-from radarcl.config import PAPER_RADAR
-from radarcl.evaluation.evaluate import BEAM_MODELS, baseline_map, beam_model, interpret_config, map_observations, score
-from radarcl.geometry import BeamLattice
+from radarcl.evaluation.evaluate import baseline_map, map_observations, score
+from radarcl.geometry import BEAM_MODELS
 from radarcl.grid import EvidenceGrid
-from radarcl.scene.outdoor import paper_grid
+from radarcl.pipeline import Mapping
 from radarcl.stages.fusion import Fusion
-from radarcl.evaluation.tuning import cfar_config
 
 ORACLE_BEAMS = (0, 85, 170, 255)
 DECISION_MARGIN = 1e-3           # as tests/tolerances.FUSION_DECISION_MARGIN
@@ -34,36 +30,31 @@ CFAR_KINDS = ("ca", "go", "so", "os")
 
 
 def variants(reference_config, voxels=VOXELS):
-    """(dimension, MapConfig) for the reference and each one-setting change of it."""
+    """(dimension, Resolved) for the reference and each one-setting change of it."""
     out = [("reference", reference_config)]
     for n in N_FFTS:
-        out.append(("zero padding", replace(reference_config, n_fft=n)))
+        out.append(("zero padding", reference_config.replaced(range_fft__n_fft=n)))
     for b in BEAM_MODELS:
-        out.append(("beam model", replace(reference_config, beam=b)))
+        out.append(("beam model", reference_config.replaced(beam__model=b)))
     for v in voxels:
-        out.append(("voxel", replace(reference_config, voxel_m=v)))
+        out.append(("voxel", reference_config.replaced(grid__voxel_m=v)))
     for k in CFAR_KINDS:
-        c = reference_config.cfar
-        out.append(("cfar", replace(reference_config, cfar=cfar_config(k, c.pfa, c.train, c.guard))))
+        out.append(("cfar", reference_config.replaced(cfar__kind=k)))
     seen, unique = set(), []
     for dim, c in out:                   # the reference reappears in each dimension: run it once
-        if c not in seen:
-            seen.add(c)
+        key = tuple(sorted(c.values.items()))
+        if key not in seen:
+            seen.add(key)
             unique.append((dim, c))
     return unique
 
 
-def oracle_deviation(runtime, obs, config, radar=PAPER_RADAR, beams=ORACLE_BEAMS):
+def oracle_deviation(runtime, obs, config, beams=ORACLE_BEAMS):
     """Max |kernel map - float64 oracle map| [nat] of ``beams`` of the middle frame, the
     fraction of compared voxels that agree exactly, and how many were compared."""
     j = len(obs.samples) // 2
-    spec = paper_grid(config.voxel_m)
-    lattice, model = BeamLattice.from_radar(radar), beam_model(config.beam, radar, config.voxel_m)
-    interpret = interpret_config(config, radar)
-    from radarcl.pipeline import Mapping
-
-    mapping = Mapping(runtime, EvidenceGrid(runtime, spec), lattice, model, radar=radar, n_fft=config.n_fft,
-                      dtype=np.int16, cfar_config=config.cfar, interpret_config=interpret)
+    mapping = Mapping.from_config(runtime, config=config)
+    spec, lattice, model = mapping.grid.spec, mapping.fusion.lattice, mapping.fusion.model
     mapping.fuse(obs.samples[j], obs.poses[j])
     runtime.queue.finish()
     it, fusion = mapping.detection.interpreter, mapping.fusion
@@ -77,11 +68,11 @@ def oracle_deviation(runtime, obs, config, radar=PAPER_RADAR, beams=ORACLE_BEAMS
     index = spec.brick_voxels(keys[(data != 0).reshape(len(keys), -1).any(axis=1)])
 
     profiles = oracle.range_profile(obs.samples[j].astype(np.float64), config.n_fft, output="power")
-    noise, _, mask = oracle.cfar(profiles, config.cfar)
-    ev64 = oracle.interpret(profiles, noise, mask, interpret, fusion.bin_spacing_m)[0]
+    noise, _, mask = oracle.cfar(profiles, config.cfar_config())
+    ev64 = oracle.interpret(profiles, noise, mask, config.interpret_config(), fusion.bin_spacing_m)[0]
     sums, _, ambiguous = oracle.fusion_at_points(spec.index_to_world(index), ev64.reshape(lattice.n_beams, -1), lattice,
-                                               model, obs.poses[j], fusion.bin_spacing_m, fusion.first_bin,
-                                               fusion.last_bin, margin=DECISION_MARGIN, beams=beams)
+                                                 model, obs.poses[j], fusion.bin_spacing_m, fusion.first_bin,
+                                                 fusion.last_bin, margin=DECISION_MARGIN, beams=beams)
     got = check.snapshot()[index[:, 2], index[:, 1], index[:, 0]].astype(np.int64)
     err = np.abs(got - sums)[~ambiguous]
     if not err.size:
@@ -105,12 +96,13 @@ def run(runtime, obs, truth_for, reference_config, voxels=VOXELS, report=None):
     say = report or (lambda _: None)
     runs, baseline = [], None
     for dim, config in variants(reference_config, voxels):
-        say(f"{dim}: {config.label()} ...")
+        say(f"{dim}: {config.label(reference_config)} ...")
         res = map_observations(runtime, obs, config)
-        truth = truth_for(config.voxel_m)
+        truth = truth_for(config["grid.voxel_m"])
         m = score(res.log_odds, res.observed, truth)
         dev, exact, compared = oracle_deviation(runtime, obs, config)
-        runs.append(dict(dimension=dim, label=config.label(), config=config.as_dict(), ms_per_frame=res.ms_per_frame,
+        label = "reference" if config is reference_config else config.label(reference_config)
+        runs.append(dict(dimension=dim, label=label, config=config.as_dict(), ms_per_frame=res.ms_per_frame,
                          auc=m["auc"], iou=m["iou"], iou_tol1=m["iou_tol1"], false_free=m["false_free"],
                          brier=m["brier"], coverage=m["coverage"], max_dev_nats=dev, exact_fraction=exact,
                          oracle_voxels=compared, memory_mib=res.memory["sparse_bytes"] / 2 ** 20))
@@ -172,5 +164,45 @@ def chart(r, path):
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, format="png")
     plt.close(fig)
+
+
+def add_arguments(parser):
+    """`radarcl bench quality` options."""
+    from radarcl.cli import add_output, positive_float
+
+    parser.add_argument("--voxel", type=positive_float, default=0.2,
+                        help="voxel of the reference run [m] (default: %(default)s)")
+    parser.add_argument("--voxels", type=positive_float, nargs="+", default=list(VOXELS),
+                        help="voxel sizes swept [m] (default: 0.4 0.2 0.1)")
+    parser.add_argument("--paper", action="store_true", help="sweep around the paper's constants, not the tuned")
+    parser.add_argument("--seed", type=int, default=None, help="simulation seed (default: the evaluation seed, 0)")
+    parser.add_argument("--replay", default=None, help="a recording of the reference scene instead of simulating")
+    add_output(parser, "--chart", "quality.png", "PNG chart to write")
+
+
+def command(args, runtime, say):
+    """Run the bench; returns (result dict, table lines)."""
+    from radarcl import outputs
+    from radarcl.evaluation.evaluate import paper_config
+    from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
+    from radarcl.io import recording
+    from radarcl.scene.observe import observe
+    from radarcl.scene.outdoor import PAPER_TILTS_DEG, paper_grid, paper_scene
+
+    chart_path = outputs.check(args.chart, args.force, inputs=[args.replay], what="chart")
+    scene = paper_scene()
+    if args.replay:
+        obs = recording.load_observations(args.replay)
+    else:
+        seed = EVALUATION_SEED if args.seed is None else args.seed
+        say(f"simulating the reference scene, seed {seed} ...")
+        obs = observe(scene, PAPER_TILTS_DEG, seed=seed)
+    reference = paper_config(args.voxel, None if args.paper else TUNED)
+    result = run(runtime(), obs, lambda v: scene.truth(paper_grid(v)), reference, voxels=tuple(args.voxels),
+                 report=say)
+    with outputs.atomic(chart_path) as tmp:
+        chart(result, tmp)
+    say(f"wrote {chart_path}")
+    return result, format_table(result)

@@ -85,3 +85,19 @@ def format_table(result):
                      f"{r['max_rel_err']:>12.2e} {r['scipy_max_rel_err']:>10.2e}")
     lines.append(f"goal: {result['goal']} -> {result['ratio_vs_scipy']:.2f}")
     return lines
+
+
+def add_arguments(parser):
+    """`radarcl bench range-fft` options."""
+    from radarcl.cli import positive_int
+
+    parser.add_argument("--repeat", type=positive_int, default=200, help="timed repetitions per variant "
+                                                                          "(default: %(default)s)")
+    parser.add_argument("--n-fft", type=positive_int, nargs="+", default=[512, GOAL_N_FFT],
+                        help="FFT lengths, powers of two >= 256 (default: 512 1024)")
+
+
+def command(args, runtime, say):
+    """Run the bench; returns (result dict, table lines)."""
+    result = run(runtime(), n_ffts=tuple(args.n_fft), repeat=args.repeat)
+    return result, format_table(result)

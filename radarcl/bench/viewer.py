@@ -142,3 +142,18 @@ def format_table(result):
               f"ratio_vs_naive {result['ratio_vs_naive']:.1f}"]
     return lines
 
+
+
+def add_arguments(parser):
+    """`radarcl bench viewer` options."""
+    from radarcl.cli import bounded_int
+
+    parser.add_argument("--repeat", type=bounded_int(1, 100), default=6,
+                        help="timed frames per mode, 1-100 (default: %(default)s)")
+    parser.add_argument("--map", default=None, help="time this map file instead of the reference scene's truth")
+
+
+def command(args, runtime, say):
+    """Run the bench; returns (result dict, table lines)."""
+    result = run(args.map, repeat=args.repeat, report=say)
+    return result, format_table(result)

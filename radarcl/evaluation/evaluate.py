@@ -1,90 +1,38 @@
 """Run recorded observations of the reference scene through the pipeline and score the map.
 
-``map_observations`` fuses every frame with one ``MapConfig`` (voxel size, zero padding, beam
-model, CFAR, eq. 12 constants) on the device, timing the pipeline, and marks the voxels some
-beam's volume reached (a second fusion of constant evidence into a count grid, outside the
-timing). ``baseline_map`` inserts the same frames' CFAR detections OctoMap-style
-(radarcl.baseline). ``score`` gives ``radarcl.metrics`` against the scene's truth.
+``map_observations`` fuses every frame with one configuration (a ``mapconfig.Resolved``: voxel
+size, zero padding, beam model, CFAR, eq. 12 constants) on the device, timing the pipeline, and
+marks the voxels some beam's volume reached (a second fusion of constant evidence into a count
+grid, outside the timing). ``baseline_map`` inserts the same frames' CFAR detections
+OctoMap-style (``evaluation.baseline``). ``score`` gives ``evaluation.metrics`` against the
+scene's truth.
 """
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl import logodds
+from radarcl import logodds, mapconfig
 from radarcl.evaluation.baseline import OctoMapBaseline
-from radarcl.config import PAPER_RADAR, CfarConfig, InterpretConfig
-from radarcl.errors import ConfigError
-from radarcl.geometry import BeamLattice, BeamModel
-from radarcl.grid import EvidenceGrid
 from radarcl.evaluation.metrics import evaluate
+from radarcl.grid import EvidenceGrid
 from radarcl.pipeline import Mapping
-from radarcl.scene.outdoor import paper_grid
 from radarcl.stages.fusion import Fusion
 
-# The beam volumes compared (``bench quality``): the axis alone (what a point cloud sees), a
-# uniform cone, a cone weighted by the two-way Gaussian, and the paper's cylindrical-conical
-# volume with the Gaussian (Fig. 7c).
-BEAM_MODELS = ("axis", "uniform-cone", "gaussian-cone", "cylindrical-conical")
-AXIS_BEAMWIDTH_RAD = 1e-6        # "axis": a cylinder of half a voxel around the beam axis
 
-
-def beam_model(name, radar, voxel_m):
-    """The ``BeamModel`` called ``name`` (one of BEAM_MODELS) for ``radar`` at ``voxel_m``."""
-    if name == "axis":
-        return BeamModel(AXIS_BEAMWIDTH_RAD, AXIS_BEAMWIDTH_RAD, 0.5 * voxel_m, 0.5 * voxel_m, True, False)
-    if name == "uniform-cone":
-        return BeamModel.from_radar(radar, near_field=False, gaussian=False)
-    if name == "gaussian-cone":
-        return BeamModel.from_radar(radar, near_field=False, gaussian=True)
-    if name == "cylindrical-conical":
-        return BeamModel.from_radar(radar, near_field=True, gaussian=True)
-    raise ConfigError(f"beam model must be one of {', '.join(BEAM_MODELS)}, got {name!r}")
-
-
-@dataclass(frozen=True)
-class MapConfig:
-    """One way of making the map; defaults: the paper's pipeline at the paper's 0.1 m."""
-
-    voxel_m: float = 0.1
-    n_fft: int = 1024
-    beam: str = "cylindrical-conical"
-    cfar: CfarConfig = field(default_factory=CfarConfig)
-    interpret: InterpretConfig = field(default_factory=InterpretConfig)
-
-    def label(self):
-        """Short text naming what differs from the defaults."""
-        base = MapConfig()
-        parts = [f"{name}={getattr(self, name)}" for name in ("voxel_m", "n_fft", "beam")
-                 if getattr(self, name) != getattr(base, name)]
-        c, i = self.cfar, self.interpret
-        if c != base.cfar:
-            parts.append(f"cfar={c.kind}" + (f"/k{c.rank}" if c.rank else "") + f"/pfa{c.pfa:g}/g{c.guard}/t{c.train}")
-        if i != base.interpret:
-            parts.append(f"k_occ={i.k_occ:g},E_h={i.e_high:g},E_l={i.e_low:g},wide={i.wide_pulse_m:.3g}m")
-        return ", ".join(parts) or "defaults (the paper's)"
-
-    def as_dict(self):
-        """JSON-ready description."""
-        return dict(voxel_m=self.voxel_m, n_fft=self.n_fft, beam=self.beam, cfar_kind=self.cfar.kind,
-                    cfar_guard=self.cfar.guard, cfar_train=self.cfar.train, cfar_pfa=self.cfar.pfa,
-                    cfar_rank=self.cfar.rank, k_occ=self.interpret.k_occ, e_high=self.interpret.e_high,
-                    e_low=self.interpret.e_low, wide_pulse_m=self.interpret.wide_pulse_m)
-
-
-def interpret_config(config, radar):
-    """``config.interpret`` limited to the radar's range of operation."""
-    i = config.interpret
-    return replace(i, range_min_m=max(i.range_min_m, radar.range_min_m), range_max_m=min(i.range_max_m, radar.range_max_m))
+def paper_config(voxel_m=0.1, values=None):
+    """The paper radar's configuration at ``voxel_m`` with ``values`` {"section.key": value}
+    set by the program (the reference scene lies in the paper's grid)."""
+    return mapconfig.resolve("paper", program={"grid.voxel_m": voxel_m, **(values or {})})
 
 
 @dataclass
 class MapResult:
     """A fused map and how it was made: dense (nz, ny, nx) log-odds [nat] and observed mask."""
 
-    config: MapConfig
+    config: object
     spec: object
     log_odds: np.ndarray
     observed: np.ndarray
@@ -94,23 +42,15 @@ class MapResult:
     grid: object = None
 
 
-def make_mapping(runtime, config=MapConfig(), radar=PAPER_RADAR):
-    """The ``Mapping`` (int16 raw frames -> paper grid) that ``config`` describes."""
-    lattice = BeamLattice.from_radar(radar)
-    model = beam_model(config.beam, radar, config.voxel_m)
-    grid = EvidenceGrid(runtime, paper_grid(config.voxel_m))
-    return Mapping(runtime, grid, lattice, model, radar=radar, n_fft=config.n_fft, dtype=np.int16,
-                   cfar_config=config.cfar, interpret_config=interpret_config(config, radar))
-
-
-def map_observations(runtime, obs, config=MapConfig(), radar=PAPER_RADAR, progress=None):
-    """Fuse ``obs`` (``scene.observe.Observations``) with ``config``; returns a ``MapResult``.
+def map_observations(runtime, obs, config, progress=None):
+    """Fuse ``obs`` (``scene.observe.Observations``) with ``config`` (a ``mapconfig.Resolved``);
+    returns a ``MapResult``.
 
     ``progress(done, total)`` counts observations (beams), frame by frame. The timing covers
     the pipeline of every frame (upload, range FFT, CFAR, eq. 12, planning the new pose, fusion)
     until the device is idle; the observed mask and the detections for the baseline are
     computed afterwards."""
-    mapping = make_mapping(runtime, config, radar)
+    mapping = Mapping.from_config(runtime, config=config)
     grid, spec, lattice, model = mapping.grid, mapping.grid.spec, mapping.fusion.lattice, mapping.fusion.model
     n_frames, per_frame = len(obs.samples), lattice.n_beams
     mapping.fuse(obs.samples[0], obs.poses[0])         # warm-up: kernel builds, first allocations
@@ -139,13 +79,13 @@ def map_observations(runtime, obs, config=MapConfig(), radar=PAPER_RADAR, progre
     return MapResult(config, spec, log_odds, count.snapshot() > 0, ms_per_frame, detections, grid.memory(), grid)
 
 
-def baseline_map(obs, detections, config=MapConfig(), radar=PAPER_RADAR):
+def baseline_map(obs, detections, config):
     """The OctoMap-style baseline on the same frames' detections: (log_odds, touched, ms_per_frame)."""
-    spec = paper_grid(config.voxel_m)
+    spec = config.grid_spec()
     base = OctoMapBaseline(spec)
-    axes = BeamLattice.from_radar(radar).beam_rotations()[:, :, 0]
-    ranges = radar.bin_ranges_m(config.n_fft)
-    i = interpret_config(config, radar)
+    axes = config.sensor.lattice().beam_rotations()[:, :, 0]
+    ranges = config.sensor.radar.bin_ranges_m(config.n_fft)
+    i = config.interpret_config()
     start = time.perf_counter()
     for pose, mask in zip(obs.poses, detections):
         base.insert_scan(pose[:3, 3], axes @ pose[:3, :3].T, ranges, mask, i.range_min_m, i.range_max_m)

@@ -1,61 +1,121 @@
-"""Recordings of raw radar frames with their poses: one ``.npz`` file the CLI can replay.
+"""Recordings: frames of any sensor with their poses, in one ``.npz`` file the CLI replays.
 
-Contents: ``samples`` (n_frames, n_az, n_el, n_samples) int16 ADC codes, ``poses``
-(n_frames, 4, 4) float64, ``tilts_deg`` (n_frames,), the simulation ``seed`` and
-``rays_per_beam`` (-1 for a real recording), ``n_clipped`` and ``version``. A file that does not
-follow this is refused with what was wrong; nothing is written over an existing file unless
-asked.
+Version 2 (written here): ``frames`` (n_frames, *frame) in the sensor's frame shape and dtype
+(raw samples (n_az, n_el, n_samples), or power profiles (*batch, n_bins) float32), ``poses``
+(n_frames, 4, 4) or (n_frames, n_beams, 4, 4), optional ``flags`` (n_frames, *batch) uint8,
+``sensor`` (the profile's name) and ``version``. Simulations add ``tilts_deg``, ``seed``,
+``rays_per_beam`` (-1 for a real recording) and ``n_clipped``. Version 1 (the paper radar's int16
+``samples`` with the same metadata) is still read.
+
+A file that does not follow this is refused with what was wrong; nothing is written over an
+existing file unless asked.
 """
 
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from radarcl.errors import FrameFormatError
 from radarcl.geometry import check_poses
-from radarcl.scene.observe import Observations
 
-VERSION = 1
-_KEYS = ("samples", "poses", "tilts_deg", "seed", "rays_per_beam", "n_clipped", "version")
+VERSION = 2
+_META = ("tilts_deg", "seed", "rays_per_beam", "n_clipped")
 
 
-def save(path, obs: Observations, overwrite=True):
-    """Write ``obs`` to ``path`` (.npz, compressed)."""
+@dataclass(frozen=True)
+class Recording:
+    """Frames of one sensor: ``frames`` (n, *frame), ``poses`` (n, 4, 4) or (n, n_beams, 4, 4),
+    ``flags`` (n, *batch) uint8 or None, the sensor's name, and simulation metadata."""
+
+    frames: np.ndarray
+    poses: np.ndarray
+    sensor: str = "paper"
+    flags: np.ndarray = None
+    meta: dict = field(default_factory=dict)
+
+    def __len__(self):
+        return len(self.frames)
+
+
+def save(path, recording, overwrite=True):
+    """Write a ``Recording`` or a simulation's ``Observations`` to ``path`` (.npz, compressed)."""
     path = Path(path)
     if path.exists() and not overwrite:
         raise FrameFormatError(f"{path} exists; pass overwrite=True to replace it")
+    if not isinstance(recording, Recording):            # scene.observe.Observations
+        obs = recording
+        recording = Recording(obs.samples, obs.poses, "paper", None,
+                              dict(tilts_deg=obs.tilts_deg, seed=obs.seed, rays_per_beam=obs.rays_per_beam,
+                                   n_clipped=obs.n_clipped))
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "wb") as f:        # a file object: numpy would append .npz to other names
-        np.savez_compressed(f, samples=obs.samples, poses=obs.poses, tilts_deg=obs.tilts_deg, seed=obs.seed,
-                            rays_per_beam=obs.rays_per_beam, n_clipped=obs.n_clipped, version=VERSION)
+    arrays = dict(version=VERSION, sensor=np.str_(recording.sensor), frames=recording.frames, poses=recording.poses,
+                  **{k: np.asarray(v) for k, v in recording.meta.items()})
+    if recording.flags is not None:
+        arrays["flags"] = recording.flags
+    from radarcl.outputs import atomic
+
+    with atomic(path) as tmp, open(tmp, "wb") as f:   # a file object: numpy would append .npz
+        np.savez_compressed(f, **arrays)
 
 
-def load(path, n_az=None, n_el=None, n_samples=None):
-    """Read a recording; checks its keys, version, dtypes and shapes (and the frame shape
-    against n_az, n_el, n_samples when given). Returns ``Observations``."""
+def load(path):
+    """Read a recording (version 1 or 2); checks keys, version, dtypes, shapes and poses.
+    Returns a ``Recording``."""
+    from radarcl.io import safe_npz
+
     try:
-        with np.load(path, allow_pickle=False) as z:
-            missing = [k for k in _KEYS if k not in z.files]
+        with safe_npz(path) as z:
+            if "version" not in z.files:
+                raise FrameFormatError(f"{path} is not a radarcl recording: it has no version")
+            version = int(z["version"])
+            if version not in (1, VERSION):
+                raise FrameFormatError(f"{path} has recording version {version}; this radarcl reads 1 and {VERSION}")
+            frames_key = "samples" if version == 1 else "frames"
+            missing = [k for k in (frames_key, "poses") + (_META if version == 1 else ("sensor",)) if k not in z.files]
             if missing:
                 raise FrameFormatError(f"{path} is not a radarcl recording: missing {', '.join(missing)}")
-            data = {k: z[k] for k in _KEYS}
-    except (OSError, ValueError) as exc:
+            frames, poses = z[frames_key], z["poses"]
+            flags = z["flags"] if "flags" in z.files else None
+            sensor = "paper" if version == 1 else str(z["sensor"])
+            meta = {k: z[k] for k in _META if k in z.files}
+    except (OSError, ValueError, EOFError) as exc:
+        if isinstance(exc, FrameFormatError):
+            raise
         raise FrameFormatError(f"{path} is not a readable .npz recording ({exc})") from exc
-    if int(data["version"]) != VERSION:
-        raise FrameFormatError(f"{path} has recording version {int(data['version'])}; this radarcl reads {VERSION}")
-    s = data["samples"]
-    if s.dtype != np.int16 or s.ndim != 4:
-        raise FrameFormatError(f"{path}: samples must be (n_frames, n_az, n_el, n_samples) int16, got {s.shape} {s.dtype}")
-    expected = (n_az, n_el, n_samples)
-    if any(e is not None and e != g for e, g in zip(expected, s.shape[1:])):
-        raise FrameFormatError(f"{path}: frames are {s.shape[1:]}, the radar expects {expected}")
-    poses, tilts = data["poses"], data["tilts_deg"]
-    if poses.shape != (len(s), 4, 4) or tilts.shape != (len(s),):
-        raise FrameFormatError(f"{path}: {len(s)} frames need poses ({len(s)}, 4, 4) and tilts ({len(s)},), "
-                               f"got {poses.shape} and {tilts.shape}")
+    n = len(frames) if frames.ndim else 0
+    if frames.ndim < 3 or n < 1:
+        raise FrameFormatError(f"{path}: frames must be (n_frames >= 1, ...) with a frame of at least 2 axes, "
+                               f"got {frames.shape} {frames.dtype}")
+    if frames.dtype not in (np.int16, np.float32, np.complex64):
+        raise FrameFormatError(f"{path}: frames must be int16, float32 or complex64, got {frames.dtype}")
+    if poses.shape not in ((n, 4, 4),) and not (poses.ndim == 4 and poses.shape[0] == n and poses.shape[2:] == (4, 4)):
+        raise FrameFormatError(f"{path}: {n} frames need poses ({n}, 4, 4) or ({n}, n_beams, 4, 4), got {poses.shape}")
     try:
-        check_poses(poses, len(poses))
+        check_poses(poses.reshape(-1, 4, 4), len(poses.reshape(-1, 4, 4)))
     except ValueError as exc:
         raise FrameFormatError(f"{path}: {exc}") from exc
-    return Observations(s, poses.astype(np.float64), tilts.astype(np.float64), int(data["seed"]),
-                        int(data["rays_per_beam"]), int(data["n_clipped"]))
+    if flags is not None and (flags.dtype != np.uint8 or len(flags) != n):
+        raise FrameFormatError(f"{path}: flags must be (n_frames, *batch) uint8, got {flags.shape} {flags.dtype}")
+    meta = {k: (v.astype(np.float64) if k == "tilts_deg" else int(v)) for k, v in meta.items()}
+    return Recording(frames, poses.astype(np.float64), sensor, flags, meta)
+
+
+def load_observations(path):
+    """A simulation of the paper's reference scene (``scene.observe.Observations``) from its
+    recording; refuses recordings of other sensors or without the simulation's metadata."""
+    from radarcl.config import PAPER_RADAR
+    from radarcl.scene.observe import Observations
+
+    rec = load(path)
+    if rec.frames.shape[1:] != PAPER_RADAR.frame_shape or rec.frames.dtype != np.int16:
+        raise FrameFormatError(f"{path}: frames are {rec.frames.shape[1:]} {rec.frames.dtype}; the paper radar's "
+                               f"are {PAPER_RADAR.frame_shape} int16")
+    missing = [k for k in _META if k not in rec.meta]
+    if missing or rec.poses.ndim != 3:
+        raise FrameFormatError(f"{path} is not a recording of the reference scene: it lacks {', '.join(missing)}"
+                               if missing else f"{path}: the reference scene has one pose per frame")
+    if rec.meta["tilts_deg"].shape != (len(rec),):
+        raise FrameFormatError(f"{path}: {len(rec)} frames need tilts ({len(rec)},), got {rec.meta['tilts_deg'].shape}")
+    m = rec.meta
+    return Observations(rec.frames, rec.poses, m["tilts_deg"], m["seed"], m["rays_per_beam"], m["n_clipped"])

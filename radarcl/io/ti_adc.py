@@ -2,25 +2,15 @@
 
 Format trap: the real and imaginary parts hold raw UNSIGNED 16-bit ADC words stored as floats
 (65375 means -161). ``words_to_int16`` converts each part by two's complement; a plain float to
-int16 cast is undefined for values above 32767.
+int16 cast is undefined for values above 32767. The radar itself (chirp profile, beams, range)
+is the sensor profile ``ti-xwr-openradar`` (radarcl/profiles/ti-xwr-openradar.toml).
 """
 
 from pathlib import Path
 
 import numpy as np
 
-from radarcl.config import RadarConfig
 from radarcl.errors import FrameFormatError
-
-# Chirp profile of the OpenRadar tutorials: 2.5 Msps, 60 MHz/us slope, 128 complex samples,
-# f0 = 77.4201 GHz -> B = 3.072 GHz over the sampled 51.2 us. Beamwidths are nominal: the
-# capture is one virtual antenna at a time (the TI patch antennas are wide, ~60 x 30 deg).
-TI_OPENRADAR = RadarConfig(
-    carrier_hz=77.4201e9, bandwidth_hz=60e12 * 51.2e-6, sweep_time_s=51.2e-6,
-    sample_rate_hz=2.5e6, n_samples=128, complex_samples=True,
-    beamwidth_az_deg=60.0, beamwidth_el_deg=30.0, n_azimuth=1, n_elevation=1,
-    range_min_m=0.2, range_max_m=6.0)   # below 0.2 m: transmitter-to-receiver coupling
-
 
 def words_to_int16(values):
     """Raw unsigned 16-bit words (any real dtype, integral values in 0..65535) -> int16 by two's
@@ -46,9 +36,29 @@ def load_capture(path):
     the original shape kept (the last axis is the samples of one chirp)."""
     path = Path(path)
     try:
-        raw = np.load(path) if path.suffix == ".npy" else np.loadtxt(path, dtype=complex)
+        if path.suffix == ".npy":
+            _check_npy_header(path)
+            raw = np.load(path, allow_pickle=False)
+        else:
+            raw = np.loadtxt(path, dtype=complex)
     except (OSError, ValueError) as exc:
         raise FrameFormatError(f"cannot read TI capture {path}: {exc}") from exc
     if not np.iscomplexobj(raw):
         raise FrameFormatError(f"{path} holds {raw.dtype} values; expected complex ADC words")
     return complex_words_to_iq(raw)
+
+
+def _check_npy_header(path):
+    """Refuse a .npy whose header declares more than the memory budget, before reading it."""
+    from radarcl.io import memory_budget
+
+    try:
+        with open(path, "rb") as f:
+            version = np.lib.format.read_magic(f)
+            read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape, _, dtype = read(f)
+    except (OSError, ValueError) as exc:
+        raise FrameFormatError(f"cannot read TI capture {path}: {exc}") from exc
+    nbytes = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+    if nbytes > memory_budget():
+        raise FrameFormatError(f"{path} declares {shape} {dtype} = {nbytes / 2**20:.0f} MiB, over the memory budget")

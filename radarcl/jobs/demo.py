@@ -17,7 +17,6 @@
 
 import json
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +25,8 @@ from radarcl import oracle
 from radarcl.jobs import demo_fig9
 from radarcl.bench import quality
 from radarcl.config import PAPER_RADAR
-from radarcl.evaluation.evaluate import MapConfig, baseline_map, interpret_config, map_observations, score
+from radarcl.errors import ConfigError
+from radarcl.evaluation.evaluate import baseline_map, map_observations, paper_config, score
 from radarcl.io import recording
 from radarcl.scene.observe import observe
 from radarcl.scene.outdoor import OCCUPIED, PAPER_TILTS_DEG, paper_grid, paper_scene
@@ -45,6 +45,9 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
     """Run the main job into ``out_dir``; ``report`` gets lines, ``progress(done, total, what)``
     counts simulated frames and fused observations. Returns the summary dict."""
     out = Path(out_dir)
+    replayed = recording.load_observations(replay) if replay else None     # a bad file stops here
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out {out} is not a directory")
     out.mkdir(parents=True, exist_ok=True)
     tick = (lambda what: (lambda d, t: progress(d, t, what))) if progress else (lambda what: None)
     summary = dict(device=runtime.name, quick=bool(quick))
@@ -53,7 +56,7 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
     scene, voxel = paper_scene(), QUICK_VOXEL_M if quick else 0.1
     start = time.perf_counter()
     if replay:
-        obs = recording.load(replay, PAPER_RADAR.n_azimuth, PAPER_RADAR.n_elevation, PAPER_RADAR.n_samples)
+        obs = replayed
         report(f"replaying {replay}: {len(obs.samples)} frames")
     else:
         report(f"simulating the reference scene: {len(PAPER_TILTS_DEG)} tilts x 64 x 4 beams, seed {seed} ...")
@@ -67,8 +70,8 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
 
     truth = scene.truth(paper_grid(voxel))
     maps = {}
-    for name, config in (("paper constants", MapConfig(voxel_m=voxel)), ("tuned", replace(TUNED, voxel_m=voxel))):
-        report(f"fusing with the {name} ({config.label()}) at {voxel} m ...")
+    for name, config in (("paper constants", paper_config(voxel)), ("tuned", paper_config(voxel, TUNED))):
+        report(f"fusing with the {name} ({config.label()}) ...")
         res = map_observations(runtime, obs, config, progress=tick("observations fused"))
         maps[name] = (config, res, score(res.log_odds, res.observed, truth))
     config, res, _ = maps["tuned"]
@@ -88,7 +91,7 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
     _plot_profiles(obs, config, out / "fig10_scene.png")
     _plot_topdown(res.log_odds, truth, res.spec, out / "topdown.png")
     report("error against run time at 0.4 m (bench quality) ...")
-    q = quality.run(runtime, obs, lambda v: scene.truth(paper_grid(v)), replace(TUNED, voxel_m=QUICK_VOXEL_M),
+    q = quality.run(runtime, obs, lambda v: scene.truth(paper_grid(v)), paper_config(QUICK_VOXEL_M, TUNED),
                     voxels=(QUICK_VOXEL_M,))
     quality.chart(q, out / "quality.png")
     for line in quality.format_table(q):
@@ -120,17 +123,17 @@ def _plot_profiles(obs, config, path, beams=((2, 32, 0), (14, 20, 3))):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    spacing = PAPER_RADAR.bin_spacing_m(config.n_fft)
-    interpret = interpret_config(config, PAPER_RADAR)
+    spacing = config.bin_spacing_m
+    interpret, cfar = config.interpret_config(), config.cfar_config()
     fig, axes = plt.subplots(2, len(beams), figsize=(11, 6), sharex=True)
     for col, (frame, az, el) in enumerate(beams):
         prof = oracle.range_profile(obs.samples[frame, az, el].astype(np.float64), config.n_fft, output="power")
-        noise, _, mask = oracle.cfar(prof[None], config.cfar)
+        noise, _, mask = oracle.cfar(prof[None], cfar)
         evidence = oracle.interpret(prof[None], noise, mask, interpret, spacing)[0][0]
         r = np.arange(len(prof)) * spacing
         top, bottom = axes[0, col], axes[1, col]
         top.semilogy(r, prof, lw=0.7, label="power")
-        top.semilogy(r, config.cfar.alpha * noise[0], lw=0.8, label="CFAR threshold")
+        top.semilogy(r, cfar.alpha * noise[0], lw=0.8, label="CFAR threshold")
         top.plot(r[mask[0]], prof[mask[0]], ".", ms=2, label="detections")
         elevation = obs.tilts_deg[frame] + PAPER_RADAR.elevation_step_deg * el
         top.set_title(f"tilt {obs.tilts_deg[frame]:.1f} deg, beam {el} ({elevation:.1f} deg), azimuth {az}", fontsize=9)

@@ -1,35 +1,48 @@
-"""`radarcl fuse`: a recording of raw frames (``radarcl.io.recording``, e.g. the demo's
-reference_scene.npz) fused into a map file with the tuned or the paper's constants. With
-``every`` the map file is rewritten every that many frames (atomically), so ``radarcl view
---live`` shows the map growing."""
+"""`radarcl fuse`: any sensor's frames fused into a map file.
+
+The input is whatever the sensor's reader opens (``radarcl.io.open_input``): a radarcl recording
+(the demo's ``reference_scene.npz``, or frames of any sensor), a directory of polar PNG scans
+with their odometry, a TI raw ADC capture. The map configuration comes from
+``mapconfig.resolve`` (sensor defaults, ``--config`` file, ``--set`` flags). With ``every`` the
+map file is rewritten every that many frames (atomically), so ``radarcl view --live`` shows the
+map growing.
+"""
 
 import time
-from dataclasses import replace
 
-from radarcl.config import PAPER_RADAR
-from radarcl.evaluation.evaluate import MapConfig, make_mapping
-from radarcl.io import recording
-from radarcl.evaluation.tuning import TUNED
+from radarcl import io
+from radarcl.pipeline import Mapping
 
 
-def run(runtime, recording_path, out, voxel_m=0.1, paper=False, every=None, progress=None, report=print):
-    """Fuse every frame of ``recording_path`` into the paper grid at ``voxel_m`` and write
-    ``out``; returns a dict with the frame count and milliseconds per frame (saving included)."""
-    obs = recording.load(recording_path, PAPER_RADAR.n_azimuth, PAPER_RADAR.n_elevation, PAPER_RADAR.n_samples)
-    config = replace(MapConfig() if paper else TUNED, voxel_m=voxel_m)
-    report(f"fusing {len(obs.samples)} frames of {recording_path} with {config.label()} at {voxel_m} m into {out}")
-    mapping = make_mapping(runtime, config)
+def run(runtime, source, config, out, every=None, progress=None, report=print, save=None):
+    """Fuse every frame of ``source`` (an ``io.FrameSource``) with ``config`` (a
+    ``mapconfig.Resolved``) and write the map to ``out`` through ``save(grid, out)`` (default
+    ``grid.save``); returns a dict with the frame count and milliseconds per frame (saving
+    included)."""
+    save = save or (lambda grid, path: grid.save(path))
+    mapping = Mapping.from_config(runtime, config=config)
+    spec = mapping.grid.spec
+    report(f"fusing {source.summary} with sensor {config.sensor.name} ({config.label()}) into a "
+           f"{' x '.join(map(str, spec.shape))} grid of {spec.voxel_m:g} m -> {out}")
     start = time.perf_counter()
-    n = len(obs.samples)
+    n = len(source)
+    outside = 0
     for j in range(n):
-        mapping.fuse(obs.samples[j], obs.poses[j])
+        plan = mapping.fuse(source.frames[j], source.poses[j], flags=None if config.sensor.raw else source.flags[j])
+        outside += plan.beams_outside
         if every and (j + 1) % every == 0 and j + 1 < n:
-            mapping.grid.save(out)                     # waits for the device: a snapshot
+            save(mapping.grid, out)                     # waits for the device: a snapshot
         if progress is not None:
             progress(j + 1, n, "frames fused")
-    mapping.grid.save(out)
+    save(mapping.grid, out)
     ms = (time.perf_counter() - start) * 1e3 / n
     mem = mapping.grid.memory()
     report(f"wrote {out}: {mem['bricks']} bricks ({mem['sparse_bytes'] / 2 ** 20:.0f} MiB), {ms:.0f} ms per frame"
-           + (f" with a save every {every} frames" if every else ""))
-    return dict(frames=n, ms_per_frame=ms, bricks=mem["bricks"])
+           + (f" with a save every {every} frames" if every else "")
+           + (f"; {outside} beam(s) reached no voxel of the grid" if outside else ""))
+    return dict(frames=n, ms_per_frame=ms, bricks=mem["bricks"], beams_outside=outside)
+
+
+def open_source(sensor, path, odometry=None):
+    """``io.open_input`` (kept here so the CLI imports one job module)."""
+    return io.open_input(sensor, path, odometry)

@@ -1,12 +1,12 @@
-"""A real-data map: the Navtech scans fused with their ground-truth odometry, and numbers that
-say whether the geometry is right.
+"""A real-data map: polar scans of a spinning radar (the Navtech scans of the Oxford set by
+default) fused with their ground-truth odometry, and numbers that say whether the geometry is
+right.
 
-Frames: the Oxford radar frame (x forward, y right, z down); azimuths and yaw both turn about z
-from x towards y, so both are rotations about the lattice's z axis. The world is the first
-scan's frame. Scan k's pose chains the odometry rows: pose_k = pose_(k-1) @ T(k-1 <- k).
-The radar turns while the car moves 2 m per scan: each azimuth gets its own pose, interpolated
-between scan poses at its time (``beam_poses``), and its own encoder angle, folded into that
-pose (so one lattice of 400 azimuths serves every scan).
+Frames: x forward, y left, z up (REP-103); the reader (``io.polar_png``) converts the Oxford
+frame. The world is the first scan's frame. Scan k's pose chains the odometry rows: pose_k =
+pose_(k-1) @ T(k-1 <- k). The radar turns while the car moves 2 m per scan: each azimuth gets
+its own pose, interpolated between scan poses at its time (``polar_png.beam_poses``), and its
+own encoder angle, folded into that pose (so one lattice of azimuths serves every scan).
 
 Consistency: the map of scans 1-5 and the map of scans 6-11 see the same street; with the
 right geometry they agree best. ``consistency`` gives the correlation of their log-odds over
@@ -20,67 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-from radarcl.config import CfarConfig, InterpretConfig
-from radarcl.errors import ConfigError
-from radarcl.geometry import BeamLattice, BeamModel, half_aperture, interpolate_se2, se2_pose
+from radarcl import logodds
+from radarcl.errors import FrameFormatError
+from radarcl.geometry import se2_pose
 from radarcl.grid import EvidenceGrid, GridSpec
-from radarcl.io import navtech
+from radarcl.io import polar_png
 from radarcl.pipeline import Mapping
 
-N_AZ = 400
-CARRIER_HZ = 76.5e9                 # CTS350-X, 76-77 GHz
-BEAM_AZ_DEG = 1.8                   # about 1.8 deg in azimuth (data README)
-# The elevation fan is wide; the map is one voxel thick in the radar's plane, where any fan
-# width lets the beam through, so this value only has to be wide.
-BEAM_EL_DEG = 40.0
 OCCUPIED_NATS = 1.0                 # occupied in the consistency overlap: log-odds above this
-
-
-def beam_model():
-    """The Navtech beam: 1.8 deg in azimuth, a wide fan in elevation, near-field cylinder and
-    Gaussian weight on."""
-    lam = 299_792_458.0 / CARRIER_HZ
-    az, el = math.radians(BEAM_AZ_DEG), math.radians(BEAM_EL_DEG)
-    return BeamModel(az, el, float(half_aperture(lam, az)), float(half_aperture(lam, el)))
-
-
-def scan_poses(stamps, odometry, invert=False):
-    """(n_scans, 4, 4) poses of scans with radar timestamps ``stamps`` in the first one's frame.
-    invert=True reads each odometry row the other way round (a convention check)."""
-    poses = [np.eye(4)]
-    for prev, cur in zip(stamps[:-1], stamps[1:]):
-        try:
-            x, y, yaw = odometry[(cur, prev)]
-        except KeyError:
-            raise ConfigError(f"no odometry row from scan {cur} to scan {prev}") from None
-        step = se2_pose(x, y, yaw)
-        poses.append(poses[-1] @ (np.linalg.inv(step) if invert else step))
-    return np.stack(poses)
-
-
-def beam_poses(scans, poses, azimuth_sign=1.0, motion=True):
-    """(n_scans, N_AZ, 4, 4) per-azimuth poses: the scan poses interpolated at each azimuth's
-    time (a line fitted to its bursty timestamps), times the rotation of its encoder angle
-    (times ``azimuth_sign``) less the lattice's i x 2 pi / N_AZ. motion=False puts every
-    azimuth at its scan's pose (no motion within a scan; a consistency check)."""
-    stamps = np.array([s.timestamps_us[0] for s in scans], np.float64)
-    out = []
-    for k, scan in enumerate(scans):
-        i = np.arange(len(scan.timestamps_us))
-        t = np.polyval(np.polyfit(i, scan.timestamps_us.astype(np.float64), 1), i)
-        if not motion:
-            a = b = poses[k]
-            frac = np.zeros(len(i))
-        elif k + 1 < len(scans):
-            a, b, t0, t1 = poses[k], poses[k + 1], stamps[k], stamps[k + 1]
-            frac = (t - t0) / (t1 - t0)
-        else:                                   # the last scan: extend the motion into it
-            a, b, t0, t1 = poses[k - 1], poses[k], stamps[k - 1], stamps[k]
-            frac = 1 + (t - stamps[k]) / (t1 - t0)
-        moved = interpolate_se2(a, b, frac)
-        turn = azimuth_sign * scan.angles_rad - i * (2 * math.pi / N_AZ)
-        out.append(moved @ np.stack([se2_pose(0.0, 0.0, float(r)) for r in turn]))
-    return np.stack(out)
 
 
 def grid_for(poses, range_m, voxel_m):
@@ -91,21 +38,17 @@ def grid_for(poses, range_m, voxel_m):
     return GridSpec((lo[0], lo[1], -0.5 * voxel_m), voxel_m, (nx, ny, 1))
 
 
-def build_map(runtime, spec, scans, per_beam, range_max_m):
-    """Fuse ``scans`` taken at ``per_beam`` poses (n, N_AZ, 4, 4) into a new grid; returns it."""
-    grid = EvidenceGrid(runtime, spec)
-    first = scans[0]
-    mapping = Mapping(runtime, grid, BeamLattice.spinning(N_AZ), beam_model(), n_bins=first.n_bins,
-                      bin_spacing_m=first.bin_spacing_m, cfar_config=CfarConfig(),
-                      interpret_config=InterpretConfig(range_min_m=2.0, range_max_m=range_max_m),
-                      per_beam_poses=True)
-    for scan, poses in zip(scans, per_beam):
-        if scan.levels.shape[0] != N_AZ:
-            raise ConfigError(f"{scan.path}: expected {N_AZ} azimuths, got {scan.levels.shape[0]}")
-        flags = np.where(scan.valid, 0, 8).astype(np.uint8)     # FLAG_SILENT: no evidence
+def build_map(runtime, config, spec, scans, per_beam, progress=None):
+    """Fuse ``scans`` taken at ``per_beam`` poses (n, n_az, 4, 4) into a new grid of ``spec``
+    with ``config`` (a ``mapconfig.Resolved``); returns the grid."""
+    mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec), per_beam_poses=True)
+    for k, (scan, poses) in enumerate(zip(scans, per_beam)):
+        flags = np.where(scan.valid, 0, 8).astype(np.uint8)     # oracle.FLAG_SILENT: no evidence
         mapping.fuse(scan.power(), poses, flags=flags)
+        if progress is not None:
+            progress(k + 1, len(scans))
     mapping.runtime.queue.finish()
-    return grid
+    return mapping.grid
 
 
 def consistency(a, b):
@@ -113,7 +56,7 @@ def consistency(a, b):
     correlation of their log-odds, Jaccard overlap of their occupied voxels, voxel count."""
     both = (a != 0) & (b != 0)
     x, y = a[both].astype(np.float64), b[both].astype(np.float64)
-    occ_a, occ_b = x > OCCUPIED_NATS * 1024, y > OCCUPIED_NATS * 1024
+    occ_a, occ_b = x > OCCUPIED_NATS * logodds.SCALE, y > OCCUPIED_NATS * logodds.SCALE
     union = np.count_nonzero(occ_a | occ_b)
     return {"correlation": float(np.corrcoef(x, y)[0, 1]) if len(x) > 1 else float("nan"),
             "occupied_jaccard": float(np.count_nonzero(occ_a & occ_b) / union) if union else float("nan"),
@@ -127,19 +70,41 @@ def _moved(poses, dx=0.0, dy=0.0, dyaw=0.0):
     return delta @ poses
 
 
-def run(runtime, data_dir, voxel_m=0.3, range_max_m=80.0, split=5, report=print):
-    """Build the half maps under the true and the altered geometries; returns a dict of
-    ``consistency`` results by case, the full-map grid (true poses, all scans) and the scan poses."""
+def load(config, data_dir):
+    """(scans, scan poses, timestamps, odometry) of ``data_dir`` (radar/*.png and
+    gt/radar_odometry.csv) read as ``config``'s sensor."""
     data_dir = Path(data_dir)
-    scans = [navtech.load_scan(p) for p in navtech.scan_paths(data_dir / "radar")]
-    odometry = navtech.load_odometry(data_dir / "gt" / "radar_odometry.csv")
-    stamps = [int(s.path.stem) for s in scans]
-    poses = scan_poses(stamps, odometry)
-    report(f"{len(scans)} scans, {N_AZ} azimuths x {scans[0].n_bins} bins; the car moves "
+    layout = polar_png.PolarLayout.of(config.sensor)
+    scans = [polar_png.load_scan(p, layout) for p in polar_png.scan_paths(data_dir / "radar")]
+    if len(scans) < 4:
+        raise FrameFormatError(f"{data_dir / 'radar'}: the half-map check needs at least 4 scans, found {len(scans)}")
+    odometry = polar_png.load_odometry(data_dir / "gt" / "radar_odometry.csv")
+    try:
+        stamps = [int(s.path.stem) for s in scans]
+    except ValueError:
+        raise FrameFormatError("scans must be named by their UNIX time in us (<stamp>.png)") from None
+    return scans, polar_png.scan_poses(stamps, odometry), stamps, odometry
+
+
+def run(runtime, config, data_dir, report=print, progress=None):
+    """Build the half maps under the true and the altered geometries; returns a dict of
+    ``consistency`` results by case, the full-map grid (true poses, all scans), the scan
+    poses and the pulse statistics of the detector."""
+    scans, poses, stamps, odometry = load(config, data_dir)
+    if config.sensor.n_bins() is None:                      # a generic profile: bins from the data
+        config = config.for_sensor(config.sensor.with_bins(scans[0].n_bins))
+    n_az = config.sensor.n_azimuth
+    split = len(scans) // 2
+    range_max_m = config["interpret.range_max_m"]
+    report(f"{len(scans)} scans, {n_az} azimuths x {scans[0].n_bins} bins; the car moves "
            f"{np.linalg.norm(poses[-1, :2, 3]):.1f} m and turns {math.degrees(math.atan2(poses[-1, 1, 0], poses[-1, 0, 0])):.1f} deg")
-    true_beams = beam_poses(scans, poses)
-    spec = grid_for(true_beams, range_max_m, voxel_m)
-    half_a = build_map(runtime, spec, scans[:split], true_beams[:split], range_max_m).snapshot()
+    true_beams = polar_png.beam_poses(scans, poses, n_az)
+    spec = grid_for(true_beams, range_max_m, config["grid.voxel_m"])
+
+    def build(sc, pb):
+        return build_map(runtime, config, spec, sc, pb).snapshot()
+
+    half_a = build(scans[:split], true_beams[:split])
     # case -> (per-azimuth poses, whether the first half is rebuilt with them too)
     cases = {
         "true poses": (true_beams, False),
@@ -147,24 +112,58 @@ def run(runtime, data_dir, voxel_m=0.3, range_max_m=80.0, split=5, report=print)
         "second half +1 m along y": (_moved(true_beams, dy=1.0), False),
         "second half turned +2 deg": (_moved(true_beams, dyaw=math.radians(2)), False),
         "second half turned -2 deg": (_moved(true_beams, dyaw=math.radians(-2)), False),
-        "one pose per scan (no motion within a scan)": (beam_poses(scans, poses, motion=False), False),
-        "azimuths counter-clockwise": (beam_poses(scans, poses, azimuth_sign=-1.0), True),
-        "odometry inverted": (beam_poses(scans, scan_poses(stamps, odometry, invert=True)), True),
+        "one pose per scan (no motion within a scan)": (polar_png.beam_poses(scans, poses, n_az, motion=False), False),
+        "azimuths reversed": (polar_png.beam_poses(scans, poses, n_az, azimuth_sign=-1.0), True),
+        "odometry inverted": (polar_png.beam_poses(scans, polar_png.scan_poses(stamps, odometry, invert=True), n_az),
+                              True),
     }
     results = {}
-    for name, (per_beam, both_halves) in cases.items():
-        a = build_map(runtime, spec, scans[:split], per_beam[:split], range_max_m).snapshot() if both_halves else half_a
-        b = build_map(runtime, spec, scans[split:], per_beam[split:], range_max_m).snapshot()
+    for k, (name, (per_beam, both_halves)) in enumerate(cases.items()):
+        a = build(scans[:split], per_beam[:split]) if both_halves else half_a
+        b = build(scans[split:], per_beam[split:])
         r = results[name] = consistency(a, b)
         report(f"{name:45s} correlation {r['correlation']:.4f}  occupied overlap {r['occupied_jaccard']:.4f}  "
                f"({r['common_voxels']} voxels seen by both halves)")
-    full = build_map(runtime, spec, scans, true_beams, range_max_m)
-    return results, full, poses
+        if progress is not None:
+            progress(k + 1, len(cases) + 1, "geometries checked")
+    full = build_map(runtime, config, spec, scans, true_beams)
+    if progress is not None:
+        progress(len(cases) + 1, len(cases) + 1, "geometries checked")
+    return results, full, poses, pulse_statistics(runtime, config, scans)
 
 
-def plot_map(grid, poses, path, results=None):
-    """Top-down PNG of a one-layer map: log-odds from -3 (empty, blue) to +3 nat (occupied,
-    red), unseen white, x (forward) up and y (right) to the right, the scan poses in black."""
+def pulse_statistics(runtime, config, scans):
+    """What the detector makes of the scans: detections and pulses per scan, pulse widths [m]
+    (median, 90th percentile), the share of wide pulses; over the evidence interval."""
+    from radarcl.pipeline import Detection
+
+    spacing = config.sensor.bin_spacing_m()
+    det = Detection(runtime, (scans[0].levels.shape[0],), scans[0].n_bins, spacing, config.cfar_config(),
+                    config.interpret_config())
+    first, last = det.interpreter.first_bin, det.interpreter.last_bin
+    detections, pulses, widths, wide = [], [], [], []
+    for scan in scans:
+        r = det(scan.power())
+        detections.append(int(r.cfar.mask[:, first:last + 1].sum()))
+        pulses.append(int(r.interpret.n_pulses.sum()))
+        p = r.interpret.pulses
+        kept = p[..., 0] >= 0
+        widths.append(((p[..., 1] - p[..., 0] + 1) * spacing)[kept])
+        wide.append(p[..., 3][kept])
+    w, wd = np.concatenate(widths), np.concatenate(wide)
+    return dict(detections_per_scan=float(np.mean(detections)), pulses_per_scan=float(np.mean(pulses)),
+                pulse_width_median_m=float(np.median(w)) if len(w) else float("nan"),
+                pulse_width_p90_m=float(np.percentile(w, 90)) if len(w) else float("nan"),
+                wide_fraction=float(np.mean(wd)) if len(wd) else float("nan"),
+                cfar=dict(kind=det.cfar.config.kind, guard_bins=det.cfar.config.guard,
+                          train_bins=det.cfar.config.train, pfa=det.cfar.config.pfa),
+                wide_bins=det.interpreter.wide_bins)
+
+
+def plot_map(grid, poses, path, results=None, title="Navtech"):
+    """Top-down PNG of a one-layer map: log-odds from -L (empty, blue) to +L (occupied, red),
+    L the 99th percentile of |log-odds|, unseen white; x (forward) up and y (left) to the
+    left (REP-103 seen from above); the scan poses in black."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -172,24 +171,27 @@ def plot_map(grid, poses, path, results=None):
 
     spec = grid.spec
     nats = grid.log_odds()[0]                                  # (ny, nx)
+    seen = nats[nats != 0]
+    limit = float(np.percentile(np.abs(seen), 99)) if seen.size else 1.0
     shown = np.ma.masked_equal(nats, 0.0).T                     # rows = x, columns = y
     x0, y0, _ = spec.origin_m
     nx, ny, _ = spec.shape
     extent = (y0, y0 + ny * spec.voxel_m, x0, x0 + nx * spec.voxel_m)
     fig, ax = plt.subplots(figsize=(8, 8 * nx / ny), dpi=120)
-    image = ax.imshow(shown, origin="lower", extent=extent, cmap="coolwarm", vmin=-3, vmax=3,
+    image = ax.imshow(shown, origin="lower", extent=extent, cmap="coolwarm", vmin=-limit, vmax=limit,
                       interpolation="nearest")
     ax.plot(poses[:, 1, 3], poses[:, 0, 3], "k.-", ms=4, label="scan poses")
-    ax.set_xlabel("y, right [m]")
+    ax.invert_xaxis()                                           # y points left
+    ax.set_xlabel("y, left [m]")
     ax.set_ylabel("x, forward [m]")
-    title = f"Navtech, {len(poses)} scans fused at {spec.voxel_m} m (eq. 9)"
+    text = f"{title}, {len(poses)} scans fused at {spec.voxel_m} m (eq. 9)"
     if results:
         r = results["true poses"]["correlation"]
         worst = max(v["correlation"] for k, v in results.items() if k != "true poses")
-        title += f"\nhalf-map correlation {r:.3f} with the true poses, at most {worst:.3f} altered"
-    ax.set_title(title, fontsize=10)
+        text += f"\nhalf-map correlation {r:.3f} with the true poses, at most {worst:.3f} altered"
+    ax.set_title(text, fontsize=10)
     fig.colorbar(image, ax=ax, label="log-odds [nat]", shrink=0.8)
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path)
+    fig.savefig(path, format="png")
     plt.close(fig)

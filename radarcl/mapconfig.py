@@ -1,0 +1,321 @@
+"""The map configuration: how a map is made, in physical units, in one file.
+
+A configuration file (TOML) has five tables; every key is optional:
+
+  [range_fft]  n_fft (raw-sample sensors), window
+  [cfar]       kind, pfa, guard_m, train_m (windows in metres), os_rank, noise_floor
+  [interpret]  k_occ, e_high, e_low (eq. 12 [nat]), wide_pulse_m, range_min_m, range_max_m, max_pulses
+  [beam]       model
+  [grid]       voxel_m, origin_m, size_m
+
+``resolve(sensor, file, flags)`` fills each key from, in increasing priority: radarcl's default
+(``BUILTIN``), the sensor's geometry (``sensors.derived_defaults``), the sensor profile's own
+``[defaults.*]`` tables, the file, and command-line flags; it remembers where each value came
+from (``radarcl config show`` prints it). The result, a ``Resolved``, is the only way a pipeline
+is built (``pipeline.Mapping.from_config``): it converts the windows in metres to bins of the
+sensor at hand, saying how it rounded.
+"""
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from radarcl import tomlfile
+from radarcl.config import CfarConfig, InterpretConfig, is_power_of_two
+from radarcl.errors import ConfigError
+from radarcl.geometry import BEAM_MODELS
+
+CFAR_KINDS = ("ca", "go", "so", "os")
+WINDOWS = ("hann", "rect")
+_N = tomlfile.number
+
+
+def _pow2(v):
+    v = tomlfile.integer(v, 4, 1 << 16)
+    if not is_power_of_two(v):
+        raise ConfigError(f"must be a power of two, got {v}")
+    return v
+
+
+@dataclass(frozen=True)
+class Key:
+    """One configuration key: its check (value -> value, or ConfigError(reason)), unit, help."""
+
+    check: object
+    unit: str
+    help: str
+
+
+KEYS = {
+    "range_fft.n_fft": Key(_pow2, "", "FFT length after zero padding (eq. 11); raw-sample sensors"),
+    "range_fft.window": Key(lambda v: tomlfile.choice(v, WINDOWS), "", "window on the samples (§3.2)"),
+    "cfar.kind": Key(lambda v: tomlfile.choice(v, CFAR_KINDS), "", "CA (the paper's), GO, SO or OS"),
+    "cfar.pfa": Key(lambda v: _N(v, 0, 0.5, lo_open=True), "", "design false-alarm probability"),
+    "cfar.guard_m": Key(lambda v: _N(v, 0, 1e4, unit="m"), "m", "guard band per side"),
+    "cfar.train_m": Key(lambda v: _N(v, 0, 1e4, lo_open=True, unit="m"), "m", "training window per side"),
+    "cfar.os_rank": Key(lambda v: _N(v, 0, 1, lo_open=True), "", "OS-CFAR: rank as a fraction of the training cells"),
+    "cfar.noise_floor": Key(lambda v: _N(v, 1e-37, 1e37), "", "lower bound of the noise estimate [power]"),
+    "interpret.k_occ": Key(lambda v: _N(v, 0, 1e3), "nat/decade", "eq. 12 gain on log10(r/n)"),
+    "interpret.e_high": Key(lambda v: _N(v, -16, 0, unit="nat"), "nat", "E_h: noise before the first wide pulse"),
+    "interpret.e_low": Key(lambda v: _N(v, -16, 0, unit="nat"), "nat", "E_l: noise after it"),
+    "interpret.wide_pulse_m": Key(lambda v: _N(v, 0, 1e4, lo_open=True, unit="m"), "m", "a pulse this wide is wide"),
+    "interpret.range_min_m": Key(lambda v: _N(v, 0, 1e5, unit="m"), "m", "no evidence nearer"),
+    "interpret.range_max_m": Key(lambda v: _N(v, 0, 1e5, lo_open=True, unit="m"), "m", "no evidence farther"),
+    "interpret.max_pulses": Key(lambda v: tomlfile.integer(v, 1, 1 << 16), "", "pulse rows kept per beam"),
+    "beam.model": Key(lambda v: tomlfile.choice(v, BEAM_MODELS), "", "beam volume (§3.4, Fig. 7c)"),
+    "grid.voxel_m": Key(lambda v: _N(v, 1e-4, 1e3, unit="m"), "m", "voxel edge"),
+    "grid.origin_m": Key(lambda v: tomlfile.vector(v, unit="m"), "m", "low corner (x, y, z), world frame"),
+    "grid.size_m": Key(lambda v: tomlfile.vector(v, lo=0, lo_open=True, unit="m"), "m", "extent (x, y, z)"),
+}
+SECTIONS = tuple(dict.fromkeys(k.split(".")[0] for k in KEYS))
+
+BUILTIN = {
+    "range_fft.window": "hann", "cfar.kind": "ca", "cfar.pfa": 1e-3, "cfar.os_rank": 0.75,
+    "cfar.noise_floor": 1e-30, "interpret.k_occ": 1.0, "interpret.e_high": -1.0, "interpret.e_low": -0.1,
+    "interpret.max_pulses": 32, "beam.model": "cylindrical-conical", "grid.voxel_m": 0.1,
+}
+"""radarcl's own defaults: the paper's CFAR (CA, P_fa 1e-3, Fig. 6), its eq. 12 constants
+(k_occ 1, E_h -1 from Fig. 10; E_l -0.1 ours, the paper gives none), Rohling's OS rank 3/4,
+the paper's beam (Fig. 7c) and voxel (0.1 m)."""
+
+
+def check_value(name, value):
+    """``value`` for key ``name`` ("section.key"), checked; ConfigError names what is allowed."""
+    if name not in KEYS:
+        raise ConfigError(f"unknown configuration key {name!r}; keys: {', '.join(KEYS)}")
+    try:
+        return KEYS[name].check(value)
+    except ConfigError as exc:
+        raise ConfigError(f"{name} {exc}") from None
+
+
+def read(path):
+    """{"section.key": (value, "file PATH:LINE")} of a configuration file; ConfigError names
+    the file, line, key, value and what is allowed for an unknown key or a bad value."""
+    data, source = tomlfile.load(path)
+    out = {}
+    for section, table in data.items():
+        if section == "sensor" and isinstance(table, str):
+            out["sensor"] = (table, f"file {source.where('', 'sensor').split(': ')[0]}")
+            continue
+        if section not in SECTIONS or not isinstance(table, dict):
+            raise ConfigError(f"{source.where('', section)}: unknown entry; a configuration has sensor = "
+                              f"\"NAME\" and the tables {', '.join('[' + s + ']' for s in SECTIONS)}")
+        tomlfile.check_keys(table, {k.split(".")[1] for k in KEYS if k.startswith(section + ".")}, source, section)
+        for key, value in table.items():
+            where = source.where(section, key)
+            try:
+                out[f"{section}.{key}"] = (KEYS[f"{section}.{key}"].check(value), "file " + where.split(": ")[0])
+            except ConfigError as exc:
+                raise ConfigError(f"{where} = {value!r}: {exc}") from None
+    return out
+
+
+def parse_flag(text):
+    """A ``--set section.key=value`` flag as (key, value): the value is read as TOML
+    (0.5, "so", [1, 2, 3]), or taken as a bare string."""
+    if "=" not in text:
+        raise ConfigError(f"--set takes section.key=value, got {text!r}")
+    name, raw = (s.strip() for s in text.split("=", 1))
+    try:
+        value = tomlfile.loads(f"v = {raw}")["v"]
+    except ConfigError:
+        value = raw
+    return name, check_value(name, value)
+
+
+@dataclass(frozen=True)
+class Resolved:
+    """A complete configuration for one sensor: ``values`` {"section.key": value} and
+    ``origins`` {"section.key": where it came from}."""
+
+    sensor: object
+    values: dict
+    origins: dict
+
+    def __getitem__(self, name):
+        return self.values[name]
+
+    def replaced(self, **changes):
+        """A copy with some values changed (keyword names use __ for the dot:
+        cfar__kind="so"), marked as set by the program."""
+        values, origins = dict(self.values), dict(self.origins)
+        for name in ("grid.origin_m", "grid.size_m"):     # a field-of-view box follows the new values
+            if origins[name].endswith("field of view"):
+                del values[name], origins[name]
+        for key, value in changes.items():
+            name = key.replace("__", ".")
+            values[name] = check_value(name, value)
+            origins[name] = "set by the program"
+        return _checked(self.sensor, values, origins)
+
+    def for_sensor(self, sensor):
+        """The same values for a variant of the sensor (e.g. with its bin count learnt from the
+        data), checked again."""
+        return _checked(sensor, dict(self.values), dict(self.origins))
+
+    @property
+    def n_fft(self):
+        """FFT length (raw sensors) or None."""
+        return self.values.get("range_fft.n_fft")
+
+    @property
+    def bin_spacing_m(self):
+        return self.sensor.bin_spacing_m(self.n_fft)
+
+    def cfar_config(self):
+        """The ``CfarConfig`` in bins of this sensor: the guard rounded up (it must cover at least
+        guard_m), the training window to the nearest bin (at least one)."""
+        spacing = self.bin_spacing_m
+        guard = math.ceil(self["cfar.guard_m"] / spacing - 1e-9)
+        train = max(1, round(self["cfar.train_m"] / spacing))
+        rank = max(1, round(self["cfar.os_rank"] * 2 * train)) if self["cfar.kind"] == "os" else None
+        return CfarConfig(kind=self["cfar.kind"], guard=guard, train=train, pfa=self["cfar.pfa"], rank=rank,
+                          noise_floor=self["cfar.noise_floor"])
+
+    def interpret_config(self):
+        """The ``InterpretConfig`` (eq. 12 constants, wide-pulse width, range interval)."""
+        return InterpretConfig(k_occ=self["interpret.k_occ"], e_high=self["interpret.e_high"],
+                               e_low=self["interpret.e_low"], range_min_m=self["interpret.range_min_m"],
+                               range_max_m=self["interpret.range_max_m"], wide_pulse_m=self["interpret.wide_pulse_m"],
+                               max_pulses=self["interpret.max_pulses"])
+
+    def grid_spec(self):
+        """The ``GridSpec`` of [grid]: origin_m, ceil(size_m / voxel_m) voxels."""
+        from radarcl.grid import GridSpec
+
+        voxel = self["grid.voxel_m"]
+        shape = tuple(max(1, math.ceil(s / voxel - 1e-9)) for s in self["grid.size_m"])
+        return GridSpec(self["grid.origin_m"], voxel, shape)
+
+    def rounding(self):
+        """Sentences saying how the windows in metres became bins."""
+        c, spacing = self.cfar_config(), self.bin_spacing_m
+        return [f"CFAR guard {self['cfar.guard_m']:.4g} m -> {c.guard} bins of {spacing:.4g} m "
+                f"({c.guard * spacing:.4g} m, rounded up)",
+                f"CFAR training {self['cfar.train_m']:.4g} m -> {c.train} bins ({c.train * spacing:.4g} m, nearest)",
+                f"wide pulse {self['interpret.wide_pulse_m']:.4g} m -> "
+                f"{self.interpret_config().wide_bins(spacing)} bins (rounded up)"]
+
+    def label(self, base=None):
+        """Short text naming the values that differ from ``base`` (a Resolved), or all the
+        CFAR and eq. 12 choices."""
+        keys = [k for k in self.values if base is None or base.values.get(k) != self.values[k]]
+        if base is None:
+            keys = [k for k in keys if k.startswith(("cfar.kind", "cfar.pfa", "interpret.k_occ", "interpret.e_",
+                                                     "interpret.wide", "grid.voxel"))]
+        return ", ".join(f"{k.split('.')[1]}={_short(self.values[k])}" for k in keys) or "the same"
+
+    def as_dict(self):
+        """JSON-ready {"section.key": value}."""
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.values.items()}
+
+    def to_toml(self, header=()):
+        """The configuration as a file ``read`` accepts (every key, with its origin as a comment)."""
+        tables = {s: {} for s in SECTIONS}
+        comments = {}
+        for name, value in self.values.items():
+            section, key = name.split(".")
+            tables[section][key] = value
+            comments[(section, key)] = self.origins.get(name)
+        return tomlfile.dumps(tables, header=header, top={"sensor": self.sensor.name}, comments=comments)
+
+    def save(self, path, header=(), overwrite=False):
+        """Write ``to_toml`` to ``path`` (refusing an existing file unless ``overwrite``)."""
+        path = Path(path)
+        if path.exists() and not overwrite:
+            raise ConfigError(f"{path} exists; choose another name or pass --force")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.tmp")
+        tmp.write_text(self.to_toml(header))
+        tmp.replace(path)
+
+
+def _short(v):
+    return f"{v:g}" if isinstance(v, float) else str(list(v) if isinstance(v, tuple) else v)
+
+
+def resolve(sensor=None, path=None, flags=None, program=None):
+    """The ``Resolved`` configuration of ``sensor`` (a SensorProfile, a name or a path; default
+    the file's ``sensor = ...`` or the paper's radar) with the file at ``path``, ``flags``
+    {"section.key": value} from the command line, and ``program`` {"section.key": value} set
+    by the calling program (a job's own choice, below the user's file and flags)."""
+    from radarcl import sensors
+
+    from_file = {}
+    if path is not None:
+        from_file = read(path)
+        file_sensor = from_file.pop("sensor", (None, None))[0]
+        if sensor is None and file_sensor is not None:
+            sensor = file_sensor
+    sensor = sensors.load(sensor if sensor is not None else sensors.DEFAULT_SENSOR)
+    values = dict(BUILTIN)
+    origins = {k: "radarcl default" for k in BUILTIN}
+    for name, (value, why) in sensors.derived_defaults(sensor).items():
+        values[name], origins[name] = value, f"sensor {sensor.name}: {why}"
+    for name, value in sensor.defaults.items():
+        values[name], origins[name] = value, f"sensor {sensor.name} ({sensor.source})"
+    for name, value in (program or {}).items():
+        values[name], origins[name] = check_value(name, value), "the command's own choice"
+    for name, (value, where) in from_file.items():
+        values[name], origins[name] = value, where
+    for name, value in (flags or {}).items():
+        values[name], origins[name] = check_value(name, value), "flag"
+    return _checked(sensor, values, origins)
+
+
+def _checked(sensor, values, origins):
+    """Fill the grid extent, drop what the sensor does not use, and check the keys together."""
+    from radarcl import sensors
+
+    if not sensor.raw:
+        values.pop("range_fft.n_fft", None)
+        values.pop("range_fft.window", None)
+    if "grid.size_m" not in values or "grid.origin_m" not in values:
+        origin, size = sensors.field_of_view_box(sensor, values["grid.voxel_m"], values["interpret.range_max_m"])
+        if "grid.origin_m" not in values:
+            values["grid.origin_m"], origins["grid.origin_m"] = origin, f"sensor {sensor.name}: field of view"
+        if "grid.size_m" not in values:
+            values["grid.size_m"], origins["grid.size_m"] = size, f"sensor {sensor.name}: field of view"
+    order = {k: i for i, k in enumerate(KEYS)}
+    values = dict(sorted(values.items(), key=lambda kv: order[kv[0]]))
+    resolved = Resolved(sensor, values, origins)
+
+    def fail(keys, reason):
+        raise ConfigError("; ".join(f"{k} = {_short(values[k])} (from {origins[k]})" for k in keys) + f": {reason}")
+
+    lo, hi = values["interpret.range_min_m"], values["interpret.range_max_m"]
+    if lo >= hi:
+        fail(["interpret.range_min_m", "interpret.range_max_m"], "need range_min_m < range_max_m")
+    s_lo, s_hi = sensor.range_interval_m
+    if lo < s_lo - 1e-9 or hi > s_hi + 1e-9:
+        fail(["interpret.range_min_m", "interpret.range_max_m"],
+             f"outside the range sensor {sensor.name} measures, [{s_lo:g}, {s_hi:g}] m")
+    if sensor.raw and values["range_fft.n_fft"] < sensor.radar.n_samples:
+        fail(["range_fft.n_fft"], f"shorter than the {sensor.radar.n_samples} samples per ramp (eq. 11 pads, "
+                                  "never truncates)")
+    n_bins = sensor.n_bins(values.get("range_fft.n_fft"))
+    try:
+        cfar = resolved.cfar_config()
+    except ConfigError as exc:
+        fail(["cfar.kind", "cfar.pfa", "cfar.guard_m", "cfar.train_m"], str(exc))
+    if n_bins is not None and cfar.window > n_bins:
+        fail(["cfar.guard_m", "cfar.train_m"], f"the CFAR window needs {cfar.window} bins of "
+                                               f"{resolved.bin_spacing_m:.4g} m; the sensor's profiles have {n_bins}")
+    try:
+        resolved.grid_spec()
+    except ConfigError as exc:
+        fail(["grid.voxel_m", "grid.size_m"], str(exc))
+    return resolved
+
+
+def show(resolved):
+    """Lines for ``radarcl config show``: each key, its value and unit, where it came from."""
+    s = resolved.sensor
+    lines = [f"sensor {s.name} ({s.source}): {s.description}"]
+    width = max(len(k) for k in resolved.values)
+    for name, value in resolved.values.items():
+        unit = KEYS[name].unit
+        lines.append(f"  {name:<{width}} = {_short(value):<24} {unit:<10} {resolved.origins[name]}")
+    lines += ["  " + r for r in resolved.rounding()]
+    return lines

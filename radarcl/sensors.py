@@ -1,0 +1,380 @@
+"""Sensor profiles: a radar described once, as data (a TOML file), and the pipeline defaults
+that follow from its own resolution and geometry.
+
+A profile gives what the pipeline needs to know of a sensor: whether it delivers raw beat
+samples (``input = "samples"``: the range FFT runs first) or range profiles (``"profiles"``:
+they enter at CFAR); its waveform or its range bins; its beams and scan lattice; its mounting;
+how its files are read (``[reader]``); and, optionally, its own choices for the map
+configuration (``[defaults.<section>]``, the sections of a configuration file, see
+``radarcl.mapconfig``). ``extends = "name"`` starts from another profile. Built-in profiles live
+in ``radarcl/profiles/*.toml``; ``radarcl sensors`` lists them and ``--sensor`` takes a name or
+a path.
+
+Defaults derived from the sensor (``derived_defaults``), each with the reason it reports:
+- the CFAR guard holds a point target's whole pulse at the threshold, the Hann mainlobe of
+  ``MAINLOBE_CELLS`` resolution cells, and, where the mounting makes wide ground echoes (a
+  beam pointing down at ``ground_elevation_deg`` from ``height_m``), half of such an echo as
+  the paper's wide-pulse rule measures it (its half-power ground extent plus a point pulse);
+- the training window spans ``TRAIN_CELLS`` resolution cells per side (the paper's 16 bins of
+  its x4 zero-padded FFT);
+- a pulse is wide from the paper's rule where the mounting defines it (the ground extent at the
+  lowest elevation, §3.3), else from twice a point target's mainlobe;
+- the FFT pads x4 (the paper's 1024 points for 256 samples, §4.1); the range interval is the
+  sensor's; the grid is the field of view's bounding box (one voxel thick for a spinning radar
+  with one elevation: it maps a plane).
+"""
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from radarcl import physics, tomlfile
+from radarcl.config import RadarConfig, is_power_of_two
+from radarcl.errors import ConfigError
+from radarcl.geometry import BeamLattice
+
+PROFILE_DIR = Path(__file__).resolve().parent / "profiles"
+DEFAULT_SENSOR = "paper"
+INPUTS = ("samples", "profiles")
+SAMPLE_TYPES = {"int16": np.int16, "float32": np.float32, "complex64": np.complex64}
+READERS = ("recording", "polar-png", "ti-openradar")
+MAINLOBE_CELLS = 4.0       # Hann mainlobe, null to null, in resolution cells (Harris 1978)
+TRAIN_CELLS = 4.0          # training window per side, in resolution cells
+PADDING = 4                # n_fft = PADDING x the next power of two >= n_samples
+
+_N = tomlfile.number
+_SCHEMA = {                # section -> key -> check (value -> value, or ConfigError(reason))
+    "": {"name": tomlfile.text, "description": tomlfile.text, "extends": tomlfile.text,
+         "input": lambda v: tomlfile.choice(v, INPUTS)},
+    "waveform": {"carrier_hz": lambda v: _N(v, 0, lo_open=True, unit="Hz"),
+                 "bandwidth_hz": lambda v: _N(v, 0, lo_open=True, unit="Hz"),
+                 "sweep_time_s": lambda v: _N(v, 0, lo_open=True, unit="s"),
+                 "sample_rate_hz": lambda v: _N(v, 0, lo_open=True, unit="Hz"),
+                 "n_samples": lambda v: tomlfile.integer(v, 2, 1 << 20),
+                 "sample_type": lambda v: tomlfile.choice(v, tuple(SAMPLE_TYPES))},
+    "range": {"range_min_m": lambda v: _N(v, 0, unit="m"), "range_max_m": lambda v: _N(v, 0, lo_open=True, unit="m"),
+              "bin_spacing_m": lambda v: _N(v, 0, 1e3, lo_open=True, unit="m"),
+              "n_bins": lambda v: tomlfile.integer(v, 1, 1 << 20),
+              "resolution_m": lambda v: _N(v, 0, 1e3, lo_open=True, unit="m"),
+              "carrier_hz": lambda v: _N(v, 0, lo_open=True, unit="Hz")},
+    "beams": {"n_azimuth": lambda v: tomlfile.integer(v, 1, 1 << 16), "n_elevation": lambda v: tomlfile.integer(v, 1, 1 << 10),
+              "azimuth_step_deg": lambda v: _N(v, 0, 360, unit="deg"), "elevation_step_deg": lambda v: _N(v, 0, 180, unit="deg"),
+              "beamwidth_az_deg": lambda v: _N(v, 0, 179, lo_open=True, unit="deg"),
+              "beamwidth_el_deg": lambda v: _N(v, 0, 179, lo_open=True, unit="deg"),
+              "spinning": tomlfile.boolean},
+    "mounting": {"height_m": lambda v: _N(v, 0, lo_open=True, unit="m"),
+                 "lowest_elevation_deg": lambda v: _N(v, -89, 0, lo_open=True, unit="deg"),
+                 "ground_elevation_deg": lambda v: _N(v, -89, 0, lo_open=True, unit="deg")},
+    "reader": {"format": lambda v: tomlfile.choice(v, READERS),
+               "meta_columns": lambda v: tomlfile.integer(v, 0, 1 << 16),
+               "timestamp_column": lambda v: tomlfile.integer(v, 0, 1 << 16),
+               "encoder_column": lambda v: tomlfile.integer(v, 0, 1 << 16),
+               "encoder_counts": lambda v: tomlfile.integer(v, 1, 1 << 31),
+               "valid_column": lambda v: tomlfile.integer(v, -1, 1 << 16),
+               "db_per_level": lambda v: _N(v, 0, 1.4, lo_open=True, unit="dB"),
+               "clockwise": tomlfile.boolean},
+}
+
+
+@dataclass(frozen=True)
+class SensorProfile:
+    """A sensor as its profile describes it (see the module docstring); build with ``load``."""
+
+    name: str
+    description: str
+    input: str
+    source: str                          # the file it was read from, or "built-in <name>"
+    tables: dict = field(repr=False)     # the merged TOML tables (after ``extends``)
+    defaults: dict = field(repr=False)   # {"section.key": value} from [defaults.*]
+    radar: RadarConfig = None            # input = "samples": waveform, beams and range as a RadarConfig
+
+    def __post_init__(self):
+        self._validate()
+
+    # -- what the pipeline asks ---------------------------------------------------------------------
+    def get(self, section, key, default=None):
+        """A raw value of the profile, or ``default``."""
+        return self.tables.get(section, {}).get(key, default)
+
+    @property
+    def raw(self):
+        """True when frames are raw beat samples (range FFT first)."""
+        return self.input == "samples"
+
+    @property
+    def n_azimuth(self):
+        return int(self.get("beams", "n_azimuth"))
+
+    @property
+    def n_elevation(self):
+        return int(self.get("beams", "n_elevation", 1))
+
+    @property
+    def spinning(self):
+        """A full turn of azimuths per frame (a spinning radar, e.g. Navtech)."""
+        return bool(self.get("beams", "spinning", False))
+
+    @property
+    def range_interval_m(self):
+        """(range_min_m, range_max_m) the sensor measures."""
+        return float(self.get("range", "range_min_m", 0.0)), float(self.get("range", "range_max_m"))
+
+    @property
+    def range_resolution_m(self):
+        """c / 2B of the sweep (eq. 7); for profiles, [range] resolution_m or the bin spacing."""
+        if self.raw:
+            return self.radar.range_resolution_m
+        return float(self.get("range", "resolution_m", self.get("range", "bin_spacing_m")))
+
+    @property
+    def wavelength_m(self):
+        carrier = self.radar.carrier_hz if self.raw else self.get("range", "carrier_hz")
+        return float(physics.wavelength(carrier))
+
+    @property
+    def sample_dtype(self):
+        """dtype of a frame: the samples' for raw sensors, float32 power for profiles."""
+        return np.dtype(SAMPLE_TYPES[self.get("waveform", "sample_type", "int16")] if self.raw else np.float32)
+
+    def n_bins(self, n_fft=None):
+        """Range bins per beam: after an n_fft FFT for raw sensors; the profile's for profiles
+        (None when the reader learns it from the data: see ``with_bins``)."""
+        if self.raw:
+            return self.radar.n_bins(n_fft)
+        n = self.get("range", "n_bins")
+        return None if n is None else int(n)
+
+    def bin_spacing_m(self, n_fft=None):
+        """Range between bins [m] (bin j at j x spacing)."""
+        return self.radar.bin_spacing_m(n_fft) if self.raw else float(self.get("range", "bin_spacing_m"))
+
+    def frame_shape(self, n_fft=None):
+        """Shape of one frame: (n_az, n_el, n_samples) raw; (*lattice.batch, n_bins) profiles."""
+        if self.raw:
+            return self.radar.frame_shape
+        return (*self.lattice().batch, self.n_bins(n_fft))
+
+    def with_bins(self, n_bins):
+        """This profile with ``n_bins`` range bins (a reader that learns them from the data)."""
+        tables = {k: dict(v) for k, v in self.tables.items()}
+        tables.setdefault("range", {})["n_bins"] = int(n_bins)
+        return SensorProfile(self.name, self.description, self.input, self.source, tables, self.defaults, self.radar)
+
+    def lattice(self):
+        """The frame's ``BeamLattice`` in the head frame (x forward, y left, z up): a full
+        counter-clockwise turn for a spinning radar, else centred on the boresight."""
+        n_az, n_el = self.n_azimuth, self.n_elevation
+        el_step = math.radians(self.get("beams", "elevation_step_deg", 0.0))
+        el0 = -0.5 * (n_el - 1) * el_step
+        if self.spinning:
+            return BeamLattice(n_az, n_el, 0.0, 2 * math.pi / n_az, el0, el_step)
+        az_step = math.radians(self.get("beams", "azimuth_step_deg", 0.0))
+        return BeamLattice(n_az, n_el, -0.5 * (n_az - 1) * az_step, az_step, el0, el_step)
+
+    def beam_model(self, name, voxel_m):
+        """The ``BeamModel`` called ``name`` (``geometry.BEAM_MODELS``) for this sensor."""
+        from radarcl.geometry import beam_model
+
+        return beam_model(name, math.radians(self.get("beams", "beamwidth_az_deg")),
+                          math.radians(self.get("beams", "beamwidth_el_deg")), self.wavelength_m, voxel_m)
+
+    def toml(self):
+        """The profile as TOML text (merged, as used)."""
+        tables = {k: v for k, v in self.tables.items() if k and k != "defaults"}
+        defaults = {f"defaults.{k.split('.')[0]}": {} for k in self.defaults}
+        for k, v in self.defaults.items():
+            section, key = k.split(".")
+            defaults[f"defaults.{section}"][key] = v
+        top = {k: v for k, v in self.tables.get("", {}).items() if k != "extends"}
+        return tomlfile.dumps({**tables, **defaults}, header=(f"sensor profile {self.name} ({self.source})",),
+                              top=top)
+
+    # -- checks -----------------------------------------------------------------------------------------------
+    def _validate(self):
+        where = self.source
+        need = {"samples": ("waveform", "beams", "range"), "profiles": ("beams", "range")}[self.input]
+        for section in need:
+            if section not in self.tables:
+                raise ConfigError(f"{where}: a sensor with input = {self.input!r} needs a [{section}] table")
+        required = [("beams", "n_azimuth"), ("beams", "beamwidth_az_deg"), ("beams", "beamwidth_el_deg"),
+                    ("range", "range_max_m")]
+        required += ([("range", "bin_spacing_m"), ("range", "carrier_hz")] if not self.raw else
+                     [("waveform", k) for k in ("carrier_hz", "bandwidth_hz", "sweep_time_s", "sample_rate_hz",
+                                                "n_samples")])
+        for section, key in required:
+            if self.get(section, key) is None:
+                raise ConfigError(f"{where}: [{section}] {key} is required for a sensor with input = {self.input!r}")
+        if not self.raw and "waveform" in self.tables:
+            raise ConfigError(f"{where}: [waveform] applies to input = 'samples' only")
+        lo, hi = self.range_interval_m
+        if lo >= hi:
+            raise ConfigError(f"{where}: need range_min_m < range_max_m, got {lo} and {hi}")
+        if not self.raw:
+            n = self.n_bins()
+            if n is not None and hi > (n - 1) * self.bin_spacing_m() * (1 + 1e-9) + self.bin_spacing_m():
+                raise ConfigError(f"{where}: range_max_m = {hi} m lies beyond the last of {n} bins of "
+                                  f"{self.bin_spacing_m()} m ({(n - 1) * self.bin_spacing_m():.2f} m)")
+        if self.spinning and self.get("beams", "azimuth_step_deg") is not None:
+            step = self.get("beams", "azimuth_step_deg")
+            if abs(step * self.n_azimuth - 360.0) > 1e-6 * 360:
+                raise ConfigError(f"{where}: a spinning sensor's {self.n_azimuth} azimuths of {step} deg "
+                                  "do not make a full turn (leave azimuth_step_deg out)")
+        try:
+            self.lattice()
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+
+
+# -- loading -----------------------------------------------------------------------------------------------------
+def builtin_names():
+    """Names of the built-in profiles."""
+    return sorted(p.stem for p in PROFILE_DIR.glob("*.toml"))
+
+
+def _read(spec, seen=()):
+    """(tables, Source) of a profile name or path, ``extends`` resolved."""
+    path = Path(spec)
+    if spec in builtin_names() and not path.exists():
+        path = PROFILE_DIR / f"{spec}.toml"
+    elif not path.is_file():
+        raise ConfigError(f"no sensor profile {spec!r}: not a built-in ({', '.join(builtin_names())}) "
+                          "and no such file")
+    data, source = tomlfile.load(path)
+    tables = {"": {k: v for k, v in data.items() if not isinstance(v, dict)}}
+    for key, value in data.items():
+        if isinstance(value, dict):
+            if key == "defaults":
+                for section, table in value.items():
+                    tables[f"defaults.{section}"] = table
+            else:
+                tables[key] = value
+    for section, table in tables.items():
+        if section.startswith("defaults."):
+            continue
+        if section not in _SCHEMA:
+            raise ConfigError(f"{source.where(section)}: unknown table; allowed: "
+                              f"{', '.join('[' + s + ']' for s in _SCHEMA if s)}, [defaults.<section>]")
+        tomlfile.check_keys(table, _SCHEMA[section], source, section)
+        for key, value in table.items():
+            try:
+                table[key] = _SCHEMA[section][key](value)
+            except ConfigError as exc:
+                raise ConfigError(f"{source.where(section, key)} {exc}") from None
+    base = tables[""].get("extends")
+    if base is not None:
+        if base in seen:
+            raise ConfigError(f"{source.name}: profiles extend each other in a circle: {' -> '.join(seen + (base,))}")
+        parent, _ = _read(base, seen + (base,))
+        merged = {k: dict(v) for k, v in parent.items()}
+        for section, table in tables.items():
+            merged.setdefault(section, {}).update(table)
+        merged[""].pop("extends", None)
+        tables = merged
+    return tables, source
+
+
+def load(spec=DEFAULT_SENSOR):
+    """The ``SensorProfile`` of a built-in name or a TOML file; ConfigError with file, line,
+    key, value and what is allowed for anything wrong in it."""
+    if isinstance(spec, SensorProfile):
+        return spec
+    tables, source = _read(str(spec))
+    top = tables[""]
+    for key in ("name", "input"):
+        if key not in top:
+            raise ConfigError(f"{source.name}: the profile needs a top-level {key} = ...")
+    defaults = {}
+    from radarcl.mapconfig import check_value
+
+    for section, table in tables.items():
+        if section.startswith("defaults."):
+            for key, value in table.items():
+                name = f"{section[len('defaults.'):]}.{key}"
+                try:
+                    defaults[name] = check_value(name, value)
+                except ConfigError as exc:
+                    raise ConfigError(f"{source.where(section, key)} {exc}") from None
+    radar = None
+    if top["input"] == "samples":
+        w, b, r = tables.get("waveform", {}), tables.get("beams", {}), tables.get("range", {})
+        try:
+            radar = RadarConfig(
+                carrier_hz=w.get("carrier_hz"), bandwidth_hz=w.get("bandwidth_hz"), sweep_time_s=w.get("sweep_time_s"),
+                sample_rate_hz=w.get("sample_rate_hz"), n_samples=w.get("n_samples"),
+                complex_samples=w.get("sample_type", "int16") == "complex64",
+                beamwidth_az_deg=b.get("beamwidth_az_deg"), beamwidth_el_deg=b.get("beamwidth_el_deg"),
+                n_azimuth=b.get("n_azimuth"), n_elevation=b.get("n_elevation", 1),
+                azimuth_step_deg=b.get("azimuth_step_deg", 1.0) or 1.0,
+                elevation_step_deg=b.get("elevation_step_deg", 1.0) or 1.0,
+                range_min_m=r.get("range_min_m", 0.0), range_max_m=r.get("range_max_m"))
+        except (ConfigError, TypeError) as exc:
+            raise ConfigError(f"{source.name}: {exc}") from None
+    label = source.name if Path(str(spec)).exists() else f"built-in {top['name']}"
+    return SensorProfile(top["name"], top.get("description", ""), top["input"], label, tables, defaults, radar)
+
+
+# -- defaults that follow from the sensor ------------------------------------------------------------------------
+def ground_pulse_m(sensor, elevation_deg):
+    """Width [m] at the CFAR threshold of the ground echo of a beam at ``elevation_deg`` (the
+    paper's wide-pulse construction, physics.wide_pulse_width), or None without a mounting."""
+    height = sensor.get("mounting", "height_m")
+    if height is None or elevation_deg is None:
+        return None
+    return float(physics.wide_pulse_width(height, math.radians(elevation_deg),
+                                          math.radians(sensor.get("beams", "beamwidth_el_deg")),
+                                          sensor.range_resolution_m))
+
+
+def derived_defaults(sensor):
+    """{"section.key": (value, reason)}: the configuration this sensor's own geometry gives
+    (see the module docstring)."""
+    res = sensor.range_resolution_m
+    mainlobe = MAINLOBE_CELLS * res
+    out = {}
+    guard, why = mainlobe, f"a point target's pulse: {MAINLOBE_CELLS:g} resolution cells of {res:.4g} m"
+    ground = ground_pulse_m(sensor, sensor.get("mounting", "ground_elevation_deg"))
+    if ground is not None and ground / 2 > guard:
+        guard, why = ground / 2, (f"half the {ground:.3g} m ground echo at "
+                                  f"{sensor.get('mounting', 'ground_elevation_deg'):g} deg")
+    out["cfar.guard_m"] = (guard, why)
+    out["cfar.train_m"] = (TRAIN_CELLS * res, f"{TRAIN_CELLS:g} resolution cells of {res:.4g} m per side")
+    wide = ground_pulse_m(sensor, sensor.get("mounting", "lowest_elevation_deg"))
+    if wide is not None:
+        out["interpret.wide_pulse_m"] = (wide, f"the paper's rule: ground echo at the lowest elevation "
+                                               f"{sensor.get('mounting', 'lowest_elevation_deg'):g} deg")
+    else:
+        out["interpret.wide_pulse_m"] = (2 * mainlobe, "twice a point target's pulse (no ground geometry)")
+    lo, hi = sensor.range_interval_m
+    out["interpret.range_min_m"] = (lo, "the sensor's range")
+    out["interpret.range_max_m"] = (hi, "the sensor's range")
+    if sensor.raw:
+        n = sensor.radar.n_samples
+        n_fft = PADDING * (1 << max(0, math.ceil(math.log2(n))))
+        assert is_power_of_two(n_fft)
+        out["range_fft.n_fft"] = (n_fft, f"x{PADDING} zero padding of {n} samples (§4.1)")
+    n_bins = sensor.n_bins(out.get("range_fft.n_fft", (None,))[0])
+    if n_bins is not None:
+        out["interpret.max_pulses"] = (max(32, n_bins // 32), f"one per 32 of {n_bins} bins, at least 32")
+    return out
+
+
+def field_of_view_box(sensor, voxel_m, range_max_m):
+    """(origin_m, size_m) of the grid that holds the field of view around a sensor at the
+    origin: the bounding box of its beams out to ``range_max_m``; one voxel thick in z for a
+    spinning radar with one elevation."""
+    r = float(range_max_m)
+    if sensor.spinning and sensor.n_elevation == 1:
+        return (-r, -r, -0.5 * voxel_m), (2 * r, 2 * r, voxel_m)
+    lat = sensor.lattice()
+    half_az = math.radians(sensor.get("beams", "beamwidth_az_deg")) / 2
+    half_el = math.radians(sensor.get("beams", "beamwidth_el_deg")) / 2
+    az = np.concatenate([lat.azimuths - half_az, lat.azimuths + half_az, lat.azimuths])
+    el = np.concatenate([lat.elevations - half_el, lat.elevations + half_el, lat.elevations])
+    a, e = (x.ravel() for x in np.meshgrid(az, np.clip(el, -math.pi / 2, math.pi / 2)))
+    d = r * np.stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)], axis=1)
+    d = np.vstack([d, np.zeros(3)])
+    lo, hi = d.min(axis=0), d.max(axis=0)
+    return (tuple(round(float(v), 6) for v in lo),
+            tuple(round(float(v), 6) for v in np.maximum(hi - lo, voxel_m)))
