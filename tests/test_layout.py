@@ -23,6 +23,8 @@ def test_installed_copy_runs_a_kernel(tmp_path):
     subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation",
                     "--target", str(target), str(ROOT)], check=True, cwd=tmp_path)
     assert (target / "radarcl" / "kernels" / "range_fft.cl").is_file()
+    profiles = {p.name for p in (target / "radarcl" / "profiles").glob("*.toml")}
+    assert profiles == {p.name for p in (ROOT / "radarcl" / "profiles").glob("*.toml")} and "paper.toml" in profiles
     shipped = {p.name for p in (target / "radarcl" / "viewer" / "shaders").glob("*.glsl")}
     assert shipped == {p.name for p in (ROOT / "viewer" / "shaders").glob("*.glsl")} and "volume.glsl" in shipped
     script = ("import numpy as np, radarcl, radarcl.cl as c\n"
@@ -30,8 +32,10 @@ def test_installed_copy_runs_a_kernel(tmp_path):
               "assert str(c.kernels_dir()).startswith(%r), c.kernels_dir()\n"
               "p = RangeFFT(c.Runtime(), (2, 1), 8, 16, dtype=np.float32)(np.ones((2, 1, 8), np.float32)).profiles\n"
               "import radarcl.viewer.renderer as r\n"
+              "from radarcl import sensors\n"
+              "assert str(sensors.PROFILE_DIR).startswith(%r) and sensors.load('navtech-cts350x').n_bins() == 3768\n"
               "assert r.__file__.startswith(%r) and 'FRAGMENT_SHADER' in r.shader_source('volume')\n"
-              "print(radarcl.__file__, float(p[0, 0, 0]))\n") % (str(target), str(target))
+              "print(radarcl.__file__, float(p[0, 0, 0]))\n") % (str(target), str(target), str(target))
     env = {**os.environ, "PYTHONPATH": str(target)}
     out = subprocess.run([sys.executable, "-c", script], check=True, cwd=tmp_path, env=env,
                          capture_output=True, text=True).stdout
