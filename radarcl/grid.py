@@ -79,6 +79,15 @@ class GridSpec:
         """Bricks along (x, y, z); partial bricks at the high ends hold voxels outside the grid."""
         return tuple(-(-n // BRICK) for n in self.shape)
 
+    def check_brick_table(self):
+        """The number of bricks, or ConfigError when the host's brick table cannot hold them."""
+        n_total = int(np.prod(self.brick_shape, dtype=np.int64))
+        if n_total > MAX_TABLE_BRICKS:
+            raise ConfigError(f"a grid of {self.shape} voxels of {self.voxel_m:g} m has {n_total} bricks, more "
+                              f"than the {MAX_TABLE_BRICKS} a brick table holds; use voxels of at least "
+                              f"{self.voxel_m * (n_total / MAX_TABLE_BRICKS) ** (1 / 3):.3g} m or a smaller grid")
+        return n_total
+
     @property
     def dense_bytes(self):
         """Bytes of the grid stored densely as int32."""
@@ -135,11 +144,7 @@ class EvidenceGrid:
         self.runtime = runtime
         self.spec = spec
         nbx, nby, nbz = spec.brick_shape
-        n_total = nbx * nby * nbz
-        if n_total > MAX_TABLE_BRICKS:
-            raise ConfigError(f"a grid of {spec.shape} voxels has {n_total} bricks, more than the "
-                              f"{MAX_TABLE_BRICKS} a brick table holds; use voxels of at least "
-                              f"{spec.voxel_m * (n_total / MAX_TABLE_BRICKS) ** (1 / 3):.3g} m or a smaller grid")
+        n_total = spec.check_brick_table()
         self.table = np.full((nbz, nby, nbx), -1, np.int32)     # brick (z, y, x) -> slot
         self.keys = np.empty((0, 3), np.int32)                  # slot -> brick (bx, by, bz)
         self.pool = None

@@ -303,7 +303,7 @@ def _checked(sensor, values, origins):
         fail(["cfar.guard_m", "cfar.train_m"], f"the CFAR window needs {cfar.window} bins of "
                                                f"{resolved.bin_spacing_m:.4g} m; the sensor's profiles have {n_bins}")
     try:
-        resolved.grid_spec()
+        resolved.grid_spec().check_brick_table()
     except ConfigError as exc:
         fail(["grid.voxel_m", "grid.size_m"], str(exc))
     return resolved

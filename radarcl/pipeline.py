@@ -113,8 +113,10 @@ class Mapping:
         elif sensor is not None and sensors.load(sensor).name != config.sensor.name:
             raise ConfigError(f"the configuration is for sensor {config.sensor.name!r}, not {sensors.load(sensor).name!r}")
         sensor = config.sensor
+        spec = grid.spec if grid is not None else config.grid_spec()
+        _check_fits(runtime, config, spec)
         if grid is None:
-            grid = EvidenceGrid(runtime, config.grid_spec())
+            grid = EvidenceGrid(runtime, spec)
         model = sensor.beam_model(config["beam.model"], grid.spec.voxel_m)
         per_beam = sensor.spinning if per_beam_poses is None else per_beam_poses
         common = dict(cfar_config=config.cfar_config(), interpret_config=config.interpret_config(),
@@ -173,3 +175,28 @@ class Mapping:
         """Dense int32 (nz, ny, nx) copy of the grid after every queued frame."""
         self.runtime.queue.finish()
         return self.grid.snapshot()
+
+
+# A frame must fit one device buffer (the grid's brick pool). Refused before anything runs when
+# even half the volume its beams sweep (the part a grid smaller than the frustum may cut away
+# is bounded by the grid's own size) cannot fit.
+FIT_FRACTION = 0.5
+
+
+def _check_fits(runtime, config, spec):
+    """DeviceCapabilityError, with the sizes, when one frame of ``config`` cannot fit the
+    device's largest buffer (``radarcl info``: "largest buffer")."""
+    from radarcl.errors import DeviceCapabilityError
+    from radarcl.sensors import frame_volume_m3
+
+    v = spec.voxel_m
+    swept = frame_volume_m3(config.sensor, config["interpret.range_min_m"], config["interpret.range_max_m"], v)
+    voxels = min(FIT_FRACTION * swept / v ** 3, float(spec.n_voxels))
+    needed, limit = 4.0 * voxels, float(runtime.device.max_mem_alloc_size)
+    if needed > limit:
+        fits = v * (needed / limit) ** (1 / 3)
+        raise DeviceCapabilityError(
+            f"one frame of sensor {config.sensor.name} at {v:g} m voxels reaches at least {voxels:.3g} voxels "
+            f"({needed / 2**30:.1f} GiB of int32), more than the largest buffer of {runtime.device.name}, "
+            f"{limit / 2**30:.2f} GiB (radarcl info); use voxels of at least {fits:.3g} m, a shorter "
+            "interpret.range_max_m, or a smaller grid")

@@ -42,6 +42,7 @@ SAMPLE_TYPES = {"int16": np.int16, "float32": np.float32, "complex64": np.comple
 READERS = ("recording", "polar-png", "ti-openradar")
 MAINLOBE_CELLS = 4.0       # Hann mainlobe, null to null, in resolution cells (Harris 1978)
 TRAIN_CELLS = 4.0          # training window per side, in resolution cells
+_NEEDS = {"samples": ("waveform", "beams", "range"), "profiles": ("beams", "range")}
 PADDING = 4                # n_fft = PADDING x the next power of two >= n_samples
 
 _N = tomlfile.number
@@ -194,8 +195,7 @@ class SensorProfile:
     # -- checks -----------------------------------------------------------------------------------------------
     def _validate(self):
         where = self.source
-        need = {"samples": ("waveform", "beams", "range"), "profiles": ("beams", "range")}[self.input]
-        for section in need:
+        for section in _NEEDS[self.input]:
             if section not in self.tables:
                 raise ConfigError(f"{where}: a sensor with input = {self.input!r} needs a [{section}] table")
         required = [("beams", "n_azimuth"), ("beams", "beamwidth_az_deg"), ("beams", "beamwidth_el_deg"),
@@ -296,6 +296,9 @@ def load(spec=DEFAULT_SENSOR):
                     defaults[name] = check_value(name, value)
                 except ConfigError as exc:
                     raise ConfigError(f"{source.where(section, key)} {exc}") from None
+    for section in _NEEDS[top["input"]]:
+        if section not in tables:
+            raise ConfigError(f"{source.name}: a sensor with input = {top['input']!r} needs a [{section}] table")
     radar = None
     if top["input"] == "samples":
         w, b, r = tables.get("waveform", {}), tables.get("beams", {}), tables.get("range", {})
@@ -378,3 +381,21 @@ def field_of_view_box(sensor, voxel_m, range_max_m):
     lo, hi = d.min(axis=0), d.max(axis=0)
     return (tuple(round(float(v), 6) for v in lo),
             tuple(round(float(v), 6) for v in np.maximum(hi - lo, voxel_m)))
+
+
+def frame_volume_m3(sensor, range_min_m, range_max_m, voxel_m):
+    """Volume [m^3] one frame's beams sweep between the two ranges: the solid angle of the
+    lattice (its azimuth span times the band of its elevations, each widened by a beamwidth)
+    times the shell (r_max^3 - r_min^3) / 3; a spinning radar with one elevation sweeps the
+    annulus of its plane, one voxel thick. What a frame allocates in the grid is at least about
+    this (fewer where the grid cuts the frustum)."""
+    lo, hi = float(range_min_m), float(range_max_m)
+    if sensor.spinning and sensor.n_elevation == 1:
+        return math.pi * (hi ** 2 - lo ** 2) * voxel_m
+    lat = sensor.lattice()
+    bw_az = math.radians(sensor.get("beams", "beamwidth_az_deg"))
+    bw_el = math.radians(sensor.get("beams", "beamwidth_el_deg"))
+    span_az = min(2 * math.pi, abs(lat.azimuths[-1] - lat.azimuths[0]) + bw_az)
+    el_lo = max(-math.pi / 2, float(lat.elevations.min()) - bw_el / 2)
+    el_hi = min(math.pi / 2, float(lat.elevations.max()) + bw_el / 2)
+    return span_az * (math.sin(el_hi) - math.sin(el_lo)) * (hi ** 3 - lo ** 3) / 3

@@ -35,6 +35,8 @@ class Source:
             header = re.fullmatch(r"\[\s*([^\]]+?)\s*\]", line)
             if header:
                 current = header.group(1).replace(" ", "")
+                if not section and current == key or current.startswith(f"{key}."):
+                    return number                    # a table named like the key asked for
             elif current == section and re.match(rf"{re.escape(key)}\s*=", line):
                 return number
         return None

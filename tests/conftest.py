@@ -1,18 +1,43 @@
-"""Shared fixtures: one OpenCL runtime per session, on the device radarcl chooses
-(RADARCL_DEVICE overrides; PoCL's CPU device in CI)."""
+"""Shared fixtures: an OpenCL runtime per device under test, and the shared data.
 
+Devices: the one radarcl chooses (RADARCL_DEVICE overrides; PoCL's CPU device in CI), or with
+RADARCL_TEST_DEVICES=all every OpenCL device present, so a GPU machine tests PoCL too (as
+PyOpenCL's own tests parametrise over devices). Each kernel test then runs once per device,
+named after it.
+"""
+
+import os
 from pathlib import Path
 
 import pytest
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+DEVICES_ENV = "RADARCL_TEST_DEVICES"
 
 
-@pytest.fixture(scope="session")
-def runtime():
+def _devices():
+    from radarcl.cl.runtime import _all_devices, choose_device
+
+    wanted = os.environ.get(DEVICES_ENV, "").strip().lower()
+    if wanted == "all":
+        return [device for _, _, _, device in _all_devices()]
+    if wanted:
+        raise pytest.UsageError(f"{DEVICES_ENV} must be 'all' or unset, got {wanted!r}")
+    return [choose_device()]
+
+
+def _device_id(device):
+    return f"{device.platform.name.split()[0]}-{device.name}".replace(" ", "_")
+
+
+DEVICES = _devices()
+
+
+@pytest.fixture(scope="session", params=DEVICES, ids=[_device_id(d) for d in DEVICES])
+def runtime(request):
     from radarcl.cl import Runtime
 
-    return Runtime()
+    return Runtime(request.param)
 
 
 @pytest.fixture(scope="session")

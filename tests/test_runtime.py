@@ -115,3 +115,25 @@ def _defines():
 def test_float_defines_are_exact():
     assert rt_module._define("X", 0.1) == "-DX=0.1f" and rt_module._define("B", True) == "-DB=1"
     assert float(rt_module._define("X", 1e-7)[4:-1]) == np.float64(1e-7)
+
+
+def test_kernel_tests_run_on_every_device_when_asked():
+    """RADARCL_TEST_DEVICES=all parametrises the runtime fixture over every OpenCL device."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from radarcl.cl.runtime import _all_devices
+
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "RADARCL_TEST_DEVICES": "all"}
+    out = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
+                          "tests/test_cfar.py::test_exact_on_integer_valued_profiles"],
+                         cwd=root, env=env, capture_output=True, text=True).stdout
+    collected = [line for line in out.splitlines() if line.startswith("tests/test_cfar.py::")]
+    assert len(collected) == len(_all_devices()) >= 1
+    env["RADARCL_TEST_DEVICES"] = "some"
+    bad = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
+                          "tests/test_cfar.py"], cwd=root, env=env, capture_output=True, text=True)
+    assert bad.returncode != 0 and "must be 'all' or unset" in bad.stdout + bad.stderr

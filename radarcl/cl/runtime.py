@@ -6,8 +6,10 @@ directory so ``#include "radarcl_common.h"`` works and PoCL's cache follows head
 and with ``-D`` switches that specialise a kernel (disabled features cost nothing).
 """
 
+import contextlib
 import logging
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -118,6 +120,30 @@ def device_report():
     return lines
 
 
+@contextlib.contextmanager
+def _quiet_build():
+    """Keep the compiler's notes off the user's terminal: PoCL's clang writes "N warnings
+    generated." to file descriptor 2 and pyopencl repeats the log as a CompilerWarning (here
+    notes on the ABI of 16-lane vectors on CPUs without AVX-512, nothing to act on). Both go to
+    the debug log (``radarcl -v``); a failed build still reports its log in the error."""
+    import tempfile
+    import warnings
+
+    said = [""]
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile(mode="w+b") as sink, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield said
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            said[0] = (sink.read().decode(errors="replace") + "".join(str(w.message) for w in caught)).strip()
+
+
 class KernelSet:
     """The kernels of one built program, fetched once (``program.name`` would make a new
     ``cl.Kernel`` on every access), each called by argument name as its ``.cl`` signature
@@ -190,7 +216,8 @@ class Runtime:
             raise KernelBuildError(f"cannot read kernel source {path}: {exc}") from exc
         program = cl.Program(self.context, source)
         try:
-            program.build(options=options)
+            with _quiet_build() as said:
+                program.build(options=options)
         except cl.Error as exc:
             try:
                 build_log = program.get_build_info(self.device, cl.program_build_info.LOG)
@@ -198,7 +225,7 @@ class Runtime:
                 build_log = "(no build log)"
             raise KernelBuildError(f"building {path} failed on {self.name}\n"
                                    f"options: {' '.join(options)}\nlog:\n{build_log or exc}") from exc
-        log.debug("built %s with %s", path.name, options)
+        log.debug("built %s with %s%s", path.name, options, f"; the compiler said:\n{said[0]}" if said[0] else "")
         kernel_set = KernelSet(program, path, options, source)
         self._programs[key] = kernel_set
         return kernel_set
