@@ -265,29 +265,45 @@ class EvidenceGrid:
 def read(path):
     """Read a grid file written by ``EvidenceGrid.save`` without a device (numpy only, for the
     viewer): returns (spec, keys (n, 3) int32, data (n, 8, 8, 8) int32). A file that is not a
-    radarcl grid raises ``FrameFormatError`` saying what was wrong."""
-    try:
-        with np.load(path, allow_pickle=False) as f:
-            missing = {"version", "origin_m", "voxel_m", "shape", "keys", "data"} - set(f.files)
-            if missing:
-                raise FrameFormatError(f"{path} is not a radarcl grid file: it lacks {sorted(missing)} "
-                                       f"(expected an npz written by EvidenceGrid.save, e.g. radarcl demo's map.npz)")
+    radarcl grid raises ``FrameFormatError`` saying what was wrong; array sizes are checked
+    against their headers and the memory budget before they are read (``io.safe_npz``)."""
+    from pathlib import Path
+
+    from radarcl.io import safe_npz
+
+    if not Path(path).is_file():
+        raise FrameFormatError(f"{path} does not exist (yet)" if not Path(path).exists()
+                               else f"{path} is not a file")
+    with safe_npz(path, what="radarcl grid file (an npz written by EvidenceGrid.save)") as f:
+        missing = {"version", "origin_m", "voxel_m", "shape", "keys", "data"} - set(f.files)
+        if missing:
+            raise FrameFormatError(f"{path} is not a radarcl grid file: it lacks {sorted(missing)} "
+                                   f"(expected an npz written by EvidenceGrid.save, e.g. radarcl demo's map.npz)")
+        try:
             version = int(f["version"])
             if version != FILE_VERSION:
                 raise FrameFormatError(f"{path} has grid file version {version}, this radarcl reads {FILE_VERSION}")
             spec = GridSpec(tuple(f["origin_m"]), float(f["voxel_m"]), tuple(int(n) for n in f["shape"]))
-            keys, data = f["keys"], f["data"]
-    except (OSError, ValueError, EOFError) as exc:   # not a zip, truncated, pickled arrays
-        if isinstance(exc, FrameFormatError):
-            raise
-        raise FrameFormatError(f"{path} is not a radarcl grid file (an npz written by EvidenceGrid.save): "
-                               f"{exc}") from exc
-    if data.dtype != np.int32 or data.shape != (len(keys), BRICK, BRICK, BRICK):
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, FrameFormatError):
+                raise
+            raise FrameFormatError(f"{path}: a bad grid description ({exc})") from exc
+        n_keys = f.header("keys")[0]
+        n_data = f.header("data")[0]
+        if len(n_keys) != 2 or n_keys[1:] != (3,) or n_data != (n_keys[0], BRICK, BRICK, BRICK):
+            raise FrameFormatError(f"{path}: expected brick keys (n, 3) and bricks (n, 8, 8, 8), got {n_keys} "
+                                   f"and {n_data}")
+        if n_keys[0] > int(np.prod(spec.brick_shape, dtype=np.int64)):
+            raise FrameFormatError(f"{path}: {n_keys[0]} bricks in a grid of only {spec.brick_shape} bricks")
+        keys, data = f["keys"], f["data"]
+    if data.dtype != np.int32:
         raise FrameFormatError(f"{path}: expected bricks ({len(keys)}, 8, 8, 8) int32, got {data.shape} {data.dtype}")
-    if keys.dtype != np.int32 or keys.ndim != 2 or keys.shape[1] != 3:
+    if keys.dtype != np.int32:
         raise FrameFormatError(f"{path}: expected brick keys (n, 3) int32, got {keys.shape} {keys.dtype}")
     if len(keys) and ((keys < 0).any() or (keys >= np.asarray(spec.brick_shape)).any()):
         raise FrameFormatError(f"{path}: brick keys outside the grid's {spec.brick_shape} bricks")
+    if len(np.unique(keys, axis=0)) != len(keys):
+        raise FrameFormatError(f"{path}: a brick key appears more than once")
     return spec, keys, data
 
 

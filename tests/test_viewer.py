@@ -247,8 +247,13 @@ def test_a_file_that_is_not_a_map_gets_a_sentence(tmp_path):
     text.write_text("hello")
     with pytest.raises(FrameFormatError, match="is not a radarcl grid file"):
         V.load_map(text)
-    with pytest.raises(FrameFormatError, match="is not a radarcl grid file"):
+    with pytest.raises(FrameFormatError, match="missing.npz does not exist \\(yet\\)"):    # not "not a grid file"
         V.load_map(tmp_path / "missing.npz")
+    dup = tmp_path / "dup.npz"                  # a crafted map: the same brick twice
+    _save(dup, version=1, origin_m=np.zeros(3), voxel_m=1.0, shape=np.array([16, 16, 16]),
+          keys=np.zeros((2, 3), np.int32), data=np.zeros((2, 8, 8, 8), np.int32))
+    with pytest.raises(FrameFormatError, match="a brick key appears more than once"):
+        V.load_map(dup)
     other = tmp_path / "recording.npz"
     _save(other, samples=np.zeros(3))
     with pytest.raises(FrameFormatError, match="lacks"):

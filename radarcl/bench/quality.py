@@ -101,7 +101,7 @@ def run(runtime, obs, truth_for, reference_config, voxels=VOXELS, report=None):
         truth = truth_for(config["grid.voxel_m"])
         m = score(res.log_odds, res.observed, truth)
         dev, exact, compared = oracle_deviation(runtime, obs, config)
-        label = "reference" if config is reference_config else config.label(reference_config)
+        label = ("reference: " + config.label()) if config is reference_config else config.label(reference_config)
         runs.append(dict(dimension=dim, label=label, config=config.as_dict(), ms_per_frame=res.ms_per_frame,
                          auc=m["auc"], iou=m["iou"], iou_tol1=m["iou_tol1"], false_free=m["false_free"],
                          brier=m["brier"], coverage=m["coverage"], max_dev_nats=dev, exact_fraction=exact,

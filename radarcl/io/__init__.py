@@ -39,13 +39,13 @@ class SafeNpz:
     """An ``.npz`` read member by member: no pickles, and each array's header (shape, dtype) is
     read and checked against the budget before its data is. Use as a context manager."""
 
-    def __init__(self, path, budget=None):
+    def __init__(self, path, budget=None, what="readable .npz file"):
         self.path = Path(path)
         self.budget = memory_budget() if budget is None else budget
         try:
             self._zip = zipfile.ZipFile(self.path)
         except (OSError, zipfile.BadZipFile, ValueError) as exc:
-            raise FrameFormatError(f"{self.path} is not a readable .npz file ({exc})") from exc
+            raise FrameFormatError(f"{self.path} is not a {what} ({exc})") from exc
         names = self._zip.namelist()
         if len(set(names)) != len(names):
             raise FrameFormatError(f"{self.path}: an archive member appears twice")
@@ -88,9 +88,9 @@ class SafeNpz:
         return array
 
 
-def safe_npz(path, budget=None):
-    """A ``SafeNpz`` over ``path``."""
-    return SafeNpz(path, budget)
+def safe_npz(path, budget=None, what="readable .npz file"):
+    """A ``SafeNpz`` over ``path``; ``what`` names the expected kind of file in errors."""
+    return SafeNpz(path, budget, what)
 
 
 @dataclass
