@@ -13,8 +13,9 @@
  * whether a noise bin gets E_h or E_l depends on every pulse before it; a frame has 256 beams of
  * 512 bins, a fraction of the CFAR's work. Any local size works.
  *
- * Beams flagged FLAG_NONFINITE upstream, or found here to hold a NaN, Inf or negative bin
- * (FLAG_BAD_PROFILE) or only zeros (FLAG_SILENT), give 0 evidence and no pulses.
+ * Beams flagged upstream with a NO_EVIDENCE_FLAGS flag, or found here to hold a NaN, Inf,
+ * negative or larger than PROFILE_LIMIT bin (FLAG_BAD_PROFILE: CFAR's float32 sums would
+ * overflow) or only zeros (FLAG_SILENT), give 0 evidence and no pulses.
  *
  * -D constants (set by radarcl/stages/interpret.py):
  *   N_BINS      bins per profile
@@ -52,7 +53,7 @@ __kernel void interpret(
     uchar flags = flags_in[beam];
     int bad = 0, any_signal = 0;
     for (int j = 0; j < N_BINS; j++) {
-        bad |= !(isfinite(r[j]) && r[j] >= 0.0f);
+        bad |= !(r[j] >= 0.0f && r[j] <= PROFILE_LIMIT);     /* false for NaN; +Inf is beyond */
         any_signal |= r[j] != 0.0f;
     }
     flags |= (bad ? FLAG_BAD_PROFILE : 0) | (any_signal ? 0 : FLAG_SILENT);

@@ -1,7 +1,7 @@
 /* Range FFT of a whole radar frame in one launch (paper §3.2, eq. 11).
  *
- * Equivalent to radarcl.reference.range_profile(samples, N_FFT, window=..., output=...,
- * gain=scale * sum(window)) in float32, plus radarcl.reference.beam_flags(samples, clip_level).
+ * Equivalent to radarcl.oracle.range_profile(samples, N_FFT, window=..., output=...,
+ * gain=scale * sum(window)) in float32, plus radarcl.oracle.beam_flags(samples, clip_level).
  *
  * Work mapping: get_group_id(0) = g handles VEC jobs g*VEC + l, one per vector LANE l, so every
  * butterfly is SIMD across jobs and twiddles are scalars shared by the lanes (VEC = 4 or 8 on
@@ -25,8 +25,11 @@
  *   INPUT_KIND   0 float32 real, 1 int16 real, 2 complex64 (float2)
  *   WINDOWED     1: multiply samples by window[] on load; 0: rectangular, no load
  *   POWER        1: |X|^2 on store; 0: |X|
- *   CHECK_FINITE 1 for float inputs: a NaN/Inf sample is replaced by 0 for the FFT (so it
- *                cannot spoil the paired beam) and its beam is flagged and written as NaN
+ *   CHECK_FINITE 1 for float inputs: a NaN/Inf sample, or one beyond SAMPLE_LIMIT (whose power
+ *                would overflow float32), is replaced by 0 for the FFT (so it cannot spoil the
+ *                paired beam) and its beam is flagged and written as NaN
+ *   SAMPLE_LIMIT oracle.sample_limit(N_SAMPLES), float inputs only
+ * Shared: PAIR_RATIO (a pair's weaker beam is flagged FLAG_CROSSTALK beyond it), flags.
  */
 #include "radarcl_common.h"
 
@@ -75,13 +78,18 @@ inline cvec cmul_minus_i_v(cvec a)
     return (cvec)(a.hi, -a.lo);
 }
 
-/* Read one sample as float, set flags for NaN/Inf and clipping. */
-inline float load_part(float v, float clip_level, int *bad)
+/* Read one sample as float, set flags for NaN/Inf, out-of-range values and clipping, and keep
+ * the largest |sample| loaded (for the pair check). A NaN, Inf or out-of-range sample enters
+ * the FFT as 0, so it cannot spoil the paired beam. */
+inline float load_part(float v, float clip_level, int *bad, float *peak)
 {
 #if CHECK_FINITE
     if (!isfinite(v)) { *bad |= FLAG_NONFINITE; return 0.0f; }
+    if (v > SAMPLE_LIMIT || v < -SAMPLE_LIMIT) { *bad |= FLAG_OVERRANGE; return 0.0f; }
 #endif
-    if (fabs(v) >= clip_level) *bad |= FLAG_CLIPPED;
+    const float m = v < 0.0f ? -v : v;
+    if (m >= clip_level) *bad |= FLAG_CLIPPED;
+    if (m > *peak) *peak = m;
     return v;
 }
 
@@ -110,18 +118,20 @@ void range_fft(
     __local cvec buf0[N_FFT];
     __local cvec buf1[N_FFT];
     __local int job_flags[BEAMS_PER_JOB * VEC];
+    __local int job_peak[BEAMS_PER_JOB * VEC];       /* largest |sample| loaded, float bits */
 
     const int lid = get_local_id(0);
     const int beam0 = get_group_id(0) * VEC * BEAMS_PER_JOB;   /* first beam of lane 0 */
 
     if (lid == 0)                                               /* local size may be 1 */
-        for (int b = 0; b < BEAMS_PER_JOB * VEC; b++) job_flags[b] = 0;
+        for (int b = 0; b < BEAMS_PER_JOB * VEC; b++) job_flags[b] = job_peak[b] = 0;
     barrier(CLK_LOCAL_MEM_FENCE);
 
     /* Load each sample once: buf0[q M + j] = w_j z_j W_N^{j q} for the P blocks, zero beyond
      * the samples and beyond the last beam. */
     int bad[BEAMS_PER_JOB * VEC];
-    for (int b = 0; b < BEAMS_PER_JOB * VEC; b++) bad[b] = 0;
+    float peak[BEAMS_PER_JOB * VEC];
+    for (int b = 0; b < BEAMS_PER_JOB * VEC; b++) { bad[b] = 0; peak[b] = 0.0f; }
     for (int j = lid; j < M; j += LOCAL_SIZE) {
         lanes_t re, im;
         for (int l = 0; l < VEC; l++) {
@@ -130,12 +140,14 @@ void range_fft(
             if (j < N_SAMPLES && beam < n_beams) {
 #if COMPLEX_INPUT
                 const float2 s = samples[(size_t)beam * N_SAMPLES + j];
-                a = load_part(s.x, clip_level, &bad[l]);
-                b = load_part(s.y, clip_level, &bad[l]);
+                a = load_part(s.x, clip_level, &bad[l], &peak[l]);
+                b = load_part(s.y, clip_level, &bad[l], &peak[l]);
 #else
-                a = load_part((float)samples[(size_t)beam * N_SAMPLES + j], clip_level, &bad[2 * l]);
+                a = load_part((float)samples[(size_t)beam * N_SAMPLES + j], clip_level, &bad[2 * l],
+                              &peak[2 * l]);
                 if (beam + 1 < n_beams)
-                    b = load_part((float)samples[(size_t)(beam + 1) * N_SAMPLES + j], clip_level, &bad[2 * l + 1]);
+                    b = load_part((float)samples[(size_t)(beam + 1) * N_SAMPLES + j], clip_level,
+                                  &bad[2 * l + 1], &peak[2 * l + 1]);
 #endif
             }
             re.s[l] = a;
@@ -149,9 +161,21 @@ void range_fft(
         for (int q = 1; q < P; q++)
             buf0[q * M + j] = cmul_tw(z, twiddle[j * q]);
     }
-    for (int b = 0; b < BEAMS_PER_JOB * VEC; b++)
+    for (int b = 0; b < BEAMS_PER_JOB * VEC; b++) {
         if (bad[b]) atomic_or(&job_flags[b], bad[b]);
+        if (peak[b] > 0.0f) atomic_max(&job_peak[b], as_int(peak[b]));   /* >= 0: int order = float order */
+    }
     barrier(CLK_LOCAL_MEM_FENCE);
+#if !COMPLEX_INPUT
+    /* The weaker beam of a pair takes the stronger's rounding (oracle.beam_flags). The passes
+     * below end with barriers, so the store sees these flags. */
+    if (lid == 0)
+        for (int l = 0; l < VEC; l++) {
+            const float pa = as_float(job_peak[2 * l]), pb = as_float(job_peak[2 * l + 1]);
+            if (pa > PAIR_RATIO * pb) job_flags[2 * l + 1] |= FLAG_CROSSTALK;
+            if (pb > PAIR_RATIO * pa) job_flags[2 * l] |= FLAG_CROSSTALK;
+        }
+#endif
 
     /* Stockham passes over the P blocks at once; p = length of the finished sub-transforms. */
     __local cvec *src = buf0;
@@ -215,11 +239,11 @@ void range_fft(
             const int beam = beam0 + l * BEAMS_PER_JOB;
             if (beam < n_beams)
                 profiles[(size_t)beam * N_BINS + k] =
-                    (job_flags[l * BEAMS_PER_JOB] & FLAG_NONFINITE) ? NAN : va.s[l];
+                    (job_flags[l * BEAMS_PER_JOB] & (FLAG_NONFINITE | FLAG_OVERRANGE)) ? NAN : va.s[l];
 #if !COMPLEX_INPUT
             if (beam + 1 < n_beams)
                 profiles[(size_t)(beam + 1) * N_BINS + k] =
-                    (job_flags[2 * l + 1] & FLAG_NONFINITE) ? NAN : vb.s[l];
+                    (job_flags[2 * l + 1] & (FLAG_NONFINITE | FLAG_OVERRANGE)) ? NAN : vb.s[l];
 #endif
         }
     }

@@ -33,9 +33,13 @@ CFAR_KINDS = ("ca", "go", "so", "os")
 
 
 def _so_pfa(t, m):
+    # sum_k C(m-1+k, k) (2+t)^-(m+k), each term in logs: C(m-1+k, k) overflows a float beyond
+    # m ~ 516 training cells, the powers underflow, their products do neither.
+    log_base = math.log(2.0 + t)
     total = 0.0
     for k in range(m):
-        total += math.comb(m - 1 + k, k) * (2.0 + t) ** -(m + k)
+        log_term = (math.lgamma(m + k) - math.lgamma(k + 1) - math.lgamma(m)) - (m + k) * log_base
+        total += math.exp(log_term)
     return 2.0 * total
 
 

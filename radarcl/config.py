@@ -171,6 +171,11 @@ PAPER_RADAR = RadarConfig()
 """The radar of Foessel-Bunting §2.3, the default everywhere."""
 
 
+MAX_TRAIN = 4096        # CA/GO/SO: 2 x 4096 cells of at most oracle.PROFILE_LIMIT sum to a finite float32
+MAX_TRAIN_OS = 128      # OS ranks 2 x train cells against each other per bin: O(train^2)
+MAX_GUARD = 1 << 20
+
+
 @dataclass(frozen=True)
 class CfarConfig:
     """A CFAR detector (paper §3.3, Fig. 6) on power profiles; see ``radarcl.cfar_theory``.
@@ -211,6 +216,12 @@ class CfarConfig:
         _require(isinstance(self.guard, (int, np.integer)) and not isinstance(self.guard, bool)
                  and self.guard >= 0, f"guard must be an integer >= 0, got {self.guard!r}")
         _positive_int("train", self.train)
+        most = MAX_TRAIN_OS if self.kind == "os" else MAX_TRAIN
+        _require(self.train <= most, f"train must be at most {most} cells per side for {self.kind.upper()}-CFAR "
+                                     f"(got {self.train}): " + ("OS sorts 2 x train cells per bin"
+                                                                if self.kind == "os" else
+                                                                "its float32 sums must stay finite"))
+        _require(self.guard <= MAX_GUARD, f"guard must be at most {MAX_GUARD} cells per side, got {self.guard}")
         _require(isinstance(self.pfa, (int, float)) and 0 < self.pfa < 1,
                  f"pfa must lie strictly between 0 and 1, got {self.pfa!r}")
         if self.kind == "os":

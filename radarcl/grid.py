@@ -44,10 +44,12 @@ class GridSpec:
         origin = tuple(float(v) for v in np.asarray(self.origin_m, dtype=float).reshape(-1))
         if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
             raise ConfigError(f"origin_m must be 3 finite numbers, got {self.origin_m!r}")
-        if not (isinstance(self.voxel_m, (int, float)) and math.isfinite(self.voxel_m) and self.voxel_m > 0):
+        if isinstance(self.voxel_m, (bool, np.bool_)) or not (
+                isinstance(self.voxel_m, (int, float, np.floating)) and math.isfinite(self.voxel_m) and self.voxel_m > 0):
             raise ConfigError(f"voxel_m must be a positive finite number, got {self.voxel_m!r}")
         shape = tuple(self.shape)
-        if len(shape) != 3 or not all(isinstance(n, (int, np.integer)) and n >= 1 for n in shape):
+        if len(shape) != 3 or not all(isinstance(n, (int, np.integer)) and not isinstance(n, (bool, np.bool_))
+                                      and n >= 1 for n in shape):
             raise ConfigError(f"shape must be 3 positive integers (nx, ny, nz), got {self.shape!r}")
         if max(shape) > 2 ** 20:
             raise ConfigError(f"shape {shape} exceeds 2^20 voxels along an axis")

@@ -16,10 +16,31 @@ OUTPUTS = ("magnitude", "power")
 FLAG_NONFINITE = 1   # a NaN or Inf sample: the beam is invalid and gives no evidence
 FLAG_CLIPPED = 2     # a sample at or beyond the clip level: the ADC saturated
 # Per-beam flags set by the interpreter on the range profile it is given.
-FLAG_BAD_PROFILE = 4  # a profile bin that is NaN, Inf or negative: not a power profile
+FLAG_BAD_PROFILE = 4  # a profile bin that is NaN, Inf, negative or beyond PROFILE_LIMIT
 FLAG_SILENT = 8       # every bin exactly 0: the receiver measured nothing
+# More flags set while loading samples.
+FLAG_OVERRANGE = 16   # a float sample beyond sample_limit(n): its power would not fit float32
+FLAG_CROSSTALK = 32   # real input: the FFT partner is PAIR_RATIO times stronger (see beam_flags)
 # Beams with any of these give no evidence and no pulses. A clipped beam still does.
-NO_EVIDENCE_FLAGS = FLAG_NONFINITE | FLAG_BAD_PROFILE | FLAG_SILENT
+NO_EVIDENCE_FLAGS = FLAG_NONFINITE | FLAG_BAD_PROFILE | FLAG_SILENT | FLAG_OVERRANGE | FLAG_CROSSTALK
+# Range processing pairs real beams (2m, 2m + 1) in one complex float32 FFT. Its rounding puts
+# about 1e-7 log2(N) of the stronger beam into the weaker one, so the weaker is flagged when the
+# stronger's largest |sample| exceeds PAIR_RATIO times its own: below that, what leaks is at
+# most ~1e-2 of the weaker beam's largest sample (tests/test_range_fft.py measures it). int16
+# samples never reach it (32768 / 1), except a beam of zeros beside a live one.
+PAIR_RATIO = 2.0 ** 15
+# A power profile bin must stay below this, so that CFAR's sums of up to 2 x 4096 training
+# cells stay finite in float32 (3.4e38).
+PROFILE_LIMIT = 1e34
+
+
+def sample_limit(n_samples):
+    """Largest |sample| of a float input whose power, after a sum over ``n_samples``, stays
+    below a quarter of the largest float32: sqrt(FLT_MAX) / (2 n). Beyond it a beam is
+    FLAG_OVERRANGE (int16 samples never are)."""
+    return float(np.sqrt(np.finfo(np.float32).max)) / (2.0 * int(n_samples))
+
+
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
@@ -50,19 +71,43 @@ def range_gain(n_bins, bin_spacing_m, exponent):
     return (np.arange(n_bins) * float(bin_spacing_m)) ** float(exponent)
 
 
-def beam_flags(samples, clip_level=np.inf):
-    """Per-beam flags (uint8, shape samples.shape[:-1]): FLAG_NONFINITE if any sample is NaN or
-    Inf, FLAG_CLIPPED if any |sample| (either of I and Q) >= clip_level."""
+def beam_flags(samples, clip_level=np.inf, paired=None):
+    """Per-beam flags (uint8, shape samples.shape[:-1]) of range processing.
+
+    FLAG_NONFINITE if any sample (I or Q) is NaN or Inf; FLAG_OVERRANGE if a finite one is
+    beyond ``sample_limit(n)`` (float input; such samples enter the FFT as 0, like non-finite
+    ones, so they cannot spoil a paired beam); FLAG_CLIPPED if any |sample| >= clip_level;
+    for real input paired in FFTs (``paired``, default: real input), the beams taken in pairs
+    (2m, 2m + 1) in C order: FLAG_CROSSTALK on the weaker of a pair when the other's largest
+    loaded |sample| exceeds PAIR_RATIO times its own."""
     x = np.asarray(samples)
-    parts = (x.real, x.imag) if np.iscomplexobj(x) else (x,)
+    complex_input = np.iscomplexobj(x)
+    parts = (x.real, x.imag) if complex_input else (x,)
+    limit = sample_limit(x.shape[-1]) if x.dtype.kind in "fc" else np.inf
     nonfinite = np.zeros(x.shape[:-1], bool)
+    overrange = np.zeros(x.shape[:-1], bool)
     clipped = np.zeros(x.shape[:-1], bool)
+    peak = np.zeros(x.shape[:-1])
     for part in parts:
         part = part.astype(np.float64)
-        nonfinite |= ~np.isfinite(part).all(axis=-1)
-        with np.errstate(invalid="ignore"):
-            clipped |= (np.abs(np.where(np.isfinite(part), part, 0.0)) >= clip_level).any(axis=-1)
-    return (nonfinite * FLAG_NONFINITE + clipped * FLAG_CLIPPED).astype(np.uint8)
+        finite = np.isfinite(part)
+        nonfinite |= ~finite.all(axis=-1)
+        mag = np.abs(np.where(finite, part, 0.0))
+        over = mag > limit
+        overrange |= over.any(axis=-1)
+        loaded = np.where(over, 0.0, mag)
+        clipped |= (loaded >= clip_level).any(axis=-1)
+        peak = np.maximum(peak, loaded.max(axis=-1))
+    flags = nonfinite * FLAG_NONFINITE + overrange * FLAG_OVERRANGE + clipped * FLAG_CLIPPED
+    if not complex_input if paired is None else paired:
+        flat, m = flags.reshape(-1), peak.reshape(-1)
+        for a in range(0, len(m) - 1, 2):
+            if m[a] > PAIR_RATIO * m[a + 1]:
+                flat[a + 1] |= FLAG_CROSSTALK
+            if m[a + 1] > PAIR_RATIO * m[a]:
+                flat[a] |= FLAG_CROSSTALK
+        flags = flat.reshape(flags.shape)
+    return flags.astype(np.uint8)
 
 
 def range_profile(samples, n_fft, *, window="hann", output="magnitude", gain=None):
@@ -74,7 +119,8 @@ def range_profile(samples, n_fft, *, window="hann", output="magnitude", gain=Non
     Kept bins: all n_fft for complex input, the n_fft/2 below Nyquist for real input (the
     paper's "512 range bins" for n_fft = 1024). ``output`` is the magnitude or its square;
     ``gain`` (n_bins,) multiplies the result, e.g. ``range_gain``. Beams with a non-finite
-    sample come out all NaN (see ``beam_flags``): they are invalid and must give no evidence.
+    sample, or a float sample beyond ``sample_limit(n)``, come out all NaN (see ``beam_flags``):
+    they are invalid and must give no evidence.
     """
     x = np.asarray(samples)
     if x.ndim < 1 or x.shape[-1] < 1:
@@ -85,10 +131,13 @@ def range_profile(samples, n_fft, *, window="hann", output="magnitude", gain=Non
     if output not in OUTPUTS:
         raise ConfigError(f"output must be one of {OUTPUTS}, got {output!r}")
     is_complex = np.iscomplexobj(x)
+    limit = sample_limit(n) if x.dtype.kind in "fc" else np.inf
     x = x.astype(np.complex128 if is_complex else np.float64)
-    invalid = ~np.isfinite(x).all(axis=-1)
+    with np.errstate(invalid="ignore"):
+        usable = np.isfinite(x) & (np.abs(x.real) <= limit) & (np.abs(x.imag) <= limit)
+    invalid = ~usable.all(axis=-1)
     w = window_coefficients(window, n)
-    spectrum = np.fft.fft(np.where(np.isfinite(x), x, 0) * w, n=int(n_fft), axis=-1)
+    spectrum = np.fft.fft(np.where(usable, x, 0) * w, n=int(n_fft), axis=-1)
     n_bins = n_fft if is_complex else n_fft // 2
     result = np.abs(spectrum[..., :n_bins]) / w.sum()
     if output == "power":
@@ -180,7 +229,7 @@ def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
     for beam in np.ndindex(*batch):
         rb, nb, mb = r[beam], n[beam], m[beam]
         with np.errstate(invalid="ignore"):
-            if not (np.isfinite(rb).all() and (rb >= 0).all()):
+            if not (np.isfinite(rb).all() and (rb >= 0).all() and (rb <= PROFILE_LIMIT).all()):
                 flags_out[beam] |= FLAG_BAD_PROFILE
         if not (rb != 0).any():
             flags_out[beam] |= FLAG_SILENT

@@ -88,17 +88,21 @@ def test_flags_and_invalid_beams_give_no_evidence(runtime):
 
 
 def test_strong_echo_never_overflows(runtime):
-    """Echoes up to float32's largest value over floored noise: evidence clamped, never wrapped."""
-    x = np.zeros((3, 64), np.float32)
-    x[0, 20] = np.finfo(np.float32).max
+    """Echoes up to oracle.PROFILE_LIMIT over floored noise: evidence clamped, never wrapped;
+    beyond it (where CFAR's float32 sums could overflow) the beam is flagged and gives none."""
+    x = np.zeros((4, 64), np.float32)
+    x[0, 20] = oracle.PROFILE_LIMIT
     x[1, 20] = 1e-20
     x[2, 20] = 1e-28                  # 100 x the noise floor
+    x[3, 20] = np.finfo(np.float32).max
     cfg = InterpretConfig(range_min_m=0.0, range_max_m=8.0, k_occ=3.0)
-    got, (evidence, _, _, _) = run_both(runtime, x, cfg, CfarConfig(guard=1, train=2))
-    assert got.cfar.mask[:, 20].all()
+    got, (evidence, _, _, flags) = run_both(runtime, x, cfg, CfarConfig(guard=1, train=2))
+    assert got.cfar.mask[:3, 20].all()
     assert evidence[0, 20] == logodds.EVIDENCE_LIMIT
     assert 0 < got.interpret.evidence[1, 20] <= logodds.EVIDENCE_LIMIT
     assert 0 < got.interpret.evidence[2, 20] <= logodds.EVIDENCE_LIMIT
+    assert flags[3] == oracle.FLAG_BAD_PROFILE == got.interpret.flags[3]
+    assert not got.interpret.evidence[3].any()
 
 
 def test_k_occ_zero_and_empty_interval(runtime):

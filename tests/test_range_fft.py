@@ -135,6 +135,56 @@ def test_nonfinite_beams_flagged_and_partner_untouched(runtime, bad):
     assert got.flags[1, 0] == oracle.FLAG_NONFINITE
 
 
+@pytest.mark.parametrize("huge", [1e10, 1e30, 3e38])
+def test_paired_beams_never_pollute_each_other(runtime, huge):
+    """One real beam with a huge sample, paired in one FFT with a normal beam. 1e10 is within
+    the float input range but 1e10 times its partner: the partner is flagged CROSSTALK (it once
+    took 419 wrong evidence bins silently); 1e30 and 3e38 are beyond sample_limit (their power
+    would overflow float32): that beam is flagged OVERRANGE and written NaN, and its partner,
+    which took none of it, is exact. Flags equal the oracle's."""
+    x = make_samples(np.random.default_rng(5), (4, 2, 256), np.float32)
+    x[1, 0, 17] = huge                     # beam 2 is paired with beam 3
+    plan = RangeFFT(runtime, (4, 2), 256, 512, dtype=np.float32, output="power")
+    got = plan(x)
+    want = oracle.range_profile(x, 512, output="power")
+    assert np.array_equal(got.flags, oracle.beam_flags(x, plan.clip_level))
+    others = np.ones((4, 2), bool)
+    others[1] = False
+    assert rel_err(got.profiles[others], want[others]) <= RANGE_FFT_RTOL
+    if huge > oracle.sample_limit(256):
+        assert got.flags[1, 0] == oracle.FLAG_OVERRANGE and np.isnan(got.profiles[1, 0]).all()
+        assert got.flags[1, 1] == 0 and rel_err(got.profiles[1, 1], want[1, 1]) <= RANGE_FFT_RTOL
+    else:
+        assert got.flags[1, 1] == oracle.FLAG_CROSSTALK and got.flags[1, 0] == 0
+        assert np.isfinite(got.profiles[1]).all()
+    assert got.n_invalid == 1 and not got.valid[1].all()
+
+
+def test_pairing_below_the_ratio_leaks_little(runtime):
+    """Peaks PAIR_RATIO / 2 apart: not flagged, and the weaker beam's profile is within 1e-2 of
+    its own peak bin of the float64 oracle (the bound the flag's threshold promises)."""
+    n = 256
+    t = np.arange(n)
+    strong = (0.5 * oracle.PAIR_RATIO * np.cos(2 * np.pi * 40.3 * t / n)).astype(np.float32)
+    weak = np.random.default_rng(1).uniform(-1, 1, n).astype(np.float32)
+    x = np.stack([strong, weak]).reshape(1, 2, n)
+    got = RangeFFT(runtime, (1, 2), n, 1024, dtype=np.float32)(x)
+    want = oracle.range_profile(x, 1024)
+    assert not got.flags.any()
+    leak = np.abs(got.profiles[0, 1] - want[0, 1]).max() / want[0, 1].max()
+    assert leak < 1e-2, leak
+
+
+def test_a_silent_beam_beside_a_live_one_is_flagged(runtime):
+    """int16: a beam of zeros paired with a live beam would take the live beam's rounding as
+    signal; it is flagged (and gives no evidence), whatever the live beam's level."""
+    x = make_samples(np.random.default_rng(2), (1, 2, 256), np.int16)
+    x[0, 1] = 0
+    got = RangeFFT(runtime, (1, 2), 256, 512)(x)
+    assert got.flags[0, 1] == oracle.FLAG_CROSSTALK and got.flags[0, 0] == 0
+    assert np.array_equal(got.flags, oracle.beam_flags(x, 32767.0))
+
+
 def test_nonfinite_complex_sample(runtime):
     x = make_samples(np.random.default_rng(6), (2, 1, 64), np.complex64)
     x[0, 0, 3] = complex(1.0, np.nan)
@@ -160,7 +210,9 @@ def test_wrong_shape_or_dtype_is_refused(runtime):
     (dict(n_samples=256, n_fft=512, local_size=3), "local_size must be a power of two"),
     (dict(n_samples=256, n_fft=512, local_size=256), "local_size must be a power of two"),
     (dict(n_samples=256, n_fft=512, clip_level=-1.0), "clip_level must be positive"),
-    (dict(n_samples=1, n_fft=4), "n_samples must be at least 2"),
+    (dict(n_samples=1, n_fft=4), "n_samples must be an integer >= 2"),
+    (dict(n_samples=64.7, n_fft=128), "n_samples must be an integer >= 2, got 64.7"),
+    (dict(n_samples=True, n_fft=4), "n_samples must be an integer >= 2, got True"),
     (dict(n_samples=256, n_fft=512, vector_width=3), "vector_width must be one of"),
 ])
 def test_impossible_plans_are_refused(runtime, kwargs, match):

@@ -63,6 +63,16 @@ class Settings:
     background: tuple = (0.06, 0.06, 0.08)
 
     def __post_init__(self):
+        import math
+
+        for name in ("threshold", "lo", "hi", "gamma", "density", "step"):
+            v = getattr(self, name)
+            if v is None and name in ("lo", "hi"):
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ConfigError(f"{name} must be a finite number, got {v!r}")
+        if abs(self.threshold) > 1e6 or any(v is not None and abs(v) > 1e6 for v in (self.lo, self.hi)):
+            raise ConfigError(f"threshold, lo and hi are log-odds [nat]; got {self.threshold}, {self.lo}, {self.hi}")
         if self.colormap not in COLORMAPS:
             raise ConfigError(f"unknown colormap {self.colormap!r}; expected one of {COLORMAPS}")
         if not 0.05 <= self.step <= 8:

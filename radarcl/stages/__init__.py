@@ -23,7 +23,8 @@ from radarcl.grid import GRID_LIMIT
 COMMON_DEFINES = dict(
     FLAG_NONFINITE=oracle.FLAG_NONFINITE, FLAG_CLIPPED=oracle.FLAG_CLIPPED,
     FLAG_BAD_PROFILE=oracle.FLAG_BAD_PROFILE, FLAG_SILENT=oracle.FLAG_SILENT,
-    NO_EVIDENCE_FLAGS=oracle.NO_EVIDENCE_FLAGS,
+    FLAG_OVERRANGE=oracle.FLAG_OVERRANGE, FLAG_CROSSTALK=oracle.FLAG_CROSSTALK,
+    NO_EVIDENCE_FLAGS=oracle.NO_EVIDENCE_FLAGS, PAIR_RATIO=oracle.PAIR_RATIO, PROFILE_LIMIT=oracle.PROFILE_LIMIT,
     LOGODDS_SCALE=float(logodds.SCALE), EVIDENCE_LIMIT_NATS=float(logodds.EVIDENCE_LIMIT_NATS),
     GRID_LIMIT=GRID_LIMIT,
 )
@@ -46,6 +47,23 @@ def beam_batch(batch):
     if not shape or min(shape) < 1:
         raise ConfigError(f"batch must be a non-empty shape of positive sizes, got {batch!r}")
     return shape, int(np.prod(shape))
+
+
+def count(value, what, lo=1):
+    """An integer >= ``lo`` (not a bool, not 64.7), or ConfigError naming ``what``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < lo:
+        raise ConfigError(f"{what} must be an integer >= {lo}, got {value!r}")
+    return int(value)
+
+
+def spacing(value, what="bin_spacing_m"):
+    """A positive finite number of metres, or ConfigError."""
+    import math
+
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.floating)) \
+            or not math.isfinite(value) or value <= 0:
+        raise ConfigError(f"{what} must be a positive finite number [m], got {value!r}")
+    return float(value)
 
 
 def _integer(value, what):

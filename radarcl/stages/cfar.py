@@ -12,7 +12,7 @@ import numpy as np
 
 from radarcl.config import CfarConfig
 from radarcl.errors import ConfigError
-from radarcl.stages import Port, Stage, beam_batch, build, work_group_size
+from radarcl.stages import Port, Stage, beam_batch, build, count, work_group_size
 
 _KINDS = {"ca": 0, "go": 1, "so": 2, "os": 3}
 # Measured on PoCL, 2 cores, paper frame (256 beams x 512 bins, CA 16+16 cells), kernel only:
@@ -49,7 +49,7 @@ class Cfar(Stage):
         if not isinstance(self.config, CfarConfig):
             raise ConfigError(f"config must be a CfarConfig, got {type(self.config).__name__}")
         self.batch, self.n_beams = beam_batch(batch)
-        self.n_bins = self.config.check_profile_length(int(n_bins))
+        self.n_bins = self.config.check_profile_length(count(n_bins, "n_bins"))
         self.alpha = float(self.config.alpha)
         if vector_width is None:
             vector_width = CPU_VECTOR_WIDTH if runtime.is_cpu else 1

@@ -22,7 +22,7 @@ import numpy as np
 from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, BeamModel, check_poses
 from radarcl.grid import BRICK, EvidenceGrid
-from radarcl.stages import Port, Stage, build, work_group_size
+from radarcl.stages import Port, Stage, build, count, spacing, work_group_size
 
 # Measured on PoCL, 2 cores, the paper's frame at 0.1 m (35k bricks), ms per frame:
 #   one work-item per voxel, window per 4^3 sub-brick in the kernel: 450; the same without
@@ -135,12 +135,11 @@ class Fusion(Stage):
         if not isinstance(lattice, BeamLattice) or not isinstance(model, BeamModel):
             raise ConfigError("lattice must be a BeamLattice and model a BeamModel")
         self.runtime, self.grid, self.lattice, self.model = runtime, grid, lattice, model
-        self.n_bins = int(n_bins)
-        self.bin_spacing_m = float(bin_spacing_m)
-        if self.n_bins < 1 or not (math.isfinite(self.bin_spacing_m) and self.bin_spacing_m > 0):
-            raise ConfigError(f"need n_bins >= 1 and a positive bin spacing, got {n_bins!r}, {bin_spacing_m!r}")
-        self.first_bin = max(0, int(first_bin))
-        self.last_bin = self.n_bins - 1 if last_bin is None else min(int(last_bin), self.n_bins - 1)
+        self.n_bins = count(n_bins, "n_bins")
+        self.bin_spacing_m = spacing(bin_spacing_m)
+        self.first_bin = max(0, count(first_bin, "first_bin", lo=-(1 << 30)))
+        self.last_bin = self.n_bins - 1 if last_bin is None else min(count(last_bin, "last_bin", lo=-(1 << 30)),
+                                                                      self.n_bins - 1)
         if self.first_bin > self.last_bin:
             raise ConfigError(f"no bin carries evidence: first_bin {first_bin} > last_bin {last_bin}")
         self.per_beam_poses = bool(per_beam_poses)

@@ -14,7 +14,7 @@ import numpy as np
 from radarcl import logodds, oracle
 from radarcl.config import InterpretConfig
 from radarcl.errors import ConfigError
-from radarcl.stages import Port, Stage, beam_batch, build, work_group_size
+from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_group_size
 
 # Beams per work-group. One work-item walks one beam; any size is correct.
 DEFAULT_LOCAL_SIZE = 16
@@ -49,10 +49,8 @@ class Interpreter(Stage):
         if not isinstance(self.config, InterpretConfig):
             raise ConfigError(f"config must be an InterpretConfig, got {type(self.config).__name__}")
         self.batch, self.n_beams = beam_batch(batch)
-        self.n_bins = int(n_bins)
-        if self.n_bins < 1:
-            raise ConfigError(f"n_bins must be positive, got {n_bins!r}")
-        self.bin_spacing_m = float(bin_spacing_m)
+        self.n_bins = count(n_bins, "n_bins")
+        self.bin_spacing_m = spacing(bin_spacing_m)
         self.first_bin, self.last_bin = self.config.bin_interval(self.bin_spacing_m, self.n_bins)
         self.wide_bins = self.config.wide_bins(self.bin_spacing_m)
         self.e_high, self.e_low = (int(v) for v in logodds.to_fixed([self.config.e_high, self.config.e_low]))

@@ -5,9 +5,13 @@
 ``radarcl.oracle.beam_flags(samples, clip_level)``, within ``RANGE_FFT_RTOL`` of the
 float64 oracle (see tests/test_range_fft.py).
 
-Bad samples: a beam with a NaN or Inf sample is flagged ``FLAG_NONFINITE``, written as NaN,
-counted in ``RangeFFTResult.n_invalid``, and must give no evidence downstream; its paired beam
-is unaffected. A beam that reaches ``clip_level`` is flagged ``FLAG_CLIPPED`` and counted.
+Bad samples: a beam with a NaN or Inf sample is flagged ``FLAG_NONFINITE``, one with a float
+sample beyond ``oracle.sample_limit`` (its power would overflow float32) ``FLAG_OVERRANGE``;
+both are written as NaN, counted in ``RangeFFTResult.n_invalid``, and give no evidence
+downstream; their paired beam is unaffected. Real beams are paired in one complex FFT: the
+weaker of a pair whose peaks differ by more than ``oracle.PAIR_RATIO`` is flagged
+``FLAG_CROSSTALK`` and gives no evidence (int16 input never reaches it). A beam that reaches
+``clip_level`` is flagged ``FLAG_CLIPPED`` and counted.
 """
 
 import math
@@ -18,7 +22,7 @@ import numpy as np
 from radarcl import oracle
 from radarcl.config import is_power_of_two
 from radarcl.errors import ConfigError, DeviceCapabilityError, ShapeError
-from radarcl.stages import Port, Stage, beam_batch, build
+from radarcl.stages import Port, Stage, beam_batch, build, count
 
 # Measured on PoCL, 2 cores, paper frame (256 beams), kernel only, n_fft 512 / 1024:
 #   scalar (vector_width 1), 16 workers: 0.34 / 0.59 ms;  vector_width 8, 16 workers: 0.21 / 0.30 ms.
@@ -39,12 +43,13 @@ class RangeFFTResult:
 
     @property
     def valid(self):
-        """Boolean mask of beams that may give evidence (no NaN/Inf sample)."""
-        return (self.flags & oracle.FLAG_NONFINITE) == 0
+        """Boolean mask of beams that may give evidence (no NaN/Inf or out-of-range sample, no
+        crosstalk from a far stronger paired beam)."""
+        return (self.flags & oracle.NO_EVIDENCE_FLAGS) == 0
 
     @property
     def n_invalid(self):
-        """Beams with a NaN or Inf sample."""
+        """Beams that give no evidence: a NaN, Inf or out-of-range sample, or crosstalk."""
         return int(np.count_nonzero(~self.valid))
 
     @property
@@ -70,16 +75,14 @@ class RangeFFT(Stage):
         default 8 on a CPU device (halved until its buffers fit the device's local memory), 1 on
         a GPU.
 
-    Float outputs are finite while |X|^2 fits float32: keep |sample| * n_samples below ~1e19.
+    Float outputs stay finite: samples beyond ``oracle.sample_limit(n_samples)`` are flagged.
     """
 
     def __init__(self, runtime, batch, n_samples, n_fft, *, dtype=np.int16, window="hann",
                  output="magnitude", gain=None, clip_level=None, local_size=None, vector_width=None):
         self.runtime = runtime
         self.batch, self.n_beams = beam_batch(batch)
-        self.n_samples = int(n_samples)
-        if self.n_samples < 2:
-            raise ConfigError(f"n_samples must be at least 2, got {n_samples!r}")
+        self.n_samples = count(n_samples, "n_samples", lo=2)
         if not is_power_of_two(n_fft) or n_fft < max(self.n_samples, 4):
             raise ConfigError(f"n_fft must be a power of two >= max(n_samples, 4) = "
                               f"{max(self.n_samples, 4)} (eq. 11 pads, never truncates), got {n_fft!r}")
@@ -140,7 +143,7 @@ class RangeFFT(Stage):
                        P=self.n_fft // m, LOG2_P=int(math.log2(self.n_fft // m)), N_BINS=self.n_bins,
                        LOCAL_SIZE=self.local_size, VEC=self.vector_width, INPUT_KIND=_INPUT_KINDS[self.dtype],
                        WINDOWED=window != "rect", POWER=output == "power",
-                       CHECK_FINITE=self.dtype != np.int16)
+                       CHECK_FINITE=self.dtype != np.int16, SAMPLE_LIMIT=oracle.sample_limit(self.n_samples))
         self._kernel = build(runtime, "range_fft", defines)["range_fft"]
         import pyopencl.array as cla
 
