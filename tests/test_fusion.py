@@ -215,3 +215,17 @@ def test_low_level_enqueue_refuses_foreign_stale_and_wrong_arrays(runtime):
     with pytest.raises(ConfigError, match="before grid.clear"):
         f.enqueue(plan=stale)
     assert grid.n_bricks == 0
+
+
+def test_updates_beyond_the_evidence_limit_are_refused(runtime):
+    """Two beams of 2^30 once summed to -2^30 (fully free): host evidence beyond +-16 nat per
+    update is refused; within it, a voxel's sum saturates instead of wrapping (the stability
+    suite takes it to the grid limit)."""
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=False"]
+    grid = EvidenceGrid(runtime, SMALL)
+    f = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST)
+    ev = np.zeros((lattice.n_beams, N_BINS), np.int32)
+    ev[:2] = 2 ** 30
+    with pytest.raises(ConfigError, match="evidence must lie within \\+-16384 units"):
+        f(ev, POSE)
+    assert grid.n_bricks == 0

@@ -168,14 +168,72 @@ def from_nats(spec, nats, max_size=2048):
     return from_units(spec, units, max_size)
 
 
-def load_map(path, max_size=2048):
+def load_map(path, max_size=2048, budget=None):
     """Read a map file (``EvidenceGrid.save``'s npz, e.g. ``radarcl demo``'s map.npz) into a
-    ``Volume``; anything else raises ``FrameFormatError`` with the reason."""
+    ``Volume``; anything else raises ``FrameFormatError`` with the reason. A grid over the GL
+    3D-texture limit ``max_size`` or whose volume would not fit the memory ``budget`` (bytes;
+    default ``radarcl.io.memory_budget()``) is max-pooled by the smallest factor that fits,
+    assembled a slab at a time from its bricks (a small file declaring 1000^3 voxels never
+    becomes a 4 GB array), and the note says so."""
+    from radarcl.io import memory_budget
+
     spec, keys, bricks = read(path)
-    volume = from_units(spec, assemble(spec, keys, bricks), max_size)
-    if not volume.note:
+    budget = memory_budget() if budget is None else budget
+    factor = pool_factor(spec, max_size, budget)
+    if factor == 1:
+        volume = from_units(spec, assemble(spec, keys, bricks), max_size)
         volume.keys, volume.bricks = keys, bricks
-    return volume
+        return volume
+    units, small = pooled_units(spec, keys, bricks, factor)
+    values = to_texture(units)
+    note = (f"grid {spec.shape} exceeds this GL's 3D texture limit of {max_size} per axis or the memory budget "
+            f"of {budget / 2**30:.1f} GiB: shown max-pooled by {factor} to {small.shape} at {small.voxel_m:g} m voxels")
+    return Volume(small, values, coarse_max(values), note)
+
+
+BYTES_PER_CELL = 8      # int32 units + float16 values + the pooling's slab, per cell shown
+
+
+def pool_factor(spec, max_size, budget):
+    """Smallest integer factor that brings every axis to ``max_size`` or below and the shown
+    volume to ``budget`` bytes or below."""
+    factor = max(1, -(-max(spec.shape) // max_size))
+    while np.prod([-(-n // factor) for n in spec.shape], dtype=np.float64) * BYTES_PER_CELL > budget:
+        factor += 1
+    return factor
+
+
+def pooled_units(spec, keys, bricks, factor):
+    """(units (cz, cy, cx) int32, GridSpec): the grid max-pooled by ``factor``, built one tile of
+    lcm(factor, 8) x lcm(factor, 8) x nx voxels at a time (voxels without a brick count as 0,
+    as in a snapshot), so memory beyond the result stays a few tiles."""
+    import math
+
+    nx, ny, nz = spec.shape
+    cx, cy, cz = (-(-n // factor) for n in (nx, ny, nz))
+    nbx = spec.brick_shape[0]
+    out = np.zeros((cz, cy, cx), np.int32)
+    tile = factor * BRICK // math.gcd(factor, BRICK)          # a multiple of both
+    tb = tile // BRICK                                         # bricks per tile edge
+    tile_of = (keys[:, 2] // tb).astype(np.int64) * (1 << 32) + keys[:, 1] // tb
+    order = np.argsort(tile_of, kind="stable")
+    tile_sorted = tile_of[order]
+    for z0 in range(0, nz, tile):
+        for y0 in range(0, ny, tile):
+            t = (z0 // tile) * (1 << 32) + y0 // tile
+            lo, hi = np.searchsorted(tile_sorted, [t, t + 1])
+            if lo == hi:
+                continue                                       # no brick: all 0, as out already is
+            dense = np.zeros((tb, tb, nbx, BRICK, BRICK, BRICK), np.int32)
+            sel = order[lo:hi]
+            dense[keys[sel, 2] - z0 // BRICK, keys[sel, 1] - y0 // BRICK, keys[sel, 0]] = bricks[sel]
+            dense = dense.transpose(0, 3, 1, 4, 2, 5).reshape(tile, tile, nbx * BRICK)
+            dense = dense[:min(tile, nz - z0), :min(tile, ny - y0), :nx]
+            dense = np.pad(dense, [(0, -(-n // factor) * factor - n) for n in dense.shape], mode="edge")
+            d0, d1, d2 = (n // factor for n in dense.shape)
+            out[z0 // factor:z0 // factor + d0, y0 // factor:y0 // factor + d1] = \
+                dense.reshape(d0, factor, d1, factor, d2, factor).max(axis=(1, 3, 5))
+    return out, GridSpec(spec.origin_m, spec.voxel_m * factor, (cx, cy, cz))
 
 
 def changed_bricks(old_keys, old_bricks, new_keys, new_bricks):

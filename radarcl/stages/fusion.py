@@ -19,6 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from radarcl import logodds
 from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, BeamModel, check_poses
 from radarcl.grid import BRICK, EvidenceGrid
@@ -238,15 +239,21 @@ class Fusion(Stage):
         ev = np.asarray(evidence)
         if ev.shape == self.evidence_shape:
             ev = ev.reshape(*self.lattice.batch, self.n_bins)
-        return self.check_input(name, ev)
+        ev = self.check_input(name, ev)
+        if ev.size and np.abs(ev.astype(np.int64)).max() > logodds.EVIDENCE_LIMIT:
+            raise ConfigError(f"evidence must lie within +-{logodds.EVIDENCE_LIMIT} units (+-{logodds.EVIDENCE_LIMIT_NATS:g} "
+                              f"nat per update, eq. 12 clamps there), got up to {np.abs(ev.astype(np.int64)).max()}: "
+                              "larger updates could wrap the kernel's int32 sums")
+        return ev
 
     def upload(self, evidence):
         """Copy a checked frame of evidence into the plan's input array; returns the copy event."""
         return super().upload(evidence=self.check(evidence))[0]
 
     def enqueue(self, evidence=None, plan=None, wait_for=None):
-        """Fuse one frame of evidence (a device array (*batch, n_bins) int32, e.g. an
-        ``Interpreter``'s ``arrays["evidence"]``; None: this plan's own) taken as ``plan``
+        """Fuse one frame of evidence (a device array (*batch, n_bins) int32 within
+        +-``logodds.EVIDENCE_LIMIT``, e.g. an ``Interpreter``'s ``arrays["evidence"]``, whose
+        values are clamped there; None: this plan's own, as ``upload`` checked it) taken as ``plan``
         (from this Fusion's ``plan``, for the grid as it is now) says. Returns the kernel event
         (None when no brick is reached)."""
         if not isinstance(plan, FramePlan) or plan.owner is not self:
