@@ -145,6 +145,10 @@ def cmd_sensors(args):
 def cmd_config(args):
     from radarcl import mapconfig, outputs
 
+    if args.action == "save" and not args.file:
+        from radarcl.errors import ConfigError
+
+        raise ConfigError("config save needs the FILE to write")
     config = resolve_config(args)
     if args.action == "save":
         path = outputs.check(args.file, args.force, inputs=[args.config], what="configuration file")

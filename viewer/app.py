@@ -18,7 +18,7 @@ from radarcl.grid import read
 from radarcl.viewer.camera import Camera
 from radarcl.viewer.modes import COLORMAPS, MODES, Settings
 from radarcl.viewer.renderer import Renderer, ViewerError, import_moderngl, read_rgb
-from radarcl.viewer.volume import changed_bricks, load_map, update
+from radarcl.viewer.volume import changed_bricks, from_bricks, load_map, update
 
 log = logging.getLogger(__name__)
 POLL_S = 0.25                       # how often --live looks at the file
@@ -119,11 +119,13 @@ class ViewerApp:
         volume = self.renderer.volume
         try:
             spec, keys, bricks = read(self.path)
-        except RadarclError as exc:
-            self.message = f"live: {exc} (waiting for the next write)"
+            fresh = from_bricks(spec, keys, bricks, self.renderer.max_texture) \
+                if spec != volume.spec or volume.keys is None else None
+        except (RadarclError, MemoryError) as exc:
+            self.message = f"live: {exc or 'out of memory'} (waiting for the next write)"
             return None
-        if spec != volume.spec or volume.keys is None:
-            self.renderer.upload(load_map(self.path, self.renderer.max_texture))
+        if fresh is not None:
+            self.renderer.upload(fresh)
             changed = len(keys)
         else:
             diff = changed_bricks(volume.keys, volume.bricks, keys, bricks)

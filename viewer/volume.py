@@ -175,9 +175,15 @@ def load_map(path, max_size=2048, budget=None):
     default ``radarcl.io.memory_budget()``) is max-pooled by the smallest factor that fits,
     assembled a slab at a time from its bricks (a small file declaring 1000^3 voxels never
     becomes a 4 GB array), and the note says so."""
+    spec, keys, bricks = read(path)
+    return from_bricks(spec, keys, bricks, max_size, budget)
+
+
+def from_bricks(spec, keys, bricks, max_size=2048, budget=None):
+    """A ``Volume`` from a sparse snapshot (``grid.read``'s keys and bricks), pooled as
+    ``load_map`` says."""
     from radarcl.io import memory_budget
 
-    spec, keys, bricks = read(path)
     budget = memory_budget() if budget is None else budget
     factor = pool_factor(spec, max_size, budget)
     if factor == 1:
@@ -196,44 +202,70 @@ BYTES_PER_CELL = 8      # int32 units + float16 values + the pooling's slab, per
 
 def pool_factor(spec, max_size, budget):
     """Smallest integer factor that brings every axis to ``max_size`` or below and the shown
-    volume to ``budget`` bytes or below."""
+    volume to ``budget`` bytes or below; above 8, a multiple of 8 (whole bricks per cell)."""
     factor = max(1, -(-max(spec.shape) // max_size))
-    while np.prod([-(-n // factor) for n in spec.shape], dtype=np.float64) * BYTES_PER_CELL > budget:
+    while True:
+        if factor > BRICK:
+            factor = -(-factor // BRICK) * BRICK
+        if np.prod([-(-n // factor) for n in spec.shape], dtype=np.float64) * BYTES_PER_CELL <= budget:
+            return factor
         factor += 1
-    return factor
 
 
 def pooled_units(spec, keys, bricks, factor):
-    """(units (cz, cy, cx) int32, GridSpec): the grid max-pooled by ``factor``, built one tile of
-    lcm(factor, 8) x lcm(factor, 8) x nx voxels at a time (voxels without a brick count as 0,
-    as in a snapshot), so memory beyond the result stays a few tiles."""
+    """(units (cz, cy, cx) int32, GridSpec): the grid max-pooled by ``factor``; voxels without a
+    brick count as 0, as in a snapshot. Memory beyond the result stays small: with a factor that
+    is a multiple of 8 each cell is whole bricks (reduced brick by brick); below, the grid is
+    assembled one tile of lcm(factor, 8)^3 voxels at a time, empty tiles skipped."""
     import math
 
     nx, ny, nz = spec.shape
-    cx, cy, cz = (-(-n // factor) for n in (nx, ny, nz))
-    nbx = spec.brick_shape[0]
-    out = np.zeros((cz, cy, cx), np.int32)
-    tile = factor * BRICK // math.gcd(factor, BRICK)          # a multiple of both
-    tb = tile // BRICK                                         # bricks per tile edge
-    tile_of = (keys[:, 2] // tb).astype(np.int64) * (1 << 32) + keys[:, 1] // tb
-    order = np.argsort(tile_of, kind="stable")
-    tile_sorted = tile_of[order]
-    for z0 in range(0, nz, tile):
-        for y0 in range(0, ny, tile):
-            t = (z0 // tile) * (1 << 32) + y0 // tile
-            lo, hi = np.searchsorted(tile_sorted, [t, t + 1])
-            if lo == hi:
-                continue                                       # no brick: all 0, as out already is
-            dense = np.zeros((tb, tb, nbx, BRICK, BRICK, BRICK), np.int32)
-            sel = order[lo:hi]
-            dense[keys[sel, 2] - z0 // BRICK, keys[sel, 1] - y0 // BRICK, keys[sel, 0]] = bricks[sel]
-            dense = dense.transpose(0, 3, 1, 4, 2, 5).reshape(tile, tile, nbx * BRICK)
-            dense = dense[:min(tile, nz - z0), :min(tile, ny - y0), :nx]
-            dense = np.pad(dense, [(0, -(-n // factor) * factor - n) for n in dense.shape], mode="edge")
-            d0, d1, d2 = (n // factor for n in dense.shape)
-            out[z0 // factor:z0 // factor + d0, y0 // factor:y0 // factor + d1] = \
-                dense.reshape(d0, factor, d1, factor, d2, factor).max(axis=(1, 3, 5))
-    return out, GridSpec(spec.origin_m, spec.voxel_m * factor, (cx, cy, cz))
+    shape = tuple(-(-n // factor) for n in (nz, ny, nx))
+    out = np.zeros(shape, np.int32)
+    small = GridSpec(spec.origin_m, spec.voxel_m * factor, shape[::-1])
+    if not len(keys):
+        return out, small
+    kzyx = keys[:, ::-1].astype(np.int64)
+    if factor % BRICK == 0:
+        per = factor // BRICK                                   # bricks per cell edge
+        inside = np.minimum(BRICK, np.asarray([nz, ny, nx]) - kzyx * BRICK)     # in-grid part of each brick
+        peak = np.empty(len(keys), np.int32)
+        edge = (inside < BRICK).any(axis=1)
+        peak[~edge] = bricks[~edge].reshape(int((~edge).sum()), -1).max(axis=1)
+        for i in np.flatnonzero(edge):                          # partial bricks at the high ends
+            z, y, x = inside[i]
+            peak[i] = bricks[i, :z, :y, :x].max()
+        cells, inverse = np.unique(kzyx // per, axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        best = np.full(len(cells), np.iinfo(np.int32).min, np.int32)
+        np.maximum.at(best, inverse, peak)
+        seen = np.bincount(inverse, minlength=len(cells))
+        # a cell wholly covered by bricks takes their maximum; an uncovered voxel adds a 0
+        n_bricks = np.asarray(spec.brick_shape[::-1])
+        full = np.prod(np.minimum((cells + 1) * per, n_bricks) - cells * per, axis=1)
+        out[tuple(cells.T)] = np.where(seen == full, best, np.maximum(best, 0))
+        return out, small
+    tile = factor * BRICK // math.gcd(factor, BRICK)          # voxels, a multiple of both
+    tb = tile // BRICK
+    tiles = kzyx // tb
+    code = (tiles[:, 0] << 42) | (tiles[:, 1] << 21) | tiles[:, 2]
+    order = np.argsort(code, kind="stable")
+    sorted_code = code[order]
+    starts = np.flatnonzero(np.r_[True, sorted_code[1:] != sorted_code[:-1]])
+    for a, b in zip(starts, np.r_[starts[1:], len(order)]):
+        sel = order[a:b]
+        t = tiles[sel[0]] * tile                                # tile origin [voxels] (z, y, x)
+        dense = np.zeros((tb, tb, tb, BRICK, BRICK, BRICK), np.int32)
+        local = kzyx[sel] - tiles[sel[0]] * tb
+        dense[local[:, 0], local[:, 1], local[:, 2]] = bricks[sel]
+        dense = dense.transpose(0, 3, 1, 4, 2, 5).reshape(tile, tile, tile)
+        dense = dense[:min(tile, nz - t[0]), :min(tile, ny - t[1]), :min(tile, nx - t[2])]
+        dense = np.pad(dense, [(0, -(-n // factor) * factor - n) for n in dense.shape], mode="edge")
+        d = [n // factor for n in dense.shape]
+        c = t // factor
+        out[c[0]:c[0] + d[0], c[1]:c[1] + d[1], c[2]:c[2] + d[2]] = \
+            dense.reshape(d[0], factor, d[1], factor, d[2], factor).max(axis=(1, 3, 5))
+    return out, small
 
 
 def changed_bricks(old_keys, old_bricks, new_keys, new_bricks):

@@ -13,6 +13,7 @@ what was read. Every size is checked against the sensor before a frame reaches a
 
 import os
 import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -66,7 +67,7 @@ class SafeNpz:
                 read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
                                else np.lib.format.read_array_header_2_0)
                 shape, _, dtype = read_header(f)
-        except (KeyError, OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        except (KeyError, OSError, ValueError, zipfile.BadZipFile, EOFError, zlib.error) as exc:
             raise FrameFormatError(f"{self.path}: member {key!r} is not a readable array ({exc})") from exc
         if dtype.hasobject:
             raise FrameFormatError(f"{self.path}: member {key!r} holds Python objects; radarcl never unpickles")
@@ -82,7 +83,7 @@ class SafeNpz:
         try:
             with self._zip.open(f"{key}.npy") as f:
                 array = np.lib.format.read_array(f, allow_pickle=False)
-        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError, zlib.error) as exc:
             raise FrameFormatError(f"{self.path}: member {key!r} is truncated or corrupt ({exc})") from exc
         self.used += nbytes
         return array

@@ -96,7 +96,7 @@ def levels_to_power(levels, db_per_level=1.0):
 
 def load_scan(path, layout=PolarLayout()):
     """Decode one scan; raises FrameFormatError naming what is wrong."""
-    from PIL import Image, UnidentifiedImageError
+    from PIL import Image
 
     path = Path(path)
     try:
@@ -109,8 +109,10 @@ def load_scan(path, layout=PolarLayout()):
                 raise FrameFormatError(f"{path}: expected an 8-bit greyscale image of shape (azimuths, "
                                        f"{layout.meta_columns} + bins), got mode {image.mode} of {height} x {width}")
             raw = np.asarray(image)
-    except (OSError, UnidentifiedImageError, Image.DecompressionBombError, ValueError) as exc:
-        raise FrameFormatError(f"{path}: not a readable PNG ({exc})") from exc
+    except FrameFormatError:
+        raise
+    except Exception as exc:            # noqa: BLE001 - PIL raises OSError, SyntaxError, zlib.error...
+        raise FrameFormatError(f"{path}: not a readable PNG ({type(exc).__name__}: {exc})") from exc
     if raw.dtype != np.uint8 or raw.ndim != 2 or raw.shape[1] <= layout.meta_columns or raw.shape[0] < 1:
         raise FrameFormatError(f"{path}: expected an 8-bit greyscale image of shape (azimuths, "
                                f"{layout.meta_columns} + bins), got {raw.shape} {raw.dtype}")

@@ -1,0 +1,358 @@
+"""Hostile input: property-based generation (hypothesis) of configurations, profiles, frames and
+poses, and a seeded corpus of malformed files (truncated, bit-flipped, wrong and repeated keys,
+bombs). Every case must end in success or a radarcl error (a sentence), never another
+exception; a refused frame leaves the map bit-identical; a file that loads after damage must
+hold exactly what was written (npz and PNG carry checksums); bombs stay within memory.
+
+CI runs a short pass (well under a minute). RADARCL_FUZZ=long runs 20x more examples and a
+larger corpus; RADARCL_FUZZ_REPORT=FILE writes the counts (cases, clear errors, crashes, other
+exceptions, silent wrong answers, peak memory on the bombs) as JSON.
+"""
+
+import json
+import os
+import resource
+import zipfile
+import zlib
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from radarcl import mapconfig, sensors
+from radarcl.errors import RadarclError
+
+LONG = os.environ.get("RADARCL_FUZZ", "") == "long"
+EXAMPLES = 400 if LONG else 25
+FLIPS = 200 if LONG else 25
+RUN = settings(max_examples=EXAMPLES, deadline=None, derandomize=not LONG,
+               suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+COUNTS = {"cases": 0, "ok": 0, "clear_errors": 0, "other_exceptions": 0, "silent_wrong": 0}
+
+
+def outcome(fn, *args, **kwargs):
+    """Run one case: 'ok' with its value, or 'error' for a RadarclError; anything else fails."""
+    COUNTS["cases"] += 1
+    try:
+        value = fn(*args, **kwargs)
+    except RadarclError as exc:
+        COUNTS["clear_errors"] += 1
+        assert str(exc), "a radarcl error must say what was wrong"
+        return "error", exc
+    except Exception as exc:                   # noqa: BLE001 - the point of the test
+        COUNTS["other_exceptions"] += 1
+        raise AssertionError(f"{type(exc).__name__} instead of a radarcl error: {exc}") from exc
+    COUNTS["ok"] += 1
+    return "ok", value
+
+
+@pytest.fixture(scope="module", autouse=True)
+def report():
+    yield
+    path = os.environ.get("RADARCL_FUZZ_REPORT")
+    if path:
+        with open(path, "w") as f:
+            json.dump(COUNTS, f, indent=1)
+
+
+# -- configurations and profiles ---------------------------------------------------------------------
+SCALARS = st.one_of(st.integers(-10 ** 12, 10 ** 12), st.floats(allow_nan=True, allow_infinity=True),
+                    st.booleans(), st.text(max_size=8), st.lists(st.floats(-1e3, 1e3), max_size=4))
+CONFIG_KEYS = st.sampled_from(sorted(mapconfig.KEYS) + ["cfar.guard", "grid.voxel", "beam.kind", "sensor.name"])
+
+
+@RUN
+@given(st.dictionaries(CONFIG_KEYS, SCALARS, max_size=6), st.sampled_from(sensors.builtin_names()))
+def test_configuration_flags(values, sensor):
+    kind, resolved = outcome(lambda: mapconfig.resolve(sensor, flags={k: v for k, v in values.items()}))
+    if kind == "ok":
+        resolved.cfar_config(), resolved.interpret_config(), resolved.grid_spec()
+
+
+@RUN
+@given(st.dictionaries(st.sampled_from(["range_fft", "cfar", "interpret", "beam", "grid", "extra"]),
+                       st.dictionaries(st.sampled_from(["n_fft", "kind", "pfa", "guard_m", "train_m", "k_occ",
+                                                        "e_high", "voxel_m", "size_m", "model", "x"]),
+                                       SCALARS, max_size=4), max_size=4))
+def test_configuration_files(tmp_path_factory, tables):
+    from radarcl import tomlfile
+
+    path = tmp_path_factory.mktemp("cfg") / "c.toml"
+    try:
+        path.write_text(tomlfile.dumps(tables))
+    except RadarclError:
+        return                                  # a value TOML cannot hold (NaN): nothing to read
+    outcome(mapconfig.resolve, "paper", path)
+
+
+@RUN
+@given(st.sampled_from(["range", "beams", "mounting", "reader", "waveform"]),
+       st.sampled_from(["bin_spacing_m", "n_bins", "range_max_m", "n_azimuth", "beamwidth_az_deg", "height_m",
+                        "meta_columns", "encoder_counts", "n_samples", "sample_rate_hz", "spinning", "nope"]),
+       SCALARS, st.sampled_from(["polar-png", "navtech-cts350x", "paper", "ti-xwr-openradar"]))
+def test_profiles(tmp_path_factory, section, key, value, base):
+    from radarcl import tomlfile
+
+    path = tmp_path_factory.mktemp("prof") / "p.toml"
+    parent = sensors.load(base)
+    try:
+        path.write_text(tomlfile.dumps({section: {key: value}}, top={"name": "fuzz", "input": parent.input,
+                                                                      "extends": base}))
+    except RadarclError:
+        return
+    kind, s = outcome(sensors.load, path)
+    if kind == "ok":
+        outcome(mapconfig.resolve, s)
+
+
+# -- frames and poses through the pipeline --------------------------------------------------------------
+@pytest.fixture(scope="module")
+def ti_mapping(runtime):
+    from radarcl.pipeline import Mapping
+
+    return Mapping.from_config(runtime, "ti-xwr-openradar", mapconfig.resolve("ti-xwr-openradar",
+                                                                              flags={"grid.voxel_m": 0.2}))
+
+
+SPECIALS = st.sampled_from([0.0, np.nan, np.inf, -np.inf, 1e10, 1e30, 3e38, -32768.0, 1e-45])
+
+
+@RUN
+@given(st.sampled_from([(1, 1, 128), (1, 1, 127), (1, 128), (2, 1, 128)]),
+       st.sampled_from([np.complex64, np.complex128, np.float32, np.int16]),
+       st.lists(st.tuples(st.integers(0, 127), SPECIALS), max_size=4), st.integers(0, 2 ** 31))
+def test_frames(ti_mapping, shape, dtype, specials, seed):
+    rng = np.random.default_rng(seed)
+    frame = (rng.standard_normal(shape) * 100).astype(dtype) if dtype != np.int16 else \
+        rng.integers(-2000, 2000, shape).astype(np.int16)
+    with np.errstate(invalid="ignore", over="ignore"):
+        for j, v in specials:
+            if frame.size:
+                frame.reshape(-1)[j % frame.size] = v if np.dtype(dtype).kind in "fc" else np.int16(-32768)
+    before = ti_mapping.snapshot()
+    kind, _ = outcome(ti_mapping.fuse, frame, np.eye(4))
+    after = ti_mapping.snapshot()
+    if kind == "error":
+        assert np.array_equal(before, after), "a refused frame changed the map"
+    assert np.abs(after.astype(np.int64)).max() <= 2 ** 30
+
+
+@RUN
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), min_size=16, max_size=16),
+       st.booleans())
+def test_poses(ti_mapping, numbers, rigid):
+    pose = np.array(numbers).reshape(4, 4)
+    if rigid:                                     # mostly-valid poses: a rotation and a translation
+        from radarcl.geometry import pose_from_xyz_rpy
+
+        t = np.nan_to_num(pose[0, :3], posinf=1e3, neginf=-1e3)
+        angles = np.nan_to_num(pose[1, :3], nan=0.0, posinf=3.0, neginf=-3.0) % 6.3
+        pose = pose_from_xyz_rpy(*t, *angles)
+    frame = np.zeros((1, 1, 128), np.complex64)
+    frame[0, 0, ::7] = 50 + 20j
+    before = ti_mapping.snapshot()
+    kind, _ = outcome(ti_mapping.fuse, frame, pose)
+    if kind == "error":
+        assert np.array_equal(before, ti_mapping.snapshot())
+
+
+# -- a seeded corpus of damaged files ---------------------------------------------------------------------
+def _damaged(raw, rng, n):
+    """Truncations at awkward places and single bit flips of ``raw``."""
+    cuts = sorted({0, 1, 4, 22, 30, 64, len(raw) // 2, len(raw) - 1} | set(rng.integers(0, len(raw), n // 4)))
+    for c in cuts:
+        yield f"truncated at {c}", raw[:c]
+    for _ in range(n):
+        b = bytearray(raw)
+        i = int(rng.integers(0, len(b)))
+        b[i] ^= 1 << int(rng.integers(0, 8))
+        yield f"bit flip at {i}", bytes(b)
+
+
+def _npz_bytes(**arrays):
+    import io
+
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    return buf.getvalue()
+
+
+def _bomb_npz(declared_shape=(1 << 40,), dtype="<i4"):
+    """An npz whose only member declares a huge array in a few bytes."""
+    import io
+
+    header = {"descr": dtype, "fortran_order": False, "shape": declared_shape}
+    npy = io.BytesIO()
+    np.lib.format.write_array_header_1_0(npy, header)
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("data.npy", npy.getvalue() + b"\0" * 64)
+        for key in ("version", "origin_m", "voxel_m", "shape", "keys"):
+            z.writestr(f"{key}.npy", _member(key))
+    return buf.getvalue()
+
+
+def _member(key):
+    import io
+
+    values = dict(version=np.int64(1), origin_m=np.zeros(3), voxel_m=np.float64(0.5), shape=np.array([16, 16, 16]),
+                  keys=np.zeros((1, 3), np.int32))
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, np.asarray(values[key]))
+    return buf.getvalue()
+
+
+def test_damaged_files(tmp_path, shared_data):
+    """Every loader on truncated and bit-flipped copies of a valid file: a radarcl error, or (npz,
+    PNG: checksummed) exactly the original content."""
+    from radarcl.grid import read
+    from radarcl.io import polar_png, recording
+
+    rng = np.random.default_rng(0)
+    spec_arrays = dict(version=1, origin_m=np.zeros(3), voxel_m=0.5, shape=np.array([24, 16, 8]),
+                       keys=np.array([[0, 0, 0], [2, 1, 0]], np.int32),
+                       data=rng.integers(-999, 999, (2, 8, 8, 8)).astype(np.int32))
+    rec_arrays = dict(version=2, sensor=np.str_("ti-xwr-openradar"),
+                      frames=(rng.standard_normal((3, 1, 1, 128)) * 50).astype(np.complex64),
+                      poses=np.broadcast_to(np.eye(4), (3, 4, 4)).copy())
+    png = (shared_data / "navtech_oxford" / "radar" / "1547131046353776.png").read_bytes()
+    layout = polar_png.PolarLayout()
+    cases = [("map", _npz_bytes(**spec_arrays), lambda p: read(p)[2]),
+             ("recording", _npz_bytes(**rec_arrays), lambda p: recording.load(p).frames),
+             ("polar scan", png, lambda p: polar_png.load_scan(p, layout).levels)]
+    for name, raw, load in cases:
+        path = tmp_path / ("x.png" if name == "polar scan" else "x.npz")
+        path.write_bytes(raw)
+        original = load(path)
+        for what, damaged in _damaged(raw, rng, FLIPS):
+            path.write_bytes(damaged)
+            kind, value = outcome(load, path)
+            if kind == "ok" and not np.array_equal(value, original):
+                COUNTS["silent_wrong"] += 1
+                raise AssertionError(f"{name} {what}: loaded different content without a word")
+
+
+def test_crafted_files(tmp_path):
+    """Wrong keys, repeated keys, keys outside the grid, declared sizes far beyond the data and a
+    1 GiB deflate bomb: refused, within memory."""
+    from radarcl.grid import read
+
+    start = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    good = dict(version=1, origin_m=np.zeros(3), voxel_m=0.5, shape=np.array([16, 16, 16]),
+                keys=np.zeros((1, 3), np.int32), data=np.zeros((1, 8, 8, 8), np.int32))
+    variants = {
+        "repeated key": dict(good, keys=np.zeros((2, 3), np.int32), data=np.zeros((2, 8, 8, 8), np.int32)),
+        "key outside": dict(good, keys=np.array([[5, 0, 0]], np.int32)),
+        "negative key": dict(good, keys=np.array([[-1, 0, 0]], np.int32)),
+        "float data": dict(good, data=np.zeros((1, 8, 8, 8))),
+        "shape 0": dict(good, shape=np.array([0, 16, 16])),
+        "voxel nan": dict(good, voxel_m=np.nan),
+        "missing data": {k: v for k, v in good.items() if k != "data"},
+        "object array": dict(good, version=np.array([None], dtype=object)),
+    }
+    for name, arrays in variants.items():
+        path = tmp_path / f"{name}.npz"
+        with open(path, "wb") as f:
+            np.savez(f, **arrays, allow_pickle=True) if name == "object array" else np.savez(f, **arrays)
+        kind, _ = outcome(read, path)
+        assert kind == "error", name
+    huge = tmp_path / "huge.npz"                  # 2^60 voxels declared, one brick stored
+    with open(huge, "wb") as f:
+        np.savez(f, **dict(good, shape=np.array([1 << 20, 1 << 20, 1 << 20])))
+    from radarcl.viewer.volume import load_map
+
+    kind, volume = outcome(load_map, huge, budget=256 << 20)
+    assert kind == "ok" and "max-pooled" in volume.note and volume.values.nbytes < 64 << 20
+    bomb = tmp_path / "bomb.npz"
+    bomb.write_bytes(_bomb_npz())
+    assert outcome(read, bomb)[0] == "error"
+    # a deflate bomb: 1 GiB of zeros in ~1 MB, its header honest about the size
+    import io
+
+    size = 1 << 30
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<i4", "fortran_order": False, "shape": (size // 4,)})
+    with zipfile.ZipFile(tmp_path / "deflate.npz", "w", zipfile.ZIP_DEFLATED, compresslevel=1) as z:
+        with z.open("data.npy", "w", force_zip64=True) as f:
+            f.write(header.getvalue())
+            zero = b"\0" * (1 << 24)
+            for _ in range(size >> 24):
+                f.write(zero)
+        for key in ("version", "origin_m", "voxel_m", "shape", "keys"):
+            z.writestr(f"{key}.npy", _member(key))
+    assert (tmp_path / "deflate.npz").stat().st_size < 8 << 20
+    os.environ["RADARCL_MEMORY_BUDGET"] = str(256 << 20)
+    try:
+        assert outcome(read, tmp_path / "deflate.npz")[0] == "error"
+    finally:
+        del os.environ["RADARCL_MEMORY_BUDGET"]
+    grew = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - start) / 1024
+    COUNTS["bomb_peak_growth_mib"] = round(grew, 1)
+    assert grew < 512, f"the bombs took {grew:.0f} MiB"
+
+
+def test_png_declaring_a_huge_image(tmp_path):
+    """A small PNG that declares 20000 x 6000 pixels is refused before it is decoded."""
+    from PIL import Image
+
+    from radarcl.io import polar_png
+
+    path = tmp_path / "huge.png"
+    Image.new("L", (20000, 6000)).save(path, optimize=True)
+    assert path.stat().st_size < 1 << 20
+    start = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    kind, exc = outcome(polar_png.load_scan, path)
+    assert kind == "error" and "refused before decoding" in str(exc)
+    assert (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - start) / 1024 < 64
+
+
+def test_the_cli_answers_hostile_arguments_with_a_sentence(tmp_path, capsys):
+    """Bad files and bad arguments through the CLI: exit 2 and one line, never a traceback or
+    the "unexpected error" of a bug (exit 70)."""
+    from radarcl.cli import main
+
+    empty = tmp_path / "empty.npz"
+    empty.write_bytes(b"")
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"PK\x03\x04" + bytes(range(200)))
+    zero = tmp_path / "zero.npz"
+    with open(zero, "wb") as f:
+        np.savez(f, version=2, sensor=np.str_("paper"), frames=np.zeros((0, 64, 4, 256), np.int16),
+                 poses=np.zeros((0, 4, 4)))
+    notes = tmp_path / "notes.txt"
+    notes.write_text("not a radar file")
+    bad_toml = tmp_path / "bad.toml"
+    bad_toml.write_text("[cfar\nkind = 'so'\n")
+    out = tmp_path / "out.npz"
+    argvs = [
+        ["fuse", str(empty), "--out", str(out)], ["fuse", str(junk), "--out", str(out)],
+        ["fuse", str(zero), "--out", str(out)], ["fuse", str(notes), "--out", str(out)],
+        ["fuse", str(tmp_path), "--out", str(out), "--sensor", "polar-png"],
+        ["fuse", str(junk), "--out", str(out), "--every", "0"], ["fuse", str(junk), "--voxel", "0"],
+        ["fuse", str(junk), "--voxel", "nan"], ["fuse", str(junk), "--voxel", "-1"],
+        ["fuse", str(junk), "--set", "cfar.guard_m=-3"], ["fuse", str(junk), "--set", "cfar"],
+        ["fuse", str(junk), "--config", str(bad_toml)], ["fuse", str(junk), "--sensor", "nosuch"],
+        ["fuse", str(junk), "--out", str(tmp_path)], ["fuse", str(junk), "--out", "/dev/null"],
+        ["render", str(junk), "--out", str(tmp_path / "v.png")], ["render", str(empty)],
+        ["render", str(tmp_path / "missing.npz")], ["render", str(junk), "--size", "0", "0"],
+        ["render", str(junk), "--threshold", "nan"], ["render", str(junk), "--gamma", "inf"],
+        ["view", str(tmp_path / "missing.npz"), "--window", "headless", "--frames", "1"],
+        ["navtech", str(notes)], ["navtech", str(tmp_path / "missing.png")],
+        ["navtech-map", str(tmp_path)], ["config", "show", "--config", str(bad_toml)],
+        ["config", "save"], ["sensors", str(notes)], ["tune", "--replay", str(junk)],
+        ["demo", "--replay", str(zero), "--out", str(tmp_path / "d")],
+        ["bench", "quality", "--replay", str(junk), "--chart", str(tmp_path / "q.png")],
+        ["bench", "fusion", "--repeat", "0"], ["bench", "range-fft", "--n-fft", "100"],
+    ]
+    for argv in argvs:
+        COUNTS["cases"] += 1
+        try:
+            status = main(argv)
+        except SystemExit as exc:                 # argparse: a usage line and the reason
+            status = exc.code
+        err = capsys.readouterr().err
+        assert status == 2, (argv, status, err)
+        assert "Traceback" not in err and err.strip(), argv
+        COUNTS["clear_errors"] += 1
+    assert not out.exists()
