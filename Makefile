@@ -10,7 +10,7 @@ BIN := $(VENV)/bin
 SYSTEM_PACKAGES_EGL := libegl1 libegl-mesa0 libgl1-mesa-dri
 SYSTEM_PACKAGES_X := xvfb xauth
 
-.PHONY: demo test bench info clean system
+.PHONY: demo test fuzz bench info clean system
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -36,6 +36,10 @@ demo: system $(BIN)/.installed
 
 test: system $(BIN)/.installed
 	$(BIN)/python -m pytest -q
+
+# The long fuzz run: 16x the CI examples, the counts written to out/fuzz.json.
+fuzz: $(BIN)/.installed
+	mkdir -p out && RADARCL_FUZZ=long RADARCL_FUZZ_REPORT=out/fuzz.json $(BIN)/python -m pytest -q tests/test_fuzz.py
 
 bench: $(BIN)/.installed
 	$(BIN)/radarcl bench range-fft

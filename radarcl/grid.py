@@ -306,6 +306,9 @@ def read(path):
         raise FrameFormatError(f"{path}: brick keys outside the grid's {spec.brick_shape} bricks")
     if len(np.unique(keys, axis=0)) != len(keys):
         raise FrameFormatError(f"{path}: a brick key appears more than once")
+    if data.size and (data.max() > GRID_LIMIT or data.min() < -GRID_LIMIT):
+        raise FrameFormatError(f"{path}: values beyond the grid's saturation +-{GRID_LIMIT} units; "
+                               "radarcl never writes them")
     return spec, keys, data
 
 

@@ -246,6 +246,7 @@ def test_crafted_files(tmp_path):
         "key outside": dict(good, keys=np.array([[5, 0, 0]], np.int32)),
         "negative key": dict(good, keys=np.array([[-1, 0, 0]], np.int32)),
         "float data": dict(good, data=np.zeros((1, 8, 8, 8))),
+        "beyond saturation": dict(good, data=np.full((1, 8, 8, 8), 2 ** 31 - 1, np.int32)),
         "shape 0": dict(good, shape=np.array([0, 16, 16])),
         "voxel nan": dict(good, voxel_m=np.nan),
         "missing data": {k: v for k, v in good.items() if k != "data"},
@@ -289,6 +290,7 @@ def test_crafted_files(tmp_path):
         del os.environ["RADARCL_MEMORY_BUDGET"]
     grew = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - start) / 1024
     COUNTS["bomb_peak_growth_mib"] = round(grew, 1)
+    COUNTS["process_peak_rss_mib"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
     assert grew < 512, f"the bombs took {grew:.0f} MiB"
 
 

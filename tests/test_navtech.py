@@ -47,7 +47,7 @@ def test_levels_are_decibels_of_integer_amplitudes(scans):
 def test_bad_files_are_refused(tmp_path):
     bad = tmp_path / "1.png"
     bad.write_bytes(b"not a png")
-    with pytest.raises(FrameFormatError, match="not a readable PNG"):
+    with pytest.raises(FrameFormatError, match="not a PNG file"):
         navtech.load_scan(bad)
     from PIL import Image
 

@@ -36,6 +36,24 @@ def memory_budget():
         return 4 << 30
 
 
+def read_npy_header(f):
+    """(shape, dtype) from an open .npy stream positioned at its start."""
+    version = np.lib.format.read_magic(f)
+    read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+    shape, _, dtype = read(f)
+    return shape, dtype
+
+
+def declared_bytes(shape, dtype):
+    """Bytes an array of ``shape`` and ``dtype`` takes (float64 arithmetic: never overflows)."""
+    return float(np.prod(shape, dtype=np.float64)) * np.dtype(dtype).itemsize
+
+
+# What zipfile and numpy raise on a damaged archive member (a flipped compression method field
+# gives NotImplementedError, a damaged deflate stream zlib.error).
+_DAMAGED = (KeyError, OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError)
+
+
 class SafeNpz:
     """An ``.npz`` read member by member: no pickles, and each array's header (shape, dtype) is
     read and checked against the budget before its data is. Use as a context manager."""
@@ -45,7 +63,7 @@ class SafeNpz:
         self.budget = memory_budget() if budget is None else budget
         try:
             self._zip = zipfile.ZipFile(self.path)
-        except (OSError, zipfile.BadZipFile, ValueError) as exc:
+        except (OSError, zipfile.BadZipFile, ValueError, NotImplementedError) as exc:
             raise FrameFormatError(f"{self.path} is not a {what} ({exc})") from exc
         names = self._zip.namelist()
         if len(set(names)) != len(names):
@@ -63,11 +81,8 @@ class SafeNpz:
         """(shape, dtype) that member ``key`` declares."""
         try:
             with self._zip.open(f"{key}.npy") as f:
-                version = np.lib.format.read_magic(f)
-                read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                               else np.lib.format.read_array_header_2_0)
-                shape, _, dtype = read_header(f)
-        except (KeyError, OSError, ValueError, zipfile.BadZipFile, EOFError, zlib.error) as exc:
+                shape, dtype = read_npy_header(f)
+        except _DAMAGED as exc:
             raise FrameFormatError(f"{self.path}: member {key!r} is not a readable array ({exc})") from exc
         if dtype.hasobject:
             raise FrameFormatError(f"{self.path}: member {key!r} holds Python objects; radarcl never unpickles")
@@ -75,7 +90,7 @@ class SafeNpz:
 
     def __getitem__(self, key):
         shape, dtype = self.header(key)
-        nbytes = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+        nbytes = declared_bytes(shape, dtype)
         if self.used + nbytes > self.budget:
             raise FrameFormatError(f"{self.path}: member {key!r} declares {shape} {dtype} = {nbytes / 2**20:.0f} MiB; "
                                    f"with the rest that exceeds the memory budget of {self.budget / 2**20:.0f} MiB "
@@ -83,7 +98,7 @@ class SafeNpz:
         try:
             with self._zip.open(f"{key}.npy") as f:
                 array = np.lib.format.read_array(f, allow_pickle=False)
-        except (OSError, ValueError, zipfile.BadZipFile, EOFError, zlib.error) as exc:
+        except _DAMAGED as exc:
             raise FrameFormatError(f"{self.path}: member {key!r} is truncated or corrupt ({exc})") from exc
         self.used += nbytes
         return array

@@ -50,15 +50,12 @@ def load_capture(path):
 
 def _check_npy_header(path):
     """Refuse a .npy whose header declares more than the memory budget, before reading it."""
-    from radarcl.io import memory_budget
+    from radarcl.io import declared_bytes, memory_budget, read_npy_header
 
     try:
         with open(path, "rb") as f:
-            version = np.lib.format.read_magic(f)
-            read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-            shape, _, dtype = read(f)
+            shape, dtype = read_npy_header(f)
     except (OSError, ValueError) as exc:
         raise FrameFormatError(f"cannot read TI capture {path}: {exc}") from exc
-    nbytes = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
-    if nbytes > memory_budget():
-        raise FrameFormatError(f"{path} declares {shape} {dtype} = {nbytes / 2**20:.0f} MiB, over the memory budget")
+    if dtype.hasobject or declared_bytes(shape, dtype) > memory_budget():
+        raise FrameFormatError(f"{path} declares {shape} {dtype}: objects or more than the memory budget")
