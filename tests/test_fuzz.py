@@ -326,6 +326,10 @@ def test_the_cli_answers_hostile_arguments_with_a_sentence(tmp_path, capsys):
     notes.write_text("not a radar file")
     bad_toml = tmp_path / "bad.toml"
     bad_toml.write_text("[cfar\nkind = 'so'\n")
+    good = tmp_path / "good.npz"                 # a valid map, so that the settings are what is refused
+    with open(good, "wb") as f:
+        np.savez(f, version=1, origin_m=np.zeros(3), voxel_m=0.5, shape=np.array([16, 16, 16]),
+                 keys=np.zeros((1, 3), np.int32), data=np.full((1, 8, 8, 8), 3000, np.int32))
     out = tmp_path / "out.npz"
     argvs = [
         ["fuse", str(empty), "--out", str(out)], ["fuse", str(junk), "--out", str(out)],
@@ -338,7 +342,9 @@ def test_the_cli_answers_hostile_arguments_with_a_sentence(tmp_path, capsys):
         ["fuse", str(junk), "--out", str(tmp_path)], ["fuse", str(junk), "--out", "/dev/null"],
         ["render", str(junk), "--out", str(tmp_path / "v.png")], ["render", str(empty)],
         ["render", str(tmp_path / "missing.npz")], ["render", str(junk), "--size", "0", "0"],
-        ["render", str(junk), "--threshold", "nan"], ["render", str(junk), "--gamma", "inf"],
+        ["render", str(good), "--threshold", "nan"], ["render", str(good), "--gamma", "inf"],
+        ["render", str(good), "--camera", "nan,0"], ["render", str(good), "--camera", "1e400,0"],
+        ["render", str(good), "--lo", "2", "--hi", "1"], ["render", str(good), "--out", str(good), "--force"],
         ["view", str(tmp_path / "missing.npz"), "--window", "headless", "--frames", "1"],
         ["navtech", str(notes)], ["navtech", str(tmp_path / "missing.png")],
         ["navtech-map", str(tmp_path)], ["config", "show", "--config", str(bad_toml)],

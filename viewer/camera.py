@@ -33,6 +33,9 @@ class Camera:
             raise ConfigError(f"camera distance must be a positive number of metres, got {self.distance!r}")
         if not 1.0 <= self.fov_deg <= 170.0:
             raise ConfigError(f"field of view must lie in [1, 170] deg, got {self.fov_deg!r}")
+        if not (math.isfinite(self.azimuth_deg) and math.isfinite(self.elevation_deg)):
+            raise ConfigError(f"camera azimuth and elevation must be finite degrees, got "
+                              f"{self.azimuth_deg!r}, {self.elevation_deg!r}")
         object.__setattr__(self, "target", target)
         object.__setattr__(self, "elevation_deg", float(np.clip(self.elevation_deg, -89.0, 89.0)))
 
