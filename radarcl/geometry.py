@@ -32,6 +32,9 @@ from radarcl.errors import ConfigError
 # A pose's rotation must be orthonormal to this tolerance (float64 products of a rotation
 # built from angles are orthonormal to ~1e-15; a pose read from text with 6 digits, ~1e-6).
 ROTATION_TOLERANCE = 1e-5
+# Poses beyond this [m] are refused: the kernels hold beam origins relative to the grid in
+# float32, which overflows (and long before that, loses the voxel) far out.
+MAX_TRANSLATION_M = 1e7
 
 
 # -- the cylindrical-conical beam (Fig. 7c) and its angular weight (Fig. 7b) ---------------------
@@ -234,6 +237,9 @@ def check_pose(pose, what="pose"):
         raise ConfigError(f"{what} must be a 4x4 rigid transform, got shape {T.shape}")
     if not np.isfinite(T).all():
         raise ConfigError(f"{what} holds NaN or Inf: {T.tolist()}")
+    if np.abs(T[:3, 3]).max() > MAX_TRANSLATION_M:
+        raise ConfigError(f"{what}'s translation {T[:3, 3].tolist()} m lies beyond +-{MAX_TRANSLATION_M:g} m "
+                          "(express poses in a local frame near the map)")
     if not np.array_equal(T[3], [0.0, 0.0, 0.0, 1.0]):
         raise ConfigError(f"{what}'s last row must be [0, 0, 0, 1], got {T[3].tolist()}")
     R = T[:3, :3]
@@ -254,7 +260,9 @@ def check_poses(poses, n_beams):
     # One vectorised pass; the first bad pose, if any, is named by check_pose's own message.
     R = P[:, :3, :3]
     err = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2))
-    bad = (~np.isfinite(P).all(axis=(1, 2)) | (P[:, 3] != [0.0, 0.0, 0.0, 1.0]).any(axis=1)
+    with np.errstate(invalid="ignore"):
+        far = ~(np.abs(P[:, :3, 3]) <= MAX_TRANSLATION_M).all(axis=1)
+    bad = (far | ~np.isfinite(P).all(axis=(1, 2)) | (P[:, 3] != [0.0, 0.0, 0.0, 1.0]).any(axis=1)
            | ~(err <= ROTATION_TOLERANCE) | ~(np.linalg.det(np.nan_to_num(R)) >= 0))
     if bad.any():
         b = int(np.flatnonzero(bad)[0])

@@ -60,6 +60,9 @@ class Detection:
 class Mapping:
     """Frames -> [range FFT] -> CFAR -> eq. 12 -> fusion into ``grid``, buffers allocated once.
 
+    Build it with ``Mapping.from_config(runtime, sensor, config)``: a sensor profile and a map
+    configuration in physical units. The constructor takes the parts assembled (tests and the
+    fusion bench use it to pin a lattice, a beam model or a sample type):
     runtime: a ``radarcl.cl.Runtime``; grid: the ``EvidenceGrid`` to build; lattice, model: the
     frame's ``BeamLattice`` and ``BeamModel``.
     Raw input: give ``radar`` (a ``RadarConfig``) and ``n_fft``; frames are (n_az, n_el,
