@@ -118,3 +118,19 @@ def test_bench_fusion_has_the_issue_keys():
     assert r["max_error_units"] <= 1 and r["oracle_voxels_compared"] > 10000
     assert r["sparse_mib"] < r["dense_mib"]
     assert any("ratio_vs_floor" in line for line in fusion.format_table(r))
+
+
+def test_debug_shows_the_traceback(tmp_path, monkeypatch):
+    """An error is one sentence; with --debug or RADARCL_DEBUG=1 it is raised (a traceback for
+    a bug report)."""
+    import pytest
+
+    from radarcl.errors import FrameFormatError
+
+    missing = str(tmp_path / "missing.npz")
+    assert main(["fuse", missing, "--out", str(tmp_path / "m.npz")]) == 2
+    with pytest.raises(FrameFormatError, match="does not exist"):
+        main(["--debug", "fuse", missing, "--out", str(tmp_path / "m.npz")])
+    monkeypatch.setenv("RADARCL_DEBUG", "1")
+    with pytest.raises(FrameFormatError):
+        main(["fuse", missing, "--out", str(tmp_path / "m.npz")])
