@@ -15,7 +15,7 @@ SYSTEM_PACKAGES_X := xvfb xauth
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,serial,viewer]'
+	$(BIN)/python -m pip install --quiet -e '.[test,serial,viewer,export,fleet]'
 	touch $@
 
 system:

@@ -7,16 +7,14 @@ RADARCL_DEBUG=1).
 """
 
 import argparse
-import json
 import logging
 import os
 import signal
 import sys
-from pathlib import Path
 
+from radarcl import commands
+from radarcl.commands import DATA_ENV
 from radarcl.errors import RadarclError
-
-DATA_ENV = "RADARCL_DATA"
 
 
 # -- argument types and shared option groups ------------------------------------------------------------
@@ -50,8 +48,12 @@ def positive_float(text):
 
 
 def add_output(p, flag, default, what):
-    """``flag`` (an output file) and --force."""
-    p.add_argument(flag, default=default, help=f"{what} (default: %(default)s); an existing file is kept unless --force")
+    """``flag`` (an output file; required when ``default`` is None) and --force."""
+    if default is None:
+        p.add_argument(flag, required=True, help=f"{what}; an existing file is kept unless --force")
+    else:
+        p.add_argument(flag, default=default, help=f"{what} (default: %(default)s); an existing file is kept unless "
+                                                   "--force")
     if not any(a.dest == "force" for a in p._actions):
         p.add_argument("--force", action="store_true", help="replace existing output files")
 
@@ -71,219 +73,6 @@ def add_config(p, sensor_default=None):
                         "`radarcl config show` lists the keys)")
     p.add_argument("--voxel", type=positive_float, default=None, help="voxel edge [m] (= --set grid.voxel_m=...)")
     p.set_defaults(sensor_default=default)
-
-
-def resolve_config(args, program=None):
-    """The ``mapconfig.Resolved`` the options of ``add_config`` describe."""
-    from radarcl import mapconfig
-
-    flags = dict(mapconfig.parse_flag(text) for text in args.set)
-    if args.voxel is not None:
-        flags["grid.voxel_m"] = args.voxel
-    sensor = args.sensor if args.sensor is not None or args.config is not None else args.sensor_default
-    return mapconfig.resolve(sensor, args.config, flags, program)
-
-
-def default_data(name):
-    """The shared data set ``name``: under $RADARCL_DATA, else ../shared/data beside the source
-    checkout (never relative to the current directory)."""
-    root = Path(os.environ[DATA_ENV]) if os.environ.get(DATA_ENV) else Path(__file__).resolve().parents[2] / "shared" / "data"
-    return root / name
-
-
-class ProgressBar:
-    """A one-line progress bar on stderr: ``bar(done, total, what)``; a new ``what`` starts a new line."""
-
-    def __init__(self, stream=sys.stderr, width=30):
-        self.stream, self.width, self.what = stream, width, None
-
-    def __call__(self, done, total, what):
-        if not self.stream.isatty() and done < total:
-            return                                # a log file gets the finished line only
-        if what != self.what and self.what is not None:
-            self.stream.write("\n")
-        self.what = what
-        filled = int(self.width * done / max(1, total))
-        self.stream.write(f"\r[{'#' * filled}{'.' * (self.width - filled)}] {done}/{total} {what}")
-        if done >= total:
-            self.stream.write("\n")
-            self.what = None
-        self.stream.flush()
-
-
-def _progress(args):
-    return None if getattr(args, "no_progress", False) else ProgressBar()
-
-
-def _runtime():
-    from radarcl.cl import Runtime
-
-    return Runtime()
-
-
-# -- the subcommands ------------------------------------------------------------------------------------------
-def cmd_info(args):
-    from radarcl.cl import device_report
-
-    print("\n".join(device_report()))
-    return 0
-
-
-def cmd_sensors(args):
-    from radarcl import sensors
-
-    if args.name:
-        print(sensors.load(args.name).toml(), end="")
-        return 0
-    for name in sensors.builtin_names():
-        s = sensors.load(name)
-        print(f"{name:20s} {s.input:8s} {s.description}")
-    print("(radarcl sensors NAME prints a profile; --sensor takes a name or a TOML file)")
-    return 0
-
-
-def cmd_config(args):
-    from radarcl import mapconfig, outputs
-
-    if args.action == "save" and not args.file:
-        from radarcl.errors import ConfigError
-
-        raise ConfigError("config save needs the FILE to write")
-    config = resolve_config(args)
-    if args.action == "save":
-        path = outputs.check(args.file, args.force, inputs=[args.config], what="configuration file")
-        config.save(path, header=("radarcl map configuration", "written by radarcl config save"), overwrite=True)
-        print(f"wrote {path}")
-        return 0
-    print("\n".join(mapconfig.show(config)))
-    return 0
-
-
-def cmd_demo(args):
-    from radarcl.jobs import demo
-
-    demo.run(_runtime(), args.out, seed=args.seed, quick=args.quick, replay=args.replay, report=print,
-             progress=_progress(args))
-    return 0
-
-
-def cmd_tune(args):
-    from radarcl import outputs
-    from radarcl.evaluation import tuning
-    from radarcl.evaluation.evaluate import paper_config
-    from radarcl.io import recording
-    from radarcl.scene.observe import observe
-    from radarcl.scene.outdoor import PAPER_TILTS_DEG, paper_grid, paper_scene
-
-    save = outputs.check(args.save, args.force, inputs=[args.replay], what="configuration file") if args.save else None
-    if args.replay:
-        obs = recording.load_observations(args.replay)
-    else:
-        print(f"simulating the reference scene, seed {args.seed} ...")
-        obs = observe(paper_scene(), PAPER_TILTS_DEG, seed=args.seed)
-    base = paper_config(args.voxel)
-    truth = paper_scene().truth(paper_grid(args.voxel))
-    best, _ = tuning.tune(_runtime(), obs, truth, base, report=print, progress=_progress(args))
-    print(f"chosen: {best.label(base)}")
-    if save:
-        best.save(save, header=("radarcl map configuration chosen by `radarcl tune`",
-                                f"reference scene, seed {obs.seed}, {args.voxel} m; the search of radarcl/evaluation/tuning.py"),
-                  overwrite=True)
-        print(f"wrote {save} (use it with --config)")
-    return 0
-
-
-def cmd_fuse(args):
-    from radarcl import outputs
-    from radarcl.jobs import fuse_recording
-
-    config = resolve_config(args)
-    out = outputs.check(args.out, args.force, inputs=[args.input, args.config, args.odometry], what="map file")
-    source = fuse_recording.open_source(config.sensor, args.input, args.odometry)
-    if source.sensor is not config.sensor:                   # the reader learnt the bin count
-        config = config.for_sensor(source.sensor)
-    fuse_recording.run(_runtime(), source, config, out, every=args.every, progress=_progress(args))
-    return 0
-
-
-def cmd_navtech(args):
-    from radarcl import outputs
-    from radarcl.jobs.navtech_report import report
-
-    out = outputs.check(args.out, args.force, inputs=[args.scan], what="figure")
-    report(_runtime(), resolve_config(args), args.scan, args.azimuth, out, print)
-    return 0
-
-
-def cmd_navtech_map(args):
-    from radarcl import outputs
-    from radarcl.jobs import navtech_map
-
-    data = Path(args.data) if args.data else default_data("navtech_oxford")
-    if not data.is_dir():
-        from radarcl.errors import ConfigError
-
-        raise ConfigError(f"no data directory {data}; give DATA (radar/*.png and gt/radar_odometry.csv) or set "
-                          f"{DATA_ENV}")
-    out = outputs.check(args.out, args.force, what="figure")
-    map_out = outputs.check(args.map, args.force, what="map file") if args.map else None
-    json_out = outputs.check(args.json, args.force, what="JSON file") if args.json else None
-    config = resolve_config(args)
-    results, grid, poses, pulses = navtech_map.run(_runtime(), config, data, report=print, progress=_progress(args))
-    print(f"detector: {pulses['cfar']['kind'].upper()}-CFAR guard {pulses['cfar']['guard_bins']} train "
-          f"{pulses['cfar']['train_bins']} bins; {pulses['detections_per_scan']:.0f} detections and "
-          f"{pulses['pulses_per_scan']:.0f} pulses per scan, pulse width median {pulses['pulse_width_median_m']:.3f} m "
-          f"(90 % below {pulses['pulse_width_p90_m']:.3f} m), {100 * pulses['wide_fraction']:.1f} % wide")
-    with outputs.atomic(out) as tmp:
-        navtech_map.plot_map(grid, poses, tmp, results, title=config.sensor.name)
-    mem = grid.memory()
-    print(f"map: {mem['bricks']} bricks, {mem['sparse_bytes'] / 2**20:.1f} MiB allocated "
-          f"({mem['dense_bytes'] / 2**20:.1f} MiB dense); wrote {out}")
-    if map_out:
-        grid.save(map_out)
-        print(f"wrote {map_out} (radarcl render / view open it)")
-    if json_out:
-        with outputs.atomic(json_out) as tmp:
-            tmp.write_text(json.dumps(dict(consistency=results, detector=pulses, config=config.as_dict()), indent=1))
-    return 0
-
-
-def _settings(args):
-    from radarcl.viewer.modes import Settings
-
-    return Settings(threshold=args.threshold, lo=args.lo, hi=args.hi, gamma=args.gamma, colormap=args.colormap,
-                    step=args.step)
-
-
-def cmd_render(args):
-    from radarcl import outputs
-    from radarcl.viewer.headless import render_map
-
-    out = outputs.check(args.out, args.force, inputs=[args.map], what="image")
-    with outputs.atomic(out) as tmp:
-        render_map(args.map, tmp, args.mode, args.camera, tuple(args.size), _settings(args),
-                   colorbar=not args.no_colorbar, report=lambda line: print(line.replace(str(tmp), str(out))))
-    return 0
-
-
-def cmd_view(args):
-    from radarcl import outputs
-    from radarcl.viewer.app import run
-
-    shot = outputs.check(args.screenshot, args.force, inputs=[args.map], what="screenshot") if args.screenshot else None
-    status = run(args.map, mode_name=args.mode, camera=args.camera, size=tuple(args.size), settings=_settings(args),
-                 live=args.live, frames=args.frames, screenshot=shot, keys=args.keys, window=args.window)
-    if shot:
-        print(f"saved {shot}")
-    return status
-
-
-def cmd_bench(args):
-    say = (lambda line: None) if args.json else (lambda line: print(line, file=sys.stderr))
-    say(f"measuring {args.bench} ...")
-    result, lines = args.module.command(args, _runtime, say)
-    print(json.dumps(result) if args.json else "\n".join(lines))
-    return 0
 
 
 # -- the parser ----------------------------------------------------------------------------------------------
@@ -336,14 +125,14 @@ def build_parser():
         p.set_defaults(func=func)
         return p
 
-    command("info", cmd_info, "list OpenCL platforms and devices and what the kernels need")
+    command("info", commands.cmd_info, "list OpenCL platforms and devices and what the kernels need")
 
-    p = command("sensors", cmd_sensors, "list the built-in sensor profiles, or print one",
+    p = command("sensors", commands.cmd_sensors, "list the built-in sensor profiles, or print one",
                 "Lists the built-in sensor profiles (radarcl/profiles/*.toml), or prints one as TOML: copy it to "
                 "describe your own radar and pass the file to --sensor.")
     p.add_argument("name", nargs="?", help="a profile name or file to print")
 
-    p = command("config", cmd_config, "show or save the effective map configuration",
+    p = command("config", commands.cmd_config, "show or save the effective map configuration",
                 "`config show` prints every configuration key with its value and where it came from (radarcl "
                 "default, the sensor's geometry, its profile, the --config file, a flag), and how the windows in "
                 "metres become bins. `config save FILE` writes it as a file for --config.")
@@ -352,7 +141,7 @@ def build_parser():
     p.add_argument("--force", action="store_true", help="config save: replace an existing file")
     add_config(p)
 
-    p = command("demo", cmd_demo, "the main job: the paper's reference scene simulated, fused at 0.1 m, scored "
+    p = command("demo", commands.cmd_demo, "the main job: the paper's reference scene simulated, fused at 0.1 m, scored "
                                   "against ground truth and the OctoMap-style baseline, plotted",
                 "Simulates the outdoor scene of the paper's §4.3 (3,840 observations), fuses it with the paper's "
                 "and the tuned constants, prints metrics and timings and writes the recording, the map, plots and "
@@ -363,7 +152,7 @@ def build_parser():
     p.add_argument("--replay", default=None, help="replay a recording (reference_scene.npz) instead of simulating")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
-    p = command("tune", cmd_tune, "the documented search for the CFAR settings and the eq. 12 constants on the "
+    p = command("tune", commands.cmd_tune, "the documented search for the CFAR settings and the eq. 12 constants on the "
                                   "reference scene; --save writes the choice as a configuration file",
                 "Runs the coordinate search of radarcl/evaluation/tuning.py (CFAR kind and P_fa, wide-pulse width, "
                 "E_h and E_l, common scale) on the reference scene simulated with the tuning seed, and with --save "
@@ -375,19 +164,51 @@ def build_parser():
     p.add_argument("--force", action="store_true", help="replace an existing --save file")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
-    p = command("fuse", cmd_fuse, "fuse any sensor's frames into a map file (rewritten every --every frames for "
+    p = command("fuse", commands.cmd_fuse, "fuse any sensor's frames into a map file (rewritten every --every frames for "
                                   "radarcl view --live)",
                 "Reads INPUT as the sensor's reader says (a radarcl recording; a directory of polar PNG scans, "
                 "with radar_odometry.csv beside them or in ../gt; a TI capture .npy/.txt), fuses every frame with "
                 "the map configuration and writes the map file.")
     p.add_argument("input", help="a recording (.npz), a directory of polar scans, or a TI capture")
-    add_output(p, "--out", "map.npz", "map file to write")
+    add_output(p, "--out", "map.npz", "map to write: an .npz file, or any other name for a map store directory "
+                                      "(zarr; --every then writes only the changed bricks)")
     add_config(p)
     p.add_argument("--odometry", default=None, help="polar scans: the radar_odometry.csv (default: found beside them)")
     p.add_argument("--every", type=positive_int, default=None, help="rewrite the map file every N frames")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
-    p = command("navtech", cmd_navtech, "CFAR and the eq. 12 interpreter on one polar scan; plot one azimuth "
+    p = command("fuse-many", commands.cmd_fuse_many, "fuse many recordings in parallel on a Dask cluster into one map",
+                "Fuses each input on a Dask worker (a LocalCluster by default, any scheduler address for a real "
+                "cluster), each worker with its own OpenCL context, and merges the maps brick by brick with exact "
+                "integer sums: the same map as fusing every input in one process, in any order.")
+    p.add_argument("inputs", nargs="+", help="recordings (or anything fuse reads) of one sensor")
+    add_output(p, "--out", "map.rcmap", "map to write (.npz, or a map store)")
+    add_config(p)
+    p.add_argument("--scheduler", default=None, help="a Dask scheduler address (default: a local cluster)")
+    p.add_argument("--workers", type=positive_int, default=2, help="local cluster workers (default: %(default)s)")
+
+    p = command("convert", commands.cmd_convert, "copy a map between the .npz file and the map store",
+                "Reads an .npz map or a map store (a directory: zarr v3, versioned, incremental saves) and writes "
+                "the other: the target's name decides (.npz, or anything else for a store).")
+    p.add_argument("source", help="a map (.npz) or map store")
+    p.add_argument("target", help="the map to write")
+    p.add_argument("--force", action="store_true", help="replace an existing target")
+
+    p = command("export", commands.cmd_export, "write a map for other tools: OctoMap, PLY, VTK, a ROS costmap or bag",
+                "octomap: .bt (occupied/free) or .ot (log-odds) read by OctoMap and octovis; ply: the voxels above "
+                "--threshold with log_odds and probability; mesh: the isosurface at --threshold as a PLY mesh; "
+                "vti: the dense log-odds as VTK image data for ParaView; costmap: a ROS map_server PGM + YAML "
+                "projected over --band; rosbag: a ROS 2 bag with a PointCloud2 and an OccupancyGrid.")
+    p.add_argument("map", help="a map (.npz) or map store")
+    p.add_argument("--to", required=True, choices=["octomap", "ply", "mesh", "vti", "costmap", "rosbag"])
+    add_output(p, "--out", None, "file to write (a directory for rosbag)")
+    p.add_argument("--threshold", type=float, default=None,
+                   help="[nat]: occupied above it (default 1; octomap: voxels with |log-odds| >= it, default 0)")
+    p.add_argument("--band", type=float, nargs=2, default=None, metavar=("Z_MIN", "Z_MAX"),
+                   help="height band [m] for costmap, rosbag's grid, mesh and vti (default: the whole grid)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+
+    p = command("navtech", commands.cmd_navtech, "CFAR and the eq. 12 interpreter on one polar scan; plot one azimuth "
                                         "like the paper's Fig. 10",
                 "Reads a polar PNG scan (1 dB per level), runs CFAR and eq. 12 on every azimuth with the kernels, "
                 "prints what was found and writes a Fig. 10 style PNG of one azimuth.")
@@ -396,7 +217,7 @@ def build_parser():
     add_output(p, "--out", "navtech_fig10.png", "PNG to write")
     add_config(p, "navtech-cts350x")
 
-    p = command("navtech-map", cmd_navtech_map, "fuse polar scans with their odometry into a map; check the "
+    p = command("navtech-map", commands.cmd_navtech_map, "fuse polar scans with their odometry into a map; check the "
                                                 "geometry by half-map consistency",
                 "Fuses the first and second half of the scans into two maps and prints how well they agree with "
                 "the true poses and with the second half moved 1 m, turned 2 deg, without motion within a scan, "
@@ -411,14 +232,14 @@ def build_parser():
     add_config(p, "navtech-cts350x")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
-    p = command("render", cmd_render, "render a map file to a PNG through EGL (no display needed)",
+    p = command("render", commands.cmd_render, "render a map file to a PNG through EGL (no display needed)",
                 "Ray-marches the map as a 3D texture (or draws the Fig. 11 spheres) offscreen through EGL and "
                 "writes a PNG with a colour bar.")
     _view_options(p)
     add_output(p, "--out", "view.png", "PNG to write")
     p.add_argument("--no-colorbar", action="store_true", help="leave the colour bar out")
 
-    p = command("view", cmd_view, "the interactive volume viewer (press h in the window for the keys)",
+    p = command("view", commands.cmd_view, "the interactive volume viewer (press h in the window for the keys)",
                 "Opens a window on the map: drag to orbit, right-drag or shift-drag to pan, wheel to zoom; 1-4 "
                 "modes, t/T threshold, x/y/z slices, c colormap, s screenshot, h help. --live follows a map file "
                 "that a running fusion rewrites.")
@@ -432,7 +253,7 @@ def build_parser():
     p.add_argument("--frames", type=positive_int, default=None, help="close after this many frames (scripts, tests)")
     p.add_argument("--keys", default="", help="keys pressed one per frame at the start, e.g. '2t' (scripts, tests)")
 
-    p = command("bench", cmd_bench, "benchmarks, each against a baseline measured in the same run",
+    p = command("bench", commands.cmd_bench, "benchmarks, each against a baseline measured in the same run",
                 "Each benchmark prints its figures and their ratio to a baseline measured in the same run "
                 "(interleaved, medians). `radarcl bench NAME --help` for its options.")
     benches = p.add_subparsers(dest="bench", required=True, metavar="NAME")

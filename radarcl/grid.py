@@ -15,6 +15,7 @@ Storage: bricks of 8 x 8 x 8 voxels (2 KiB), allocated the first time some beam 
 ("leave out what the scene does not need"). A host table maps brick -> slot in one device pool.
 """
 
+import logging
 import math
 from dataclasses import dataclass
 
@@ -29,6 +30,7 @@ BRICK_BYTES = 4 * BRICK_VOXELS
 GRID_LIMIT = 2 ** 30                # stored sums saturate here [units]
 MAX_TABLE_BRICKS = 2 ** 28          # the host brick table (int32) stays below 1 GiB
 FILE_VERSION = 1
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -265,17 +267,24 @@ class EvidenceGrid:
 
 
 def read(path):
-    """Read a grid file written by ``EvidenceGrid.save`` without a device (numpy only, for the
-    viewer): returns (spec, keys (n, 3) int32, data (n, 8, 8, 8) int32). A file that is not a
+    """Read a map, an npz file written by ``EvidenceGrid.save`` or a map store directory
+    (``radarcl.store``), without a device (numpy only, for the viewer): returns (spec, keys (n, 3) int32, data (n, 8, 8, 8) int32). A file that is not a
     radarcl grid raises ``FrameFormatError`` saying what was wrong; array sizes are checked
     against their headers and the memory budget before they are read (``io.safe_npz``)."""
     from pathlib import Path
 
+    from radarcl import store
     from radarcl.io import safe_npz
 
+    if Path(path).is_dir() and store.is_store(path):
+        spec, keys, data, manifest = store.read(path)
+        if manifest["incomplete"]:
+            log.warning("%s: a save after version %d did not complete (%s left behind); read version %d",
+                        path, manifest["version"], ", ".join(manifest["incomplete"]), manifest["version"])
+        return spec, keys, data
     if not Path(path).is_file():
         raise FrameFormatError(f"{path} does not exist (yet)" if not Path(path).exists()
-                               else f"{path} is not a file")
+                               else f"{path} is not a map file or store")
     with safe_npz(path, what="radarcl grid file (an npz written by EvidenceGrid.save)") as f:
         missing = {"version", "origin_m", "voxel_m", "shape", "keys", "data"} - set(f.files)
         if missing:

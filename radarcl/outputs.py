@@ -40,20 +40,33 @@ def clean_stale(path):
         m = _TMP.match(tmp.name)
         if m and m.group("name") == path.name and int(m.group("pid")) != os.getpid() and not _alive(int(m.group("pid"))):
             with contextlib.suppress(OSError):
-                tmp.unlink()
+                if tmp.is_dir():
+                    import shutil
+
+                    shutil.rmtree(tmp)
+                else:
+                    tmp.unlink()
                 removed.append(tmp)
     return removed
 
 
-def check(path, force=False, inputs=(), what="output"):
-    """``path`` as a Path that may be written (see the module docstring), or ConfigError."""
+def check(path, force=False, inputs=(), what="output", store=False):
+    """``path`` as a Path that may be written (see the module docstring), or ConfigError.
+    ``store``: the output is a map store directory (``radarcl.store``), which may replace an
+    existing store with ``force`` but never another directory."""
+    from radarcl.store import is_store
+
     path = Path(path)
     if str(path) in ("", "."):
         raise ConfigError(f"the {what} needs a file name")
     if path.is_symlink():
         raise ConfigError(f"{what} {path} is a symbolic link; give the path of a regular file")
     if path.exists():
-        if not path.is_file():
+        if store and path.is_dir() and (is_store(path) or not any(path.iterdir())):
+            pass
+        elif store and path.is_dir():
+            raise ConfigError(f"{what} {path} is a directory that is not a map store; choose another name")
+        elif not path.is_file():
             kind = "a directory" if path.is_dir() else "not a regular file"
             raise ConfigError(f"{what} {path} is {kind}; give the path of a regular file")
         for source in inputs:
@@ -77,12 +90,18 @@ def check(path, force=False, inputs=(), what="output"):
 def atomic(path):
     """Yield a temporary path beside ``path``; rename it over ``path`` when the block ends
     normally, remove it otherwise."""
+    import shutil
+
     path = Path(path)
     clean_stale(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
         yield tmp
+        if tmp.is_dir() and path.is_dir():               # a directory output (a bag) replaces one
+            shutil.rmtree(path)
         os.replace(tmp, path)
     finally:
+        if tmp.is_dir():
+            shutil.rmtree(tmp, ignore_errors=True)
         with contextlib.suppress(OSError):
             tmp.unlink()

@@ -13,7 +13,6 @@ import json
 import os
 import resource
 import zipfile
-import zlib
 
 import numpy as np
 import pytest

@@ -65,13 +65,13 @@ def test_sigterm_and_ctrl_c_leave_no_temporary_file(tmp_path):
     """A writer stopped by SIGTERM or Ctrl-C inside ``atomic`` under the CLI's handlers exits
     with 143 or 130 and removes its temporary file."""
     script = ("import os, signal, sys, time\n"
-              "from radarcl import cli, outputs\n"
+              "from radarcl import cli, commands, outputs\n"
               "def job(args):\n"
               "    with outputs.atomic(sys.argv[1]) as tmp:\n"
               "        tmp.write_bytes(b'partial')\n"
               "        os.kill(os.getpid(), getattr(signal, sys.argv[2]))\n"
               "        time.sleep(5)\n"
-              "cli.cmd_info = job\n"
+              "commands.cmd_info = job\n"
               "sys.exit(cli.main(['info']))\n")
     for sig, status in (("SIGTERM", 143), ("SIGINT", 130)):
         out = tmp_path / f"{sig}.npz"

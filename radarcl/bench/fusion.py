@@ -17,7 +17,6 @@ import math
 import time
 
 import numpy as np
-import pyopencl as cl
 
 from radarcl import oracle
 from radarcl.bench import interleaved_medians

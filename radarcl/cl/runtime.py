@@ -12,7 +12,6 @@ import os
 import sys
 from pathlib import Path
 
-import numpy as np
 
 from radarcl.cl.signature import KernelFunction, parse_kernels
 from radarcl.errors import KernelBuildError, NoOpenCLError

@@ -5,7 +5,7 @@ The input is whatever the sensor's reader opens (``radarcl.io.open_input``): a r
 with their odometry, a TI raw ADC capture. The map configuration comes from
 ``mapconfig.resolve`` (sensor defaults, ``--config`` file, ``--set`` flags). With ``every`` the
 map file is rewritten every that many frames (atomically), so ``radarcl view --live`` shows the
-map growing.
+map growing; a store output makes each rewrite cost the changed bricks only.
 """
 
 import time
@@ -14,12 +14,19 @@ from radarcl import io
 from radarcl.pipeline import Mapping
 
 
-def run(runtime, source, config, out, every=None, progress=None, report=print, save=None):
+def run(runtime, source, config, out, every=None, progress=None, report=print, inputs=()):
     """Fuse every frame of ``source`` (an ``io.FrameSource``) with ``config`` (a
-    ``mapconfig.Resolved``) and write the map to ``out`` through ``save(grid, out)`` (default
-    ``grid.save``); returns a dict with the frame count and milliseconds per frame (saving
-    included)."""
-    save = save or (lambda grid, path: grid.save(path))
+    ``mapconfig.Resolved``) and write the map to ``out``: an ``.npz`` file, or a map store
+    (``radarcl.store``, any other name: only changed bricks are written after the first save).
+    ``inputs`` go into the store's provenance. Returns a dict with the frame count and
+    milliseconds per frame (saving included)."""
+    from radarcl.store import MapSaver
+
+    saver = MapSaver(out, config.sensor.toml(), config.as_dict(), inputs)
+
+    def save(grid, path):
+        saver(grid)
+
     mapping = Mapping.from_config(runtime, config=config)
     spec = mapping.grid.spec
     report(f"fusing {source.summary} with sensor {config.sensor.name} ({config.label()}) into a "

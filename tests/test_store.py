@@ -1,0 +1,155 @@
+"""The map store: round trips, incremental saves, atomic for readers against a killed writer,
+newer formats refused, conversion to and from .npz, and the point-query API."""
+
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from radarcl import store
+from radarcl.cli import main
+from radarcl.errors import ConfigError, FrameFormatError
+from radarcl.grid import GridSpec, assemble, read
+from radarcl.maps import UNKNOWN, Map
+
+SPEC = GridSpec((-2.0, -3.0, -1.0), 0.25, (40, 30, 20))
+
+
+def random_map(seed=0, n=20):
+    rng = np.random.default_rng(seed)
+    all_keys = np.array([(x, y, z) for x in range(5) for y in range(4) for z in range(3)], np.int32)
+    keys = all_keys[rng.choice(len(all_keys), n, replace=False)]
+    return keys, rng.integers(-4000, 4000, (n, 8, 8, 8)).astype(np.int32)
+
+
+def same(spec, keys, data, keys2, data2):
+    return np.array_equal(assemble(spec, keys, data), assemble(spec, keys2, data2))
+
+
+def test_round_trip_and_incremental_saves(tmp_path):
+    keys, data = random_map()
+    path = tmp_path / "m.rcmap"
+    w = store.StoreWriter(path, SPEC, sensor_toml='name = "x"', config={"grid.voxel_m": 0.25}, inputs=[__file__])
+    assert w.save(keys, data) == len(keys)
+    spec, k, d = read(path)
+    assert spec == SPEC and same(SPEC, keys, data, k, d)
+    changed = data.copy()
+    changed[3, 1, 2, 3] += 7                                       # one brick changes
+    grown_keys = np.concatenate([keys, [[4, 3, 2]]]).astype(np.int32)
+    grown = np.concatenate([changed, np.full((1, 8, 8, 8), 9, np.int32)])
+    assert w.save(grown_keys, grown) == 2                          # the changed brick and the new one
+    assert w.save(grown_keys, grown) == 0
+    spec, k, d = read(path)
+    assert same(SPEC, grown_keys, grown, k, d)
+    manifest = store.read_manifest(path)
+    assert manifest["version"] == 3 and manifest["provenance"]["inputs"][0]["sha256"]
+    assert manifest["sensor"] == 'name = "x"' and manifest["config"] == {"grid.voxel_m": 0.25}
+    # continued by a new writer, and compacted when segments pile up
+    w2 = store.StoreWriter(path, SPEC)
+    for i in range(store.COMPACT_SEGMENTS + 2):
+        grown[0, 0, 0, 0] = i
+        w2.save(grown_keys, grown)
+    assert len(store.read_manifest(path)["segments"]) <= store.COMPACT_SEGMENTS
+    assert same(SPEC, grown_keys, grown, *read(path)[1:])
+    assert len([p for p in path.iterdir() if p.name.startswith("segment_")]) <= store.COMPACT_SEGMENTS + 1
+    with pytest.raises(ConfigError, match="holds a map of grid"):
+        store.StoreWriter(path, GridSpec((0.0, 0.0, 0.0), 0.25, (40, 30, 20)))
+
+
+def test_newer_or_foreign_stores_are_refused(tmp_path):
+    keys, data = random_map()
+    path = tmp_path / "m.rcmap"
+    store.StoreWriter(path, SPEC).save(keys, data)
+    manifest = json.loads((path / "manifest.json").read_text())
+    manifest["format_version"] = 99
+    (path / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(FrameFormatError, match="written in store format 99; this radarcl reads format 1"):
+        read(path)
+    (path / "manifest.json").write_text("{ torn")
+    with pytest.raises(FrameFormatError, match="manifest.json is not readable"):
+        read(path)
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("x")
+    with pytest.raises(ConfigError, match="a directory that is not a map store"):
+        store.StoreWriter(other, SPEC)
+
+
+WRITER = """
+import sys, numpy as np
+from radarcl import store
+from radarcl.grid import GridSpec
+spec = GridSpec((-2.0, -3.0, -1.0), 0.25, (160, 120, 80))
+rng = np.random.default_rng(0)
+keys = np.array([(x, y, z) for x in range(20) for y in range(15) for z in range(10)], np.int32)
+data = rng.integers(-4000, 4000, (len(keys), 8, 8, 8)).astype(np.int32)
+w = store.StoreWriter(sys.argv[1], spec)
+for version in range(1, 10 ** 6):
+    data[:, 0, 0, 0] = version          # every brick changes: every save is a full one
+    w.save(keys, data)
+    print(version, flush=True)
+"""
+
+
+def test_a_killed_writer_never_leaves_a_mixed_map(tmp_path):
+    """A writer saving 3,000 bricks over and over, killed with SIGKILL at random moments: the
+    store always reads as one complete version (every brick carries the same version number),
+    says what the killed save left behind, and the next writer cleans it up."""
+    path = tmp_path / "m.rcmap"
+    rng = np.random.default_rng(1)
+    for trial in range(4):
+        proc = subprocess.Popen([sys.executable, "-c", WRITER, str(path)], stdout=subprocess.PIPE, text=True)
+        assert proc.stdout.readline().strip() == "1"                 # one save has landed
+        time.sleep(float(rng.uniform(0.05, 0.6)))
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        spec, keys, data, manifest = store.read(path)
+        versions = np.unique(data[:, 0, 0, 0])
+        assert len(versions) == 1 and len(keys) == 3000, f"a mixed map: versions {versions}"
+        if trial % 2:                                                 # a new writer continues, cleaning up
+            store.StoreWriter(path, spec).save(keys, data)
+            assert not store.read(path)[3]["incomplete"] and not list(path.glob(".manifest.json.*.tmp"))
+
+
+def test_convert_between_npz_and_store(tmp_path, capsys):
+    keys, data = random_map(2)
+    npz = tmp_path / "m.npz"
+    with open(npz, "wb") as f:
+        np.savez_compressed(f, version=1, origin_m=np.asarray(SPEC.origin_m), voxel_m=SPEC.voxel_m,
+                            shape=np.asarray(SPEC.shape), keys=keys, data=data)
+    assert main(["convert", str(npz), str(tmp_path / "m.rcmap")]) == 0
+    assert main(["convert", str(tmp_path / "m.rcmap"), str(tmp_path / "back.npz")]) == 0
+    assert same(SPEC, keys, data, *read(tmp_path / "back.npz")[1:])
+    assert main(["convert", str(npz), str(tmp_path / "m.rcmap")]) == 2
+    assert "exists; pass --force" in capsys.readouterr().err
+    (tmp_path / "plain").mkdir()
+    (tmp_path / "plain" / "x").write_text("x")
+    assert main(["convert", str(npz), str(tmp_path / "plain"), "--force"]) == 2
+    assert "a directory that is not a map store" in capsys.readouterr().err
+
+
+def test_point_queries_agree_with_the_dense_map(tmp_path):
+    keys, data = random_map(3)
+    m = Map(SPEC, keys, data)
+    dense = assemble(SPEC, keys, data)
+    rng = np.random.default_rng(4)
+    idx = np.stack([rng.integers(0, n, 500) for n in SPEC.shape], axis=1)
+    points = SPEC.index_to_world(idx) + rng.uniform(-0.12, 0.12, (500, 3))     # anywhere inside the voxel
+    assert np.array_equal(m.units_at(points), dense[idx[:, 2], idx[:, 1], idx[:, 0]])
+    assert np.allclose(m.log_odds_at(points), dense[idx[:, 2], idx[:, 1], idx[:, 0]] / 1024)
+    assert np.isnan(m.log_odds_at([[100.0, 0, 0]])).all() and m.units_at(np.zeros((0, 3))).shape == (0,)
+    centres, nats = m.occupied(1.0)
+    back = SPEC.world_to_index(centres)
+    assert np.array_equal(np.sort(dense[dense > 1024]), np.sort(np.rint(nats * 1024).astype(np.int32)))
+    assert (dense[back[:, 2], back[:, 1], back[:, 0]] > 1024).all()
+    grid = m.projection((-1.0, 4.0), 1.0)
+    assert grid.shape == (30, 40) and set(np.unique(grid)) <= {0, 50, 100, UNKNOWN}
+    col = dense.max(axis=0) > 1024
+    assert np.array_equal(grid == 100, col)
+    assert np.allclose(m.slice(0.1), dense[int((0.1 + 1.0) / 0.25)] / 1024)
+    with pytest.raises(ConfigError, match="holds no voxel centre"):
+        m.projection((50.0, 60.0))
