@@ -103,6 +103,8 @@ BENCHES = {
                                        "memory floor, same run"),
     "quality": ("radarcl.bench.quality", "map error against run time on the reference scene (zero padding, beam "
                                          "model, voxel, CFAR kind) with the OctoMap-style baseline"),
+    "store": ("radarcl.bench.store", "saving and loading the paper's 0.1 m map as .npz vs the map store, with an "
+                                     "incremental save, same run"),
     "viewer": ("radarcl.bench.viewer", "the paper's full grid rendered at 512 x 512 through EGL vs a plain ray "
                                        "march, same run"),
 }

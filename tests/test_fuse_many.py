@@ -61,3 +61,16 @@ def test_mismatched_inputs_are_refused_before_any_work(recordings, tmp_path):
         fuse_many.run(mapconfig.resolve("paper"), [recordings[0], recordings[0]], tmp_path / "m.npz",
                       report=lambda _: None)
     assert not (tmp_path / "m.npz").exists()
+
+
+def test_cli_fuse_many_writes_a_store(recordings, tmp_path, capsys):
+    from radarcl.cli import main
+
+    out = tmp_path / "fleet.rcmap"
+    assert main(["fuse-many", *map(str, recordings[:2]), "--voxel", "0.8", "--workers", "1", "--out", str(out)]) == 0
+    assert "merged in" in capsys.readouterr().out
+    from radarcl import store
+
+    manifest = store.read_manifest(out)
+    assert [i["path"] for i in manifest["provenance"]["inputs"]] == [str(p) for p in recordings[:2]]
+    assert all(len(i["sha256"]) == 64 for i in manifest["provenance"]["inputs"])
