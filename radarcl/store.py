@@ -50,7 +50,7 @@ def _zarr():
     try:
         import zarr
         from zarr.codecs import ZstdCodec
-    except ImportError as exc:                      # zarr 3 needs Python 3.11+
+    except ImportError as exc:
         raise ConfigError(f"the map store needs zarr >= 3 (pip install 'zarr>=3'): {exc}") from None
     return zarr, ZstdCodec
 

@@ -1,7 +1,7 @@
 """radarcl's TOML files (sensor profiles, map configurations): read with file and line in every
 error, checked against a schema of named fields, written back in the same shape.
 
-Reading uses ``tomllib`` (``tomli`` on Python 3.10). Writing is by hand: the files hold flat
+Reading uses ``tomllib``. Writing is by hand: the files hold flat
 tables of numbers, strings, booleans and short lists of numbers, which a dozen lines write
 exactly (``repr`` of a float round-trips), so no TOML writer is needed as a dependency.
 """
@@ -13,10 +13,7 @@ from pathlib import Path
 
 from radarcl.errors import ConfigError
 
-try:
-    import tomllib
-except ImportError:            # Python 3.10
-    import tomli as tomllib
+import tomllib
 
 
 @dataclass(frozen=True)
