@@ -200,7 +200,7 @@ def cmd_export(args):
     from radarcl import exports, outputs
     from radarcl.maps import Map
 
-    out = outputs.check(args.out, args.force, inputs=[args.map], what="export")
+    out = outputs.check(args.out, args.force, inputs=[args.map], what="export", bag=args.to == "rosbag")
     if args.to == "costmap":
         outputs.check(out.with_suffix(".yaml"), args.force, inputs=[args.map], what="costmap YAML")
     m = Map.open(args.map)

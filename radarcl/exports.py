@@ -5,7 +5,7 @@
 | ``octomap`` | ``.bt`` / ``.ot`` | OctoMap (``octomap.OcTree``, octovis) | every observed voxel at its log-odds (clamped to OctoMap's +-CLAMP_NATS); ``.bt`` keeps occupied/free only |
 | ``ply`` | ``.ply`` | plyfile, MeshLab, CloudCompare | the voxels above the threshold: x, y, z [m], log_odds [nat], probability |
 | ``mesh`` | ``.ply`` | plyfile, MeshLab | the isosurface at the threshold (marching cubes, PyMCubes), vertices in metres |
-| ``vti`` | ``.vti`` | VTK, ParaView, pyvista | the dense log-odds [nat] as VTK image data, origin and spacing of the grid |
+| ``vti`` | ``.vti`` | VTK, ParaView, pyvista | the dense log-odds [nat] as zlib-compressed VTK image data, origin and spacing of the grid |
 | ``costmap`` | ``.pgm`` + ``.yaml`` | ROS map_server / Nav2 | the projection over ``band``: 0 free, 100 occupied, -1 unknown |
 | ``rosbag`` | a ROS 2 bag directory | rosbags, ros2 bag | ``/map/points`` PointCloud2 of the occupied voxels and ``/map/grid`` OccupancyGrid |
 
@@ -95,10 +95,12 @@ def ply_mesh(m, path, threshold_nats=1.0, band=None):
     if len(above):
         lo = np.maximum(above.min(axis=0) - 1, 0)
         hi = np.minimum(above.max(axis=0) + 2, d.shape)
-        sub = logodds.to_nats(d[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]])
-        # pad with "free" so the surface closes at the box; marching cubes wants (x, y, z)
-        volume = np.pad(sub, 1, constant_values=min(-1.0, threshold_nats - 1.0)).transpose(2, 1, 0)
-        verts, faces = mcubes.marching_cubes(np.ascontiguousarray(volume), float(threshold_nats))
+        sub = d[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+        # float32 nats in (x, y, z) order (what marching cubes wants), padded with "free" so the
+        # surface closes at the box: one allocation beside the dense copy
+        volume = np.full(np.asarray(sub.shape[::-1]) + 2, min(-1.0, threshold_nats - 1.0), np.float32)
+        volume[1:-1, 1:-1, 1:-1] = sub.transpose(2, 1, 0) * np.float32(1.0 / logodds.SCALE)
+        verts, faces = mcubes.marching_cubes(volume, float(threshold_nats))
         first = np.array([lo[2], lo[1], lo[0] + z0]) - 1                # voxel index of volume[0, 0, 0]
         verts = np.asarray(m.spec.origin_m) + (verts + first + 0.5) * m.spec.voxel_m
     vertex = np.empty(len(verts), dtype=[("x", "f4"), ("y", "f4"), ("z", "f4")])
@@ -113,21 +115,33 @@ def ply_mesh(m, path, threshold_nats=1.0, band=None):
     return len(vertex), len(face)
 
 
-def vti(m, path, band=None):
-    """Dense log-odds [nat] (float32) as VTK XML image data: origin at the first voxel centre,
-    spacing the voxel size, x fastest (VTK's point order). Returns the point count."""
-    import base64
+VTI_BLOCK = 1 << 20            # bytes per zlib block of the .vti data
 
-    d = logodds.to_nats(m.dense(band)).astype("<f4")
+
+def vti(m, path, band=None):
+    """Dense log-odds [nat] (float32) as VTK XML image data, zlib-compressed in blocks (VTK's
+    vtkZLibDataCompressor layout): origin at the first voxel centre, spacing the voxel size, x
+    fastest (VTK's point order). Returns the point count."""
+    import base64
+    import zlib
+
+    d = m.dense(band)
     z0 = 0 if band is None else m._band(band)[0]
     nz, ny, nx = d.shape
+    n_values = d.size
+    per_block = VTI_BLOCK // 4
+    blocks = []
+    for start in range(0, n_values, per_block):
+        chunk = (d.reshape(-1)[start:start + per_block] * np.float32(1.0 / logodds.SCALE)).astype("<f4")
+        blocks.append(zlib.compress(chunk.tobytes(), 1))
+    last = (n_values * 4) % VTI_BLOCK or (VTI_BLOCK if n_values else 0)
+    header = np.array([len(blocks), VTI_BLOCK, last] + [len(b) for b in blocks], "<u8")
+    payload = base64.b64encode(header.tobytes()).decode() + base64.b64encode(b"".join(blocks)).decode()
     origin = np.asarray(m.spec.origin_m) + 0.5 * m.spec.voxel_m + np.array([0, 0, z0 * m.spec.voxel_m])
-    raw = d.tobytes()
-    # one block of binary data, base64 with its UInt64 byte count in front (header_type UInt64)
-    payload = base64.b64encode(np.uint64(len(raw)).tobytes() + raw).decode()
     s = m.spec.voxel_m
     xml = (f'<?xml version="1.0"?>\n'
-           f'<VTKFile type="ImageData" version="1.0" byte_order="LittleEndian" header_type="UInt64">\n'
+           f'<VTKFile type="ImageData" version="1.0" byte_order="LittleEndian" header_type="UInt64" '
+           f'compressor="vtkZLibDataCompressor">\n'
            f'  <ImageData WholeExtent="0 {nx - 1} 0 {ny - 1} 0 {nz - 1}" '
            f'Origin="{float(origin[0])!r} {float(origin[1])!r} {float(origin[2])!r}" Spacing="{s!r} {s!r} {s!r}">\n'
            f'    <Piece Extent="0 {nx - 1} 0 {ny - 1} 0 {nz - 1}">\n'
@@ -136,7 +150,7 @@ def vti(m, path, band=None):
            f'      </PointData>\n    </Piece>\n  </ImageData>\n</VTKFile>\n')
     with atomic(path) as tmp:
         Path(tmp).write_text(xml)
-    return d.size
+    return n_values
 
 
 def costmap(m, path, band=None, threshold_nats=1.0):

@@ -113,14 +113,17 @@ class Map:
 
         z0, z1 = self._band(band)
         nx, ny, _ = self.spec.shape
-        if 4.0 * nx * ny * (z1 - z0) > memory_budget():
+        nbx, nby, _ = self.spec.brick_shape
+        b0, b1 = z0 // BRICK, (z1 - 1) // BRICK + 1                 # the brick layers the band touches
+        if 4.0 * nbx * nby * (b1 - b0) * BRICK ** 3 > memory_budget():
             raise ConfigError(f"a dense copy of {nx} x {ny} x {z1 - z0} voxels exceeds the memory budget; "
                               "narrow the band")
-        out = np.zeros((z1 - z0, ny, nx), np.int32)
-        idx, units = self.voxels()
-        sel = (idx[:, 2] >= z0) & (idx[:, 2] < z1)
-        out[idx[sel, 2] - z0, idx[sel, 1], idx[sel, 0]] = units[sel]
-        return out
+        slab = np.zeros(((b1 - b0) * BRICK, nby * BRICK, nbx * BRICK), np.int32)
+        view = slab.reshape(b1 - b0, BRICK, nby, BRICK, nbx, BRICK).transpose(0, 2, 4, 1, 3, 5)
+        sel = (self.keys[:, 2] >= b0) & (self.keys[:, 2] < b1)      # whole bricks, no voxel lists
+        k = self.keys[sel]
+        view[k[:, 2] - b0, k[:, 1], k[:, 0]] = self.data[sel]
+        return np.ascontiguousarray(slab[z0 - b0 * BRICK:z1 - b0 * BRICK, :ny, :nx])
 
     def _band(self, band):
         nz = self.spec.shape[2]

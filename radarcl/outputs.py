@@ -50,10 +50,11 @@ def clean_stale(path):
     return removed
 
 
-def check(path, force=False, inputs=(), what="output", store=False):
+def check(path, force=False, inputs=(), what="output", store=False, bag=False):
     """``path`` as a Path that may be written (see the module docstring), or ConfigError.
-    ``store``: the output is a map store directory (``radarcl.store``), which may replace an
-    existing store with ``force`` but never another directory."""
+    ``store`` / ``bag``: the output is a directory (a map store, ``radarcl.store``; a ROS 2
+    bag), which may replace an existing one of its kind (or an empty directory) with ``force``,
+    never another directory."""
     from radarcl.store import is_store
 
     path = Path(path)
@@ -62,10 +63,12 @@ def check(path, force=False, inputs=(), what="output", store=False):
     if path.is_symlink():
         raise ConfigError(f"{what} {path} is a symbolic link; give the path of a regular file")
     if path.exists():
-        if store and path.is_dir() and (is_store(path) or not any(path.iterdir())):
+        kind = "map store" if store else "ROS 2 bag" if bag else None
+        ours = (store and is_store(path)) or (bag and (path / "metadata.yaml").is_file())
+        if kind and path.is_dir() and (ours or not any(path.iterdir())):
             pass
-        elif store and path.is_dir():
-            raise ConfigError(f"{what} {path} is a directory that is not a map store; choose another name")
+        elif kind and path.is_dir():
+            raise ConfigError(f"{what} {path} is a directory that is not a {kind}; choose another name")
         elif not path.is_file():
             kind = "a directory" if path.is_dir() else "not a regular file"
             raise ConfigError(f"{what} {path} is {kind}; give the path of a regular file")
@@ -99,6 +102,8 @@ def atomic(path):
         yield tmp
         if tmp.is_dir() and path.is_dir():               # a directory output (a bag) replaces one
             shutil.rmtree(path)
+        elif tmp.is_dir() and path.exists():             # ... or the file --force named
+            path.unlink()
         os.replace(tmp, path)
     finally:
         if tmp.is_dir():
