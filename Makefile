@@ -1,7 +1,8 @@
 # The README's two commands: `make demo` (the main job on the paper's radar) and `make test`.
 # Both build a virtual environment in .venv from pyproject.toml first (PoCL, the OpenCL CPU
 # device, comes from PyPI) and check the system libraries the viewer needs: Mesa's EGL for
-# headless rendering and Xvfb for the window test. Missing ones are installed with apt-get when
+# headless rendering and Xvfb for the window test; `make test` also Chromium (the reports are
+# opened in a real browser). Missing ones are installed with apt-get when
 # running as root (CI, a fresh machine); otherwise make stops and names them.
 PYTHON ?= python3
 VENV ?= .venv
@@ -9,6 +10,7 @@ BIN := $(VENV)/bin
 
 SYSTEM_PACKAGES_EGL := libegl1 libegl-mesa0 libgl1-mesa-dri
 SYSTEM_PACKAGES_X := xvfb xauth
+SYSTEM_PACKAGES_BROWSER := chromium
 
 .PHONY: demo test fuzz bench info clean system
 
@@ -22,6 +24,7 @@ system:
 	@missing=""; \
 	ldconfig -p | grep -q 'libEGL_mesa.so' || missing="$$missing $(SYSTEM_PACKAGES_EGL)"; \
 	command -v xvfb-run >/dev/null || missing="$$missing $(SYSTEM_PACKAGES_X)"; \
+	[ -z "$(NEED_BROWSER)" ] || command -v chromium >/dev/null || missing="$$missing $(SYSTEM_PACKAGES_BROWSER)"; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
 	    echo "installing$$missing (apt-get)"; \
@@ -34,6 +37,7 @@ system:
 demo: system $(BIN)/.installed
 	$(BIN)/radarcl demo --out out/demo
 
+test: NEED_BROWSER := 1
 test: system $(BIN)/.installed
 	$(BIN)/python -m pytest -q
 

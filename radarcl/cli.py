@@ -240,6 +240,7 @@ def build_parser():
     _view_options(p)
     add_output(p, "--out", "view.png", "PNG to write")
     p.add_argument("--no-colorbar", action="store_true", help="leave the colour bar out")
+    p.add_argument("--no-guides", action="store_true", help="leave the ground grid, axes and sensor poses out")
 
     p = command("view", commands.cmd_view, "the interactive volume viewer (press h in the window for the keys)",
                 "Opens a window on the map: drag to orbit, right-drag or shift-drag to pan, wheel to zoom; 1-4 "

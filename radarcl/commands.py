@@ -172,13 +172,12 @@ def cmd_navtech_map(args):
           f"{pulses['cfar']['train_bins']} bins; {pulses['detections_per_scan']:.0f} detections and "
           f"{pulses['pulses_per_scan']:.0f} pulses per scan, pulse width median {pulses['pulse_width_median_m']:.3f} m "
           f"(90 % below {pulses['pulse_width_p90_m']:.3f} m), {100 * pulses['wide_fraction']:.1f} % wide")
-    with outputs.atomic(out) as tmp:
-        navtech_map.plot_map(grid, poses, tmp, results, title=config.sensor.name)
+    navtech_map.plot_map(grid, poses, out, results, title=config.sensor.name)
     mem = grid.memory()
     print(f"map: {mem['bricks']} bricks, {mem['sparse_bytes'] / 2**20:.1f} MiB allocated "
           f"({mem['dense_bytes'] / 2**20:.1f} MiB dense); wrote {out}")
     if map_out:
-        grid.save(map_out)
+        grid.save(map_out, poses=poses)
         print(f"wrote {map_out} (radarcl render / view open it)")
     if json_out:
         with outputs.atomic(json_out) as tmp:
@@ -244,7 +243,8 @@ def cmd_render(args):
     out = outputs.check(args.out, args.force, inputs=[args.map], what="image")
     with outputs.atomic(out) as tmp:
         render_map(args.map, tmp, args.mode, args.camera, tuple(args.size), _settings(args),
-                   colorbar=not args.no_colorbar, report=lambda line: print(line.replace(str(tmp), str(out))))
+                   colorbar=not args.no_colorbar, report=lambda line: print(line.replace(str(tmp), str(out))),
+                   guides=not args.no_guides)
     return 0
 
 

@@ -240,16 +240,11 @@ class EvidenceGrid:
         self.pool, self.capacity = None, 0
         self.generation += 1
 
-    def save(self, path):
-        """Write the grid (spec and allocated bricks, not the dense volume) to an npz file.
-        The file is written beside ``path`` and renamed over it, so a reader (``radarcl view
-        --live``) sees the old map or the new one, never half of one."""
-        from radarcl.outputs import atomic
-
-        keys, data = self.bricks()
-        with atomic(path) as tmp, open(tmp, "wb") as f:
-            np.savez_compressed(f, version=FILE_VERSION, origin_m=np.asarray(self.spec.origin_m),
-                                voxel_m=self.spec.voxel_m, shape=np.asarray(self.spec.shape), keys=keys, data=data)
+    def save(self, path, poses=None):
+        """Write the grid (spec and allocated bricks, not the dense volume) to an npz file,
+        with the sensor's ``poses`` (n, 4, 4) when given (the viewer draws them); see
+        ``write_npz``."""
+        write_npz(path, self.spec, *self.bricks(), poses=poses)
 
     @classmethod
     def load(cls, runtime, path):
@@ -264,6 +259,18 @@ class EvidenceGrid:
             ordered[slots] = data
             cl.enqueue_copy(runtime.queue, grid.pool, ordered, is_blocking=True)
         return grid
+
+
+def write_npz(path, spec, keys, data, poses=None):
+    """A map file: ``spec``, the bricks (``keys`` (n, 3) int32, ``data`` (n, 8, 8, 8) int32) and
+    the sensor's ``poses`` when given. Written beside ``path`` and renamed over it, so a reader
+    (``radarcl view --live``) sees the old map or the new one, never half of one."""
+    from radarcl.outputs import atomic
+
+    extra = {} if poses is None else dict(poses=check_trajectory(poses))
+    with atomic(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, version=FILE_VERSION, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
+                            shape=np.asarray(spec.shape), keys=keys, data=data, **extra)
 
 
 def read(path):
@@ -319,6 +326,37 @@ def read(path):
         raise FrameFormatError(f"{path}: values beyond the grid's saturation +-{GRID_LIMIT} units; "
                                "radarcl never writes them")
     return spec, keys, data
+
+
+MAX_POSES = 10000          # a map keeps at most this many sensor poses (evenly subsampled)
+
+
+def check_trajectory(poses):
+    """Sensor poses (n, 4, 4) float64 to keep with a map: finite, at most MAX_POSES (evenly
+    subsampled, the last kept)."""
+    P = np.asarray(poses, dtype=np.float64)
+    if P.ndim != 3 or P.shape[1:] != (4, 4) or not np.isfinite(P).all():
+        raise ShapeError(f"poses must be finite (n, 4, 4), got {P.shape}")
+    if len(P) > MAX_POSES:
+        P = P[np.unique(np.r_[np.linspace(0, len(P) - 1, MAX_POSES).astype(int), len(P) - 1])]
+    return P
+
+
+def read_poses(path):
+    """The sensor poses (n, 4, 4) a map file or store keeps, or None."""
+    from pathlib import Path
+
+    from radarcl import store
+    from radarcl.io import safe_npz
+
+    try:
+        if Path(path).is_dir():
+            poses = store.read_manifest(path).get("poses")
+            return None if not poses else check_trajectory(np.asarray(poses, float).reshape(-1, 4, 4))
+        with safe_npz(path) as f:
+            return check_trajectory(f["poses"]) if "poses" in f.files else None
+    except (ShapeError, ValueError) as exc:
+        raise FrameFormatError(f"{path}: bad sensor poses ({exc})") from exc
 
 
 def assemble(spec, keys, data):

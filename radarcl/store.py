@@ -130,7 +130,7 @@ class StoreWriter:
     made the map (kept in the manifest); inputs: paths whose SHA-256 goes into the provenance.
     """
 
-    def __init__(self, path, spec, sensor_toml="", config=None, inputs=(), overwrite=False):
+    def __init__(self, path, spec, sensor_toml="", config=None, inputs=(), overwrite=False, poses=None):
         zarr, self._codec = _zarr()
         self.path = Path(path)
         if self.path.exists() and not self.path.is_dir():
@@ -142,7 +142,10 @@ class StoreWriter:
                 shutil.rmtree(self.path)
         self.spec = spec
         self.group = zarr.open_group(str(self.path), mode="a")
+        from radarcl.grid import check_trajectory
+
         self.meta = dict(sensor=sensor_toml, config=config or {},
+                         poses=[] if poses is None else check_trajectory(poses).reshape(-1, 16).tolist(),
                          provenance=dict(radarcl=_version(), created=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                                          inputs=[dict(path=str(p), sha256=file_digest(p)) for p in inputs]))
         self.version, self.segments, self.keys, self.data = 0, [], None, None
@@ -156,15 +159,22 @@ class StoreWriter:
             self.index = self.group[manifest["index"]][:]
             self.keys, self.data = keys, data
             self.segment_rows = {s: self.group[f"segment_{s}"].shape[0] for s in self.segments}
+            if poses is None:
+                self.meta["poses"] = manifest.get("poses", [])
 
     @property
     def dead(self):
         """Stored bricks no longer in the map (superseded by later saves)."""
         return sum(self.segment_rows[s] for s in self.segments) - len(self.index)
 
-    def save(self, keys, data):
-        """Write the bricks (keys (n, 3), data (n, 8, 8, 8) int32) that differ from the last save;
-        returns the number written. Atomic for readers."""
+    def save(self, keys, data, poses=None):
+        """Write the bricks (keys (n, 3), data (n, 8, 8, 8) int32) that differ from the last save,
+        and the sensor ``poses`` (n, 4, 4) so far when given; returns the number of bricks
+        written. Atomic for readers."""
+        if poses is not None:
+            from radarcl.grid import check_trajectory
+
+            self.meta["poses"] = check_trajectory(poses).reshape(-1, 16).tolist()
         keys = np.ascontiguousarray(keys, np.int32)
         data = np.ascontiguousarray(data, np.int32)
         self._clean()
@@ -288,13 +298,14 @@ class MapSaver:
         self.meta = dict(sensor_toml=sensor_toml, config=config, inputs=inputs)
         self.writer = None
 
-    def __call__(self, grid):
+    def __call__(self, grid, poses=None):
+        """Save ``grid`` (and the sensor ``poses`` (n, 4, 4) so far, when given)."""
         if self.npz:
-            grid.save(self.path)
+            grid.save(self.path, poses=poses)
             return
         if self.writer is None:
             self.writer = StoreWriter(self.path, grid.spec, overwrite=True, **self.meta)
-        self.writer.save(*grid.bricks())
+        self.writer.save(*grid.bricks(), poses=poses)
 
 
 def convert(source, target):

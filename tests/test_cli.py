@@ -6,6 +6,8 @@ import sys
 
 from radarcl.cli import main
 
+from browser import open_in_browser
+
 
 def run_cli(*args, env=None):
     return subprocess.run([sys.executable, "-m", "radarcl", *args], capture_output=True, text=True, env=env)
@@ -28,8 +30,10 @@ def test_demo_quick_runs_the_main_job_and_replays_its_recording(tmp_path, capsys
     same maps (the pipeline is deterministic)."""
     assert main(["demo", "--quick", "--no-progress", "--out", str(tmp_path / "a")]) == 0
     for name in ("fig9.png", "frame.png", "fig10_scene.png", "topdown.png", "quality.png", "map.npz",
-                 "reference_scene.npz", "summary.json", "view.png"):
+                 "reference_scene.npz", "summary.json", "view.png", "report.html"):
         assert (tmp_path / "a" / name).stat().st_size > 0
+    dom, console = open_in_browser(tmp_path / "a" / "report.html", tmp_path)
+    assert 'data-images="6/6"' in dom and 'data-errors="0"' in dom and console == [], (dom[-300:], console)
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     assert summary["view"]["mode"] == "iso" and "error" not in summary["view"]
     assert summary["observations"] == 3840

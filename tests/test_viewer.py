@@ -10,7 +10,7 @@ import pytest
 from radarcl.errors import ConfigError, FrameFormatError, ShapeError
 from radarcl.grid import BRICK, GridSpec, read
 from radarcl.viewer import volume as V
-from radarcl.viewer.camera import Camera
+from radarcl.viewer.camera import Camera, box
 from radarcl.viewer.modes import MODES, Settings
 from radarcl.viewer.renderer import Renderer, ViewerError, create_context
 
@@ -70,10 +70,19 @@ def test_a_single_cube_appears_where_its_projection_says_and_nowhere_else(ctx, m
 @pytest.mark.parametrize("fill", [0.0, -2.0])
 @pytest.mark.parametrize("mode_name", list(MODES))
 def test_an_empty_grid_renders_background_only(ctx, mode_name, fill):
+    """Nothing occupied: background everywhere, except in the free mode, where an all-free grid
+    (-2 nat) is a blue haze over the whole box and an unknown one (0) shows nothing."""
     renderer = Renderer(ctx, V.from_nats(SPEC, _nats(fill)))
     for preset in ("iso", "top"):
-        img = renderer.image(Camera.fit(SPEC, preset), mode_name, Settings(), SIZE)
-        assert (img == _background_u8()).all()
+        camera = Camera.fit(SPEC, preset)
+        img = renderer.image(camera, mode_name, Settings(), SIZE)
+        if mode_name == "free" and fill < -1.0:
+            lit = (img != _background_u8()).any(axis=-1)
+            lo, hi = _box_pixels(camera, *box(SPEC))
+            assert lit.mean() > 0.2 and (img[lit][:, 2] > img[lit][:, 0]).all()        # blue, over the box
+            assert not lit[:, :max(0, int(lo[0]) - 2)].any()
+        else:
+            assert (img == _background_u8()).all()
 
 
 @pytest.mark.parametrize("mode_name", RAY_MODES)
@@ -83,7 +92,7 @@ def test_no_wrap_around_at_the_faces(ctx, mode_name):
     and quarter-voxel steps put samples there; the oblique camera puts the two faces apart."""
     settings = Settings(threshold=0.0, step=0.25, skip=False)   # the plain march reads every sample
     for axis in range(3):
-        nats = _nats()
+        nats = _nats(0.0) if mode_name == "free" else _nats()       # the free mode shows free space
         index = [3, 3, 3]
         index[axis] = SPEC.shape[axis] - 1
         patch = [slice(i - 1, i + 2) for i in index]
@@ -329,3 +338,18 @@ def test_pooled_loading_equals_the_dense_downsample_and_bounds_memory(tmp_path):
     grew_mib = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
     assert "memory budget" in vol.note and max(vol.spec.shape) <= 1000 // 4 and grew_mib < 256
     assert vol.values.max() == 2.0
+
+
+@pytest.mark.parametrize("lo, hi", [(-0.1, 2.1), (1.0, 5.98), (-10.0, 10.0), (1.0, 86.87), (-0.15, 0.15),
+                                    (0.0, 1e-7), (-1000.0, 1000.0), (2.5, 2.5001)])
+def test_colour_bar_ticks_are_round_and_inside(lo, hi):
+    from radarcl.viewer.overlay import tick_labels, ticks
+
+    values = ticks(lo, hi)
+    assert 3 <= len(values) <= 10, values
+    span = hi - lo
+    assert all(lo - 1e-9 * span <= v <= hi + 1e-9 * span for v in values)
+    step = values[1] - values[0]
+    mantissa = step / 10 ** np.floor(np.log10(step))
+    assert min(abs(mantissa - m) for m in (1, 2, 5)) < 1e-6, step
+    assert len(set(tick_labels(values))) == len(values)          # labels tell the ticks apart

@@ -53,12 +53,43 @@ def test_render_writes_the_picture_with_its_colour_bar(tmp_path, capsys):
         assert lit[90, 120], mode                         # the cube is what the camera frames
         assert lit[10:40, 200:].any()                     # the colour bar, top right
     out = tmp_path / "bare.png"
-    assert cli.main(["render", str(m), "--out", str(out), "--no-colorbar", "--size", "240", "180",
+    assert cli.main(["render", str(m), "--out", str(out), "--no-colorbar", "--no-guides", "--size", "240", "180",
                      "--camera", "top"]) == 0
     _, lit = _lit(out)
-    cols = np.flatnonzero(lit.any(axis=0))
-    assert lit[90, 120] and 60 < cols.min() and cols.max() < 180  # just the cube, in the middle
+    rows, cols = np.flatnonzero(lit.any(axis=1)), np.flatnonzero(lit.any(axis=0))
+    assert lit[90, 120] and 0 < cols.min() and cols.max() < 239 and 0 < rows.min() and rows.max() < 179
+    guided = tmp_path / "guided.png"
+    assert cli.main(["render", str(m), "--out", str(guided), "--no-colorbar", "--size", "240", "180",
+                     "--camera", "top"]) == 0
+    _, lit_g = _lit(guided)
+    assert lit_g[:, :50].any() and lit_g[160:].any()           # the ground grid and the scale label
     assert "wrote" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("camera", ["iso", "top", "front", "-160,30"])
+def test_the_default_view_frames_the_content_tightly(tmp_path, camera):
+    """The map's content, not its grid, fills the picture: the cube's pixels span at least 80 %
+    of the height or width and touch no edge, and a lone false alarm far off (0.2 % of the
+    occupied voxels) does not change the frame."""
+    m = write_map(tmp_path / "map.npz")
+    with np.load(m) as f:
+        arrays = dict(f)
+    outlier = arrays["data"].copy()
+    outlier[0, 0, 0, 0] = 4 * 1024                  # the grid's corner voxel, 7 m from the cube
+    tmp = tmp_path / "outlier.npz"
+    with open(tmp, "wb") as f:
+        np.savez_compressed(f, **{**arrays, "data": outlier})
+    spans = []
+    for path in (m, tmp):
+        out = tmp_path / f"{path.stem}.png"
+        assert cli.main(["render", str(path), "--out", str(out), "--no-colorbar", "--no-guides", "--size", "240",
+                         "180", f"--camera={camera}"]) == 0
+        _, lit = _lit(out)
+        rows, cols = np.flatnonzero(lit.any(axis=1)), np.flatnonzero(lit.any(axis=0))
+        assert 0 < rows.min() and rows.max() < 179 and 0 < cols.min() and cols.max() < 239, camera
+        assert max((rows.max() - rows.min()) / 180, (cols.max() - cols.min()) / 240) >= 0.8, camera
+        spans.append((rows.min(), rows.max(), cols.min(), cols.max()))
+    assert spans[0] == spans[1], (camera, spans)
 
 
 def test_bad_input_gets_a_sentence_not_a_traceback(tmp_path, capsys):

@@ -36,8 +36,11 @@ class ViewerApp:
 
         self.wnd, self.ctx = window, window.ctx
         self.path, self.live = Path(path), live
+        from radarcl.viewer.guides import Guides
+
         self.renderer = Renderer(self.ctx, volume)
         self.overlay = Overlay(self.ctx)
+        self.guides, self.show_guides = Guides(self.ctx), True
         self.mode, self.settings = mode_name, settings
         self.camera = camera or Camera.fit(volume.spec)
         self.home = self.camera
@@ -139,7 +142,7 @@ class ViewerApp:
     # -- drawing --------------------------------------------------------------------------
     def frame(self):
         """Poll (live), render, draw the overlays."""
-        from radarcl.viewer.headless import legend
+        from radarcl.viewer.headless import legend, scale_label
         from radarcl.viewer.overlay import text_panel
 
         self.poll()
@@ -147,7 +150,14 @@ class ViewerApp:
         self.wnd.fbo.use()
         start = time.perf_counter()
         lo, hi = self.renderer.render(self.camera, self.mode, self.settings, size)
-        bar = legend(self.renderer.volume, self.mode, self.settings, lo, hi, height=max(60, min(220, size[1] - 80)))
+        if self.show_guides:
+            volume = self.renderer.volume
+            box_lo, box_hi = volume.view_box(lo)
+            step = self.guides.draw(self.camera, size, box_lo, box_hi, volume.poses,
+                                    z=self.renderer.height_range(self.settings.threshold)[0])
+            guide = text_panel([scale_label(step, volume.poses)])
+            self.overlay.draw(guide, 10, size[1] - guide.shape[0] - 40, size)
+        bar = legend(self.renderer, self.mode, self.settings, lo, hi, height=max(60, min(220, size[1] - 80)))
         self.overlay.draw(bar, size[0] - bar.shape[1] - 10, 10, size)
         status = (f"{self.mode} | threshold {self.settings.threshold:.2f} nat | clamp {lo:.2f}..{hi:.2f} | "
                   f"{self.frame_ms:.0f} ms | skip {'on' if self.settings.skip else 'off'}"
@@ -185,6 +195,7 @@ ACTIONS = {
     "[": ("move the slice down the axis", lambda app: app._move_slice(-SLICE_STEP)),
     "]": ("move the slice up the axis", lambda app: app._move_slice(SLICE_STEP)),
     "k": ("empty-space skipping on/off", lambda app: app.set(skip=not app.settings.skip)),
+    "a": ("guides (ground grid, axes, sensor path) on/off", lambda app: setattr(app, "show_guides", not app.show_guides)),
     "r": ("reset the camera", lambda app: setattr(app, "camera", app.home)),
     "+": ("zoom in", lambda app: app.scroll(1)),
     "-": ("zoom out", lambda app: app.scroll(-1)),
@@ -226,8 +237,9 @@ def run(path, mode_name="occupancy", camera="iso", size=(1024, 768), settings=Se
     wnd = open_window(window, size, f"radarcl view {Path(path).name}")
     if volume.note:
         log.warning("%s", volume.note)
-    region = volume.content_box(settings.clamp_range(volume)[0])
-    app = ViewerApp(wnd, path, volume, mode_name, Camera.parse(camera, volume.spec, region), settings, live)
+    region = volume.view_box(settings.clamp_range(volume)[0])
+    cam = Camera.parse(camera, volume.spec, region, size[0] / size[1])
+    app = ViewerApp(wnd, path, volume, mode_name, cam, settings, live)
     wnd.unicode_char_entered_func = app.press
     wnd.key_event_func = lambda key, action, modifiers: (
         wnd.close() if key == wnd.keys.ESCAPE and action == wnd.keys.ACTION_PRESS else None)

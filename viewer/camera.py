@@ -40,24 +40,39 @@ class Camera:
         object.__setattr__(self, "elevation_deg", float(np.clip(self.elevation_deg, -89.0, 89.0)))
 
     @classmethod
-    def fit(cls, spec, preset="iso", region=None):
-        """A camera that sees the whole grid ``spec``, or the world box ``region`` (lo, hi) in
-        it, from a preset direction (``PRESETS``)."""
-        if preset not in PRESETS:
+    def fit(cls, spec, preset="iso", region=None, aspect=1.0, points=None, direction=None):
+        """A camera from a preset direction (``PRESETS``) that frames the world box ``region``
+        (lo, hi) (default: the whole grid ``spec``) grown to hold ``points`` (n, 3) (the sensor's
+        poses), as tightly as a viewport of width / height ``aspect`` allows: every corner of the
+        box inside the view with 4 % to spare. ``direction`` (azimuth, elevation) [deg] replaces
+        the preset's."""
+        if direction is None and preset not in PRESETS:
             raise ConfigError(f"unknown camera preset {preset!r}; expected one of {sorted(PRESETS)}")
         lo, hi = box(spec) if region is None else (np.asarray(region[0], float), np.asarray(region[1], float))
-        radius = 0.5 * float(np.linalg.norm(hi - lo))
+        if points is not None and len(points):
+            pts = np.asarray(points, float).reshape(-1, 3)
+            lo, hi = np.minimum(lo, pts.min(axis=0)), np.maximum(hi, pts.max(axis=0))
         fov = 40.0
-        az, el = PRESETS[preset]
-        return cls(tuple((lo + hi) / 2), radius / math.sin(math.radians(fov / 2)) * 1.02, az, el, fov)
+        az, el = PRESETS[preset] if direction is None else (float(direction[0]), float(direction[1]))
+        target = (lo + hi) / 2
+        probe = cls(tuple(target), 1.0, az, el, fov)
+        v = probe.view()[:3, :3]                        # rows: right, up, backward
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        rel = corners - target
+        right, up, ahead = rel @ v[0], rel @ v[1], -(rel @ v[2])        # ahead: towards the target
+        tan_v = math.tan(math.radians(fov / 2))
+        tan_h = tan_v * max(float(aspect), 1e-3)
+        need = np.maximum(np.abs(right) / tan_h, np.abs(up) / tan_v) - ahead
+        distance = max(float(need.max()) * 1.04, 1e-3 + float(np.linalg.norm(hi - lo)) * 1e-3)
+        return cls(tuple(target), distance, az, el, fov)
 
     @classmethod
-    def parse(cls, text, spec, region=None):
+    def parse(cls, text, spec, region=None, aspect=1.0, points=None):
         """From the command line: a preset name (iso, top, front, side) or
         ``AZ,EL[,DIST[,X,Y,Z]]`` (degrees, metres; the target defaults to the centre of
         ``region`` or of the grid, the distance to one that fits it)."""
         if text in PRESETS:
-            return cls.fit(spec, text, region)
+            return cls.fit(spec, text, region, aspect, points)
         try:
             parts = [float(v) for v in text.split(",")]
         except ValueError:
@@ -65,7 +80,7 @@ class Camera:
         if len(parts) not in (2, 3, 6):
             raise ConfigError(f"--camera {text!r}: expected a preset ({', '.join(PRESETS)}) or "
                               f"AZ,EL[,DIST[,X,Y,Z]] in degrees and metres")
-        cam = replace(cls.fit(spec, region=region), azimuth_deg=parts[0], elevation_deg=parts[1])
+        cam = cls.fit(spec, region=region, aspect=aspect, points=points, direction=parts[:2])
         if len(parts) >= 3:
             cam = replace(cam, distance=parts[2])
         if len(parts) == 6:
@@ -137,3 +152,4 @@ def box(spec):
     """World corners (lo, hi) of a grid: [origin, origin + shape * voxel]."""
     lo = np.asarray(spec.origin_m, dtype=float)
     return lo, lo + np.asarray(spec.shape, dtype=float) * spec.voxel_m
+

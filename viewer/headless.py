@@ -12,33 +12,51 @@ from radarcl.viewer.renderer import Renderer, create_context, read_rgb
 from radarcl.viewer.volume import load_map
 
 
-def compose(renderer, camera, mode_name, settings, size, colorbar=True):
-    """Render offscreen, with the colour bar at the right edge unless ``colorbar`` is False;
-    returns RGB uint8 (height, width, 3) and the clamp (lo, hi) [nat]."""
-    from radarcl.viewer.overlay import Overlay
+def compose(renderer, camera, mode_name, settings, size, colorbar=True, guides=True):
+    """Render offscreen, with the guides (ground grid, axes, the sensor's poses; the grid's
+    spacing in a label) and the colour bar at the right edge unless turned off; returns RGB
+    uint8 (height, width, 3) and the clamp (lo, hi) [nat]."""
+    from radarcl.viewer.guides import Guides
+    from radarcl.viewer.overlay import Overlay, text_panel
 
     fbo = renderer.framebuffer(size)
     fbo.use()
     lo, hi = renderer.render(camera, mode_name, settings, size)
+    overlay = Overlay(renderer.ctx)
+    if guides:
+        volume = renderer.volume
+        box_lo, box_hi = volume.view_box(lo)
+        step = Guides(renderer.ctx).draw(camera, size, box_lo, box_hi, volume.poses,
+                                         z=renderer.height_range(settings.threshold)[0])
+        label = text_panel([scale_label(step, volume.poses)])
+        overlay.draw(label, 10, size[1] - label.shape[0] - 10, size)
     if colorbar:
-        bar = legend(renderer.volume, mode_name, settings, lo, hi, height=min(220, size[1] - 60))
-        Overlay(renderer.ctx).draw(bar, size[0] - bar.shape[1] - 10, 10, size)
+        bar = legend(renderer, mode_name, settings, lo, hi, height=min(220, size[1] - 60))
+        overlay.draw(bar, size[0] - bar.shape[1] - 10, 10, size)
     return read_rgb(fbo), (lo, hi)
 
 
-def legend(volume, mode_name, settings, lo, hi, height):
-    """The colour bar of a mode: log-odds, or height for the isosurface."""
+def scale_label(step, poses=None):
+    """The text beside the guides: the grid's spacing, the axes' colours, the sensor's path."""
+    path = "; yellow: sensor path" if poses is not None and len(poses) > 1 else \
+        "; yellow: sensor" if poses is not None and len(poses) else ""
+    return f"grid {step:g} m; axes x red (forward), y green (left), z blue (up){path}"
+
+
+def legend(renderer, mode_name, settings, lo, hi, height):
+    """The colour bar of a mode: log-odds, or for the isosurface the heights its colours span."""
     from radarcl.viewer.overlay import colour_bar
 
     if mode_name == "iso":
-        z0 = volume.spec.origin_m[2]
-        return colour_bar(settings.colormap, z0, z0 + volume.spec.shape[2] * volume.spec.voxel_m, 1.0,
-                          label="height [m]", height=height)
-    return colour_bar(settings.colormap, 0.0 if mode_name == "spheres" else lo, hi, settings.gamma, height=height)
+        z_lo, z_hi = renderer.height_range(settings.threshold)
+        return colour_bar(settings.colormap, z_lo, z_hi, 1.0, label="height [m]", height=height)
+    label = "log-odds [nat]" if mode_name != "free" else "log-odds [nat]; blue: free"
+    return colour_bar(settings.colormap, 0.0 if mode_name == "spheres" else lo, hi, settings.gamma, label=label,
+                      height=height)
 
 
 def render_map(path, out, mode_name="occupancy", camera="iso", size=(1024, 768), settings=Settings(),
-               colorbar=True, report=print):
+               colorbar=True, report=print, guides=True):
     """Render the map file ``path`` to the PNG ``out``; ``camera`` is a ``Camera`` or its
     command-line text (``Camera.parse``). Returns a dict of what was drawn."""
     from PIL import Image
@@ -49,9 +67,9 @@ def render_map(path, out, mode_name="occupancy", camera="iso", size=(1024, 768),
     if volume.note:
         report(volume.note)
     renderer = Renderer(ctx, volume)
-    region = volume.content_box(settings.clamp_range(volume)[0])
-    cam = camera if isinstance(camera, Camera) else Camera.parse(camera, volume.spec, region)
-    image, (lo, hi) = compose(renderer, cam, mode_name, settings, size, colorbar)
+    region = volume.view_box(settings.clamp_range(volume)[0])
+    cam = camera if isinstance(camera, Camera) else Camera.parse(camera, volume.spec, region, size[0] / size[1])
+    image, (lo, hi) = compose(renderer, cam, mode_name, settings, size, colorbar, guides)
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     Image.fromarray(image).save(out, format="PNG")
     info = dict(out=str(out), mode=mode_name, size=list(size), lo=lo, hi=hi, grid=list(volume.spec.shape),

@@ -8,6 +8,8 @@ clamp -> normalise -> gamma -> colormap:  x = clamp((v - lo) / (hi - lo), 0, 1) 
 - ``mip``: maximum-evidence projection, colormap of the largest v along the ray.
 - ``iso``: the isosurface v = ``threshold`` (the occupancy threshold), refined by bisection and
   lit by its gradient; coloured by height.
+- ``free``: where can I drive: occupancy as above, and free space (v below -``lo``) as a blue
+  haze of the same clamp on -v. Never skips (the coarse maxima say nothing of free space).
 - ``spheres``: the paper's Fig. 11, one instanced sphere per cell with positive log-odds,
   radius proportional to v (half a voxel at ``hi``), coloured by x.
 
@@ -23,13 +25,15 @@ from radarcl.errors import ConfigError
 @dataclass(frozen=True)
 class Mode:
     """One render mode: ``name``, its ``key`` in the app, ``program`` (shader file stem),
-    ``define`` (the GLSL macro selecting it), ``description``."""
+    ``define`` (the GLSL macro selecting it), ``description``, ``skips`` (empty-space skipping
+    applies)."""
 
     name: str
     key: str
     program: str
     define: str
     description: str
+    skips: bool = True
 
 
 MODES = {m.name: m for m in (
@@ -37,6 +41,7 @@ MODES = {m.name: m for m in (
     Mode("mip", "2", "volume", "MODE_MIP", "maximum-evidence projection"),
     Mode("iso", "3", "volume", "MODE_ISO", "isosurface at the occupancy threshold, coloured by height"),
     Mode("spheres", "4", "spheres", "MODE_SPHERES", "Fig. 11: a sphere per positive cell, radius ~ log-odds"),
+    Mode("free", "5", "volume", "MODE_FREE", "free space (blue haze) and occupancy: where can I drive", False),
 )}
 
 COLORMAPS = ("inferno", "viridis", "magma", "turbo", "gray")

@@ -144,6 +144,7 @@ class Renderer:
         self.coarser = self._coarser_texture(volume.coarse)
         self.volume = volume
         self._spheres_stale = True
+        self._heights = {}
 
     def update(self, boxes, coarse_box):
         """Write the changed voxel boxes ((z0, z1), (y0, y1), (x0, x1)) and coarse cells
@@ -160,6 +161,7 @@ class Renderer:
             self.coarser.release()
             self.coarser = self._coarser_texture(self.volume.coarse)   # 1/64 of the coarse level: whole
         self._spheres_stale = True
+        self._heights = {}
 
     def _coarser_texture(self, coarse):
         level = coarser_max(coarse)
@@ -199,11 +201,12 @@ class Renderer:
         if m.program == "spheres":
             self._draw_spheres(camera, mvp, lo, hi, settings, lut, clip)
             return lo, hi
-        defines = (m.define,) + (("SKIP",) if settings.skip else ())
+        skip = settings.skip and m.skips
+        defines = (m.define,) + (("SKIP",) if skip else ())
         prog = self._program("volume", defines)
         clip_lo, clip_hi = clip[:, 0] * dims, clip[:, 1] * dims
         active_lo, active_hi = clip_lo, clip_hi
-        if settings.skip:                           # only where this mode can see anything
+        if skip:                                    # only where this mode can see anything
             visible = (lambda c: c >= settings.threshold) if m.name == "iso" else (lambda c: c > lo)
             found = active_box(self.volume.coarse, visible)
             if found is None:
@@ -214,6 +217,8 @@ class Renderer:
                       clip_lo=tuple(clip_lo), clip_hi=tuple(clip_hi), active_lo=tuple(active_lo),
                       active_hi=tuple(active_hi), lo=lo, hi=hi, gamma=settings.gamma, density=settings.density,
                       threshold=settings.threshold, step_u=settings.step, background=settings.background,
+                      height_range=tuple((np.asarray(self.height_range(settings.threshold)) - spec.origin_m[2])
+                                         / spec.voxel_m),
                       volume=0, coarse=1, coarser=3, colormap=2)
         _set_uniforms(prog, values)
         self.texture.use(0)
@@ -230,6 +235,24 @@ class Renderer:
         ctx.cull_face = "back"
         ctx.disable(self.moderngl.CULL_FACE)
         return lo, hi
+
+    def height_range(self, threshold):
+        """(z_lo, z_hi) [m] the isosurface's colours span: the heights of the surface seen from
+        above, the top-most cell at or above ``threshold`` of every column (2nd to 98th
+        percentile: evidence under a surface is not what a view shows), or the grid's heights."""
+        key = float(threshold)
+        if key not in self._heights:
+            spec = self.volume.spec
+            z0, v = spec.origin_m[2], spec.voxel_m
+            mask = self.volume.values >= np.float16(key)
+            seen = mask.any(axis=0)
+            if seen.any():
+                top = (mask.shape[0] - 1 - np.argmax(mask[::-1], axis=0))[seen]
+                a, b = np.percentile(top, [2, 98])
+                self._heights[key] = (z0 + a * v, z0 + (b + 1) * v)
+            else:
+                self._heights[key] = (z0, z0 + spec.shape[2] * v)
+        return self._heights[key]
 
     def sphere_instances(self, max_spheres=MAX_SPHERES):
         """(centres (n, 3) float32 world [m], values (n,) float32 [nat]) of the cells with

@@ -36,6 +36,7 @@ class Volume:
     note: str = ""
     keys: np.ndarray = field(default=None, repr=False)
     bricks: np.ndarray = field(default=None, repr=False)
+    poses: np.ndarray = field(default=None, repr=False)     # the sensor's (n, 4, 4), when the map keeps them
     _percentiles: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -59,18 +60,34 @@ class Volume:
         return self._percentiles[key]
 
     def content_box(self, lo, keep=0.98):
-        """World box (lo, hi) [m] around the bricks holding values above ``lo`` (what a view at
-        that clamp shows), leaving out the ``1 - keep`` most outlying along each axis (isolated
-        false alarms would otherwise frame the whole grid); None when there are none."""
-        cells = np.argwhere(self.coarse > lo)[:, ::-1]             # (bx, by, bz)
-        if len(cells) == 0:
+        """World box (lo, hi) [m] around the voxels holding values above ``lo`` (what a view at
+        that clamp shows), leaving out the ``1 - keep`` most outlying of them along each axis
+        (isolated false alarms would otherwise frame the whole grid); None when there are none.
+        Voxels, not bricks: a brick's apron would frame a one-brick object three bricks wide."""
+        above = self.values > lo
+        total = int(np.count_nonzero(above))
+        if total == 0:
             return None
-        q = 50 * (1 - keep)
-        first = np.floor(np.percentile(cells, q, axis=0))
-        last = np.ceil(np.percentile(cells, 100 - q, axis=0)) + 1
+        first, last = [], []
+        for other in ((0, 1), (0, 2), (1, 2)):             # counts along x, y, z ((nz, ny, nx) layout)
+            cum = np.cumsum(np.count_nonzero(above, axis=other))
+            first.append(int(np.searchsorted(cum, total * (1 - keep) / 2, side="right")))
+            last.append(int(np.searchsorted(cum, total * (1 + keep) / 2, side="left")) + 1)
         v, o = self.spec.voxel_m, np.asarray(self.spec.origin_m)
-        top = np.asarray(self.spec.shape)
-        return o + first * BRICK * v, o + np.minimum(last * BRICK, top) * v
+        return o + np.asarray(first) * v, o + np.asarray(last) * v
+
+    def view_box(self, lo):
+        """The box a default view frames: the content above ``lo`` grown to hold the sensor's
+        positions, or the whole grid when there is no content."""
+        found = self.content_box(lo)
+        if found is None:
+            o = np.asarray(self.spec.origin_m, float)
+            found = (o, o + np.asarray(self.spec.shape) * self.spec.voxel_m)
+        lo_w, hi_w = (np.asarray(v, float) for v in found)
+        if self.poses is not None and len(self.poses):
+            p = self.poses[:, :3, 3]
+            lo_w, hi_w = np.minimum(lo_w, p.min(axis=0)), np.maximum(hi_w, p.max(axis=0))
+        return lo_w, hi_w
 
     def value_range(self):
         """(min, max) of the log-odds [nat]."""
@@ -175,8 +192,12 @@ def load_map(path, max_size=2048, budget=None):
     default ``radarcl.io.memory_budget()``) is max-pooled by the smallest factor that fits,
     assembled a slab at a time from its bricks (a small file declaring 1000^3 voxels never
     becomes a 4 GB array), and the note says so."""
+    from radarcl.grid import read_poses
+
     spec, keys, bricks = read(path)
-    return from_bricks(spec, keys, bricks, max_size, budget)
+    volume = from_bricks(spec, keys, bricks, max_size, budget)
+    volume.poses = read_poses(path)
+    return volume
 
 
 def from_bricks(spec, keys, bricks, max_size=2048, budget=None):

@@ -137,35 +137,10 @@ def format_table(r):
 
 
 def chart(r, path):
-    """AUC against ms per frame (log axis), the Pareto front joined, the baseline marked."""
-    import matplotlib
+    """AUC against ms per frame (``jobs.plots.quality_figure``) written to ``path``."""
+    from radarcl.jobs import plots
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 5.5))
-    colours = dict(zip(("reference", "zero padding", "beam model", "voxel", "cfar"), plt.cm.tab10.colors))
-    for x in r["runs"]:
-        ax.scatter(x["ms_per_frame"], x["auc"], color=colours.get(x["dimension"], "k"), s=40,
-                   edgecolor="k" if x["pareto"] else "none", zorder=3)
-        ax.annotate(x["label"].replace("defaults (the paper's)", "reference")[:38], (x["ms_per_frame"], x["auc"]),
-                    fontsize=6.5, xytext=(4, 2), textcoords="offset points")
-    front = sorted((x["ms_per_frame"], x["auc"]) for x in r["runs"] if x["pareto"])
-    ax.plot(*zip(*front), "k--", lw=0.8, label="Pareto front")
-    for dim, c in colours.items():
-        ax.scatter([], [], color=c, label=dim)
-    b = r["baseline"]
-    if b:
-        ax.scatter(b["ms_per_frame"], b["auc"], marker="x", color="k", s=60, label="baseline: CFAR points, OctoMap-style")
-    ax.set_xscale("log")
-    ax.set_xlabel(f"ms per frame (pipeline, {r['device'][:40]})")
-    ax.set_ylabel("ROC-AUC over observed voxels")
-    ax.set_title(f"Error against run time: the reference scene, {r['observations']} observations")
-    ax.legend(fontsize=7, loc="lower right")
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, format="png")
-    plt.close(fig)
+    plots.save(plots.quality_figure(r), path)
 
 
 def add_arguments(parser):
@@ -202,7 +177,6 @@ def command(args, runtime, say):
     reference = paper_config(args.voxel, None if args.paper else TUNED)
     result = run(runtime(), obs, lambda v: scene.truth(paper_grid(v)), reference, voxels=tuple(args.voxels),
                  report=say)
-    with outputs.atomic(chart_path) as tmp:
-        chart(result, tmp)
+    chart(result, chart_path)
     say(f"wrote {chart_path}")
     return result, format_table(result)

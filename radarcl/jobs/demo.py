@@ -12,7 +12,8 @@
    ``topdown.png`` (the map seen from above beside the truth), ``quality.png`` (error against
    run time, ``bench.quality`` at 0.4 m), ``view.png`` (the tuned map's isosurface rendered
    headless by the viewer, ``radarcl render``); the map itself as ``map.npz``
-   (``EvidenceGrid.load``, ``radarcl view``); everything in ``summary.json``.
+   (``EvidenceGrid.load``, ``radarcl view``); everything in ``summary.json``, and one page
+   with the configuration, the tables and every figure in ``report.html``.
 """
 
 import json
@@ -22,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from radarcl import oracle
-from radarcl.jobs import demo_fig9
+from radarcl.geometry import BeamLattice
+from radarcl.jobs import demo_fig9, plots
 from radarcl.bench import quality
 from radarcl.config import PAPER_RADAR
 from radarcl.errors import ConfigError
@@ -35,6 +37,7 @@ from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
 QUICK_VOXEL_M = 0.4
 VIEW_CAMERA = "-160,30"               # behind and left of the stand, looking down the field
 METRIC_KEYS = ("auc", "iou", "iou_tol1", "brier", "false_free", "false_occupied", "coverage")
+METRIC_NAMES = ("AUC", "IoU", "IoU +-1 voxel", "Brier", "false-free", "false-occupied", "coverage")
 
 
 def _metrics_line(name, m, ms):
@@ -64,7 +67,7 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
         recording.save(out / "reference_scene.npz", obs)
     n_obs = int(np.prod(obs.samples.shape[:3]))
     summary.update(observations=n_obs, seed=obs.seed, simulate_s=time.perf_counter() - start,
-                   clipped_samples=obs.n_clipped)
+                   clipped_samples=obs.n_clipped, recording=str(replay) if replay else "reference_scene.npz (simulated)")
     report(f"{n_obs} observations ({obs.rays_per_beam} rays per beam, {obs.n_clipped} clipped samples) in "
            f"{summary['simulate_s']:.1f} s")
 
@@ -86,20 +89,52 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
                                   memory_mib=r.memory["sparse_bytes"] / 2 ** 20) for name, (c, r, m) in maps.items()}
     summary["baseline"] = dict(ms_per_frame=base_ms, metrics=base)
 
-    res.grid.save(out / "map.npz")
+    res.grid.save(out / "map.npz", poses=obs.poses)
     summary["view"] = _render_view(out, report)
     _plot_profiles(obs, config, out / "fig10_scene.png")
     _plot_topdown(res.log_odds, truth, res.spec, out / "topdown.png")
     report("error against run time at 0.4 m (bench quality) ...")
     q = quality.run(runtime, obs, lambda v: scene.truth(paper_grid(v)), paper_config(QUICK_VOXEL_M, TUNED),
                     voxels=(QUICK_VOXEL_M,))
-    quality.chart(q, out / "quality.png")
+    plots.save(plots.quality_figure(q), out / "quality.png")
     for line in quality.format_table(q):
         report(line)
     summary["quality"] = q
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    _write_report(out, summary, maps, base, base_ms, q)
     report(f"wrote {', '.join(p.name for p in sorted(out.iterdir()))} in {out}")
     return summary
+
+
+def _write_report(out, summary, maps, base, base_ms, q):
+    """report.html: the run's configuration, its metrics, every figure and the viewer's render."""
+    from radarcl.jobs import report as page
+
+    headers = ["map"] + list(METRIC_NAMES) + ["ms/frame"]
+    rows = [[name] + [m[k] for k in METRIC_KEYS] + [r.ms_per_frame] for name, (_, r, m) in maps.items()]
+    rows.append(["baseline: CFAR points, OctoMap-style"] + [base[k] for k in METRIC_KEYS] + [base_ms])
+    runs = [[k, x["dimension"], x["label"], x["ms_per_frame"], x["auc"], x["iou"], x["false_free"],
+             "yes" if x["pareto"] else ""] for k, x in enumerate(q["runs"], 1)]
+    tuned = maps["tuned"][0]
+    figures = [("fig9.png", "Fig. 9: two point targets 1.0 m apart, without and with zero padding"),
+               ("frame.png", "One frame of the paper's radar, range x azimuth, per stacked beam"),
+               ("fig10_scene.png", "Two beams of the reference scene as in Fig. 10, with CFAR and eq. 12"),
+               ("topdown.png", "The tuned map from above beside the ground truth"),
+               ("quality.png", "Error against run time (bench quality at 0.4 m)"),
+               ("view.png", "The tuned map's isosurface at 1 nat, rendered by the viewer")]
+    sections = [
+        ("Run", [page.Pairs({"device": summary["device"], "recording": summary["recording"],
+                             "observations": summary["observations"], "seed": summary["seed"],
+                             "voxel [m]": QUICK_VOXEL_M if summary["quick"] else 0.1,
+                             "simulation [s]": round(summary["simulate_s"], 1)})]),
+        ("Metrics over the observed voxels", [page.Table(headers, rows)]),
+        ("Error against run time", [page.Table(["run", "changed", "configuration", "ms/frame", "AUC", "IoU",
+                                                "false-free", "Pareto"], runs)]),
+        ("Figures", [page.Figure(out / name, caption) for name, caption in figures if (out / name).is_file()]),
+        ("Configuration of the tuned map", [page.Pairs({k: f"{v}  ({tuned.origins[k]})" for k, v in tuned.values.items()})]),
+    ]
+    page.write(out / "report.html", "radarcl demo: the paper's reference scene", sections,
+               f"Foessel-Bunting's sensor model on the reference scene (§4.3), {summary['observations']} observations.")
 
 
 def _render_view(out, report):
@@ -118,59 +153,21 @@ def _render_view(out, report):
 def _plot_profiles(obs, config, path, beams=((2, 32, 0), (14, 20, 3))):
     """Two beams of the recording like the paper's Fig. 10: a steep one on the grass and a
     near-horizontal one, each with its CFAR threshold and its eq. 12 evidence (float64 oracle)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     spacing = config.bin_spacing_m
     interpret, cfar = config.interpret_config(), config.cfar_config()
-    fig, axes = plt.subplots(2, len(beams), figsize=(11, 6), sharex=True)
-    for col, (frame, az, el) in enumerate(beams):
+    panels = []
+    for frame, az, el in beams:
         prof = oracle.range_profile(obs.samples[frame, az, el].astype(np.float64), config.n_fft, output="power")
         noise, _, mask = oracle.cfar(prof[None], cfar)
         evidence = oracle.interpret(prof[None], noise, mask, interpret, spacing)[0][0]
-        r = np.arange(len(prof)) * spacing
-        top, bottom = axes[0, col], axes[1, col]
-        top.semilogy(r, prof, lw=0.7, label="power")
-        top.semilogy(r, cfar.alpha * noise[0], lw=0.8, label="CFAR threshold")
-        top.plot(r[mask[0]], prof[mask[0]], ".", ms=2, label="detections")
         elevation = obs.tilts_deg[frame] + PAPER_RADAR.elevation_step_deg * el
-        top.set_title(f"tilt {obs.tilts_deg[frame]:.1f} deg, beam {el} ({elevation:.1f} deg), azimuth {az}", fontsize=9)
-        bottom.plot(r, evidence / 1024, lw=0.8)
-        bottom.set_xlabel("range [m]")
-    axes[0, 0].set_ylabel("power")
-    axes[1, 0].set_ylabel("eq. 12 evidence [nat]")
-    axes[0, 0].legend(fontsize=7)
-    fig.suptitle("Two beams of the reference scene (as the paper's Fig. 10), tuned constants")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+        azimuth = np.degrees(BeamLattice.from_radar(PAPER_RADAR).azimuths[az])
+        panels.append((np.arange(len(prof)) * spacing, prof, cfar.alpha * noise[0], mask[0], evidence,
+                       f"beam at {elevation:.1f} deg elevation, {azimuth:+.1f} deg azimuth"))
+    plots.save(plots.beams_figure(panels, "Two beams of the reference scene (as the paper's Fig. 10), tuned "
+                                          "constants"), path, dpi=100)
 
 
 def _plot_topdown(log_odds, truth, spec, path):
     """Largest log-odds over z per (x, y) (Fig. 11 seen from above) beside the truth."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    extent = (spec.origin_m[0], spec.origin_m[0] + spec.shape[0] * spec.voxel_m,
-              spec.origin_m[1], spec.origin_m[1] + spec.shape[1] * spec.voxel_m)
-    above = np.arange(spec.shape[2]) * spec.voxel_m + spec.origin_m[2] >= 0.0 - 1e-9
-    fig, axes = plt.subplots(1, 2, figsize=(12, 5.5), sharey=True)
-    top = np.max(np.where(log_odds[above] > 0, log_odds[above], 0), axis=0)
-    axes[0].imshow(top.T, origin="lower", extent=(extent[2], extent[3], extent[0], extent[1]), cmap="magma",
-                   vmax=np.percentile(top[top > 0], 99) if (top > 0).any() else 1, aspect="equal")
-    axes[0].set_title("map: largest positive log-odds above the grass")
-    occupied = (truth[above] == OCCUPIED)
-    axes[1].imshow(occupied[1:].any(axis=0).T, origin="lower", extent=(extent[2], extent[3], extent[0], extent[1]),
-                   cmap="Greys", aspect="equal")
-    axes[1].set_title("truth: occupied voxels above the grass layer")
-    for ax in axes:
-        ax.set_xlabel("y [m]")
-        ax.invert_xaxis()
-    axes[0].set_ylabel("x [m] (forward from the stand)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    plots.save(plots.topdown_figure(log_odds, truth == OCCUPIED, spec, above_z_m=0.0), path, dpi=100)

@@ -3,7 +3,7 @@
 Simulates one frame (64 x 4 beams) with a §4.1 pair 1.0 m apart in one beam and a few other
 targets, runs the range-FFT kernel at n_fft = 256, 512, 1024, and writes:
   fig9.png       the pair's range profile without and with zero padding (paper Fig. 9)
-  frame.png      range x azimuth image of each stacked beam (n_fft = 1024), in dB
+  frame.png      range x azimuth image of each stacked beam (n_fft = 1024), dB of the strongest bin
   fig9.json      device, timings, detected peak ranges, the §4.1 sweep fractions
 """
 
@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from radarcl.config import PAPER_RADAR
+from radarcl.geometry import BeamLattice
+from radarcl.jobs import plots
 from radarcl.scene.fmcw import Adc, PointTarget, simulate_frame
 from radarcl.scene.resolution import count_peaks, two_target_experiment
 from radarcl.stages.range_fft import RangeFFT
@@ -35,11 +37,6 @@ N_FFTS = (256, 512, 1024)
 
 def run(runtime, out_dir, seed=0, report=log.info):
     """Make the Fig. 9 plots; ``report`` receives progress lines. Returns the summary dict."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     cfg = PAPER_RADAR
@@ -71,34 +68,12 @@ def run(runtime, out_dir, seed=0, report=log.info):
         report(f"§4.1 sweep, {sep} m apart, fraction of 120 phase/offset cases resolved: "
                + ", ".join(f"n_fft {n}: {f:.2f}" for n, f in fractions.items()))
 
-    fig, axes = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
-    for ax, n_fft, label in zip(axes, N_FFTS, ("no padding", "256 zeros", "768 zeros")):
-        axis = cfg.bin_ranges_m(n_fft)
-        ax.plot(axis, profiles[n_fft][PAIR_BEAM], ".-", ms=3)
-        for r in PAIR_M:
-            ax.axvline(r, color="grey", lw=0.8, ls="--")
-        ax.set_title(f"({'abc'[N_FFTS.index(n_fft)]}) n_fft = {n_fft}: {label}", fontsize=10)
-        ax.set_ylabel("amplitude [ADC codes]")
-    axes[-1].set_xlim(4, 11)
-    axes[-1].set_xlabel("range [m]")
-    fig.suptitle(f"Two point targets 1.0 m apart at {PAIR_M[0]} and {PAIR_M[1]} m (paper Fig. 9)")
-    fig.tight_layout()
-    fig.savefig(out_dir / "fig9.png", dpi=110)
-    plt.close(fig)
-
-    fig, axes = plt.subplots(1, 4, figsize=(12, 4), sharey=True)
-    p = profiles[1024]
-    db = 20 * np.log10(np.maximum(p, 1e-3))
-    for el, ax in enumerate(axes):
-        ax.imshow(db[:, el, :].T, origin="lower", aspect="auto", vmin=db.max() - 70, vmax=db.max(),
-                  extent=(-0.5, 63.5, 0, cfg.bin_ranges_m(1024)[-1]))
-        ax.set_title(f"stacked beam {el}", fontsize=10)
-        ax.set_xlabel("azimuth index")
-    axes[0].set_ylabel("range [m]")
-    fig.suptitle("One frame, range x azimuth, n_fft = 1024 [dB]")
-    fig.tight_layout()
-    fig.savefig(out_dir / "frame.png", dpi=90)
-    plt.close(fig)
+    labels = [f"n_fft = {n}: " + ("no padding" if n == cfg.n_samples else f"{n - cfg.n_samples} zeros") for n in N_FFTS]
+    plots.save(plots.fig9_figure([cfg.bin_ranges_m(n) for n in N_FFTS], [profiles[n][PAIR_BEAM] for n in N_FFTS],
+                                 PAIR_M, labels), out_dir / "fig9.png")
+    db = 20 * np.log10(np.maximum(profiles[1024], 1e-3))
+    azimuths = np.degrees(BeamLattice.from_radar(cfg).azimuths)
+    plots.save(plots.frame_figure(db, azimuths, cfg.bin_ranges_m(1024)[-1], 1024), out_dir / "frame.png", dpi=90)
 
     summary = dict(device=runtime.name, frame_shape=list(frame.samples.shape),
                    range_fft_ms={str(n): t for n, t in timings.items()},

@@ -135,13 +135,10 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
         def bricks(self):
             return keys, data
 
-        def save(self, path):
-            from radarcl.grid import FILE_VERSION
-            from radarcl.outputs import atomic
+        def save(self, path, poses=None):
+            from radarcl.grid import write_npz
 
-            with atomic(path) as tmp, open(tmp, "wb") as f:
-                np.savez_compressed(f, version=FILE_VERSION, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
-                                    shape=np.asarray(spec.shape), keys=keys, data=data)
+            write_npz(path, spec, keys, data, poses)
 
     MapSaver(out, config.sensor.toml(), config.as_dict(), paths)(_Snapshot())
     report(f"wrote {out}: {len(keys)} bricks; fused in {fused:.1f} s on the workers (busy "

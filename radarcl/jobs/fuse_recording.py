@@ -10,6 +10,8 @@ map growing; a store output makes each rewrite cost the changed bricks only.
 
 import time
 
+import numpy as np
+
 from radarcl import io
 from radarcl.pipeline import Mapping
 
@@ -24,8 +26,10 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
 
     saver = MapSaver(out, config.sensor.toml(), config.as_dict(), inputs)
 
+    trajectory = []                                     # the sensor's pose per frame (its middle beam's)
+
     def save(grid, path):
-        saver(grid)
+        saver(grid, np.array(trajectory) if trajectory else None)
 
     mapping = Mapping.from_config(runtime, config=config)
     spec = mapping.grid.spec
@@ -35,7 +39,9 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
     n = len(source)
     outside = 0
     for j in range(n):
-        plan = mapping.fuse(source.frames[j], source.poses[j], flags=None if config.sensor.raw else source.flags[j])
+        poses = np.asarray(source.poses[j])
+        plan = mapping.fuse(source.frames[j], poses, flags=None if config.sensor.raw else source.flags[j])
+        trajectory.append(poses if poses.ndim == 2 else poses[len(poses) // 2])
         outside += plan.beams_outside
         if every and (j + 1) % every == 0 and j + 1 < n:
             save(mapping.grid, out)                     # waits for the device: a snapshot

@@ -161,37 +161,13 @@ def pulse_statistics(runtime, config, scans):
 
 
 def plot_map(grid, poses, path, results=None, title="Navtech"):
-    """Top-down PNG of a one-layer map: log-odds from -L (empty, blue) to +L (occupied, red),
-    L the 99th percentile of |log-odds|, unseen white; x (forward) up and y (left) to the
-    left (REP-103 seen from above); the scan poses in black."""
-    import matplotlib
+    """Top-down PNG of a one-layer map (``jobs.plots.plane_map_figure``) with the half-map
+    check's result in the title."""
+    from radarcl.jobs import plots
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    spec = grid.spec
-    nats = grid.log_odds()[0]                                  # (ny, nx)
-    seen = nats[nats != 0]
-    limit = float(np.percentile(np.abs(seen), 99)) if seen.size else 1.0
-    shown = np.ma.masked_equal(nats, 0.0).T                     # rows = x, columns = y
-    x0, y0, _ = spec.origin_m
-    nx, ny, _ = spec.shape
-    extent = (y0, y0 + ny * spec.voxel_m, x0, x0 + nx * spec.voxel_m)
-    fig, ax = plt.subplots(figsize=(8, 8 * nx / ny), dpi=120)
-    image = ax.imshow(shown, origin="lower", extent=extent, cmap="coolwarm", vmin=-limit, vmax=limit,
-                      interpolation="nearest")
-    ax.plot(poses[:, 1, 3], poses[:, 0, 3], "k.-", ms=4, label="scan poses")
-    ax.invert_xaxis()                                           # y points left
-    ax.set_xlabel("y, left [m]")
-    ax.set_ylabel("x, forward [m]")
-    text = f"{title}, {len(poses)} scans fused at {spec.voxel_m} m (eq. 9)"
+    text = f"{title}, {len(poses)} scans fused at {grid.spec.voxel_m} m (eq. 9)"
     if results:
         r = results["true poses"]["correlation"]
         worst = max(v["correlation"] for k, v in results.items() if k != "true poses")
         text += f"\nhalf-map correlation {r:.3f} with the true poses, at most {worst:.3f} altered"
-    ax.set_title(text, fontsize=10)
-    fig.colorbar(image, ax=ax, label="log-odds [nat]", shrink=0.8)
-    ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, format="png")
-    plt.close(fig)
+    plots.save(plots.plane_map_figure(grid.log_odds()[0], grid.spec, poses, text), path, dpi=120)

@@ -8,7 +8,6 @@ import numpy as np
 from radarcl.errors import ConfigError
 from radarcl.io import polar_png
 from radarcl.jobs import plots
-from radarcl.outputs import atomic
 from radarcl.pipeline import Detection
 
 
@@ -50,8 +49,7 @@ def report(runtime, config, scan_path, azimuth, out, say):
                                       interp.evidence[a], title,
                                       (detection.interpreter.first_bin, detection.interpreter.last_bin))
     out = Path(out)
-    with atomic(out) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
+    plots.save(fig, out, dpi=110)
     say(f"  azimuth {a}: {len(rows)} pulses "
         + ", ".join(f"{r[0] * spacing:.1f}-{r[1] * spacing:.1f} m{' (wide)' if r[3] else ''}" for r in rows[:8])
         + (" ..." if len(rows) > 8 else ""))

@@ -1,8 +1,18 @@
-"""Figures in the paper's style (matplotlib, Agg backend: no display needed)."""
+"""Every figure radarcl draws (matplotlib, Agg backend: no display needed), one function each,
+returning the figure; ``save`` writes it whole or not at all.
+
+House rules, checked by ``problems`` in the tests: every image-like panel has a colour bar with
+its unit; every axis is labelled with its unit (metres, degrees, dB, nat); text is at least 10 pt
+and inside the canvas; maps seen from above have x forward up and y left to the left (REP-103).
+"""
 
 import numpy as np
 
 from radarcl import logodds
+
+RC = {"font.size": 10, "axes.titlesize": 11, "axes.labelsize": 10, "xtick.labelsize": 10,
+      "ytick.labelsize": 10, "legend.fontsize": 10, "figure.titlesize": 12}
+MIN_POINTS = 10
 
 
 def _pyplot():
@@ -11,7 +21,119 @@ def _pyplot():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    plt.rcParams.update(RC)
     return plt
+
+
+def save(fig, path, dpi=110):
+    """Write ``fig`` as a PNG through a temporary file, then close it; cropped to what is
+    drawn (square map panels otherwise leave wide empty margins)."""
+    from radarcl.outputs import atomic
+
+    plt = _pyplot()
+    with atomic(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png", bbox_inches="tight", pad_inches=0.15)
+    plt.close(fig)
+
+
+def problems(fig):
+    """What breaks the house rules in ``fig`` (an empty list when nothing does)."""
+    from matplotlib.image import AxesImage
+    from matplotlib.text import Text
+
+    fig.canvas.draw()
+    out = []
+    renderer = fig.canvas.get_renderer()
+    canvas = fig.bbox
+    colorbar_axes = {id(ax) for ax in fig.axes if hasattr(ax, "_colorbar")}
+    images = [ax for ax in fig.axes if id(ax) not in colorbar_axes and any(isinstance(a, AxesImage) for a in ax.get_children())]
+    mappables = [getattr(ax, "_colorbar").mappable for ax in fig.axes if hasattr(ax, "_colorbar")]
+    for ax in images:
+        if not any(m.axes is ax for m in mappables) and not getattr(ax, "_radarcl_shared_colorbar", False):
+            out.append(f"image panel {ax.get_title()!r} has no colour bar")
+    for ax in fig.axes:
+        if id(ax) in colorbar_axes:
+            if not getattr(ax, "_colorbar").ax.get_ylabel() and not getattr(ax, "_colorbar").ax.get_xlabel():
+                out.append("a colour bar without a label")
+            continue
+        if not ax.axison:
+            continue
+        if not ax.get_xlabel() and not getattr(ax, "_radarcl_shared_x", False):
+            out.append(f"panel {ax.get_title()!r} has no x label")
+        if not ax.get_ylabel() and not getattr(ax, "_radarcl_shared_y", False):
+            out.append(f"panel {ax.get_title()!r} has no y label")
+    def outside(box):
+        return box.x0 < canvas.x0 - 1 or box.y0 < canvas.y0 - 1 or box.x1 > canvas.x1 + 1 or box.y1 > canvas.y1 + 1
+
+    # Matplotlib keeps tick labels beyond the view limits that it never draws: tick labels are
+    # placed through their axes' tight box (what is drawn), every other text on its own.
+    tick_labels = {id(t) for ax in fig.axes for axis in (ax.xaxis, ax.yaxis) for t in axis.get_ticklabels(which="both")}
+    for ax in fig.axes:
+        if ax.get_visible() and outside(ax.get_tightbbox(renderer)):
+            out.append(f"panel {ax.get_title()!r} reaches outside the canvas (tick labels or axis labels)")
+    for text in fig.findobj(Text):
+        if not text.get_visible() or not text.get_text().strip():
+            continue
+        if text.get_fontsize() < MIN_POINTS:
+            out.append(f"text {text.get_text()!r} at {text.get_fontsize():.1f} pt")
+        if id(text) not in tick_labels and outside(text.get_window_extent(renderer)):
+            out.append(f"text {text.get_text()!r} outside the canvas")
+    return out
+
+
+def _colorbar(fig, image, ax, label):
+    bar = fig.colorbar(image, ax=ax, shrink=0.85)
+    bar.set_label(label)
+    bar.ax._colorbar = bar
+    return bar
+
+
+# -- the range profile and detection (paper §3.2, §3.3) -------------------------------------------
+def fig9_figure(ranges, profiles, pair_m, labels):
+    """Fig. 9: one beam's profile at several zero paddings. ``ranges`` and ``profiles`` are
+    lists (one per FFT length), ``labels`` their panel titles."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(len(profiles), 1, figsize=(7.5, 8), sharex=True)
+    for k, (ax, r, p, label) in enumerate(zip(axes, ranges, profiles, labels)):
+        ax.plot(r, p, ".-", ms=3)
+        for m in pair_m:
+            ax.axvline(m, color="grey", lw=0.8, ls="--")
+        ax.set_title(f"({'abcdef'[k]}) {label}")
+        ax.set_ylabel("amplitude [ADC codes]")
+        if k < len(profiles) - 1:
+            ax._radarcl_shared_x = True
+    axes[-1].set_xlim(4, 11)
+    axes[-1].set_xlabel("range [m]")
+    fig.suptitle(f"Two point targets 1.0 m apart at {pair_m[0]} and {pair_m[1]} m (paper Fig. 9)")
+    fig.tight_layout()
+    return fig
+
+
+def frame_figure(db, azimuths_deg, range_max_m, n_fft):
+    """One frame as range x azimuth images, one per stacked beam, in dB of the strongest bin,
+    azimuth in degrees (positive to the left, so left is on the left)."""
+    plt = _pyplot()
+    n_el = db.shape[1]
+    fig, axes = plt.subplots(1, n_el, figsize=(3.2 * n_el + 1.2, 4.4), sharey=True)
+    axes = np.atleast_1d(axes)
+    top = float(db.max())
+    half = 0.5 * (azimuths_deg[1] - azimuths_deg[0]) if len(azimuths_deg) > 1 else 0.5
+    image = None
+    for el, ax in enumerate(axes):
+        image = ax.imshow(db[:, el, :].T - top, origin="lower", aspect="auto", vmin=-70, vmax=0, cmap="viridis",
+                          extent=(azimuths_deg[0] - half, azimuths_deg[-1] + half, 0, range_max_m))
+        ax.invert_xaxis()                                    # azimuth positive to the left
+        ax.set_title(f"stacked beam {el}")
+        ax.set_xlabel("azimuth [deg], left +")
+        if el:
+            ax._radarcl_shared_y = True
+        ax._radarcl_shared_colorbar = True
+    axes[0].set_ylabel("range [m]")
+    bar = fig.colorbar(image, ax=list(axes), shrink=0.9)
+    bar.set_label("power [dB re strongest bin]")
+    bar.ax._colorbar = bar
+    fig.suptitle(f"One frame of the paper's radar, range x azimuth, n_fft = {n_fft}")
+    return fig
 
 
 def interpretation_figure(ranges_m, power, threshold, pulses, evidence_units, title, interval=None):
@@ -23,7 +145,7 @@ def interpretation_figure(ranges_m, power, threshold, pulses, evidence_units, ti
     """
     plt = _pyplot()
     floor = np.finfo(np.float32).tiny
-    fig, (ax_a, ax_b) = plt.subplots(2, 1, figsize=(10, 6.4), sharex=True, constrained_layout=True)
+    fig, (ax_a, ax_b) = plt.subplots(2, 1, figsize=(10, 6.6), sharex=True, constrained_layout=True)
     spacing = ranges_m[1] - ranges_m[0]
     for start, end, peak, wide in pulses:
         ax_a.axvspan(ranges_m[start] - spacing / 2, ranges_m[end] + spacing / 2, zorder=0,
@@ -34,8 +156,9 @@ def interpretation_figure(ranges_m, power, threshold, pulses, evidence_units, ti
     ax_a.plot([], [], color="tab:green", alpha=0.5, lw=6, label="narrow pulse")
     ax_a.plot([], [], color="tab:orange", alpha=0.6, lw=6, label="wide pulse")
     ax_a.set_ylabel("power [dB]")
-    ax_a.set_title(title, fontsize=10)
-    ax_a.legend(loc="upper right", fontsize=8)
+    ax_a.set_title(title, fontsize=10, wrap=True)
+    ax_a.legend(loc="upper right")
+    ax_a._radarcl_shared_x = True
     ax_b.plot(ranges_m, logodds.to_nats(evidence_units), lw=0.8, color="tab:blue", drawstyle="steps-mid")
     ax_b.axhline(0, color="0.5", lw=0.5)
     ax_b.set_ylabel("evidence, log-odds [nat]")
@@ -45,3 +168,162 @@ def interpretation_figure(ranges_m, power, threshold, pulses, evidence_units, ti
             for j in interval:
                 ax.axvline(ranges_m[j], color="0.4", ls=":", lw=0.8)
     return fig
+
+
+def beams_figure(panels, title):
+    """Several beams like Fig. 10, side by side: ``panels`` of (ranges, power, threshold, mask,
+    evidence_units, subtitle)."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(2, len(panels), figsize=(5.6 * len(panels), 6.6), sharex=True, squeeze=False)
+    floor = np.finfo(np.float32).tiny
+    for col, (r, power, threshold, mask, evidence, subtitle) in enumerate(panels):
+        top, bottom = axes[0, col], axes[1, col]
+        top.plot(r, 10 * np.log10(np.maximum(power, floor)), lw=0.7, label="power")
+        top.plot(r, 10 * np.log10(np.maximum(threshold, floor)), lw=0.8, label="CFAR threshold")
+        top.plot(r[mask], 10 * np.log10(np.maximum(power[mask], floor)), ".", ms=2, label="detections")
+        top.set_title(subtitle, fontsize=10)
+        top.set_ylabel("power [dB]")
+        top._radarcl_shared_x = True
+        bottom.plot(r, logodds.to_nats(evidence), lw=0.8)
+        bottom.set_xlabel("range [m]")
+        bottom.set_ylabel("eq. 12 evidence [nat]")
+    axes[0, 0].legend(loc="upper right")
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+# -- maps seen from above ------------------------------------------------------------------------------
+def topdown_figure(log_odds, occupied_truth, spec, above_z_m=0.0):
+    """The map's largest positive log-odds above ``above_z_m`` seen from above beside the truth
+    (occupied voxels above it), x forward up, y left to the left."""
+    plt = _pyplot()
+    x0, y0, z0 = spec.origin_m
+    nx, ny, nz = spec.shape
+    extent = (y0, y0 + ny * spec.voxel_m, x0, x0 + nx * spec.voxel_m)
+    above = z0 + np.arange(nz) * spec.voxel_m >= above_z_m - 1e-9     # from the layer holding above_z_m up
+    top = np.max(np.where(log_odds[above] > 0, log_odds[above], 0), axis=0)
+    fig, axes = plt.subplots(1, 2, figsize=(12.5, 6.2), sharey=True)
+    vmax = float(np.percentile(top[top > 0], 99)) if (top > 0).any() else 1.0
+    image = axes[0].imshow(top.T, origin="lower", extent=extent, cmap="magma", vmin=0, vmax=vmax, aspect="equal")
+    _colorbar(fig, image, axes[0], "largest log-odds above the grass [nat]")
+    axes[0].set_title("map")
+    truth = occupied_truth[above][1:].any(axis=0)                     # the layers above the grass itself
+    image = axes[1].imshow(truth.T, origin="lower", extent=extent, cmap="Greys", vmin=0, vmax=1, aspect="equal")
+    bar = _colorbar(fig, image, axes[1], "truth: occupied above the grass")
+    bar.set_ticks([0, 1], labels=["free", "occupied"])
+    axes[1].set_title("ground truth")
+    for ax in axes:
+        ax.set_xlabel("y, left [m]")
+        ax.invert_xaxis()
+    axes[0].set_ylabel("x, forward [m]")
+    axes[1]._radarcl_shared_y = True
+    fig.tight_layout()
+    return fig
+
+
+def plane_map_figure(nats, spec, poses, title):
+    """A one-layer map seen from above: log-odds from -L (free, blue) to +L (occupied, red), L
+    the 99th percentile of |log-odds|, unseen white; the poses (n, 4, 4) in black."""
+    plt = _pyplot()
+    seen = nats[nats != 0]
+    limit = float(np.percentile(np.abs(seen), 99)) if seen.size else 1.0
+    shown = np.ma.masked_equal(nats, 0.0).T                     # rows = x, columns = y
+    x0, y0, _ = spec.origin_m
+    nx, ny, _ = spec.shape
+    extent = (y0, y0 + ny * spec.voxel_m, x0, x0 + nx * spec.voxel_m)
+    fig, ax = plt.subplots(figsize=(8.4, 8.4 * nx / ny), dpi=120)
+    image = ax.imshow(shown, origin="lower", extent=extent, cmap="coolwarm", vmin=-limit, vmax=limit,
+                      interpolation="nearest")
+    ax.plot(poses[:, 1, 3], poses[:, 0, 3], "k.-", ms=4, label="scan poses")
+    ax.invert_xaxis()                                           # y points left
+    ax.set_xlabel("y, left [m]")
+    ax.set_ylabel("x, forward [m]")
+    ax.set_title(title)
+    _colorbar(fig, image, ax, "log-odds [nat]; white: unseen")
+    ax.legend(loc="upper right")
+    fig.tight_layout()
+    return fig
+
+
+# -- error against run time ------------------------------------------------------------------------------
+DIMENSION_MARKERS = {"reference": "*", "zero padding": "o", "beam model": "s", "voxel": "D", "cfar": "^"}
+
+
+def quality_figure(r):
+    """``bench quality``'s result: AUC against ms per frame. Each run is a numbered marker whose
+    shape says which setting changed; the names are in the table beside it, the Pareto front is
+    a line, the baseline a large cross."""
+    plt = _pyplot()
+    runs = r["runs"]
+    import textwrap
+
+    fig = plt.figure(figsize=(12.5, 6.2))
+    ax = fig.add_axes([0.07, 0.11, 0.56, 0.8])
+    colours = dict(zip(DIMENSION_MARKERS, plt.cm.tab10.colors))
+    for k, x in enumerate(runs, 1):
+        ax.scatter(x["ms_per_frame"], x["auc"], marker=DIMENSION_MARKERS.get(x["dimension"], "o"),
+                   s=160 if x["dimension"] == "reference" else 70, color=colours.get(x["dimension"], "k"),
+                   edgecolor="k", linewidth=1.4 if x["pareto"] else 0.3, zorder=3)
+    front = sorted((x["ms_per_frame"], x["auc"]) for x in runs if x["pareto"])
+    if front:
+        ax.plot(*zip(*front), "k--", lw=1.2, label="Pareto front (thick edge)", zorder=2)
+    present = {x["dimension"] for x in runs}
+    for dim, marker in DIMENSION_MARKERS.items():
+        if dim in present:
+            ax.scatter([], [], marker=marker, color=colours[dim], edgecolor="k", s=60, label=dim)
+    b = r.get("baseline")
+    if b:
+        ax.scatter(b["ms_per_frame"], b["auc"], marker="X", color="crimson", edgecolor="k", s=220, zorder=4,
+                   label="baseline: CFAR points, OctoMap-style")
+    ax.set_xscale("log")
+    ax.set_xlabel(f"ms per frame (whole pipeline, {r['device'].split('/')[-1].strip()[:28]})")
+    ax.set_ylabel("ROC-AUC over observed voxels")
+    ax.set_title(f"Error against run time: reference scene, {r['observations']} observations")
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    ax.xaxis.set_major_locator(LogLocator(subs=(1, 2, 5)))              # 10, 20, 50, 100: no crowding
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.grid(alpha=0.3, which="both")
+    _number_points(ax, [(x["ms_per_frame"], x["auc"]) for x in runs])
+    table = fig.add_axes([0.66, 0.11, 0.33, 0.8])
+    table.axis("off")
+    rows = []
+    for k, x in enumerate(runs, 1):
+        lines = textwrap.wrap(x["label"], 34) or [""]
+        rows += [f"{k:>2}  {lines[0]}"] + [f"    {line}" for line in lines[1:]]
+    table.text(0, 1, "run setting changed from the reference\n" + "\n".join(rows), va="top", family="monospace",
+               fontsize=10, transform=table.transAxes)
+    table.legend(*ax.get_legend_handles_labels(), loc="lower left", frameon=False)     # beside, not over, the points
+    return fig
+
+
+def _number_points(ax, points, near_px=12):
+    """Number the points 1..n beside their markers; points closer than ``near_px`` on screen
+    share one label ("1, 5"), and each label takes the first of four places beside its marker
+    that overlaps no other label or marker, so numbers never print over each other."""
+    ax.autoscale_view()
+    screen = ax.transData.transform(np.asarray(points, float))
+    groups = []
+    for k, p in enumerate(screen):
+        for g in groups:
+            if np.hypot(*(screen[g[0]] - p)) < near_px:
+                g.append(k)
+                break
+        else:
+            groups.append([k])
+    scale = ax.figure.dpi / 72.0                        # offsets are in points, the screen in pixels
+    placed = [(p[0] - 7, p[1] - 7, p[0] + 7, p[1] + 7) for p in screen]          # the markers
+    for g in groups:
+        text = ", ".join(str(k + 1) for k in g)
+        w, h = 7.0 * len(text) * scale, 11.0 * scale
+        x, y = screen[g[0]]
+        for dx, dy in ((6, 4), (6, -14), (-8 - 7 * len(text), 4), (-8 - 7 * len(text), -14)):
+            box = (x + dx * scale, y + dy * scale, x + dx * scale + w, y + dy * scale + h)
+            if not any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed):
+                break
+        else:
+            dx, dy = 6, 4
+        placed.append(box)
+        ax.annotate(text, points[g[0]], xytext=(dx, dy), textcoords="offset points", fontsize=10)

@@ -1,5 +1,5 @@
 // Back-face ray casting of the evidence grid (one program per mode: MODE_OCCUPANCY, MODE_MIP,
-// MODE_ISO; SKIP turns on empty-space skipping). The box's back faces are drawn with front
+// MODE_ISO, MODE_FREE; SKIP turns on empty-space skipping). The box's back faces are drawn with front
 // faces culled, so every pixel the box covers runs this shader once, also with the camera
 // inside the box. The fragment knows where its ray leaves; the ray's entry comes from
 // intersecting it with the clip box, clamped to the camera (t >= 0).
@@ -41,6 +41,7 @@ uniform float hi;
 uniform float gamma;
 uniform float density;       // opacity per voxel of length at x = 1
 uniform float threshold;     // isosurface [nat]
+uniform vec2 height_range;   // iso: the z [voxels] the colormap spans (the content's heights)
 uniform float step_u;        // between samples [voxels]
 uniform vec3 background;
 
@@ -50,6 +51,8 @@ out vec4 f_color;
 const float BRICK = 8.0;
 const float BIG = 32.0;      // voxels per coarser cell
 const float OPAQUE = 0.99;
+const vec3 FREE_COLOUR = vec3(0.25, 0.6, 1.0);
+const float FREE_DENSITY = 0.12;   // free space is a haze: this much of the occupied opacity
 
 float sample_at(vec3 u) { return texture(volume, u / dims).r; }
 
@@ -89,6 +92,10 @@ void main() {
 #elif defined MODE_ISO
     float t_hit = -1.0;
 #define EMPTY(cmax) ((cmax) < threshold)       /* no sample reaches the surface */
+#elif defined MODE_FREE
+    vec3 acc = vec3(0.0);
+    float alpha = 0.0;
+#define EMPTY(cmax) (false)                    /* the maxima say nothing of free space: never skip */
 #endif
 
     while (k < n) {
@@ -120,6 +127,13 @@ void main() {
         acc += (1.0 - alpha) * a * color_of(x);
         alpha += (1.0 - alpha) * a;
         if (alpha > OPAQUE) break;
+#elif defined MODE_FREE
+        // occupied (v > lo) as in occupancy; free (v < -lo) as a blue haze of the same clamp on -v
+        float x = transfer(v), xf = transfer(-v);
+        float a = 1.0 - pow(1.0 - min(max(x * density, xf * density * FREE_DENSITY), 0.999), step_u);
+        acc += (1.0 - alpha) * a * (x > 0.0 ? color_of(x) : FREE_COLOUR);
+        alpha += (1.0 - alpha) * a;
+        if (alpha > OPAQUE) break;
 #elif defined MODE_MIP
         best = max(best, v);
 #elif defined MODE_ISO
@@ -137,7 +151,7 @@ void main() {
         k++;
     }
 
-#if defined MODE_OCCUPANCY
+#if defined MODE_OCCUPANCY || defined MODE_FREE
     f_color = vec4(acc + (1.0 - alpha) * background, 1.0);
 #elif defined MODE_MIP
     f_color = vec4(best > lo ? color_of(transfer(best)) : background, 1.0);
@@ -150,7 +164,8 @@ void main() {
                       sample_at(u + vec3(0, 1, 0)) - sample_at(u - vec3(0, 1, 0)),
                       sample_at(u + vec3(0, 0, 1)) - sample_at(u - vec3(0, 0, 1)));
         float lit = length(g) > 0.0 ? abs(dot(normalize(g), dir)) : 1.0;   // headlight, both sides
-        f_color = vec4(color_of(clamp(u.z / dims.z, 0.0, 1.0)) * (0.3 + 0.7 * lit), 1.0);
+        float h = (u.z - height_range.x) / max(height_range.y - height_range.x, 1e-3);
+        f_color = vec4(color_of(clamp(h, 0.0, 1.0)) * (0.3 + 0.7 * lit), 1.0);
     }
 #endif
 }

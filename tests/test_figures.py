@@ -1,0 +1,89 @@
+"""Every figure reads at a glance: colour bars with units on image panels, labelled axes, text of
+10 pt or more inside the canvas (``jobs.plots.problems``), for every figure radarcl draws; and
+the report page opens in a real browser with every image loaded and no console message."""
+
+import numpy as np
+import pytest
+
+from radarcl.grid import GridSpec
+from radarcl.jobs import plots, report
+
+from browser import open_in_browser
+
+
+def test_the_checker_catches_what_it_should():
+    plt = plots._pyplot()
+    fig, ax = plt.subplots()
+    ax.imshow(np.zeros((4, 4)))
+    ax.text(2e3, 0, "far away", fontsize=6)
+    found = " ".join(plots.problems(fig))
+    assert "no colour bar" in found and "no x label" in found and "6.0 pt" in found and "outside the canvas" in found
+    plt.close(fig)
+    fig = plt.figure()
+    ax = fig.add_axes((0.0, 0.1, 0.9, 0.8))          # y tick labels left of the canvas
+    ax.set(xlabel="x", ylabel="y", ylim=(0, 1e6))
+    assert any("reaches outside the canvas" in p for p in plots.problems(fig))
+    plt.close(fig)
+
+
+def figures():
+    rng = np.random.default_rng(0)
+    r = np.linspace(0, 64, 512)
+    spec = GridSpec((-8.0, -35.0, -10.0), 0.8, (100, 88, 25))
+    occ = np.zeros(spec.array_shape, bool)
+    occ[13, 40:48, 20:22] = True
+    log_odds = rng.normal(0, 1, spec.array_shape)
+    poses = np.stack([np.eye(4)] * 3)
+    poses[:, 0, 3] = [0, 2, 4]
+    plane = GridSpec((-20.0, -20.0, -0.15), 0.5, (80, 80, 1))
+    run = dict(dimension="cfar", label="kind=ca", ms_per_frame=12.0, auc=0.6, iou=0.1, false_free=0.3, pareto=True)
+    quality = dict(device="Portable / pthread-cpu", observations=3840, runs=[
+        dict(run, dimension="reference", label="reference: kind=so, pfa=0.01, k_occ=0.25, e_high=-0.025"),
+        run, dict(run, label="n_fft=256", dimension="zero padding", ms_per_frame=9.0, pareto=False)],
+        baseline=dict(ms_per_frame=45.0, auc=0.48))
+    return {  # built one at a time: a test draws only its own
+        "fig9": lambda: plots.fig9_figure([r, r], [np.abs(np.sin(r)), np.abs(np.cos(r))], (7.2, 8.2), ["a", "b"]),
+        "frame": lambda: plots.frame_figure(rng.normal(0, 10, (64, 4, 512)), np.arange(-31.5, 32.5), 64.0, 1024),
+        "fig10": lambda: plots.interpretation_figure(r, rng.exponential(1, 512), np.ones(512), [(10, 20, 15, 1)],
+                                             rng.integers(-1024, 2048, 512), "a title"),
+        "beams": lambda: plots.beams_figure([(r, rng.exponential(1, 512), np.ones(512), rng.random(512) > 0.9,
+                                      rng.integers(-100, 100, 512), "beam")] * 2, "two beams"),
+        "topdown": lambda: plots.topdown_figure(log_odds, occ, spec),
+        "plane map": lambda: plots.plane_map_figure(rng.normal(0, 2, (80, 80)), plane, poses, "a map\nsecond line"),
+        "quality": lambda: plots.quality_figure(quality),
+    }
+
+
+@pytest.mark.parametrize("name", list(figures()))
+def test_every_figure_follows_the_house_rules(name):
+    fig = figures()[name]()
+    assert plots.problems(fig) == []
+    plots._pyplot().close(fig)
+
+
+def test_the_quality_chart_labels_coinciding_runs_once_and_lists_only_present_settings():
+    fig = figures()["quality"]()
+    ax = fig.axes[0]
+    labels = [t.get_text() for t in ax.texts]
+    assert labels == ["1, 2", "3"]                     # runs 1 and 2 sit on the same point
+    legend = [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
+    assert "voxel" not in legend and "zero padding" in legend and "cfar" in legend
+    plots._pyplot().close(fig)
+
+
+def test_a_report_opens_in_a_real_browser(tmp_path):
+    fig = figures()["topdown"]()
+    png = tmp_path / "topdown.png"
+    plots.save(fig, png)
+    page = report.write(tmp_path / "report.html", "a run <with> characters & more", [
+        ("Numbers", [report.Table(["map", "AUC"], [["tuned", 0.634], ["baseline", 0.5]]),
+                     report.Pairs({"voxel_m": 0.1, "sensor": "paper"})]),
+        ("Figures", [report.Figure(png, "from above"), report.Figure(png.read_bytes(), "again, from bytes")]),
+        ("Notes", [report.Text("x < y & y > z")])])
+    dom, console = open_in_browser(page, tmp_path)
+    assert 'data-images="2/2"' in dom and 'data-errors="0"' in dom, dom[-400:]
+    assert console == []
+    assert "a run &lt;with&gt; characters &amp; more" in dom and "x &lt; y &amp; y &gt; z" in dom
+    broken = report.write(tmp_path / "broken.html", "a broken image", [("F", [report.Figure(b"not a png")])])
+    dom, _ = open_in_browser(broken, tmp_path)
+    assert 'data-images="0/1"' in dom                   # the check can fail
