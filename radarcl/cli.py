@@ -177,6 +177,10 @@ def build_parser():
     add_config(p)
     p.add_argument("--odometry", default=None, help="polar scans: the radar_odometry.csv (default: found beside them)")
     p.add_argument("--every", type=positive_int, default=None, help="rewrite the map file every N frames")
+    p.add_argument("--report", default=None, metavar="FILE",
+                   help="the run's HTML page: numbers, the map from above, the viewer's render, the configuration "
+                        "(default: the map's name with .html, e.g. map.html)")
+    p.add_argument("--no-report", action="store_true", help="write no HTML page")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
     p = command("fuse-many", commands.cmd_fuse_many, "fuse many recordings in parallel on a Dask cluster into one map",

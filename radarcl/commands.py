@@ -136,11 +136,17 @@ def cmd_fuse(args):
     config = resolve_config(args)
     out = outputs.check(args.out, args.force, inputs=[args.input, args.config, args.odometry], what="map",
                         store=not str(args.out).endswith(".npz"))
+    page = None if args.no_report else outputs.check(args.report or Path(out).with_suffix(".html"), args.force,
+                                                      inputs=[args.input, args.config, out], what="report")
+    if page is not None and Path(page).resolve() == Path(out).resolve():
+        from radarcl.errors import ConfigError
+
+        raise ConfigError(f"the report and the map would both be {out}; give --report another name")
     source = fuse_recording.open_source(config.sensor, args.input, args.odometry)
     if source.sensor is not config.sensor:                   # the reader learnt the bin count
         config = config.for_sensor(source.sensor)
     fuse_recording.run(_runtime(), source, config, out, every=args.every, progress=_progress(args),
-                       inputs=[args.input])
+                       inputs=[args.input], page=page)
     return 0
 
 

@@ -148,6 +148,23 @@ class Map:
         top = self.spec.origin_m[2] + (k + 0.5) * self.spec.voxel_m
         return logodds.to_nats(self.dense((top - 0.25 * self.spec.voxel_m, top + 0.25 * self.spec.voxel_m))[0])
 
+    def column_extremes(self):
+        """Log-odds [nat] (ny, nx) of each column's most telling observed voxel, seen from
+        above: its largest value when that is positive (something occupied somewhere above the
+        cell), else its smallest (how free the column is); 0 where no voxel of the column was
+        observed. Brick by brick: never the dense volume."""
+        ny, nx = self.spec.shape[1], self.spec.shape[0]
+        nby, nbx = -(-ny // BRICK), -(-nx // BRICK)
+        hi = np.zeros((nby, nbx, BRICK, BRICK), np.int64)
+        lo = np.zeros((nby, nbx, BRICK, BRICK), np.int64)
+        if len(self.keys):
+            inside = self.keys[:, 2, None] * BRICK + np.arange(BRICK) < self.spec.shape[2]     # a top brick's overhang
+            d = np.where(inside[:, :, None, None], self.data, 0).astype(np.int64)
+            np.maximum.at(hi, (self.keys[:, 1], self.keys[:, 0]), d.max(axis=1))
+            np.minimum.at(lo, (self.keys[:, 1], self.keys[:, 0]), d.min(axis=1))
+        best = np.where(hi > 0, hi, lo).transpose(0, 2, 1, 3).reshape(nby * BRICK, nbx * BRICK)[:ny, :nx]
+        return logodds.to_nats(best)
+
     def projection(self, band=None, threshold_nats=1.0):
         """A 2D occupancy grid over a height band, int8 (ny, nx) in the ROS map_server
         convention: 100 occupied (some observed voxel of the column above ``threshold_nats``), 0

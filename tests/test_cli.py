@@ -67,6 +67,14 @@ def test_fuse_writes_a_map_the_viewer_reads(tmp_path, capsys):
     assert load_map(out).positive > 0
     assert main(["render", str(out), "--out", str(tmp_path / "v.png"), "--size", "64", "48"]) == 0
     assert not list(tmp_path.glob("*.tmp"))
+    dom, console = open_in_browser(tmp_path / "map.html", tmp_path)       # the run's page, beside the map
+    assert 'data-images="2/2"' in dom and 'data-errors="0"' in dom and console == [], (dom[-300:], console)
+    assert "2 frames" in dom or "<td class=\"n\">2</td>" in dom
+    assert main(["fuse", str(rec), "--out", str(tmp_path / "again.npz"), "--voxel", "0.4", "--no-progress",
+                 "--report", str(tmp_path / "map.html")]) == 2             # the page is kept like any output
+    assert "exists; pass --force" in capsys.readouterr().err and not (tmp_path / "again.npz").exists()
+    assert main(["fuse", str(rec), "--out", str(tmp_path / "x.html"), "--voxel", "0.4", "--no-progress"]) == 2
+    assert "would both be" in capsys.readouterr().err
 
 
 def test_demo_refuses_a_file_that_is_not_a_recording(tmp_path, capsys):

@@ -26,6 +26,9 @@ def test_the_checker_catches_what_it_should():
     plt.close(fig)
 
 
+QUALITY = {}                   # the bench quality result the figures use
+
+
 def figures():
     rng = np.random.default_rng(0)
     r = np.linspace(0, 64, 512)
@@ -37,10 +40,11 @@ def figures():
     poses[:, 0, 3] = [0, 2, 4]
     plane = GridSpec((-20.0, -20.0, -0.15), 0.5, (80, 80, 1))
     run = dict(dimension="cfar", label="kind=ca", ms_per_frame=12.0, auc=0.6, iou=0.1, false_free=0.3, pareto=True)
-    quality = dict(device="Portable / pthread-cpu", observations=3840, runs=[
+    quality = dict(device="Portable / pthread-cpu", observations=3840, seed=0, frames=15, runs=[
         dict(run, dimension="reference", label="reference: kind=so, pfa=0.01, k_occ=0.25, e_high=-0.025"),
         run, dict(run, label="n_fft=256", dimension="zero padding", ms_per_frame=9.0, pareto=False)],
-        baseline=dict(ms_per_frame=45.0, auc=0.48))
+        baseline=dict(label="CFAR points", ms_per_frame=45.0, auc=0.48, iou=0.05, false_free=0.2))
+    QUALITY.update(quality)
     return {  # built one at a time: a test draws only its own
         "fig9": lambda: plots.fig9_figure([r, r], [np.abs(np.sin(r)), np.abs(np.cos(r))], (7.2, 8.2), ["a", "b"]),
         "frame": lambda: plots.frame_figure(rng.normal(0, 10, (64, 4, 512)), np.arange(-31.5, 32.5), 64.0, 1024),
@@ -87,3 +91,14 @@ def test_a_report_opens_in_a_real_browser(tmp_path):
     broken = report.write(tmp_path / "broken.html", "a broken image", [("F", [report.Figure(b"not a png")])])
     dom, _ = open_in_browser(broken, tmp_path)
     assert 'data-images="0/1"' in dom                   # the check can fail
+
+
+def test_the_bench_quality_page_opens_with_its_table_and_chart(tmp_path):
+    from radarcl.bench import quality
+
+    plots.save(figures()["quality"](), tmp_path / "quality.png")
+    page = tmp_path / "quality.html"
+    quality.write_report(QUALITY, tmp_path / "quality.png", page)
+    dom, console = open_in_browser(page, tmp_path)
+    assert 'data-images="1/1"' in dom and 'data-errors="0"' in dom and console == []
+    assert dom.count("<tr>") == 1 + len(QUALITY["runs"]) + 1 + 4       # header, runs, baseline; 4 run rows

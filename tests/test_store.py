@@ -153,3 +153,5 @@ def test_point_queries_agree_with_the_dense_map(tmp_path):
     assert np.allclose(m.slice(0.1), dense[int((0.1 + 1.0) / 0.25)] / 1024)
     with pytest.raises(ConfigError, match="holds no voxel centre"):
         m.projection((50.0, 60.0))
+    hi, lo = dense.max(axis=0), dense.min(axis=0)             # unseen voxels are 0
+    assert np.array_equal(m.column_extremes(), np.where(hi > 0, hi, lo) / 1024)

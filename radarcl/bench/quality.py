@@ -136,6 +136,31 @@ def format_table(r):
     return lines
 
 
+def sweep_table(r):
+    """The sweep as a report table (``jobs.report``): one row per run and the baseline."""
+    from radarcl.jobs import report
+
+    rows = [[k, x["dimension"], x["label"], x["ms_per_frame"], x["auc"], x["iou"], x["false_free"],
+             "yes" if x["pareto"] else ""] for k, x in enumerate(r["runs"], 1)]
+    b = r.get("baseline")
+    if b:
+        rows.append(["", "baseline", b["label"], b["ms_per_frame"], b["auc"], b["iou"], b["false_free"], ""])
+    return report.Table(["run", "changed", "configuration", "ms/frame", "AUC", "IoU", "false-free", "Pareto"], rows)
+
+
+def write_report(r, chart_path, page):
+    """``bench quality``'s page: the device, the sweep table and the chart."""
+    from radarcl.jobs import report
+
+    report.write(page, "radarcl bench quality: error against run time", [
+        ("Run", [report.Pairs({"device": r["device"], "observations": r["observations"], "seed": r["seed"],
+                               "frames": r["frames"]})]),
+        ("Runs", [sweep_table(r), report.Text("ms/frame: the whole device pipeline per frame; AUC, IoU and "
+                                              "false-free over the observed voxels of the reference scene.")]),
+        ("Chart", [report.Figure(chart_path, "AUC against ms per frame; the Pareto front dashed")])],
+        "Each run changes one setting of the reference configuration.")
+
+
 def chart(r, path):
     """AUC against ms per frame (``jobs.plots.quality_figure``) written to ``path``."""
     from radarcl.jobs import plots
@@ -155,6 +180,8 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=int, default=None, help="simulation seed (default: the evaluation seed, 0)")
     parser.add_argument("--replay", default=None, help="a recording of the reference scene instead of simulating")
     add_output(parser, "--chart", "quality.png", "PNG chart to write")
+    parser.add_argument("--report", default=None, metavar="FILE",
+                        help="the HTML page (table and chart; default: the chart's name with .html)")
 
 
 def command(args, runtime, say):
@@ -167,6 +194,8 @@ def command(args, runtime, say):
     from radarcl.scene.outdoor import PAPER_TILTS_DEG, paper_grid, paper_scene
 
     chart_path = outputs.check(args.chart, args.force, inputs=[args.replay], what="chart")
+    page = outputs.check(args.report or chart_path.with_suffix(".html"), args.force, inputs=[args.replay, chart_path],
+                         what="report")
     scene = paper_scene()
     if args.replay:
         obs = recording.load_observations(args.replay)
@@ -178,5 +207,6 @@ def command(args, runtime, say):
     result = run(runtime(), obs, lambda v: scene.truth(paper_grid(v)), reference, voxels=tuple(args.voxels),
                  report=say)
     chart(result, chart_path)
-    say(f"wrote {chart_path}")
+    write_report(result, chart_path, page)
+    say(f"wrote {chart_path} and {page}")
     return result, format_table(result)

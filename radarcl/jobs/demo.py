@@ -113,8 +113,6 @@ def _write_report(out, summary, maps, base, base_ms, q):
     headers = ["map"] + list(METRIC_NAMES) + ["ms/frame"]
     rows = [[name] + [m[k] for k in METRIC_KEYS] + [r.ms_per_frame] for name, (_, r, m) in maps.items()]
     rows.append(["baseline: CFAR points, OctoMap-style"] + [base[k] for k in METRIC_KEYS] + [base_ms])
-    runs = [[k, x["dimension"], x["label"], x["ms_per_frame"], x["auc"], x["iou"], x["false_free"],
-             "yes" if x["pareto"] else ""] for k, x in enumerate(q["runs"], 1)]
     tuned = maps["tuned"][0]
     figures = [("fig9.png", "Fig. 9: two point targets 1.0 m apart, without and with zero padding"),
                ("frame.png", "One frame of the paper's radar, range x azimuth, per stacked beam"),
@@ -128,10 +126,9 @@ def _write_report(out, summary, maps, base, base_ms, q):
                              "voxel [m]": QUICK_VOXEL_M if summary["quick"] else 0.1,
                              "simulation [s]": round(summary["simulate_s"], 1)})]),
         ("Metrics over the observed voxels", [page.Table(headers, rows)]),
-        ("Error against run time", [page.Table(["run", "changed", "configuration", "ms/frame", "AUC", "IoU",
-                                                "false-free", "Pareto"], runs)]),
+        ("Error against run time", [quality.sweep_table(q)]),
         ("Figures", [page.Figure(out / name, caption) for name, caption in figures if (out / name).is_file()]),
-        ("Configuration of the tuned map", [page.Pairs({k: f"{v}  ({tuned.origins[k]})" for k, v in tuned.values.items()})]),
+        ("Configuration of the tuned map", [page.configuration(tuned)]),
     ]
     page.write(out / "report.html", "radarcl demo: the paper's reference scene", sections,
                f"Foessel-Bunting's sensor model on the reference scene (§4.3), {summary['observations']} observations.")

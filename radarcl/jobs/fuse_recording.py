@@ -16,12 +16,13 @@ from radarcl import io
 from radarcl.pipeline import Mapping
 
 
-def run(runtime, source, config, out, every=None, progress=None, report=print, inputs=()):
+def run(runtime, source, config, out, every=None, progress=None, report=print, inputs=(), page=None):
     """Fuse every frame of ``source`` (an ``io.FrameSource``) with ``config`` (a
     ``mapconfig.Resolved``) and write the map to ``out``: an ``.npz`` file, or a map store
     (``radarcl.store``, any other name: only changed bricks are written after the first save).
-    ``inputs`` go into the store's provenance. Returns a dict with the frame count and
-    milliseconds per frame (saving included)."""
+    ``inputs`` go into the store's provenance; ``page`` names the HTML report to write
+    (``write_report``). Returns a dict with the frame count and milliseconds per frame (saving
+    included)."""
     from radarcl.store import MapSaver
 
     saver = MapSaver(out, config.sensor.toml(), config.as_dict(), inputs)
@@ -53,7 +54,58 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
     report(f"wrote {out}: {mem['bricks']} bricks ({mem['sparse_bytes'] / 2 ** 20:.0f} MiB), {ms:.0f} ms per frame"
            + (f" with a save every {every} frames" if every else "")
            + (f"; {outside} beam(s) reached no voxel of the grid" if outside else ""))
-    return dict(frames=n, ms_per_frame=ms, bricks=mem["bricks"], beams_outside=outside)
+    result = dict(frames=n, ms_per_frame=ms, bricks=mem["bricks"], beams_outside=outside,
+                  memory_mib=mem["sparse_bytes"] / 2 ** 20, every=every, device=runtime.name)
+    if page is not None:
+        from radarcl.maps import Map
+
+        write_report(page, out, source, config, result, Map.of_grid(mapping.grid), np.array(trajectory))
+        report(f"wrote {page}")
+    return result
+
+
+def write_report(page, out, source, config, result, map_, trajectory):
+    """The run as one HTML page: what was fused and how fast, the map from above (each column's
+    most telling voxel, ``Map.column_extremes``) with the sensor's path, the viewer's render
+    (when EGL is there), and the configuration with where each value came from."""
+    import tempfile
+    from pathlib import Path
+
+    from radarcl.jobs import plots, report as html
+
+    run = {"input": source.summary, "sensor": config.sensor.name, "map": str(out), "frames": result["frames"],
+           "device": result["device"], "ms per frame (saving included)": round(result["ms_per_frame"], 1),
+           "bricks": result["bricks"], "memory [MiB]": round(result["memory_mib"], 1),
+           "beams that reached no voxel": result["beams_outside"]}
+    if result["every"]:
+        run["saved every"] = f"{result['every']} frames"
+    spec = map_.spec
+    title = f"{config.sensor.name}: {result['frames']} frames fused at {spec.voxel_m:g} m, seen from above"
+    with tempfile.TemporaryDirectory() as tmp:
+        top = Path(tmp) / "top.png"
+        plots.save(plots.plane_map_figure(map_.column_extremes(), spec, trajectory, title, "sensor path",
+                                          "most telling log-odds of the column [nat]"), top)
+        figures = [html.Figure(top.read_bytes(), "Each column's largest log-odds where positive, else its "
+                                                 "smallest: red occupied, blue free, white unseen")]
+        figures.append(_render(out, Path(tmp) / "view.png"))
+    html.write(page, f"radarcl fuse: {Path(str(out)).name}", [
+        ("Run", [html.Pairs(run)]), ("Map", figures),
+        ("Configuration", [html.configuration(config)])],
+        f"{source.summary}, sensor {config.sensor.name}.")
+
+
+def _render(map_path, png):
+    """The viewer's isosurface of the map as a report figure, or a sentence when it cannot render."""
+    from radarcl.jobs import report as html
+
+    try:
+        from radarcl.viewer.headless import render_map
+        from radarcl.viewer.renderer import ViewerError
+
+        render_map(map_path, png, "iso", size=(800, 500), report=lambda _: None)
+    except (ImportError, ViewerError) as exc:
+        return html.Text(f"No render: {exc}")
+    return html.Figure(png.read_bytes(), "The viewer's isosurface at 1 nat, coloured by height (radarcl render)")
 
 
 def open_source(sensor, path, odometry=None):

@@ -222,9 +222,9 @@ def topdown_figure(log_odds, occupied_truth, spec, above_z_m=0.0):
     return fig
 
 
-def plane_map_figure(nats, spec, poses, title):
-    """A one-layer map seen from above: log-odds from -L (free, blue) to +L (occupied, red), L
-    the 99th percentile of |log-odds|, unseen white; the poses (n, 4, 4) in black."""
+def plane_map_figure(nats, spec, poses, title, pose_label="scan poses", label="log-odds [nat]"):
+    """A one-layer map (ny, nx) seen from above: log-odds from -L (free, blue) to +L (occupied,
+    red), L the 99th percentile of |log-odds|, unseen white; the poses (n, 4, 4) in black."""
     plt = _pyplot()
     seen = nats[nats != 0]
     limit = float(np.percentile(np.abs(seen), 99)) if seen.size else 1.0
@@ -232,16 +232,17 @@ def plane_map_figure(nats, spec, poses, title):
     x0, y0, _ = spec.origin_m
     nx, ny, _ = spec.shape
     extent = (y0, y0 + ny * spec.voxel_m, x0, x0 + nx * spec.voxel_m)
-    fig, ax = plt.subplots(figsize=(8.4, 8.4 * nx / ny), dpi=120)
+    fig, ax = plt.subplots(figsize=(8.4, float(np.clip(8.4 * nx / ny, 4.0, 12.0))), dpi=120)
     image = ax.imshow(shown, origin="lower", extent=extent, cmap="coolwarm", vmin=-limit, vmax=limit,
                       interpolation="nearest")
-    ax.plot(poses[:, 1, 3], poses[:, 0, 3], "k.-", ms=4, label="scan poses")
+    if len(poses):
+        ax.plot(poses[:, 1, 3], poses[:, 0, 3], "k.-", ms=4, label=pose_label)
+        ax.legend(loc="upper right")
     ax.invert_xaxis()                                           # y points left
     ax.set_xlabel("y, left [m]")
     ax.set_ylabel("x, forward [m]")
     ax.set_title(title)
-    _colorbar(fig, image, ax, "log-odds [nat]; white: unseen")
-    ax.legend(loc="upper right")
+    _colorbar(fig, image, ax, f"{label}; white: unseen")
     fig.tight_layout()
     return fig
 

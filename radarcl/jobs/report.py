@@ -66,6 +66,19 @@ class Pairs:
     values: dict
 
 
+def configuration(resolved):
+    """A ``mapconfig.Resolved`` as key/value rows: each value (floats to 6 significant digits)
+    with where it came from."""
+    def text(v):
+        if isinstance(v, float):
+            return f"{v:.6g}"
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(text(x) for x in v) + "]"
+        return str(v)
+
+    return Pairs({k: f"{text(v)}  ({resolved.origins[k]})" for k, v in resolved.values.items()})
+
+
 def _cell(v):
     """A table cell: numbers right-aligned to 4 significant digits, the rest as text."""
     if isinstance(v, bool) or not isinstance(v, (int, float)):
