@@ -353,3 +353,12 @@ def test_colour_bar_ticks_are_round_and_inside(lo, hi):
     mantissa = step / 10 ** np.floor(np.log10(step))
     assert min(abs(mantissa - m) for m in (1, 2, 5)) < 1e-6, step
     assert len(set(tick_labels(values))) == len(values)          # labels tell the ticks apart
+
+
+@pytest.mark.parametrize("lo", [0.0, 1.0, 1.0009, 3.3, 65504.0, -0.5, -1000.0])
+def test_the_fast_float16_compare_equals_numpy(lo):
+    rng = np.random.default_rng(7)
+    values = np.concatenate([rng.normal(0, 5, 5000), [0.0, -0.0, 1.0, 1.0009, np.inf, -np.inf, 65504.0, 6e-8]])
+    values = values.astype(np.float16)
+    assert np.array_equal(V.above(values, lo), values > np.float16(lo))
+    assert np.array_equal(V.above(values, lo, inclusive=True), values >= np.float16(lo))

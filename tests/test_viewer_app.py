@@ -19,9 +19,9 @@ CUBE = (16, 24, 8, 16, 8, 16)   # brick-aligned: the view frames it in the middl
 BACKGROUND = np.round(np.asarray(Settings().background) * 255).astype(np.uint8)
 
 
-def write_map(path, cube=CUBE, value=4.0):
+def write_map(path, cube=CUBE, value=4.0, poses=None):
     """A map file as EvidenceGrid.save writes it, with one cube (x0, x1, y0, y1, z0, z1) of
-    ``value`` nat in free space (-1 nat); numpy only."""
+    ``value`` nat in free space (-1 nat) and the sensor's ``poses`` when given; numpy only."""
     nats = np.full(SPEC.array_shape, -1.0)
     x0, x1, y0, y1, z0, z1 = cube
     nats[z0:z1, y0:y1, x0:x1] = value
@@ -33,7 +33,8 @@ def write_map(path, cube=CUBE, value=4.0):
     tmp = f"{path}.tmp"
     with open(tmp, "wb") as f:
         np.savez_compressed(f, version=1, origin_m=np.asarray(SPEC.origin_m), voxel_m=SPEC.voxel_m,
-                            shape=np.asarray(SPEC.shape), keys=keys, data=data)
+                            shape=np.asarray(SPEC.shape), keys=keys, data=data,
+                            **({} if poses is None else dict(poses=poses)))
     shutil.move(tmp, path)
     return path
 
@@ -189,8 +190,11 @@ def test_live_uploads_the_changed_bricks_and_survives_a_broken_file(tmp_path, ap
     path = write_map(tmp_path / "map.npz")
     app = app_for(path, live=True)
     before = _frame(app)
-    write_map(path, value=9.0)                                      # the cube gains evidence
+    path_so_far = np.stack([np.eye(4)] * 2)
+    path_so_far[1, 0, 3] = 1.5
+    write_map(path, value=9.0, poses=path_so_far)                   # the cube gains evidence, the sensor moves
     assert app.poll(force=True) == 1                                # the cube is one brick
+    assert np.array_equal(app.renderer.volume.poses, path_so_far)   # the path drawn grows with the map
     after = _frame(app)
     assert not np.array_equal(before, after)
     fresh = app_for(path)

@@ -14,7 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from radarcl.errors import RadarclError
-from radarcl.grid import read
+from radarcl.grid import read, read_poses
 from radarcl.viewer.camera import Camera
 from radarcl.viewer.modes import COLORMAPS, MODES, Settings
 from radarcl.viewer.renderer import Renderer, ViewerError, import_moderngl, read_rgb
@@ -122,18 +122,21 @@ class ViewerApp:
         volume = self.renderer.volume
         try:
             spec, keys, bricks = read(self.path)
+            poses = read_poses(self.path)                   # the sensor's path grows with the map
             fresh = from_bricks(spec, keys, bricks, self.renderer.max_texture) \
                 if spec != volume.spec or volume.keys is None else None
         except (RadarclError, MemoryError) as exc:
             self.message = f"live: {exc or 'out of memory'} (waiting for the next write)"
             return None
         if fresh is not None:
+            fresh.poses = poses
             self.renderer.upload(fresh)
             changed = len(keys)
         else:
             diff = changed_bricks(volume.keys, volume.bricks, keys, bricks)
             boxes, coarse_box = update(volume, keys, bricks, diff)
             self.renderer.update(boxes, coarse_box)
+            volume.poses = poses
             changed = len(diff)
         self.updates += 1
         self.message = f"live: update {self.updates}, {changed} bricks changed"

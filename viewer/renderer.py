@@ -18,7 +18,7 @@ import numpy as np
 from radarcl.errors import ConfigError, RadarclError
 from radarcl.viewer.camera import box
 from radarcl.viewer.modes import Settings, mode
-from radarcl.viewer.volume import active_box, coarser_max
+from radarcl.viewer.volume import above, active_box, coarser_max
 
 log = logging.getLogger(__name__)
 MAX_SPHERES = 2_000_000          # Fig. 11 instances drawn at most; the largest values are kept
@@ -244,7 +244,7 @@ class Renderer:
         if key not in self._heights:
             spec = self.volume.spec
             z0, v = spec.origin_m[2], spec.voxel_m
-            mask = self.volume.values >= np.float16(key)
+            mask = above(self.volume.values, key, inclusive=True)
             seen = mask.any(axis=0)
             if seen.any():
                 top = (mask.shape[0] - 1 - np.argmax(mask[::-1], axis=0))[seen]
