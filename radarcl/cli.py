@@ -247,9 +247,9 @@ def build_parser():
     p.add_argument("--no-guides", action="store_true", help="leave the ground grid, axes and sensor poses out")
 
     p = command("view", commands.cmd_view, "the interactive volume viewer (press h in the window for the keys)",
-                "Opens a window on the map: drag to orbit, right-drag or shift-drag to pan, wheel to zoom; 1-4 "
-                "modes, t/T threshold, x/y/z slices, c colormap, s screenshot, h help. --live follows a map file "
-                "that a running fusion rewrites.")
+                "Opens a window on the map: drag to orbit, right-drag or shift-drag to pan, wheel to zoom; 1-5 "
+                "modes (5: free space too), t/T threshold, x/y/z slices, c colormap, a guides, s screenshot, "
+                "h help. --live follows a map file that a running fusion rewrites.")
     _view_options(p)
     p.add_argument("--live", action="store_true", help="watch MAP and upload the bricks that changed whenever it is "
                                                        "rewritten")
