@@ -76,10 +76,11 @@ def add_config(p, sensor_default=None):
 
 
 # -- the parser ----------------------------------------------------------------------------------------------
-def _view_options(p):
+def _view_options(p, follow=False):
     from radarcl.viewer.modes import COLORMAPS, MODES
 
-    p.add_argument("map", help="a map file: the npz that EvidenceGrid.save writes (radarcl demo's map.npz)")
+    p.add_argument("map", nargs="?" if follow else None,
+                   help="a map file or store (radarcl demo's map.npz)" + (" (or --follow)" if follow else ""))
     p.add_argument("--mode", choices=list(MODES), default="occupancy",
                    help="; ".join(f"{m.name}: {m.description}" for m in MODES.values()) + " (default: %(default)s)")
     p.add_argument("--camera", default="iso",
@@ -105,6 +106,8 @@ BENCHES = {
                                          "model, voxel, CFAR kind) with the OctoMap-style baseline"),
     "store": ("radarcl.bench.store", "saving and loading the paper's 0.1 m map as .npz vs the map store, with an "
                                      "incremental save, same run"),
+    "live": ("radarcl.bench.live", "the reference scene streamed beam by beam over a pty into the live engine: "
+                                   "throughput, latency, faults, vs waiting for whole frames"),
     "viewer": ("radarcl.bench.viewer", "the paper's full grid rendered at 512 x 512 through EGL vs a plain ray "
                                        "march, same run"),
 }
@@ -238,6 +241,10 @@ def build_parser():
     add_config(p, "navtech-cts350x")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
+    from radarcl import stream_commands
+
+    stream_commands.add_parsers(command, add_output, add_config, positive_float, positive_int)
+
     p = command("render", commands.cmd_render, "render a map file to a PNG through EGL (no display needed)",
                 "Ray-marches the map as a 3D texture (or draws the Fig. 11 spheres) offscreen through EGL and "
                 "writes a PNG with a colour bar.")
@@ -250,9 +257,11 @@ def build_parser():
                 "Opens a window on the map: drag to orbit, right-drag or shift-drag to pan, wheel to zoom; 1-5 "
                 "modes (5: free space too), t/T threshold, x/y/z slices, c colormap, a guides, s screenshot, "
                 "h help. --live follows a map file that a running fusion rewrites.")
-    _view_options(p)
+    _view_options(p, follow=True)
     p.add_argument("--live", action="store_true", help="watch MAP and upload the bricks that changed whenever it is "
                                                        "rewritten")
+    p.add_argument("--follow", default=None, metavar="HOST:PORT",
+                   help="show the map a running `radarcl live --serve` fuses, brick by brick as it changes")
     p.add_argument("--window", default="pyglet", help="moderngl-window backend: pyglet, glfw, headless "
                                                       "(default: %(default)s)")
     p.add_argument("--screenshot", default=None, help="save the last frame to this PNG when the window closes")

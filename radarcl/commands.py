@@ -258,9 +258,14 @@ def cmd_view(args):
     from radarcl import outputs
     from radarcl.viewer.app import run
 
+    if (args.map is None) == (args.follow is None):
+        from radarcl.errors import ConfigError
+
+        raise ConfigError("give a MAP file to view, or --follow HOST:PORT of a running radarcl live --serve (not both)")
     shot = outputs.check(args.screenshot, args.force, inputs=[args.map], what="screenshot") if args.screenshot else None
     status = run(args.map, mode_name=args.mode, camera=args.camera, size=tuple(args.size), settings=_settings(args),
-                 live=args.live, frames=args.frames, screenshot=shot, keys=args.keys, window=args.window)
+                 live=args.live, frames=args.frames, screenshot=shot, keys=args.keys, window=args.window,
+                 follow=args.follow)
     if shot:
         print(f"saved {shot}")
     return status

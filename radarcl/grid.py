@@ -220,6 +220,23 @@ class EvidenceGrid:
             cl.enqueue_copy(self.runtime.queue, data, self.pool, is_blocking=True)
         return self.keys.copy(), data
 
+    def read_slots(self, slots):
+        """(keys (n, 3), data (n, 8, 8, 8)) of the bricks in pool ``slots`` (e.g. a plan's
+        bricks[:, 3]), read in contiguous runs: what changed, without the whole pool."""
+        import pyopencl as cl
+
+        slots = np.unique(np.asarray(slots, np.int64))
+        if len(slots) and (slots[0] < 0 or slots[-1] >= self.n_bricks):
+            raise ConfigError(f"brick slots must lie in [0, {self.n_bricks}), got {slots[0]}..{slots[-1]}")
+        data = np.empty((len(slots), BRICK, BRICK, BRICK), np.int32)
+        if len(slots):
+            starts = np.concatenate([[0], np.flatnonzero(np.diff(slots) != 1) + 1, [len(slots)]])
+            for a, b in zip(starts[:-1], starts[1:]):
+                cl.enqueue_copy(self.runtime.queue, data[a:b], self.pool, src_offset=int(slots[a]) * BRICK_BYTES,
+                                is_blocking=False)
+            self.runtime.queue.finish()
+        return self.keys[slots].copy(), data
+
     def snapshot(self):
         """Dense int32 (nz, ny, nx) copy of the grid in logodds units; unseen voxels are 0."""
         keys, data = self.bricks()
@@ -261,13 +278,18 @@ class EvidenceGrid:
         return grid
 
 
-def write_npz(path, spec, keys, data, poses=None):
-    """A map file: ``spec``, the bricks (``keys`` (n, 3) int32, ``data`` (n, 8, 8, 8) int32) and
-    the sensor's ``poses`` when given. Written beside ``path`` and renamed over it, so a reader
-    (``radarcl view --live``) sees the old map or the new one, never half of one."""
+def write_npz(path, spec, keys, data, poses=None, meta=None):
+    """A map file: ``spec``, the bricks (``keys`` (n, 3) int32, ``data`` (n, 8, 8, 8) int32),
+    the sensor's ``poses`` and ``meta`` (a JSON-able dict) when given. Written beside ``path``
+    and renamed over it, so a reader (``radarcl view --live``) sees the old map or the new one,
+    never half of one."""
+    import json
+
     from radarcl.outputs import atomic
 
     extra = {} if poses is None else dict(poses=check_trajectory(poses))
+    if meta:
+        extra["meta"] = np.str_(json.dumps(meta))
     with atomic(path) as tmp, open(tmp, "wb") as f:
         np.savez_compressed(f, version=FILE_VERSION, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
                             shape=np.asarray(spec.shape), keys=keys, data=data, **extra)
@@ -357,6 +379,26 @@ def read_poses(path):
             return check_trajectory(f["poses"]) if "poses" in f.files else None
     except (ShapeError, ValueError) as exc:
         raise FrameFormatError(f"{path}: bad sensor poses ({exc})") from exc
+
+
+def read_meta(path, key):
+    """The ``key`` entry a map's saver kept (``store.MapSaver(..., key=value)``: the store's
+    manifest, or the npz's ``meta``), or None."""
+    import json
+    from pathlib import Path
+
+    from radarcl import store
+    from radarcl.io import safe_npz
+
+    if Path(path).is_dir():
+        return store.read_manifest(path).get(key)
+    with safe_npz(path) as f:
+        if "meta" not in f.files:
+            return None
+        try:
+            return json.loads(str(f["meta"])).get(key)
+        except (ValueError, AttributeError) as exc:
+            raise FrameFormatError(f"{path}: its meta is not a JSON object ({exc})") from exc
 
 
 def assemble(spec, keys, data):

@@ -141,11 +141,12 @@ class Mapping:
         """Shape of one frame: (n_az, n_el, n_samples) raw, (*batch, n_bins) profiles."""
         return self.range_fft.input_shape if self.range_fft is not None else self.detection.cfar.input_shape
 
-    def fuse(self, frame, poses, flags=None):
+    def fuse(self, frame, poses, flags=None, azimuths=None):
         """Fuse one frame taken at ``poses`` (4x4, or one per beam). The pose and the frame are
         checked before anything runs, so a refused frame leaves the map as it was. Returns the
         ``FramePlan`` (bricks reached, beams outside the grid); the device work is queued, not
-        waited for (``snapshot`` and ``flags`` wait)."""
+        waited for (``snapshot`` and ``flags`` wait). ``azimuths`` (lo, hi): fuse only those
+        azimuths' beams (``Fusion.restrict``): a part of a frame that has arrived so far."""
         if self.range_fft is not None:
             if flags is not None:
                 raise ConfigError("raw frames carry their own flags; pass flags with profiles only")
@@ -155,6 +156,8 @@ class Mapping:
             if flags is not None:
                 flags = self.detection.interpreter.check_flags(flags)
         plan = self.fusion.plan(poses)                  # checks the poses; allocates bricks
+        if azimuths is not None:
+            plan = self.fusion.restrict(plan, *azimuths)
         if self.range_fft is not None:
             done = self.range_fft.enqueue(wait_for=[self.range_fft.upload(frame)])
             profiles, flags_array = self.range_fft.arrays["profiles"], self.range_fft.arrays["flags"]

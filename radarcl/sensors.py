@@ -40,6 +40,7 @@ DEFAULT_SENSOR = "paper"
 INPUTS = ("samples", "profiles")
 SAMPLE_TYPES = {"int16": np.int16, "float32": np.float32, "complex64": np.complex64}
 READERS = ("recording", "polar-png", "ti-openradar")
+STREAM_PROTOCOLS = ("beams", "ti")        # radarcl.io.beam_protocol, radarcl.io.ti_uart
 MAINLOBE_CELLS = 4.0       # Hann mainlobe, null to null, in resolution cells (Harris 1978)
 TRAIN_CELLS = 4.0          # training window per side, in resolution cells
 _NEEDS = {"samples": ("waveform", "beams", "range"), "profiles": ("beams", "range")}
@@ -68,6 +69,9 @@ _SCHEMA = {                # section -> key -> check (value -> value, or ConfigE
     "mounting": {"height_m": lambda v: _N(v, 0, lo_open=True, unit="m"),
                  "lowest_elevation_deg": lambda v: _N(v, -89, 0, lo_open=True, unit="deg"),
                  "ground_elevation_deg": lambda v: _N(v, -89, 0, lo_open=True, unit="deg")},
+    "stream": {"protocol": lambda v: tomlfile.choice(v, STREAM_PROTOCOLS),
+               "range_profile_antennas": lambda v: tomlfile.integer(v, 1, 256),
+               "range_profile_q": lambda v: tomlfile.integer(v, 0, 15)},
     "reader": {"format": lambda v: tomlfile.choice(v, READERS),
                "meta_columns": lambda v: tomlfile.integer(v, 0, 1 << 16),
                "timestamp_column": lambda v: tomlfile.integer(v, 0, 1 << 16),
@@ -98,6 +102,12 @@ class SensorProfile:
     def get(self, section, key, default=None):
         """A raw value of the profile, or ``default``."""
         return self.tables.get(section, {}).get(key, default)
+
+    @property
+    def protocol(self):
+        """How the sensor streams over a serial line (``radarcl live``): "beams" (the radarcl
+        beam protocol) unless its [stream] protocol says "ti" (TI's mmWave demo UART)."""
+        return self.get("stream", "protocol", "beams")
 
     @property
     def raw(self):

@@ -298,13 +298,18 @@ class MapSaver:
         self.meta = dict(sensor_toml=sensor_toml, config=config, inputs=inputs)
         self.writer = None
 
-    def __call__(self, grid, poses=None):
-        """Save ``grid`` (and the sensor ``poses`` (n, 4, 4) so far, when given)."""
+    def __call__(self, grid, poses=None, **meta):
+        """Save ``grid`` (and the sensor ``poses`` (n, 4, 4) so far, when given); ``meta``
+        (JSON-able values, e.g. a live stream's counts) goes into the manifest or the npz's
+        ``meta`` (``grid.read_meta`` reads either)."""
         if self.npz:
-            grid.save(self.path, poses=poses)
+            from radarcl.grid import write_npz
+
+            write_npz(self.path, grid.spec, *grid.bricks(), poses=poses, meta=meta or None)
             return
         if self.writer is None:
             self.writer = StoreWriter(self.path, grid.spec, overwrite=True, **self.meta)
+        self.writer.meta.update(meta)
         self.writer.save(*grid.bricks(), poses=poses)
 
 

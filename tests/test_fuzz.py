@@ -363,3 +363,117 @@ def test_the_cli_answers_hostile_arguments_with_a_sentence(tmp_path, capsys):
         assert "Traceback" not in err and err.strip(), argv
         COUNTS["clear_errors"] += 1
     assert not out.exists()
+
+
+# -- serial streams: 10^6 mutated byte streams in the long run ---------------------------------------
+STREAMS = 1_000_000 if LONG else 20_000
+STREAM_COUNTS = {"streams": 0, "packets_delivered": 0, "exceptions": 0, "slow": 0, "bad_deliveries": 0,
+                 "intact_lost": 0, "counter_mismatches": 0}
+
+
+def _capture(protocol, rng):
+    """A valid stream of 1-5 packets: (list of packets, a way to tell a delivered one was sent)."""
+    from radarcl.io import beam_protocol, emulator
+
+    n = int(rng.integers(1, 6))
+    if protocol == "beams":
+        packets = [beam_protocol.encode(int(rng.integers(0, 1 << 32)), j, j % 3, j % 2, j,
+                                        rng.integers(-999, 999, int(rng.integers(1, 64))).astype(np.int16),
+                                        np.eye(4) if j % 2 else None) for j in range(n)]
+    else:
+        packets = emulator.ti_packets(rng.integers(0, 65535, (n, int(rng.integers(1, 40)))).astype(np.uint16),
+                                      first_frame=int(rng.integers(0, 1000)),
+                                      version=[0x01020000, 0x02010004, 0x03050004][int(rng.integers(0, 3))])
+    return packets
+
+
+def _mutate(packets, rng):
+    """Damage at original positions (from the end, so positions stay valid): returns (bytes,
+    indices of the packets no damage touched)."""
+    from radarcl.io import beam_protocol, ti_uart
+
+    data = bytearray(b"".join(packets))
+    if rng.random() < 0.05:                                # pure noise, now and then with magic words
+        junk = rng.integers(0, 256, int(rng.integers(0, 3000)), np.uint8).tobytes()
+        return junk + (beam_protocol.MAGIC + ti_uart.MAGIC) * int(rng.integers(0, 3)), set()
+    bounds = np.cumsum([0] + [len(p) for p in packets])
+    touched = set()
+    positions = np.sort(rng.integers(0, len(data), int(rng.integers(0, 5))))[::-1]
+    grown = {}                                             # bytes a packet gained (or lost) so far
+    for pos in positions.tolist():                         # from the end: earlier positions stay put
+        if pos >= len(data):                               # a truncation at or before it came first
+            continue
+        op = rng.integers(0, 7)
+        hit = int(np.searchsorted(bounds, pos, side="right") - 1)
+        end = int(bounds[hit + 1]) + grown.get(hit, 0)     # where the packet ends now
+        touched.add(hit)
+        before = len(data)
+        if op == 0:
+            data[pos] ^= 1 << int(rng.integers(0, 8))
+        elif op == 1:
+            del data[pos:min(pos + int(rng.integers(1, 40)), end)]
+        elif op == 2:
+            data[pos:pos] = rng.integers(0, 256, int(rng.integers(1, 80)), np.uint8).tobytes()
+        elif op == 3:
+            data[pos:pos] = (beam_protocol.MAGIC if rng.random() < 0.5 else ti_uart.MAGIC) + \
+                rng.integers(0, 256, int(rng.integers(0, 60)), np.uint8).tobytes()
+        elif op == 4:
+            data[pos:pos] = data[pos:min(pos + int(rng.integers(1, 100)), end)]
+        elif op == 5:
+            del data[pos:]
+            touched.update(range(hit, len(packets)))
+        else:
+            data[pos] = int(rng.integers(0, 256))
+        grown[hit] = grown.get(hit, 0) + len(data) - before
+    return bytes(data), set(range(len(packets))) - touched
+
+
+def test_stream_parsers_survive_mutated_streams():
+    """Both protocols' parsers on STREAMS seeded mutated captures (bit flips, deletions,
+    insertions, fake magic words, repeats, truncation, pure noise) fed in random chunks, then a
+    packet's length of zeros (what follows on a live line): no exception, no stream slower than
+    0.25 s, every delivered beam packet one that was sent (its CRC checked), every untouched beam
+    packet delivered (a TI frame: when the one before it is untouched too; that protocol has no
+    CRC, a damaged frame may claim the next one's bytes), the counters adding up."""
+    import time
+
+    from radarcl.io import beam_protocol, ti_uart
+
+    rng = np.random.default_rng(20261123)
+    for i in range(STREAMS):
+        protocol = "beams" if i % 2 else "ti"
+        packets = _capture(protocol, rng)
+        data, intact = _mutate(packets, rng)
+        parser = beam_protocol.BeamParser() if protocol == "beams" else ti_uart.TiParser()
+        cuts = np.sort(rng.integers(0, len(data) + 1, int(rng.integers(0, 6))))
+        STREAM_COUNTS["streams"] += 1
+        start = time.perf_counter()
+        try:
+            prev = 0
+            for c in list(cuts) + [len(data)]:
+                parser.data_received(data[prev:c])
+                prev = c
+            # the radar goes on sending: a packet cut short waits for at most its own length in
+            # bytes, then fails its check, and what it held back is searched again
+            parser.data_received(bytes(max(len(p) for p in packets)))
+        except Exception:                          # noqa: BLE001 - counted, then the test fails
+            STREAM_COUNTS["exceptions"] += 1
+            raise
+        STREAM_COUNTS["slow"] += time.perf_counter() - start > 0.25
+        got = parser.take()
+        STREAM_COUNTS["packets_delivered"] += len(got)
+        c = parser.counters
+        STREAM_COUNTS["counter_mismatches"] += c.bytes_in != c.bytes_in_packets + c.bytes_dropped + c.bytes_pending
+        if protocol == "beams":
+            sent = {beam_protocol.encode(p.sequence, p.frame, p.azimuth, p.elevation, p.timestamp_ns, p.samples,
+                                         p.pose) for p in got}
+            STREAM_COUNTS["bad_deliveries"] += len(sent - set(packets))
+            STREAM_COUNTS["intact_lost"] += len({packets[j] for j in intact} - sent)
+        else:                    # no CRC: a frame arrives when it and the one before it are whole
+            numbers = {f.frame_number for f in got}
+            first = int.from_bytes(packets[0][20:24], "little")
+            STREAM_COUNTS["intact_lost"] += sum(first + j not in numbers for j in intact if j == 0 or j - 1 in intact)
+    COUNTS.update({f"stream_{k}": v for k, v in STREAM_COUNTS.items()})
+    assert STREAM_COUNTS["exceptions"] == STREAM_COUNTS["slow"] == STREAM_COUNTS["bad_deliveries"] == 0
+    assert STREAM_COUNTS["intact_lost"] == STREAM_COUNTS["counter_mismatches"] == 0
+    assert STREAM_COUNTS["packets_delivered"] > STREAMS

@@ -18,7 +18,7 @@ from radarcl.grid import read, read_poses
 from radarcl.viewer.camera import Camera
 from radarcl.viewer.modes import COLORMAPS, MODES, Settings
 from radarcl.viewer.renderer import Renderer, ViewerError, import_moderngl, read_rgb
-from radarcl.viewer.volume import changed_bricks, from_bricks, load_map, update
+from radarcl.viewer.volume import changed_bricks, from_bricks, load_map, update, write_bricks
 
 log = logging.getLogger(__name__)
 POLL_S = 0.25                       # how often --live looks at the file
@@ -31,11 +31,12 @@ class ViewerApp:
     key's action, ``drag``/``scroll`` move the camera, ``frame()`` draws one frame into the
     window's framebuffer (polling the file first when live)."""
 
-    def __init__(self, window, path, volume, mode_name="occupancy", camera=None, settings=Settings(), live=False):
+    def __init__(self, window, path, volume, mode_name="occupancy", camera=None, settings=Settings(), live=False,
+                 follow=None):
         from radarcl.viewer.overlay import Overlay
 
         self.wnd, self.ctx = window, window.ctx
-        self.path, self.live = Path(path), live
+        self.path, self.live, self.follow = Path(path), live, follow    # follow: a BrickSubscriber
         from radarcl.viewer.guides import Guides
 
         self.renderer = Renderer(self.ctx, volume)
@@ -110,7 +111,10 @@ class ViewerApp:
 
     def poll(self, force=False):
         """When live (or ``force``), read the file if it changed and upload the changed bricks;
-        returns the number of bricks written (None when nothing was read)."""
+        when following an engine, write the bricks it sent. Returns the number of bricks
+        written (None when nothing was read)."""
+        if self.follow is not None:
+            return self._follow()
         now = time.monotonic()
         if not force and (not self.live or now - self._last_poll < POLL_S):
             return None
@@ -141,6 +145,22 @@ class ViewerApp:
         self.updates += 1
         self.message = f"live: update {self.updates}, {changed} bricks changed"
         return changed
+
+    def _follow(self):
+        volume, written = self.renderer.volume, None
+        for item in self.follow.take():
+            if item[0] == "bricks" and len(item[1]):
+                boxes, coarse_box = write_bricks(volume, item[1], item[2])
+                self.renderer.update(boxes, coarse_box)
+                written = (written or 0) + len(item[1])
+            elif item[0] == "poses":
+                volume.poses = item[1]
+        if written:
+            self.updates += 1
+            self.message = f"follow: update {self.updates}, {written} bricks"
+        if self.follow.error:
+            self.message = f"follow: the engine's stream ended ({self.follow.error}); the map shown is its last"
+        return written
 
     # -- drawing --------------------------------------------------------------------------
     def frame(self):
@@ -232,17 +252,23 @@ def open_window(backend, size, title):
 
 
 def run(path, mode_name="occupancy", camera="iso", size=(1024, 768), settings=Settings(), live=False, frames=None,
-        screenshot=None, keys="", window="pyglet"):
-    """Open the window on the map file ``path`` and run until it closes (or ``frames`` frames
-    have been drawn); ``keys`` are pressed one per frame first; the last frame is saved to
+        screenshot=None, keys="", window="pyglet", follow=None):
+    """Open the window on the map file ``path`` (or, with ``follow`` "HOST:PORT", on the map a
+    running ``radarcl live --serve`` sends) and run until it closes (or ``frames`` frames have
+    been drawn); ``keys`` are pressed one per frame first; the last frame is saved to
     ``screenshot``. Returns the exit status."""
-    volume = load_map(path)                             # a bad file fails before a window opens
+    subscriber = None
+    if follow is not None:
+        subscriber, volume = follow_engine(follow)
+        path = f"follow-{follow.replace(':', '-')}"
+    else:
+        volume = load_map(path)                         # a bad file fails before a window opens
     wnd = open_window(window, size, f"radarcl view {Path(path).name}")
     if volume.note:
         log.warning("%s", volume.note)
     region = volume.view_box(settings.clamp_range(volume)[0])
     cam = Camera.parse(camera, volume.spec, region, size[0] / size[1])
-    app = ViewerApp(wnd, path, volume, mode_name, cam, settings, live)
+    app = ViewerApp(wnd, path, volume, mode_name, cam, settings, live, subscriber)
     wnd.unicode_char_entered_func = app.press
     wnd.key_event_func = lambda key, action, modifiers: (
         wnd.close() if key == wnd.keys.ESCAPE and action == wnd.keys.ACTION_PRESS else None)
@@ -262,3 +288,33 @@ def run(path, mode_name="occupancy", camera="iso", size=(1024, 768), settings=Se
         wnd.swap_buffers()
     wnd.destroy()
     return 0
+
+
+def follow_engine(address, timeout_s=10.0):
+    """(subscriber, Volume) of a running engine's map: waits for its grid and first bricks."""
+    from radarcl.io.brick_stream import BrickSubscriber
+
+    sub = BrickSubscriber(address, timeout_s)
+    deadline = time.monotonic() + timeout_s
+    spec = keys = data = None
+    poses = None
+    while data is None:
+        if not sub.arrived.wait(max(0.0, deadline - time.monotonic())) or sub.error:
+            sub.close()
+            raise ViewerError(f"the engine at {address} sent no map within {timeout_s:g} s"
+                              + (f" ({sub.error})" if sub.error else ""))
+        sub.arrived.clear()
+        for item in sub.take():
+            if item[0] == "spec":
+                spec = item[1]
+            elif item[0] == "bricks" and spec is not None and data is None:
+                keys, data = item[1], item[2]
+            elif item[0] == "poses":
+                poses = item[1]
+    volume = from_bricks(spec, keys, data)
+    if volume.note:
+        sub.close()
+        raise ViewerError(f"the engine's grid {spec.shape} is too large to follow brick by brick here ({volume.note}); "
+                          "open its saved map with radarcl view instead")
+    volume.poses = poses
+    return sub, volume

@@ -333,25 +333,38 @@ def update(volume, keys, bricks, changed):
     """Write the ``changed`` bricks of a new sparse snapshot (``keys``, ``bricks``) into
     ``volume.values`` and recompute the coarse cells they touch; returns the voxel boxes
     ((z0, z1), (y0, y1), (x0, x1)) written, for the texture upload, and the coarse box."""
-    spec = volume.spec
     if volume.keys is None:
         raise ConfigError("this volume was downsampled or built from a dense array; reload it instead")
     lookup = {tuple(k): i for i, k in enumerate(keys.tolist())}
+    blocks = np.zeros((len(changed), BRICK, BRICK, BRICK), np.int32)
+    for j, key in enumerate(np.asarray(changed).tolist()):
+        i = lookup.get(tuple(key))
+        if i is not None:
+            blocks[j] = bricks[i]
+    out = write_bricks(volume, changed, blocks)
+    volume.keys, volume.bricks = keys, bricks
+    return out
+
+
+def write_bricks(volume, keys, blocks):
+    """Write bricks (``keys`` (n, 3) (bx, by, bz), ``blocks`` (n, 8, 8, 8) int32 units) into
+    ``volume.values`` and recompute the coarse cells they touch (a live engine's changed bricks,
+    ``radarcl view --follow``); returns the voxel boxes written and the coarse box, as ``update``."""
+    spec = volume.spec
+    if volume.note:
+        raise ConfigError("this volume is max-pooled to fit the GL: bricks cannot be written into it; reload it")
     nz, ny, nx = spec.array_shape
     boxes = []
-    for bx, by, bz in changed.tolist():
+    for (bx, by, bz), block in zip(np.asarray(keys).tolist(), blocks):
         z0, y0, x0 = bz * BRICK, by * BRICK, bx * BRICK
         z1, y1, x1 = min(z0 + BRICK, nz), min(y0 + BRICK, ny), min(x0 + BRICK, nx)
-        i = lookup.get((bx, by, bz))
-        block = np.zeros((BRICK,) * 3, np.int32) if i is None else bricks[i]
         volume.values[z0:z1, y0:y1, x0:x1] = to_texture(block[:z1 - z0, :y1 - y0, :x1 - x0])
         boxes.append(((z0, z1), (y0, y1), (x0, x1)))
-    volume.keys, volume.bricks = keys, bricks
     volume._percentiles.clear()
     volume._boxes.clear()
     if not boxes:
         return boxes, None
-    c = np.asarray(changed)
+    c = np.asarray(keys)
     lo = np.maximum(c.min(axis=0) - 1, 0)              # a neighbour's apron may reach a changed voxel
     hi = np.minimum(c.max(axis=0) + 2, np.asarray(spec.brick_shape))
     volume.coarse[lo[2]:hi[2], lo[1]:hi[1], lo[0]:hi[0]] = coarse_max(volume.values, lo, hi)

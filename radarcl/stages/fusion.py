@@ -197,6 +197,27 @@ class Fusion(Stage):
         self._cached = (key, plan)
         return plan
 
+    def restrict(self, plan, az_lo, az_hi):
+        """The part of ``plan`` that the beams of azimuths ``az_lo``..``az_hi`` (every elevation)
+        can reach: the bricks whose candidate window meets them, each window clipped to them.
+        Fusing the sub-plans of disjoint azimuth ranges, each with its beams' evidence, gives
+        the whole plan's map: each beam's update is rounded on its own and the sums are exact
+        integers (the grid clamps at +-2^30 after each fuse, so the two agree below that).
+        A radar streaming beam by beam fuses what has arrived this way (``radarcl live``)."""
+        if self.lattice.wraps:
+            raise ConfigError("a spinning radar's turn wraps around in azimuth: fuse whole turns, not azimuth ranges")
+        lo, hi = int(az_lo), int(az_hi)
+        if not 0 <= lo <= hi < self.lattice.n_az:
+            raise ConfigError(f"azimuths {az_lo}..{az_hi} are not a range of this lattice's 0..{self.lattice.n_az - 1}")
+        if not isinstance(plan, FramePlan) or plan.owner is not self:
+            raise ConfigError("plan must be a FramePlan made by this Fusion's plan()")
+        w = plan.windows
+        i_lo, i_hi = np.maximum(w[:, 0], lo), np.minimum(w[:, 1], hi)
+        keep = i_lo <= i_hi
+        windows = w[keep].copy()
+        windows[:, 0], windows[:, 1] = i_lo[keep], i_hi[keep]
+        return FramePlan(plan.beams, plan.bricks[keep], windows, plan.beams_outside, self, plan.generation)
+
     def _windows(self, brick_index, edge, frame):
         centres = (brick_index + 0.5) * edge * self.grid.spec.voxel_m
         radius = 0.5 * math.sqrt(3) * edge * self.grid.spec.voxel_m
