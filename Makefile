@@ -2,7 +2,8 @@
 # Both build a virtual environment in .venv from pyproject.toml first (PoCL, the OpenCL CPU
 # device, comes from PyPI) and check the system libraries the viewer needs: Mesa's EGL for
 # headless rendering and Xvfb for the window test; `make test` also Chromium (the reports are
-# opened in a real browser). Missing ones are installed with apt-get when
+# opened in a real browser), and Debian's PoCL where apt-get can (see SYSTEM_PACKAGES_OPENCL).
+# Missing ones are installed with apt-get when
 # running as root (CI, a fresh machine); otherwise make stops and names them.
 PYTHON ?= python3
 VENV ?= .venv
@@ -11,6 +12,10 @@ BIN := $(VENV)/bin
 SYSTEM_PACKAGES_EGL := libegl1 libegl-mesa0 libgl1-mesa-dri
 SYSTEM_PACKAGES_X := xvfb xauth
 SYSTEM_PACKAGES_BROWSER := chromium
+# Debian's PoCL 3.1 (LLVM 15) beside PyPI's 3.0 (LLVM 14): it builds on CPUs LLVM 14 does not know
+# (AMD Zen 5 reads as 'generic' there and every build fails) and ran our kernels faster
+# (ARCHITECTURE.md). Optional: installed where apt-get can, otherwise PyPI's PoCL is used.
+SYSTEM_PACKAGES_OPENCL := pocl-opencl-icd
 
 .PHONY: demo test fuzz bench info clean system
 
@@ -25,6 +30,8 @@ system:
 	ldconfig -p | grep -q 'libEGL_mesa.so' || missing="$$missing $(SYSTEM_PACKAGES_EGL)"; \
 	command -v xvfb-run >/dev/null || missing="$$missing $(SYSTEM_PACKAGES_X)"; \
 	[ -z "$(NEED_BROWSER)" ] || command -v chromium >/dev/null || missing="$$missing $(SYSTEM_PACKAGES_BROWSER)"; \
+	[ -e /etc/OpenCL/vendors/pocl.icd ] || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && missing="$$missing $(SYSTEM_PACKAGES_OPENCL)"; } || \
+	  echo "note: no system PoCL; using PyPI's PoCL 3.0 (LLVM 14), which cannot build for CPUs newer than LLVM 14 (AMD Zen 4/5): radarcl info says"; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
 	    echo "installing$$missing (apt-get)"; \

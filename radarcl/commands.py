@@ -59,9 +59,10 @@ def _runtime():
 
 
 def cmd_info(args):
-    from radarcl.cl import device_report
+    from radarcl.cl import choose_device, device_report
 
     print("\n".join(device_report()))
+    choose_device()  # after the listing: no usable device, or a RADARCL_DEVICE that fits none, is an error
     return 0
 
 

@@ -1,7 +1,7 @@
 """Shared fixtures: an OpenCL runtime per device under test, and the shared data.
 
 Devices: the one radarcl chooses (RADARCL_DEVICE overrides; PoCL's CPU device in CI), or with
-RADARCL_TEST_DEVICES=all every OpenCL device present, so a GPU machine tests PoCL too (as
+RADARCL_TEST_DEVICES=all every OpenCL device present that can build a kernel, so a GPU machine tests PoCL too (as
 PyOpenCL's own tests parametrise over devices). Each kernel test then runs once per device,
 named after it.
 """
@@ -16,11 +16,11 @@ DEVICES_ENV = "RADARCL_TEST_DEVICES"
 
 
 def _devices():
-    from radarcl.cl.runtime import _all_devices, choose_device
+    from radarcl.cl.runtime import _all_devices, build_problem, choose_device
 
     wanted = os.environ.get(DEVICES_ENV, "").strip().lower()
     if wanted == "all":
-        return [device for _, _, _, device in _all_devices()]
+        return [device for _, _, _, device in _all_devices() if build_problem(device) is None]
     if wanted:
         raise pytest.UsageError(f"{DEVICES_ENV} must be 'all' or unset, got {wanted!r}")
     return [choose_device()]

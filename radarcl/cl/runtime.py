@@ -65,12 +65,47 @@ def _all_devices():
     return found
 
 
+_PROBE_SOURCE = "__kernel void probe(__global float *x) { x[get_global_id(0)] = sqrt(x[get_global_id(0)]); }"
+_probed = {}
+
+_UNKNOWN_CPU_HINT = ("this PoCL's LLVM does not know this CPU (PyPI's PoCL 3.0 has LLVM 14, which "
+                     "predates AMD Zen 4/5); install a newer PoCL, e.g. Debian's pocl-opencl-icd "
+                     "(make test and make demo do it where they can)")
+
+
+def build_problem(device):
+    """None when ``device`` compiles a small kernel, else the reason it cannot (memoised).
+
+    A device can be listed and still fail every build: PyPI's PoCL 3.0 (LLVM 14) asks LLVM for
+    the host CPU, gets 'generic' on CPUs newer than LLVM 14 (AMD family 26) and every build
+    fails with "unknown target CPU 'generic'". Choosing such a device would fail later, in the
+    first stage, with a compiler log instead of a sentence."""
+    key = device.int_ptr
+    if key not in _probed:
+        cl = _cl()
+        try:
+            program = cl.Program(cl.Context([device]), _PROBE_SOURCE)
+            with _quiet_build():
+                program.build()
+            _probed[key] = None
+        except cl.Error as exc:
+            try:
+                said = program.get_build_info(device, cl.program_build_info.LOG).strip()
+            except (cl.Error, UnboundLocalError):
+                said = ""
+            said = said.splitlines()[0] if said else str(exc).splitlines()[0]
+            hint = f"; {_UNKNOWN_CPU_HINT}" if "unknown target CPU" in said else ""
+            _probed[key] = f"cannot build kernels ({said}){hint}"
+    return _probed[key]
+
+
 def choose_device(spec=None):
     """Pick the OpenCL device radarcl runs on.
 
     ``spec`` (or the ``RADARCL_DEVICE`` environment variable when ``spec`` is None) selects by
     ``"P:D"`` indices or by a substring of "platform / device". Without either, a GPU is
-    preferred and PoCL's CPU device is the fallback. Raises ``NoOpenCLError`` when nothing fits.
+    preferred and PoCL's CPU device is the fallback, among the devices that can build a
+    kernel (``build_problem``). Raises ``NoOpenCLError`` when nothing fits.
     """
     cl = _cl()
     spec = os.environ.get(DEVICE_ENV) if spec is None else spec
@@ -79,30 +114,39 @@ def choose_device(spec=None):
         spec = spec.strip()
         parts = spec.split(":")
         if len(parts) == 2 and all(p.isdigit() for p in parts):
-            for p_index, d_index, _, device in found:
-                if (p_index, d_index) == (int(parts[0]), int(parts[1])):
-                    return device
+            matches = [dev for p, d, _, dev in found if (p, d) == (int(parts[0]), int(parts[1]))]
         else:
-            for _, _, platform, device in found:
-                if spec.lower() in f"{platform.name} / {device.name}".lower():
-                    return device
+            matches = [dev for _, _, pl, dev in found if spec.lower() in f"{pl.name} / {dev.name}".lower()]
+        if matches:
+            usable = [dev for dev in matches if build_problem(dev) is None]
+            if usable:
+                return usable[0]
+            raise NoOpenCLError(f"{DEVICE_ENV}={spec!r} picks {matches[0].platform.name} / {matches[0].name}, "
+                                f"which {build_problem(matches[0])}")
         listing = "; ".join(f"{p}:{d} {pl.name} / {dev.name}" for p, d, pl, dev in found)
         raise NoOpenCLError(f"{DEVICE_ENV}={spec!r} matches no device; available: {listing}")
-    gpus = [dev for _, _, _, dev in found if dev.type & cl.device_type.GPU]
+    usable = [(pl, dev) for _, _, pl, dev in found if build_problem(dev) is None]
+    if not usable:
+        problems = "; ".join(f"{pl.name} / {dev.name}: {build_problem(dev)}" for _, _, pl, dev in found)
+        raise NoOpenCLError(f"no OpenCL device can build radarcl's kernels: {problems}")
+    gpus = [dev for _, dev in usable if dev.type & cl.device_type.GPU]
     if gpus:
         return gpus[0]
-    pocl = [dev for _, _, pl, dev in found if "portable computing language" in pl.name.lower()]
-    return (pocl or [found[0][3]])[0]
+    pocl = [dev for pl, dev in usable if "portable computing language" in pl.name.lower()]
+    return (pocl or [usable[0][1]])[0]
 
 
 def device_report():
     """Lines describing every platform and device, with what radarcl's kernels need."""
     cl = _cl()
-    chosen = choose_device()
+    try:
+        chosen = choose_device()
+    except NoOpenCLError:  # still list what is there; the caller says why none was chosen
+        chosen = None
     lines = []
     for p_index, d_index, platform, device in _all_devices():
         ext = device.extensions.split()
-        mark = "*" if device.int_ptr == chosen.int_ptr else " "
+        mark = "*" if chosen is not None and device.int_ptr == chosen.int_ptr else " "
         lines += [
             f"{mark} {p_index}:{d_index}  {platform.name} ({platform.version})",
             f"      device         {device.name} [{cl.device_type.to_string(device.type)}]",
@@ -115,6 +159,8 @@ def device_report():
             f"int64 atomics {'yes' if 'cl_khr_int64_base_atomics' in ext else 'no'}, "
             f"fp64 {'yes' if 'cl_khr_fp64' in ext else 'no'}",
         ]
+        if build_problem(device):
+            lines.append(f"      UNUSABLE       {build_problem(device)}")
     lines.append(f"(* = chosen; set {DEVICE_ENV}=P:D or a name substring to override)")
     return lines
 
