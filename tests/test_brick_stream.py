@@ -55,6 +55,25 @@ def test_a_viewer_gets_the_map_then_each_change():
         pub.close()
 
 
+def test_a_viewer_that_comes_before_the_first_beam_gets_an_empty_map():
+    """`radarcl live --view` starts its viewer before the radar has sent anything: the greeting
+    holds no brick (this crashed the engine: an empty array cannot be reshaped to (0, -1))."""
+    keys, data = np.zeros((0, 3), np.int32), np.zeros((0, BRICK, BRICK, BRICK), np.int32)
+    pub = bs.BrickPublisher(lambda: (SPEC, keys, data, None))
+    sub = bs.BrickSubscriber(pub.address)
+    try:
+        for _ in range(200):
+            pub.publish()
+            if sub.arrived.wait(0.05):
+                break
+        got = wait_for(sub, ["spec", "bricks"])
+        k, d = next(g[1:] for g in got if g[0] == "bricks")
+        assert k.shape == (0, 3) and d.size == 0 and sub.error is None
+    finally:
+        sub.close()
+        pub.close()
+
+
 def test_a_bad_stream_stops_the_subscriber_with_the_reason():
     server = socket.create_server(("127.0.0.1", 0))
     addr = server.getsockname()[:2]

@@ -159,7 +159,8 @@ class ViewerApp:
             self.updates += 1
             self.message = f"follow: update {self.updates}, {written} bricks"
         if self.follow.error:
-            self.message = f"follow: the engine's stream ended ({self.follow.error}); the map shown is its last"
+            # short: the status line is one line of a window that may be 1024 px wide
+            self.message = f"follow ended: {self.follow.error}; showing the last map"
         return written
 
     # -- drawing --------------------------------------------------------------------------

@@ -32,7 +32,7 @@ def _message(kind, payload):
 
 def bricks_message(keys, data):
     keys = np.ascontiguousarray(keys, "<i4").reshape(-1, 3)
-    data = np.ascontiguousarray(data, "<i4").reshape(len(keys), -1)
+    data = np.ascontiguousarray(data, "<i4").reshape(len(keys), BRICK_INTS)  # an empty map too (a viewer that comes first)
     return _message(BRICKS, struct.pack("<I", len(keys)) + keys.tobytes() + data.tobytes())
 
 
