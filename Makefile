@@ -30,7 +30,7 @@ system:
 	ldconfig -p | grep -q 'libEGL_mesa.so' || missing="$$missing $(SYSTEM_PACKAGES_EGL)"; \
 	command -v xvfb-run >/dev/null || missing="$$missing $(SYSTEM_PACKAGES_X)"; \
 	[ -z "$(NEED_BROWSER)" ] || command -v chromium >/dev/null || missing="$$missing $(SYSTEM_PACKAGES_BROWSER)"; \
-	[ -e /etc/OpenCL/vendors/pocl.icd ] || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && missing="$$missing $(SYSTEM_PACKAGES_OPENCL)"; } || \
+	{ [ -e /etc/OpenCL/vendors/pocl.icd ] && ldconfig -p | grep -q 'libpocl.so'; } || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && missing="$$missing $(SYSTEM_PACKAGES_OPENCL)"; } || \
 	  echo "note: no system PoCL; using PyPI's PoCL 3.0 (LLVM 14), which cannot build for CPUs newer than LLVM 14 (AMD Zen 4/5): radarcl info says"; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
