@@ -39,11 +39,19 @@ def figures():
     poses = np.stack([np.eye(4)] * 3)
     poses[:, 0, 3] = [0, 2, 4]
     plane = GridSpec((-20.0, -20.0, -0.15), 0.5, (80, 80, 1))
-    run = dict(dimension="cfar", label="kind=ca", ms_per_frame=12.0, auc=0.6, iou=0.1, false_free=0.3, pareto=True)
-    quality = dict(device="Portable / pthread-cpu", observations=3840, seed=0, frames=15, runs=[
-        dict(run, dimension="reference", label="reference: kind=so, pfa=0.01, k_occ=0.25, e_high=-0.025"),
-        run, dict(run, label="n_fft=256", dimension="zero padding", ms_per_frame=9.0, pareto=False)],
-        baseline=dict(label="CFAR points", ms_per_frame=45.0, auc=0.48, iou=0.05, false_free=0.2))
+    scores = dict(auc_detectable=0.6, iou_detectable=0.1, auc_obstacles=0.7, iou_obstacles=0.05, auc_weak=0.5,
+                  false_free=0.3, shadow_unknown=0.9, ece=0.4, brier=0.25, objects_found=9, objects_total=10,
+                  reliability=[(k / 10, (k + 1) / 10, 10 * k, k / 10 + 0.05, k / 12) for k in range(10)])
+    run = dict(scores, dimension="cfar", label="kind=ca", voxel_m=0.4, ms_per_frame=12.0, pareto=True)
+    base = {"prior_only": dict(scores, auc_detectable=0.88, ms_per_frame=0.0),
+            "raw_intensity": dict(scores, auc_detectable=0.67, ms_per_frame=9.0),
+            "octomap": dict(scores, auc_detectable=0.48, ms_per_frame=45.0)}
+    voxel_set = "fixed voxel set: the 498,343 voxels the reference configuration's beams reach at 0.4 m"
+    quality = dict(device="Portable / pthread-cpu", observations=3840, seed=0, frames=15, reference_voxel_m=0.4,
+                   voxel_set=voxel_set, runs=[
+                       dict(run, dimension="reference", label="reference: kind=so, pfa=0.01, k_occ=0.25, e_high=-0.025"),
+                       run, dict(run, label="n_fft=256", dimension="zero padding", ms_per_frame=9.0, pareto=False)],
+                   baselines=base, by_voxel={"0.4": dict(voxel_set=voxel_set, baselines=base)})
     QUALITY.update(quality)
     return {  # built one at a time: a test draws only its own
         "fig9": lambda: plots.fig9_figure([r, r], [np.abs(np.sin(r)), np.abs(np.cos(r))], (7.2, 8.2), ["a", "b"]),
@@ -55,6 +63,8 @@ def figures():
         "topdown": lambda: plots.topdown_figure(log_odds, occ, spec),
         "plane map": lambda: plots.plane_map_figure(rng.normal(0, 2, (80, 80)), plane, poses, "a map\nsecond line"),
         "quality": lambda: plots.quality_figure(quality),
+        "reliability": lambda: plots.reliability_figure({"map": scores["reliability"],
+                                                         "prior_only": scores["reliability"][::-1]}, voxel_set),
     }
 
 
@@ -101,4 +111,4 @@ def test_the_bench_quality_page_opens_with_its_table_and_chart(tmp_path):
     quality.write_report(QUALITY, tmp_path / "quality.png", page)
     dom, console = open_in_browser(page, tmp_path)
     assert 'data-images="1/1"' in dom and 'data-errors="0"' in dom and console == []
-    assert dom.count("<tr>") == 1 + len(QUALITY["runs"]) + 1 + 4       # header, runs, baseline; 4 run rows
+    assert dom.count("<tr>") == 1 + len(QUALITY["runs"]) + 3 + 4       # header, runs, baselines; 4 run rows

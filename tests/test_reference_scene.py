@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from radarcl.evaluation import baseline, metrics
+from radarcl.evaluation import metrics
 from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.grid import GridSpec
 from radarcl.io import recording
@@ -158,20 +158,3 @@ def test_metrics_on_a_hand_made_map():
     assert m["auc"] == pytest.approx(metrics.roc_auc([-2, -1, 3, 2, -1, -1], y.astype(bool)))
 
 
-def test_octomap_baseline_one_ray():
-    """One detection at 2.03 m along x on a 0.1 m grid (voxel 20): it takes logit(0.7), the 20
-    voxels before it logit(0.4); repeated scans clamp at OctoMap's limits."""
-    spec = GridSpec((-0.05, -0.15, -0.15), 0.1, (40, 3, 3))      # the ray runs along the middle row
-    base = baseline.OctoMapBaseline(spec)
-    ranges = np.arange(0, 4, 0.0625) + 0.03
-    mask = np.zeros((1, len(ranges)), bool)
-    mask[0, 32] = True                                        # 2.03 m
-    base.insert_scan((0.0, 0.0, 0.0), np.array([[1.0, 0.0, 0.0]]), ranges, mask, 0.5, 3.5)
-    row = base.log_odds[1, 1]
-    assert np.count_nonzero(base.log_odds) == 21
-    assert row[20] == pytest.approx(math.log(0.7 / 0.3), rel=1e-6)
-    assert np.allclose(row[:20], math.log(0.4 / 0.6)) and (row[21:] == 0).all()
-    for _ in range(30):
-        base.insert_scan((0.0, 0.0, 0.0), np.array([[1.0, 0.0, 0.0]]), ranges, mask, 0.5, 3.5)
-    assert row[20] == pytest.approx(math.log(0.971 / 0.029), rel=1e-6)
-    assert row[0] == pytest.approx(math.log(0.1192 / 0.8808), rel=1e-6)

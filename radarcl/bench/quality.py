@@ -3,20 +3,23 @@
 One recording of the paper's 3,840 observations (``tuning.EVALUATION_SEED``) is mapped with the
 tuned configuration (``tuning.TUNED``) and with one setting changed at a time: zero padding
 (n_fft 256 = none, 512 = x2, 1024 = x4), the beam model (``geometry.BEAM_MODELS``), the voxel
-size (0.4, 0.2, 0.1 m) and the CFAR kind. For each run, measured in this process:
-``ms_per_frame`` (the device pipeline, planning included), AUC, IoU, false-free rate, Brier, and
-``max_dev_nats``: the largest |kernel - float64 oracle| over the voxels that ``ORACLE_BEAMS`` of
-the middle frame reach, the oracle being ``radarcl.oracle`` end to end (range profile, CFAR, eq. 12,
-``fusion_at_points``), voxels whose decisions lie within ``FUSION_DECISION_MARGIN`` of a boundary left
-out. The baseline entry is the OctoMap-style map (``evaluation.baseline``) of the reference run's
-detections, timed in numpy. Runs on the Pareto front (no other run both faster and better in
-AUC) are marked; ``chart`` draws AUC against ms per frame.
+size (0.4, 0.2, 0.1 m) and the CFAR kind. Every run is scored on one fixed voxel set per voxel
+size: what the reference configuration's beams reach at that size (``evaluate.instrument``),
+with the visibility truth (``evaluation.visibility``) and ``metrics.radar_scores``; beside the
+three baselines of ``evaluation.baseline`` (prior_only, raw_intensity, octomap) on the same set.
+For each run, measured in this process: ``ms_per_frame`` (the device pipeline, planning
+included), the scores, and ``max_dev_nats``: the largest |kernel - float64 oracle| over the
+voxels that ``ORACLE_BEAMS`` of the middle frame reach, the oracle being ``radarcl.oracle`` end
+to end (range profile, CFAR, eq. 12, ``fusion_at_points``), voxels whose decisions lie within
+``FUSION_DECISION_MARGIN`` of a boundary left out. Runs on the Pareto front within their voxel
+size (no other run both faster and higher in ``auc_detectable``) are marked; ``chart`` draws
+that AUC against ms per frame, and a reliability diagram.
 """
 
 import numpy as np
 
 from radarcl import logodds, oracle
-from radarcl.evaluation.evaluate import baseline_map, map_observations, score
+from radarcl.evaluation.evaluate import map_observations
 from radarcl.geometry import BEAM_MODELS
 from radarcl.grid import EvidenceGrid
 from radarcl.pipeline import Mapping
@@ -80,92 +83,141 @@ def oracle_deviation(runtime, obs, config, beams=ORACLE_BEAMS):
     return float(err.max()) / logodds.SCALE, float((err == 0).mean()), int(err.size)
 
 
-def pareto(runs):
+SCORE_KEYS = ("auc_detectable", "iou_detectable", "auc_obstacles", "iou_obstacles", "auc_weak", "false_free",
+              "shadow_unknown", "ece", "brier", "objects_found", "objects_total")
+BASELINES = ("prior_only", "raw_intensity", "octomap")
+
+
+def pareto(runs, key="auc_detectable"):
     """Flags: run i is on the front when no run is at least as fast and as good, one strictly."""
     flags = []
     for r in runs:
-        dominated = any(o["ms_per_frame"] <= r["ms_per_frame"] and o["auc"] >= r["auc"]
-                        and (o["ms_per_frame"] < r["ms_per_frame"] or o["auc"] > r["auc"]) for o in runs)
+        dominated = any(o["ms_per_frame"] <= r["ms_per_frame"] and o[key] >= r[key]
+                        and (o["ms_per_frame"] < r["ms_per_frame"] or o[key] > r[key]) for o in runs)
         flags.append(not dominated)
     return flags
 
 
-def run(runtime, obs, truth_for, reference_config, voxels=VOXELS, report=None):
-    """Measure every variant; ``truth_for(voxel_m)`` gives the truth labels of that grid.
-    Returns the --json dict."""
+def run(runtime, scene, obs, reference_config, voxels=VOXELS, report=None):
+    """Measure every variant of ``reference_config`` on ``obs`` (simulated from ``scene``), each
+    scored on the fixed voxel set of its voxel size (``evaluate.instrument``: what the reference
+    configuration reaches at that size), beside the three baselines. Returns the --json dict."""
+    from radarcl.evaluation.evaluate import baselines, instrument, radar_score
+
     say = report or (lambda _: None)
-    runs, baseline = [], None
+    instruments, runs, by_voxel = {}, [], {}
     for dim, config in variants(reference_config, voxels):
+        v = config["grid.voxel_m"]
+        if v not in instruments:
+            say(f"truth and baselines at {v} m ...")
+            inst = instruments[v] = instrument(runtime, scene, obs, reference_config.replaced(grid__voxel_m=v))
+            by_voxel[str(v)] = dict(voxel_set=inst.describe(), classes=inst.truth.counts(), hidden_objects=inst.hidden,
+                                    baselines=baselines(runtime, inst, obs))
+        inst = instruments[v]
         say(f"{dim}: {config.label(reference_config)} ...")
         res = map_observations(runtime, obs, config)
-        truth = truth_for(config["grid.voxel_m"])
-        m = score(res.log_odds, res.observed, truth)
+        m = radar_score(inst, res.log_odds)
         dev, exact, compared = oracle_deviation(runtime, obs, config)
         label = ("reference: " + config.label()) if config is reference_config else config.label(reference_config)
-        runs.append(dict(dimension=dim, label=label, config=config.as_dict(), ms_per_frame=res.ms_per_frame,
-                         auc=m["auc"], iou=m["iou"], iou_tol1=m["iou_tol1"], false_free=m["false_free"],
-                         brier=m["brier"], coverage=m["coverage"], max_dev_nats=dev, exact_fraction=exact,
-                         oracle_voxels=compared, memory_mib=res.memory["sparse_bytes"] / 2 ** 20))
-        if config == reference_config:
-            log_odds, _, ms = baseline_map(obs, res.detections, config)
-            b = score(log_odds, res.observed, truth)
-            baseline = dict(label="CFAR points, OctoMap-style (numpy)", config=config.as_dict(), ms_per_frame=ms,
-                            auc=b["auc"], iou=b["iou"], iou_tol1=b["iou_tol1"], false_free=b["false_free"],
-                            brier=b["brier"], coverage=b["coverage"])
+        runs.append(dict(dimension=dim, label=label, voxel_m=v, config=config.as_dict(), ms_per_frame=res.ms_per_frame,
+                         **{k: m[k] for k in SCORE_KEYS}, objects=m["objects"], reliability=m["reliability"],
+                         max_dev_nats=dev, exact_fraction=exact, oracle_voxels=compared,
+                         memory_mib=res.memory["sparse_bytes"] / 2 ** 20))
         del res
-    for r, front in zip(runs, pareto(runs)):
-        r["pareto"] = front
+    for v in {r["voxel_m"] for r in runs}:                 # the front within one voxel set
+        same = [r for r in runs if r["voxel_m"] == v]
+        for r, front in zip(same, pareto(same)):
+            r["pareto"] = front
+    ref_v = str(reference_config["grid.voxel_m"])
     return dict(benchmark="quality", device=runtime.name, frames=len(obs.samples),
-                observations=int(np.prod(obs.samples.shape[:3])), seed=obs.seed, runs=runs, baseline=baseline)
+                observations=int(np.prod(obs.samples.shape[:3])), seed=obs.seed, reference_voxel_m=float(ref_v),
+                voxel_set=by_voxel[ref_v]["voxel_set"], runs=runs, baselines=by_voxel[ref_v]["baselines"],
+                by_voxel=by_voxel)
+
+
+def _cells(x):
+    def f(k, fmt="6.3f"):
+        v = x.get(k)
+        return f"{v:{fmt}}" if isinstance(v, float) else f"{'-' if v is None else v!s:>6s}"
+    return (f"{f('auc_detectable')} {f('iou_detectable')} {f('auc_obstacles')} {f('auc_weak')} {f('false_free')} "
+            f"{f('shadow_unknown')} {f('ece')} {f('brier')} {x.get('objects_found', '-')!s:>3s}/{x.get('objects_total', '-')!s:<3s}")
 
 
 def format_table(r):
     """Human-readable lines for a ``run`` result."""
-    lines = [f"reference scene, {r['observations']} observations (seed {r['seed']}) on {r['device']}; "
-             f"* = Pareto front (no run both faster and higher in AUC)",
-             f"  {'dimension':13s} {'configuration':64s} {'ms/frame':>9s} {'AUC':>6s} {'IoU':>6s} {'IoU1':>6s} "
-             f"{'f-free':>6s} {'Brier':>6s} {'dev[nat]':>8s}"]
-    for x in r["runs"]:
-        lines.append(f"{'*' if x['pareto'] else ' '} {x['dimension']:13s} {x['label'][:64]:64s} {x['ms_per_frame']:9.1f} "
-                     f"{x['auc']:6.3f} {x['iou']:6.3f} {x['iou_tol1']:6.3f} {x['false_free']:6.3f} {x['brier']:6.3f} "
-                     f"{x['max_dev_nats']:8.3f}")
-    b = r["baseline"]
-    if b:
-        lines.append(f"  {'baseline':13s} {b['label'][:64]:64s} {b['ms_per_frame']:9.1f} {b['auc']:6.3f} "
-                     f"{b['iou']:6.3f} {b['iou_tol1']:6.3f} {b['false_free']:6.3f} {b['brier']:6.3f}")
+    head = (f"{'AUCdet':>6s} {'IoUdet':>6s} {'AUCobs':>6s} {'AUCwk':>6s} {'f-free':>6s} {'shd-unk':>6s} {'ECE':>6s} "
+            f"{'Brier':>6s} {'objects':>7s}")
+    lines = [f"reference scene, {r['observations']} observations (seed {r['seed']}) on {r['device']}",
+             "* = Pareto front within a voxel size (no run both faster and higher in AUC detectable)"]
+    for v, b in r["by_voxel"].items():
+        lines += [f"{b['voxel_set']}", f"  {'':13s} {'configuration':52s} {'ms/frame':>9s} {head} {'dev[nat]':>8s}"]
+        for x in (x for x in r["runs"] if str(x["voxel_m"]) == v):
+            lines.append(f"{'*' if x['pareto'] else ' '} {x['dimension']:13s} {x['label'][:52]:52s} "
+                         f"{x['ms_per_frame']:9.1f} {_cells(x)} {x['max_dev_nats']:8.3f}")
+        for name in BASELINES:
+            x = b["baselines"][name]
+            if "error" in x:
+                lines.append(f"  {'baseline':13s} {name:52s} {x['error']}")
+            else:
+                lines.append(f"  {'baseline':13s} {name:52s} {x['ms_per_frame']:9.1f} {_cells(x)}")
     return lines
 
 
 def sweep_table(r):
-    """The sweep as a report table (``jobs.report``): one row per run and the baseline."""
+    """The sweep as a report table (``jobs.report``): one row per run and per baseline."""
     from radarcl.jobs import report
 
-    rows = [[k, x["dimension"], x["label"], x["ms_per_frame"], x["auc"], x["iou"], x["false_free"],
-             "yes" if x["pareto"] else ""] for k, x in enumerate(r["runs"], 1)]
-    b = r.get("baseline")
-    if b:
-        rows.append(["", "baseline", b["label"], b["ms_per_frame"], b["auc"], b["iou"], b["false_free"], ""])
-    return report.Table(["run", "changed", "configuration", "ms/frame", "AUC", "IoU", "false-free", "Pareto"], rows)
+    rows = []
+    for k, x in enumerate(r["runs"], 1):
+        rows.append([k, x["voxel_m"], x["dimension"], x["label"], x["ms_per_frame"]] + [x[key] for key in SCORE_KEYS[:-2]]
+                    + [f"{x['objects_found']}/{x['objects_total']}", "yes" if x["pareto"] else ""])
+    for v, b in r["by_voxel"].items():
+        for name in BASELINES:
+            x = b["baselines"][name]
+            if "error" not in x:
+                rows.append(["", float(v), "baseline", name, x["ms_per_frame"]] + [x[key] for key in SCORE_KEYS[:-2]]
+                            + [f"{x['objects_found']}/{x['objects_total']}", ""])
+    return report.Table(["run", "voxel [m]", "changed", "configuration", "ms/frame", "AUC det", "IoU det", "AUC obst",
+                         "IoU obst", "AUC weak", "false-free", "shadow unknown", "ECE", "Brier", "objects", "Pareto"],
+                        rows)
 
 
-def write_report(r, chart_path, page):
-    """``bench quality``'s page: the device, the sweep table and the chart."""
+def write_report(r, chart_path, page, reliability_path=None):
+    """``bench quality``'s page: the device, the voxel sets, the sweep table and the charts."""
     from radarcl.jobs import report
 
+    figures = [report.Figure(chart_path, "AUC (detectable vs free-visible) against ms per frame; the Pareto front "
+                                         "dashed; the baselines as large markers")]
+    if reliability_path:
+        figures.append(report.Figure(reliability_path, "Reliability of the reference map and the baselines on the "
+                                                       "visible voxels"))
     report.write(page, "radarcl bench quality: error against run time", [
         ("Run", [report.Pairs({"device": r["device"], "observations": r["observations"], "seed": r["seed"],
                                "frames": r["frames"]})]),
-        ("Runs", [sweep_table(r), report.Text("ms/frame: the whole device pipeline per frame; AUC, IoU and "
-                                              "false-free over the observed voxels of the reference scene.")]),
-        ("Chart", [report.Figure(chart_path, "AUC against ms per frame; the Pareto front dashed")])],
-        "Each run changes one setting of the reference configuration.")
+        ("Voxel sets", [report.Text(b["voxel_set"]) for b in r["by_voxel"].values()]),
+        ("Runs", [sweep_table(r), report.Text(METRICS_TEXT)]),
+        ("Charts", figures)],
+        "Each run changes one setting of the reference configuration; each is scored on the fixed voxel set of "
+        "its voxel size.")
 
 
-def chart(r, path):
-    """AUC against ms per frame (``jobs.plots.quality_figure``) written to ``path``."""
+METRICS_TEXT = ("AUC/IoU det: detectable surface voxels (noiseless echo >= 10 dB over the noise) vs free-visible air; "
+                "obst: the same for every solid but the ground; weak: surface voxels below that; false-free: occupied "
+                "voxels of any visibility with p < 0.35; shadow unknown: shadowed voxels within 0.2 nat of 0; ECE "
+                "(10 bins) and Brier on the visible voxels; objects: found within one voxel of their visible surface.")
+
+
+def chart(r, path, reliability_path=None):
+    """AUC against ms per frame (``jobs.plots.quality_figure``) written to ``path``; with
+    ``reliability_path`` the reliability diagram of the reference map and the baselines."""
     from radarcl.jobs import plots
 
     plots.save(plots.quality_figure(r), path)
+    if reliability_path:
+        ref = r["runs"][0]
+        curves = {"map: " + ref["label"][:40]: ref["reliability"]}
+        curves.update({name: b["reliability"] for name, b in r["baselines"].items() if "reliability" in b})
+        plots.save(plots.reliability_figure(curves, r["voxel_set"]), reliability_path)
 
 
 def add_arguments(parser):
@@ -179,7 +231,8 @@ def add_arguments(parser):
     parser.add_argument("--paper", action="store_true", help="sweep around the paper's constants, not the tuned")
     parser.add_argument("--seed", type=int, default=None, help="simulation seed (default: the evaluation seed, 0)")
     parser.add_argument("--replay", default=None, help="a recording of the reference scene instead of simulating")
-    add_output(parser, "--chart", "quality.png", "PNG chart to write")
+    add_output(parser, "--chart", "quality.png", "PNG chart to write (and its reliability diagram beside it, "
+                                                   "*_reliability.png)")
     parser.add_argument("--report", default=None, metavar="FILE",
                         help="the HTML page (table and chart; default: the chart's name with .html)")
 
@@ -191,7 +244,7 @@ def command(args, runtime, say):
     from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
     from radarcl.io import recording
     from radarcl.scene.observe import observe
-    from radarcl.scene.outdoor import PAPER_TILTS_DEG, paper_grid, paper_scene
+    from radarcl.scene.outdoor import PAPER_TILTS_DEG, paper_scene
 
     chart_path = outputs.check(args.chart, args.force, inputs=[args.replay], what="chart")
     page = outputs.check(args.report or chart_path.with_suffix(".html"), args.force, inputs=[args.replay, chart_path],
@@ -204,9 +257,10 @@ def command(args, runtime, say):
         say(f"simulating the reference scene, seed {seed} ...")
         obs = observe(scene, PAPER_TILTS_DEG, seed=seed)
     reference = paper_config(args.voxel, None if args.paper else TUNED)
-    result = run(runtime(), obs, lambda v: scene.truth(paper_grid(v)), reference, voxels=tuple(args.voxels),
-                 report=say)
-    chart(result, chart_path)
-    write_report(result, chart_path, page)
-    say(f"wrote {chart_path} and {page}")
+    result = run(runtime(), scene, obs, reference, voxels=tuple(args.voxels), report=say)
+    reliability = outputs.check(chart_path.with_name(chart_path.stem + "_reliability.png"), args.force,
+                                inputs=[args.replay], what="reliability chart")
+    chart(result, chart_path, reliability)
+    write_report(result, chart_path, page, reliability)
+    say(f"wrote {chart_path}, {reliability} and {page}")
     return result, format_table(result)

@@ -3,8 +3,8 @@
 ``map_observations`` fuses every frame with one configuration (a ``mapconfig.Resolved``: voxel
 size, zero padding, beam model, CFAR, eq. 12 constants) on the device, timing the pipeline, and
 marks the voxels some beam's volume reached (a second fusion of constant evidence into a count
-grid, outside the timing). ``baseline_map`` inserts the same frames' CFAR detections
-OctoMap-style (``evaluation.baseline``). ``score`` gives ``evaluation.metrics`` against the
+grid, outside the timing). ``baseline_map`` inserts the same frames' CFAR detections into
+OctoMap (``evaluation.baseline``). ``score`` gives ``evaluation.metrics`` against the
 scene's truth.
 """
 
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarcl import logodds, mapconfig
-from radarcl.evaluation.baseline import OctoMapBaseline
+from radarcl.errors import ConfigError
 from radarcl.evaluation.metrics import evaluate
 from radarcl.grid import EvidenceGrid
 from radarcl.pipeline import Mapping
@@ -80,20 +80,99 @@ def map_observations(runtime, obs, config, progress=None):
 
 
 def baseline_map(obs, detections, config):
-    """The OctoMap-style baseline on the same frames' detections: (log_odds, touched, ms_per_frame)."""
+    """OctoMap's map (``baseline.octree``, ``baseline.read_back``) of the same frames' CFAR
+    detections: (log_odds, ms_per_frame); the time is OctoMap's insertion, not our read-back."""
+    from radarcl.evaluation.baseline import detection_scans, octree, read_back
+
     spec = config.grid_spec()
-    base = OctoMapBaseline(spec)
-    axes = config.sensor.lattice().beam_rotations()[:, :, 0]
-    ranges = config.sensor.radar.bin_ranges_m(config.n_fft)
-    i = config.interpret_config()
+    scans = detection_scans(obs, detections, config)
     start = time.perf_counter()
-    for pose, mask in zip(obs.poses, detections):
-        base.insert_scan(pose[:3, 3], axes @ pose[:3, :3].T, ranges, mask, i.range_min_m, i.range_max_m)
+    tree = octree(spec, scans)
     ms = (time.perf_counter() - start) * 1e3 / max(1, len(obs.poses))
-    return base.log_odds, base.touched, ms
+    return read_back(tree, spec), ms
 
 
 def score(log_odds, observed, truth):
     """``metrics.evaluate`` with NaN turned into None (JSON)."""
     out = evaluate(log_odds, truth, observed)
     return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in out.items()}
+
+
+# -- the instrument: visibility truth on one fixed voxel set, scores and baselines --------------------------
+@dataclass
+class Instrument:
+    """What every map of one recording is scored against at one voxel size: the fixed voxel set
+    (what the reference configuration's beams reach), its visibility truth and its objects."""
+
+    spec: object
+    truth: object
+    objects: list
+    hidden: list
+    reference: object
+    reference_map: MapResult
+
+    def describe(self):
+        """One line: the voxel set and its classes."""
+        c = self.truth.counts()
+        return (f"fixed voxel set: the {int(self.truth.observed.sum()):,} voxels the reference configuration's beams "
+                f"reach at {self.spec.voxel_m} m ({self.reference.label()}); free-visible {c['free-visible']:,}, "
+                f"detectable {c['detectable']:,}, weak {c['weak']:,}, shadowed {c['shadowed']:,}")
+
+
+def instrument(runtime, scene, obs, reference, progress=None):
+    """The ``Instrument`` of ``obs`` (simulated from ``scene``) at ``reference``'s voxel size.
+
+    DETECTABLE/WEAK need the frames' noiseless range profiles: the recording is simulated again
+    with its seed and tilts and no receiver noise or ADC (the same rays, phases and echoes)."""
+    from radarcl import oracle
+    from radarcl.evaluation import visibility as vis
+    from radarcl.scene.observe import NOISE_RMS, observe
+
+    ref_map = map_observations(runtime, obs, reference, progress)
+    radar = reference.sensor.radar
+    quiet = observe(scene, obs.tilts_deg, radar=radar, seed=obs.seed, rays_across=_rays_across(obs, scene), noise_rms=0.0,
+                    adc=None)
+    n = quiet.samples.shape
+    power = oracle.range_profile(quiet.samples.reshape(n[0], n[1] * n[2], n[3]), reference.n_fft, output="power")
+    half = (math.radians(radar.beamwidth_az_deg) / 2, math.radians(radar.beamwidth_el_deg) / 2)
+    truth = vis.visibility_truth(scene, ref_map.spec, ref_map.observed, obs.poses, power,
+                                 vis.noise_power_per_bin(NOISE_RMS, radar.n_samples), reference.sensor.lattice(), half,
+                                 radar.bin_spacing_m(reference.n_fft))
+    objects, hidden = vis.object_surfaces(scene, truth, ref_map.spec)
+    return Instrument(ref_map.spec, truth, objects, hidden, reference, ref_map)
+
+
+def _rays_across(obs, scene):
+    """The simulation's rays across a beam, from its echoes per beam (rays + point scatterers)."""
+    from radarcl.scene.observe import ray_offsets
+
+    for k in range(2, 64):
+        if len(ray_offsets(k)[0]) + len(scene.points) == obs.rays_per_beam:
+            return k
+    raise ConfigError(f"cannot tell the simulation's rays across from {obs.rays_per_beam} rays per beam")
+
+
+def radar_score(inst, log_odds):
+    """``metrics.radar_scores`` of ``log_odds`` on ``inst``, NaN as None (JSON)."""
+    from radarcl.evaluation.metrics import radar_scores
+
+    out = radar_scores(log_odds, inst.truth, inst.objects)
+    return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in out.items()}
+
+
+def baselines(runtime, inst, obs):
+    """The three baselines on ``inst``'s voxel set: {name: scores with ms_per_frame}; octomap
+    uses the reference map's CFAR detections. Without octomap-python, its entry says so."""
+    from radarcl.evaluation import baseline
+
+    out = {}
+    out["prior_only"] = dict(radar_score(inst, baseline.prior_only(inst.spec)), ms_per_frame=0.0)
+    start = time.perf_counter()
+    raw = baseline.raw_intensity(runtime, obs, inst.reference)
+    out["raw_intensity"] = dict(radar_score(inst, raw), ms_per_frame=(time.perf_counter() - start) * 1e3 / len(obs.poses))
+    try:
+        log_odds, ms = baseline_map(obs, inst.reference_map.detections, inst.reference)
+        out["octomap"] = dict(radar_score(inst, log_odds), ms_per_frame=ms)
+    except ConfigError as exc:
+        out["octomap"] = dict(error=str(exc))
+    return out

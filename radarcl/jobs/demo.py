@@ -28,20 +28,23 @@ from radarcl.jobs import demo_fig9, plots
 from radarcl.bench import quality
 from radarcl.config import PAPER_RADAR
 from radarcl.errors import ConfigError
-from radarcl.evaluation.evaluate import baseline_map, map_observations, paper_config, score
+from radarcl.evaluation.evaluate import baselines, instrument, map_observations, paper_config, radar_score
 from radarcl.io import recording
 from radarcl.scene.observe import observe
-from radarcl.scene.outdoor import OCCUPIED, PAPER_TILTS_DEG, paper_grid, paper_scene
+from radarcl.scene.outdoor import OCCUPIED, PAPER_TILTS_DEG, paper_scene
 from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
 
 QUICK_VOXEL_M = 0.4
 VIEW_CAMERA = "-160,30"               # behind and left of the stand, looking down the field
-METRIC_KEYS = ("auc", "iou", "iou_tol1", "brier", "false_free", "false_occupied", "coverage")
-METRIC_NAMES = ("AUC", "IoU", "IoU +-1 voxel", "Brier", "false-free", "false-occupied", "coverage")
+METRIC_KEYS = ("auc_detectable", "iou_detectable", "auc_obstacles", "auc_weak", "false_free", "shadow_unknown", "ece",
+               "brier")
+METRIC_NAMES = ("AUC detectable", "IoU detectable", "AUC obstacles", "AUC weak", "false-free", "shadow unknown",
+                "ECE", "Brier")
 
 
 def _metrics_line(name, m, ms):
-    return (f"  {name:34s} " + " ".join(f"{m[k]:7.3f}" for k in METRIC_KEYS) + f" {ms:9.1f}")
+    cells = " ".join(f"{m[k]:7.3f}" if m[k] is not None else f"{'-':>7s}" for k in METRIC_KEYS)
+    return f"  {name:34s} {cells} {m['objects_found']:>3d}/{m['objects_total']:<3d} {ms:9.1f}"
 
 
 def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report=print, progress=None):
@@ -71,61 +74,70 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
     report(f"{n_obs} observations ({obs.rays_per_beam} rays per beam, {obs.n_clipped} clipped samples) in "
            f"{summary['simulate_s']:.1f} s")
 
-    truth = scene.truth(paper_grid(voxel))
+    tuned = paper_config(voxel, TUNED)
+    report("truth: the line of sight and the noiseless echo of every voxel the tuned map's beams reach ...")
+    inst = instrument(runtime, scene, obs, tuned, progress=tick("observations fused"))
+    report(inst.describe())
     maps = {}
-    for name, config in (("paper constants", paper_config(voxel)), ("tuned", paper_config(voxel, TUNED))):
+    for name, config in (("paper constants", paper_config(voxel)), ("tuned", tuned)):
         report(f"fusing with the {name} ({config.label()}) ...")
-        res = map_observations(runtime, obs, config, progress=tick("observations fused"))
-        maps[name] = (config, res, score(res.log_odds, res.observed, truth))
+        res = inst.reference_map if config is tuned else map_observations(runtime, obs, config,
+                                                                         progress=tick("observations fused"))
+        maps[name] = (config, res, radar_score(inst, res.log_odds))
     config, res, _ = maps["tuned"]
-    log_odds, _, base_ms = baseline_map(obs, res.detections, config)
-    base = score(log_odds, res.observed, truth)
-    report("metrics over the observed voxels (INTERIOR left out); ms per frame of the pipeline")
-    report(f"  {'map':34s} " + " ".join(f"{k[:7]:>7s}" for k in METRIC_KEYS) + f" {'ms/frame':>9s}")
+    report("baselines on the same voxel set: prior_only, raw_intensity, octomap ...")
+    base = baselines(runtime, inst, obs)
+    report(f"  {'map':34s} " + " ".join(f"{k.replace('_', ' ')[:7]:>7s}" for k in METRIC_KEYS) + " objects  ms/frame")
     for name, (config_n, res_n, m) in maps.items():
         report(_metrics_line(name, m, res_n.ms_per_frame))
-    report(_metrics_line("baseline: CFAR points, OctoMap", base, base_ms))
+    for name, b in base.items():
+        report(_metrics_line(f"baseline: {name}", b, b["ms_per_frame"]) if "error" not in b else f"  {name}: {b['error']}")
+    summary["voxel_set"] = inst.describe()
     summary["maps"] = {name: dict(config=c.as_dict(), ms_per_frame=r.ms_per_frame, metrics=m,
                                   memory_mib=r.memory["sparse_bytes"] / 2 ** 20) for name, (c, r, m) in maps.items()}
-    summary["baseline"] = dict(ms_per_frame=base_ms, metrics=base)
+    summary["baselines"] = base
 
     res.grid.save(out / "map.npz", poses=obs.poses)
     summary["view"] = _render_view(out, report)
     _plot_profiles(obs, config, out / "fig10_scene.png")
-    _plot_topdown(res.log_odds, truth, res.spec, out / "topdown.png")
+    _plot_topdown(res.log_odds, inst.truth.labels, res.spec, out / "topdown.png")
     report("error against run time at 0.4 m (bench quality) ...")
-    q = quality.run(runtime, obs, lambda v: scene.truth(paper_grid(v)), paper_config(QUICK_VOXEL_M, TUNED),
-                    voxels=(QUICK_VOXEL_M,))
-    plots.save(plots.quality_figure(q), out / "quality.png")
+    q = quality.run(runtime, scene, obs, paper_config(QUICK_VOXEL_M, TUNED), voxels=(QUICK_VOXEL_M,))
+    quality.chart(q, out / "quality.png", out / "reliability.png")
     for line in quality.format_table(q):
         report(line)
     summary["quality"] = q
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    _write_report(out, summary, maps, base, base_ms, q)
+    _write_report(out, summary, maps, base, q)
     report(f"wrote {', '.join(p.name for p in sorted(out.iterdir()))} in {out}")
     return summary
 
 
-def _write_report(out, summary, maps, base, base_ms, q):
+def _write_report(out, summary, maps, base, q):
     """report.html: the run's configuration, its metrics, every figure and the viewer's render."""
     from radarcl.jobs import report as page
 
-    headers = ["map"] + list(METRIC_NAMES) + ["ms/frame"]
-    rows = [[name] + [m[k] for k in METRIC_KEYS] + [r.ms_per_frame] for name, (_, r, m) in maps.items()]
-    rows.append(["baseline: CFAR points, OctoMap-style"] + [base[k] for k in METRIC_KEYS] + [base_ms])
+    headers = ["map"] + list(METRIC_NAMES) + ["objects", "ms/frame"]
+    rows = [[name] + [m[k] for k in METRIC_KEYS] + [f"{m['objects_found']}/{m['objects_total']}", r.ms_per_frame]
+            for name, (_, r, m) in maps.items()]
+    rows += [[f"baseline: {name}"] + [b[k] for k in METRIC_KEYS] + [f"{b['objects_found']}/{b['objects_total']}",
+                                                                    b["ms_per_frame"]]
+             for name, b in base.items() if "error" not in b]
     tuned = maps["tuned"][0]
     figures = [("fig9.png", "Fig. 9: two point targets 1.0 m apart, without and with zero padding"),
                ("frame.png", "One frame of the paper's radar, range x azimuth, per stacked beam"),
                ("fig10_scene.png", "Two beams of the reference scene as in Fig. 10, with CFAR and eq. 12"),
                ("topdown.png", "The tuned map from above beside the ground truth"),
                ("quality.png", "Error against run time (bench quality at 0.4 m)"),
+               ("reliability.png", "Reliability of the 0.4 m reference map and the baselines"),
                ("view.png", "The tuned map's isosurface at 1 nat, rendered by the viewer")]
     sections = [
         ("Run", [page.Pairs({"device": summary["device"], "recording": summary["recording"],
                              "observations": summary["observations"], "seed": summary["seed"],
                              "voxel [m]": QUICK_VOXEL_M if summary["quick"] else 0.1,
                              "simulation [s]": round(summary["simulate_s"], 1)})]),
-        ("Metrics over the observed voxels", [page.Table(headers, rows)]),
+        ("Metrics on the fixed voxel set", [page.Text(summary["voxel_set"]), page.Table(headers, rows),
+                                            page.Text(quality.METRICS_TEXT)]),
         ("Error against run time", [quality.sweep_table(q)]),
         ("Figures", [page.Figure(out / name, caption) for name, caption in figures if (out / name).is_file()]),
         ("Configuration of the tuned map", [page.configuration(tuned)]),

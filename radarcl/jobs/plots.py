@@ -251,10 +251,15 @@ def plane_map_figure(nats, spec, poses, title, pose_label="scan poses", label="l
 DIMENSION_MARKERS = {"reference": "*", "zero padding": "o", "beam model": "s", "voxel": "D", "cfar": "^"}
 
 
+BASELINE_MARKERS = {"prior_only": ("P", "tab:gray"), "raw_intensity": ("h", "tab:olive"), "octomap": ("X", "crimson")}
+
+
 def quality_figure(r):
-    """``bench quality``'s result: AUC against ms per frame. Each run is a numbered marker whose
-    shape says which setting changed; the names are in the table beside it, the Pareto front is
-    a line, the baseline a large cross."""
+    """``bench quality``'s result: AUC (detectable vs free-visible, on the reference voxel
+    size's fixed set) against ms per frame. Each run is a numbered marker whose shape says which
+    setting changed; the names are in the table beside it, the Pareto front is a line, the
+    baselines are large markers. Runs at other voxel sizes are scored on their own voxel sets,
+    so they are drawn hollow."""
     plt = _pyplot()
     runs = r["runs"]
     import textwrap
@@ -262,32 +267,38 @@ def quality_figure(r):
     fig = plt.figure(figsize=(12.5, 6.2))
     ax = fig.add_axes([0.07, 0.11, 0.56, 0.8])
     colours = dict(zip(DIMENSION_MARKERS, plt.cm.tab10.colors))
+    ref_v = r.get("reference_voxel_m")
     for k, x in enumerate(runs, 1):
-        ax.scatter(x["ms_per_frame"], x["auc"], marker=DIMENSION_MARKERS.get(x["dimension"], "o"),
-                   s=160 if x["dimension"] == "reference" else 70, color=colours.get(x["dimension"], "k"),
-                   edgecolor="k", linewidth=1.4 if x["pareto"] else 0.3, zorder=3)
-    front = sorted((x["ms_per_frame"], x["auc"]) for x in runs if x["pareto"])
+        same_set = ref_v is None or x["voxel_m"] == ref_v
+        ax.scatter(x["ms_per_frame"], x["auc_detectable"], marker=DIMENSION_MARKERS.get(x["dimension"], "o"),
+                   s=160 if x["dimension"] == "reference" else 70,
+                   color=colours.get(x["dimension"], "k") if same_set else "none",
+                   edgecolor=colours.get(x["dimension"], "k") if not same_set else "k",
+                   linewidth=1.4 if x["pareto"] else (1.0 if not same_set else 0.3), zorder=3)
+    front = sorted((x["ms_per_frame"], x["auc_detectable"]) for x in runs if x["pareto"] and x["voxel_m"] == ref_v)
     if front:
         ax.plot(*zip(*front), "k--", lw=1.2, label="Pareto front (thick edge)", zorder=2)
     present = {x["dimension"] for x in runs}
     for dim, marker in DIMENSION_MARKERS.items():
         if dim in present:
             ax.scatter([], [], marker=marker, color=colours[dim], edgecolor="k", s=60, label=dim)
-    b = r.get("baseline")
-    if b:
-        ax.scatter(b["ms_per_frame"], b["auc"], marker="X", color="crimson", edgecolor="k", s=220, zorder=4,
-                   label="baseline: CFAR points, OctoMap-style")
+    for name, b in (r.get("baselines") or {}).items():
+        if "auc_detectable" in b and b["auc_detectable"] is not None:
+            marker, colour = BASELINE_MARKERS.get(name, ("X", "k"))
+            ax.scatter(max(b["ms_per_frame"], 0.1), b["auc_detectable"], marker=marker, color=colour, edgecolor="k",
+                       s=220, zorder=4, label=f"baseline: {name}")
     ax.set_xscale("log")
-    ax.set_xlabel(f"ms per frame (whole pipeline, {r['device'].split('/')[-1].strip()[:28]})")
-    ax.set_ylabel("ROC-AUC over observed voxels")
-    ax.set_title(f"Error against run time: reference scene, {r['observations']} observations")
+    ax.set_xlabel(f"ms per frame (whole pipeline, {r['device'].split('/')[-1].strip()[:28]}; prior_only at 0.1)")
+    ax.set_ylabel("ROC-AUC, detectable vs free-visible")
+    ax.set_title(f"Error against run time: reference scene, {r['observations']} observations, fixed voxel set at "
+                 f"{ref_v} m", fontsize=11)
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     ax.xaxis.set_major_locator(LogLocator(subs=(1, 2, 5)))              # 10, 20, 50, 100: no crowding
     ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.xaxis.set_minor_formatter(NullFormatter())
     ax.grid(alpha=0.3, which="both")
-    _number_points(ax, [(x["ms_per_frame"], x["auc"]) for x in runs])
+    _number_points(ax, [(x["ms_per_frame"], x["auc_detectable"]) for x in runs])
     table = fig.add_axes([0.66, 0.11, 0.33, 0.8])
     table.axis("off")
     rows = []
@@ -328,3 +339,33 @@ def _number_points(ax, points, near_px=12):
             dx, dy = 6, 4
         placed.append(box)
         ax.annotate(text, points[g[0]], xytext=(dx, dy), textcoords="offset points", fontsize=10)
+
+
+def reliability_figure(curves, subtitle=""):
+    """Reliability diagram: per map ({name: rows (lo, hi, count, mean p, frequency)} from
+    ``metrics.calibration``) the observed frequency of occupied against the mean predicted p in
+    each bin, the diagonal being perfect calibration; beneath, how many voxels each bin holds."""
+    import textwrap
+
+    plt = _pyplot()
+    fig, (ax, hist) = plt.subplots(2, 1, figsize=(7.5, 8.0), gridspec_kw=dict(height_ratios=(3, 1.2)), sharex=True)
+    ax.plot([0, 1], [0, 1], color="0.6", lw=1, ls=":", label="perfectly calibrated")
+    width = 0.1 / (len(curves) + 1)
+    for n, (name, rows) in enumerate(curves.items()):
+        rows = [row for row in rows if row[2]]
+        mean_p, freq, count = [x[3] for x in rows], [x[4] for x in rows], [x[2] for x in rows]
+        ax.plot(mean_p, freq, "o-", label=name, lw=1.5)
+        hist.bar([x[0] + (n + 0.5) * width for x in rows], count, width=width, label=name)
+    ax.set_ylabel("observed frequency of occupied")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(-0.02, 1.02)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left")
+    ax.set_title("Reliability on the visible voxels\n" + "\n".join(textwrap.wrap(subtitle, 70)), fontsize=10)
+    ax._radarcl_shared_x = True                         # the x label sits under the panel below
+    hist.set_yscale("log")
+    hist.set_xlabel("predicted p (bin: mean p of its voxels)")
+    hist.set_ylabel("voxels per bin")
+    hist.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,94 @@
+"""The metrics on the visibility truth (radarcl/evaluation/metrics.py: radar_scores and its
+parts) against hand-computed values and against scikit-learn as an oracle."""
+
+import math
+
+import numpy as np
+import pytest
+from sklearn import metrics as skm
+
+from radarcl.evaluation import metrics
+from radarcl.evaluation import visibility as vis
+from radarcl.scene.outdoor import FREE, INTERIOR, OCCUPIED
+
+
+def test_auc_iou_brier_and_ece_match_scikit_learn():
+    rng = np.random.default_rng(5)
+    L = np.round(rng.normal(0, 2, 4000), 1).astype(np.float32)      # ties on purpose
+    y = rng.random(4000) < 1 / (1 + np.exp(-L))                      # roughly calibrated
+    pos, neg = y.copy(), ~y
+    auc, iou = metrics.auc_iou(L, pos, neg)
+    assert auc == pytest.approx(skm.roc_auc_score(y, L), abs=1e-12)
+    assert iou == pytest.approx(skm.jaccard_score(y, L > 0), abs=1e-12)
+    p = metrics.probability(L)
+    ece, rows = metrics.calibration(p, y)
+    # scikit-learn's calibration_curve with uniform bins gives each non-empty bin's frequency
+    # and mean p: the ECE from them, weighted by the bin counts
+    from sklearn.calibration import calibration_curve
+
+    freq, mean_p = calibration_curve(y, p, n_bins=10, strategy="uniform")
+    counts = [r[2] for r in rows if r[2]]
+    assert [r[4] for r in rows if r[2]] == pytest.approx(freq, abs=1e-12)
+    assert [r[3] for r in rows if r[2]] == pytest.approx(mean_p, abs=1e-12)
+    assert ece == pytest.approx(float(np.dot(counts, np.abs(freq - mean_p)) / len(p)), abs=1e-12)
+    assert float(np.mean((p - y) ** 2)) == pytest.approx(skm.brier_score_loss(y, p), abs=1e-12)
+
+
+def small_truth():
+    """A 1 x 2 x 6 grid by hand: classes and labels chosen so every metric has a known value."""
+    classes = np.array([[[vis.FREE_VISIBLE, vis.FREE_VISIBLE, vis.DETECTABLE, vis.WEAK, vis.SHADOWED, vis.SHADOWED],
+                         [vis.FREE_VISIBLE, vis.DETECTABLE, vis.UNOBSERVED, vis.INTERIOR, vis.SHADOWED, vis.WEAK]]],
+                       np.uint8)
+    labels = np.array([[[FREE, FREE, OCCUPIED, OCCUPIED, OCCUPIED, FREE],
+                        [FREE, OCCUPIED, OCCUPIED, INTERIOR, FREE, OCCUPIED]]], np.uint8)
+    obstacle = np.zeros_like(classes, bool)
+    obstacle[0, 1, 1] = True                                            # the second DETECTABLE voxel
+    return vis.VisibilityTruth(classes, labels, obstacle, classes != vis.UNOBSERVED)
+
+
+def test_radar_scores_by_hand():
+    t = small_truth()
+    L = np.array([[[-1.0, 0.5, 2.0, -0.1, 0.1, -3.0],
+                   [-2.0, 1.0, 9.0, 5.0, 0.0, -0.7]]], np.float32)
+    s = metrics.radar_scores(L, t)
+    # DETECTABLE {2.0, 1.0} vs FREE-visible {-1.0, 0.5, -2.0}: every pair ranked right
+    assert s["auc_detectable"] == 1.0
+    assert s["iou_detectable"] == pytest.approx(2 / 3)                  # called: 2.0, 1.0, 0.5
+    # WEAK {-0.1, -0.7} vs FREE {-1.0, 0.5, -2.0}: pairs won: -0.1 beats 2, -0.7 beats 2 -> 4 / 6
+    assert s["auc_weak"] == pytest.approx(4 / 6)
+    assert s["iou_weak"] == 0.0                                          # called 0.5 (free), no weak one
+    assert s["auc_obstacles"] == 1.0 and s["iou_obstacles"] == pytest.approx(1 / 2)
+    # OCCUPIED within the observed set: 2.0, -0.1, 0.1, 1.0, -0.7 (the unobserved 9.0 is not in
+    # it); p < 0.35 means L < -0.619: only -0.7
+    assert s["false_free"] == pytest.approx(1 / 5)
+    # SHADOWED {0.1, -3.0, 0.0}: two within 0.2 nat
+    assert s["shadow_unknown"] == pytest.approx(2 / 3)
+    visible = np.array([-1.0, 0.5, 2.0, -0.1, -2.0, 1.0, -0.7])
+    y = np.array([0, 0, 1, 1, 0, 1, 1], bool)
+    p = 1 / (1 + np.exp(-visible))
+    assert s["brier"] == pytest.approx(np.mean((p - y) ** 2), abs=1e-7)
+    assert s["voxels"] == dict(free_visible=3, detectable=2, weak=2, obstacles=1, shadowed=3, occupied=5)
+
+
+def test_a_map_of_zeros_and_the_empty_cases():
+    t = small_truth()
+    s = metrics.radar_scores(np.zeros((1, 2, 6), np.float32), t)
+    assert s["auc_detectable"] == 0.5 and s["iou_detectable"] == 0.0
+    assert s["false_free"] == 0.0 and s["shadow_unknown"] == 1.0 and s["brier"] == 0.25
+    t.classes[t.classes == vis.SHADOWED] = vis.FREE_VISIBLE
+    assert math.isnan(metrics.radar_scores(np.zeros((1, 2, 6), np.float32), t)["shadow_unknown"])
+    with pytest.raises(Exception, match="same"):
+        metrics.radar_scores(np.zeros((2, 2, 6), np.float32), t)
+
+
+def test_objects_are_found_within_one_voxel_of_their_visible_surface():
+    t = small_truth()
+    objects = [dict(name="near", range_m=3.0, near=np.array([[2, 0, 0], [1, 1, 0]])),
+               dict(name="far", range_m=9.0, near=np.array([[5, 0, 0]]))]
+    L = np.zeros((1, 2, 6), np.float32)
+    L[0, 1, 1] = 0.3
+    L[0, 0, 5] = -1.0
+    s = metrics.radar_scores(L, t, objects)
+    assert s["objects_found"] == 1 and s["objects_total"] == 2
+    assert s["objects"][0] == dict(name="near", range_m=3.0, peak_nats=pytest.approx(0.3), found=True)
+    assert s["objects"][1]["found"] is False and s["objects"][1]["peak_nats"] == -1.0
