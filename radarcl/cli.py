@@ -103,7 +103,9 @@ BENCHES = {
     "fusion": ("radarcl.bench.fusion", "one paper frame into the 0.1 m grid vs the float64 oracle and the "
                                        "memory floor, same run"),
     "quality": ("radarcl.bench.quality", "map error against run time on the reference scene (zero padding, beam "
-                                         "model, voxel, CFAR kind) with the OctoMap-style baseline"),
+                                         "model, voxel, CFAR kind) on one fixed voxel set, with three baselines"),
+    "scenes": ("radarcl.bench.scenes", "the maps of generated scenes (held-out or training split) scored on their "
+                                       "visibility truth, beside the three baselines"),
     "store": ("radarcl.bench.store", "saving and loading the paper's 0.1 m map as .npz vs the map store, with an "
                                      "incremental save, same run"),
     "live": ("radarcl.bench.live", "the reference scene streamed beam by beam over a pty into the live engine: "

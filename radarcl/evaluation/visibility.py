@@ -129,7 +129,8 @@ def visibility_truth(scene, spec, observed, poses, noiseless_power=None, noise_p
     observed = np.asarray(observed, bool)
     if observed.shape != labels.shape:
         raise ShapeError(f"observed {observed.shape} must be the grid's {labels.shape}")
-    obstacles = type(scene)(tuple(o for o in scene.objects if o.shape.bounds() is not None), (), scene.sensor_m)
+    obstacles = type(scene)(tuple(o for o in scene.objects if o.shape.bounds() is not None and not is_terrain(o.name)),
+                            (), scene.sensor_m)
     obstacle = obstacles.truth(spec) == SCENE_OCCUPIED
     classes = np.full(labels.shape, UNOBSERVED, np.uint8)
     classes[observed & (labels == SCENE_INTERIOR)] = INTERIOR
@@ -153,6 +154,11 @@ def visibility_truth(scene, spec, observed, poses, noiseless_power=None, noise_p
     return VisibilityTruth(classes, labels, obstacle, observed, detectable_db)
 
 
+def is_terrain(name):
+    """The ground and the generator's mounds: terrain, predictable without a radar, not obstacles."""
+    return name.split(" ")[0] in ("ground", "grass", "mound")
+
+
 def object_group(name):
     """The object a solid belongs to: a tree's trunk and crown are one tree."""
     for part in (" trunk", " crown"):
@@ -172,7 +178,7 @@ def object_surfaces(scene, truth, spec, sensor_m=None):
     sensor = np.asarray(scene.sensor_m if sensor_m is None else sensor_m, float)
     groups = {}
     for obj in scene.objects:
-        if obj.shape.bounds() is not None:
+        if obj.shape.bounds() is not None and not is_terrain(obj.name):
             groups.setdefault(object_group(obj.name), []).append(obj)
     origin, v, shape = np.asarray(spec.origin_m), spec.voxel_m, np.asarray(spec.shape)
     found, hidden = [], []

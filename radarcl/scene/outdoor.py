@@ -109,12 +109,23 @@ class Scene:
         shape = np.asarray(spec.shape)
         for obj in self.objects:
             box = obj.shape.bounds()
-            if box is None:                                   # the ground: layer by layer in z
+            if box is None and isinstance(obj.shape, Ground):   # flat ground: layer by layer in z
                 lo = np.zeros((spec.shape[2], 3))
                 lo[:, 2] = origin[2] + np.arange(spec.shape[2]) * v
                 touch, inside = _classify(obj.shape, lo, v, eps)
                 labels[touch] = np.maximum(labels[touch], OCCUPIED)
                 labels[inside] = INTERIOR
+                continue
+            if box is None:                                   # other terrain: every voxel, a layer at a time
+                y, x = np.meshgrid(np.arange(spec.shape[1]), np.arange(spec.shape[0]), indexing="ij")
+                lo = np.zeros((x.size, 3))
+                lo[:, 0], lo[:, 1] = origin[0] + x.ravel() * v, origin[1] + y.ravel() * v
+                for k in range(spec.shape[2]):
+                    lo[:, 2] = origin[2] + k * v
+                    touch, inside = _classify(obj.shape, lo, v, eps)
+                    layer = labels[k].reshape(-1)
+                    layer[touch] = np.maximum(layer[touch], OCCUPIED)
+                    layer[inside] = INTERIOR
                 continue
             i0 = np.clip(np.floor((box[0] - origin) / v).astype(int), 0, shape)
             i1 = np.clip(np.floor((box[1] - origin) / v).astype(int) + 1, 0, shape)

@@ -187,3 +187,39 @@ class Box:
         """(touches, inside) for boxes [lo, hi)."""
         blo, bhi = self.bounds()
         return (lo <= bhi).all(axis=1) & (hi > blo).all(axis=1), (lo >= blo).all(axis=1) & (hi <= bhi).all(axis=1)
+
+
+@dataclass(frozen=True)
+class Slope:
+    """Sloped terrain: the half-space z <= z0_m + gx x + gy y (gradients gx, gy, rise per metre)."""
+
+    z0_m: float = 0.0
+    gx: float = 0.0
+    gy: float = 0.0
+
+    def bounds(self):
+        """None: the terrain is unbounded."""
+        return None
+
+    def height(self, x, y):
+        """Terrain height [m] at (x, y)."""
+        return self.z0_m + self.gx * np.asarray(x) + self.gy * np.asarray(y)
+
+    def intersect(self, origins, dirs):
+        """(t, normal) of the first entry of each ray; see the module docstring."""
+        above = origins[:, 2] - self.height(origins[:, 0], origins[:, 1])
+        rate = dirs[:, 2] - self.gx * dirs[:, 0] - self.gy * dirs[:, 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -above / rate
+        t = np.where((above > 0) & (rate < 0) & (t > 0), t, _NO_HIT)
+        n = np.array([-self.gx, -self.gy, 1.0])
+        return t, np.broadcast_to(n / np.linalg.norm(n), origins.shape)
+
+    def classify(self, lo, hi):
+        """(touches, inside) for boxes [lo, hi): the plane is linear, so its extremes over a box
+        lie at corners."""
+        top_lo = self.z0_m + np.maximum(self.gx * lo[:, 0], self.gx * hi[:, 0]) + np.maximum(self.gy * lo[:, 1],
+                                                                                           self.gy * hi[:, 1])
+        top_hi = self.z0_m + np.minimum(self.gx * lo[:, 0], self.gx * hi[:, 0]) + np.minimum(self.gy * lo[:, 1],
+                                                                                           self.gy * hi[:, 1])
+        return lo[:, 2] <= top_lo, hi[:, 2] <= top_hi

@@ -1,0 +1,108 @@
+"""`radarcl bench scenes`: the instrument on generated scenes, the training or the held-out split.
+
+Each scene of the split (``scene.generator``) is simulated (the paper's 15 tilts, seeded by the
+scene's seed) and mapped with the paper's constants, the tuned constants and each beam model of
+the tuned configuration; every map and the three baselines (prior_only, raw_intensity, octomap)
+are scored on that scene's fixed voxel set (what the tuned configuration's beams reach,
+``evaluate.instrument``). The table gives per configuration the mean of each score over the
+scenes (objects: found / total summed). Nothing is tuned here: the held-out split is for
+reporting only.
+"""
+
+import numpy as np
+
+from radarcl.geometry import BEAM_MODELS
+
+KEYS = ("auc_detectable", "iou_detectable", "auc_obstacles", "iou_obstacles", "auc_weak", "false_free",
+        "shadow_unknown", "ece", "brier")
+
+
+def configurations(voxel_m):
+    """(name, Resolved) of the compared configurations; the first is the reference."""
+    from radarcl.evaluation.evaluate import paper_config
+    from radarcl.evaluation.tuning import TUNED
+
+    tuned = paper_config(voxel_m, TUNED)
+    out = [("tuned", tuned), ("paper constants", paper_config(voxel_m))]
+    out += [(f"tuned, beam {b}", tuned.replaced(beam__model=b)) for b in BEAM_MODELS if b != tuned["beam.model"]]
+    return out
+
+
+def run(runtime, seeds, voxel_m=0.2, report=None):
+    """Score every configuration and baseline on every scene of ``seeds``; returns the --json dict."""
+    from radarcl.evaluation.evaluate import baselines, instrument, map_observations, radar_score
+    from radarcl.scene.generator import generate
+    from radarcl.scene.observe import observe
+    from radarcl.scene.outdoor import PAPER_TILTS_DEG
+
+    say = report or (lambda _: None)
+    configs = configurations(voxel_m)
+    per_scene = []
+    for n, seed in enumerate(seeds, 1):
+        scene, described = generate(seed)
+        say(f"scene {seed} ({n}/{len(seeds)}): {described['terrain']} terrain, sensor at "
+            f"{described['sensor_height_m']} m, {len(described['objects'])} solids ...")
+        obs = observe(scene, PAPER_TILTS_DEG, seed=seed)
+        inst = instrument(runtime, scene, obs, configs[0][1])
+        maps = {}
+        for name, config in configs:
+            res = inst.reference_map if config is configs[0][1] else map_observations(runtime, obs, config)
+            maps[name] = dict(radar_score(inst, res.log_odds), ms_per_frame=res.ms_per_frame)
+            del res
+        maps.update({f"baseline: {k}": v for k, v in baselines(runtime, inst, obs).items()})
+        per_scene.append(dict(scene=described, voxel_set=inst.describe(), classes=inst.truth.counts(),
+                              hidden_objects=inst.hidden, maps=maps))
+    names = list(per_scene[0]["maps"]) if per_scene else []
+    mean = {}
+    for name in names:
+        rows = [s["maps"][name] for s in per_scene if "error" not in s["maps"][name]]
+        if not rows:
+            mean[name] = dict(error=per_scene[0]["maps"][name].get("error"))
+            continue
+        mean[name] = {k: _mean([r[k] for r in rows]) for k in KEYS + ("ms_per_frame",)}
+        mean[name]["objects_found"] = sum(r["objects_found"] for r in rows)
+        mean[name]["objects_total"] = sum(r["objects_total"] for r in rows)
+    return dict(benchmark="scenes", device=runtime.name, seeds=list(seeds), voxel_m=voxel_m, mean=mean,
+                scenes=per_scene)
+
+
+def _mean(values):
+    values = [v for v in values if v is not None]
+    return float(np.mean(values)) if values else None
+
+
+def format_table(r):
+    """Human-readable lines: the mean of each score per configuration over the scenes."""
+    lines = [f"{len(r['seeds'])} generated scenes (seeds {', '.join(map(str, r['seeds']))}) at {r['voxel_m']} m on "
+             f"{r['device']}; each scored on its own fixed voxel set, means over the scenes",
+             f"  {'map':28s} {'AUCdet':>6s} {'IoUdet':>6s} {'AUCobs':>6s} {'IoUobs':>6s} {'AUCwk':>6s} {'f-free':>6s} "
+             f"{'shd-unk':>7s} {'ECE':>6s} {'Brier':>6s} {'objects':>8s} {'ms/frame':>8s}"]
+    for name, m in r["mean"].items():
+        if "error" in m:
+            lines.append(f"  {name:28s} {m['error']}")
+            continue
+        cells = " ".join(f"{m[k]:6.3f}" if m[k] is not None else f"{'-':>6s}" for k in KEYS[:6])
+        lines.append(f"  {name:28s} {cells} {m['shadow_unknown']:7.3f} {m['ece']:6.3f} {m['brier']:6.3f} "
+                     f"{m['objects_found']:>3d}/{m['objects_total']:<4d} {m['ms_per_frame']:8.1f}")
+    for s in r["scenes"]:
+        lines.append(f"  scene {s['scene']['seed']}: {s['voxel_set']}")
+    return lines
+
+
+def add_arguments(parser):
+    """`radarcl bench scenes` options."""
+    from radarcl.cli import positive_float
+
+    parser.add_argument("--split", choices=("held-out", "train"), default="held-out",
+                        help="which scenes (default: %(default)s; tune only on train)")
+    parser.add_argument("--voxel", type=positive_float, default=0.2, help="voxel [m] (default: %(default)s)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=None, help="these scene seeds instead of a split")
+
+
+def command(args, runtime, say):
+    """Run the bench; returns (result dict, table lines)."""
+    from radarcl.scene.generator import HELD_OUT_SEEDS, TRAIN_SEEDS
+
+    seeds = args.seeds or (HELD_OUT_SEEDS if args.split == "held-out" else TRAIN_SEEDS)
+    result = run(runtime(), seeds, args.voxel, report=say)
+    return result, format_table(result)
