@@ -104,6 +104,8 @@ BENCHES = {
                                        "memory floor, same run"),
     "quality": ("radarcl.bench.quality", "map error against run time on the reference scene (zero padding, beam "
                                          "model, voxel, CFAR kind) on one fixed voxel set, with three baselines"),
+    "heldout-scans": ("radarcl.bench.heldout_scans", "real data without lidar: a map of the even Navtech scans "
+                                                     "predicts the CFAR detections of the odd ones, vs raw intensity"),
     "scenes": ("radarcl.bench.scenes", "the maps of generated scenes (held-out or training split) scored on their "
                                        "visibility truth, beside the three baselines"),
     "store": ("radarcl.bench.store", "saving and loading the paper's 0.1 m map as .npz vs the map store, with an "
