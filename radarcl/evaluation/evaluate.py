@@ -123,15 +123,19 @@ def instrument(runtime, scene, obs, reference, progress=None):
     """The ``Instrument`` of ``obs`` (simulated from ``scene``) at ``reference``'s voxel size.
 
     DETECTABLE/WEAK need the frames' noiseless range profiles: the recording is simulated again
-    with its seed and tilts and no receiver noise or ADC (the same rays, phases and echoes)."""
+    with its seed and tilts and no receiver noise or ADC (the same rays, phases and echoes: they
+    are functions of the seed, ``observe.lattice_rays``)."""
     from radarcl import oracle
     from radarcl.evaluation import visibility as vis
     from radarcl.scene.observe import NOISE_RMS, observe
 
     ref_map = map_observations(runtime, obs, reference, progress)
     radar = reference.sensor.radar
-    quiet = observe(scene, obs.tilts_deg, radar=radar, seed=obs.seed, rays_across=_rays_across(obs, scene), noise_rms=0.0,
-                    adc=None)
+    quiet = observe(scene, obs.tilts_deg, radar=radar, seed=obs.seed, noise_rms=0.0, adc=None)
+    if quiet.rays_per_beam != obs.rays_per_beam or not np.allclose(quiet.poses, obs.poses):
+        raise ConfigError(f"the recording (seed {obs.seed}, {obs.rays_per_beam} echoes per beam) was not simulated "
+                          f"from this scene with radarcl's defaults ({quiet.rays_per_beam} echoes per beam): its "
+                          f"noiseless echoes cannot be recomputed for the truth")
     n = quiet.samples.shape
     power = oracle.range_profile(quiet.samples.reshape(n[0], n[1] * n[2], n[3]), reference.n_fft, output="power")
     half = (math.radians(radar.beamwidth_az_deg) / 2, math.radians(radar.beamwidth_el_deg) / 2)
@@ -140,16 +144,6 @@ def instrument(runtime, scene, obs, reference, progress=None):
                                  radar.bin_spacing_m(reference.n_fft))
     objects, hidden = vis.object_surfaces(scene, truth, ref_map.spec)
     return Instrument(ref_map.spec, truth, objects, hidden, reference, ref_map)
-
-
-def _rays_across(obs, scene):
-    """The simulation's rays across a beam, from its echoes per beam (rays + point scatterers)."""
-    from radarcl.scene.observe import ray_offsets
-
-    for k in range(2, 64):
-        if len(ray_offsets(k)[0]) + len(scene.points) == obs.rays_per_beam:
-            return k
-    raise ConfigError(f"cannot tell the simulation's rays across from {obs.rays_per_beam} rays per beam")
 
 
 def radar_score(inst, log_odds):

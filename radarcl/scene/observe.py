@@ -1,16 +1,20 @@
 """Radar observations of a ``Scene``: raw beat-signal samples of every beam, seeded.
 
-Each beam is sampled by rays spread over its pattern: a stratified, jittered set of offsets
-(s, t) in units of the half-power half-widths (azimuth, elevation) with s^2 + t^2 <= ``SPAN``^2,
+Each beam is sampled by rays spread over its pattern: the directions of one lattice fixed in the
+world (``lattice_rays``; cells of 2 SPAN / RAYS_ACROSS half-power half-widths, a jitter fixed per
+cell) whose offsets (s, t) from the beam's axis, in half-widths, satisfy s^2 + t^2 <= ``SPAN``^2,
 so the one-way pattern 2^-(s^2 + t^2) (the square root of ``geometry.two_way_weight``) falls to
-0.21 at the edge of what is sampled. Per ray:
+0.21 at the edge of what is sampled. Beams and tilts that overlap share rays. Per ray:
 
 - the first surface it meets (occlusion: nothing behind it is seen);
 - a patch of that surface of area r^2 dOmega / cos(theta_i) with sigma0 = gamma cos(theta_i)
   (the constant-gamma model, ``outdoor.Material``), so the patch's RCS is gamma r^2 dOmega;
 - the radar equation in amplitude: a = A_1M2_AT_10M sqrt(sigma / 1 m^2) (10 m / r)^2 times the
   two-way pattern in amplitude, 2^-(s^2 + t^2);
-- a uniformly random phase (a rough surface: speckle).
+- the phase of the scatterer it hits, fixed per ``SPECKLE_CELL_M`` cell of the surface and per
+  recording (``hash_uniform`` of the cell and the seed): a still radar sees the same speckle
+  from the same scatterer at every tilt, as a real one does (before, every tilt drew new
+  phases, and fusing tilts averaged speckle more than a real radar could).
 
 A grazing ground return spreads over the ranges its rays reach, and its power per range cell
 falls with range: both come from the geometry, nothing is imposed. Point scatterers (RCS) add
@@ -34,6 +38,7 @@ RAYS_ACROSS = 12             # stratified grid of RAYS_ACROSS^2 cells over the s
 A_1M2_AT_10M = 0.05          # tone amplitude [V] of a 1 m^2 target at 10 m on the beam axis
 R_REF_M = 10.0
 NOISE_RMS = 1e-3             # receiver noise per sample [V]
+SPECKLE_CELL_M = 0.05        # a scatterer's phase is fixed per cell of this edge on the surface
 ADC = Adc(bits=12)           # full scale 1 V
 
 
@@ -50,55 +55,92 @@ class Observations:
     n_clipped: int
 
 
-def ray_offsets(rays_across=RAYS_ACROSS, span=SPAN):
-    """(k, 2) offsets (s, t) in half-power half-widths: the centres of the stratified cells
-    that lie in the disc of radius ``span``; and a cell's area in those units."""
-    cell = 2 * span / rays_across                       # edge of a cell
-    centres = (np.arange(rays_across) + 0.5) * cell - span
-    s, t = np.meshgrid(centres, centres, indexing="ij")
-    keep = s ** 2 + t ** 2 <= span ** 2
-    return np.column_stack([s[keep], t[keep]]), cell * cell
-
-
 def _beam_frames(pose, lattice):
     """(n_beams, 3, 3) world rotations of the beams: columns u (axis), v, w."""
     return pose[:3, :3] @ lattice.beam_rotations()
 
 
-def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, rng=None):
-    """Echoes of every beam of one frame: (amplitude, range_m, phase) arrays (n_beams, k)."""
-    rng = np.random.default_rng(rng)
+def hash_uniform(keys, salt, stream=0):
+    """Floats in [0, 1) from integer ``keys`` (..., m) and ``salt``: splitmix64 over the key's
+    entries, so the same key always draws the same number (the same scatterer, the same ray)."""
+    k = np.asarray(keys, np.int64).astype(np.uint64)
+    with np.errstate(over="ignore"):
+        h = np.uint64((int(salt) * 0x9E3779B97F4A7C15 + int(stream) * 0xD1B54A32D192ED03) & 0xFFFFFFFFFFFFFFFF)
+        h = np.broadcast_to(h, k.shape[:-1]).copy()
+        for j in range(k.shape[-1]):
+            h = (h ^ k[..., j]) * np.uint64(0xBF58476D1CE4E5B9)
+            h ^= h >> np.uint64(31)
+        h = (h ^ (h >> np.uint64(30))) * np.uint64(0x94D049BB133111EB)
+        h ^= h >> np.uint64(31)
+    return (h >> np.uint64(11)).astype(np.float64) / 2.0 ** 53
+
+
+def lattice_rays(frames, half_az, half_el, rays_across=RAYS_ACROSS, salt=0):
+    """The rays that sample each beam, drawn from one lattice of directions fixed in the world:
+    cells ``2 SPAN / rays_across`` half-power half-widths wide in world azimuth and elevation,
+    one ray per cell at a jitter fixed per cell (``hash_uniform``). A beam takes the lattice's
+    rays within ``SPAN`` of its axis, so beams and tilts that overlap share rays, and a still
+    radar sees the same scatterers, with the same speckle, at every tilt.
+
+    Returns (dirs (n_beams, k, 3), offsets (n_beams, k, 2) in half-widths, solid angle per ray
+    (n_beams, k) [sr], used (n_beams, k) bool); k is the most rays a beam holds."""
+    cell = 2 * SPAN / rays_across
+    d_az, d_el = cell * half_az, cell * half_el
+    u = frames[:, :, 0]
+    a_b, e_b = np.arctan2(u[:, 1], u[:, 0]), np.arcsin(np.clip(u[:, 2], -1, 1))
+    worst = np.cos(np.minimum(np.abs(e_b).max() + SPAN * half_el, 1.4))
+    n_i, n_k = int(math.ceil(SPAN * half_az / (d_az * worst))) + 1, int(math.ceil(SPAN / cell)) + 1
+    di, dk = np.meshgrid(np.arange(-n_i, n_i + 1), np.arange(-n_k, n_k + 1), indexing="ij")
+    I = np.rint(a_b / d_az).astype(np.int64)[:, None] + di.reshape(1, -1)
+    K = np.rint(e_b / d_el).astype(np.int64)[:, None] + dk.reshape(1, -1)
+    keys = np.stack([I, K], axis=-1)
+    az = (I + hash_uniform(keys, salt, 1) - 0.5) * d_az
+    el = (K + hash_uniform(keys, salt, 2) - 0.5) * d_el
+    dirs = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=-1)
+    du, dv, dw = (np.einsum("bkj,bj->bk", dirs, frames[:, :, c]) for c in range(3))
+    st = np.stack([np.arctan2(dv, du) / half_az, np.arctan2(dw, du) / half_el], axis=-1)
+    inside = (du > 0) & ((st ** 2).sum(axis=-1) <= SPAN ** 2)
+    order = np.argsort(~inside, axis=1, kind="stable")[:, :int(inside.sum(axis=1).max())]
+    take = lambda a: np.take_along_axis(a, order.reshape(order.shape + (1,) * (a.ndim - 2)), axis=1)  # noqa: E731
+    used = take(inside)
+    return take(dirs), take(st), np.where(used, d_az * d_el * np.cos(take(el)), 0.0), used
+
+
+def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, salt=0):
+    """Echoes of every beam of one frame: (amplitude, range_m, phase) arrays (n_beams, k).
+
+    ``salt`` fixes the recording's scatterers: ray jitter and speckle phases are functions of
+    the world direction and of the scatterer, not random draws (``lattice_rays``,
+    ``hash_uniform``), so the same salt gives the same echoes at the same pose."""
     lattice = BeamLattice.from_radar(radar)
     frames = _beam_frames(pose, lattice)
     n_beams = len(frames)
     half_az, half_el = math.radians(radar.beamwidth_az_deg) / 2, math.radians(radar.beamwidth_el_deg) / 2
     origin = np.asarray(scene.sensor_m, float)
 
-    st, cell = ray_offsets(rays_across)
-    k = len(st)
-    st = st[None] + rng.uniform(-0.5, 0.5, (n_beams, k, 2)) * math.sqrt(cell)    # jitter in its cell
-    d_omega = cell * half_az * half_el                                  # solid angle per ray [sr]
-    dirs = (frames[:, None, :, 0] + np.tan(st[..., :1] * half_az) * frames[:, None, :, 1]
-            + np.tan(st[..., 1:] * half_el) * frames[:, None, :, 2])
-    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    dirs, st, d_omega, used = lattice_rays(frames, half_az, half_el, rays_across, salt)
+    k = dirs.shape[1]
     flat = dirs.reshape(-1, 3)
     t, owner, normal = scene.first_hit(np.broadcast_to(origin, flat.shape), flat)
-    hit = np.isfinite(t) & (t <= radar.range_max_m * 1.05)
+    hit = np.isfinite(t) & (t <= radar.range_max_m * 1.05) & used.reshape(-1)
     gamma = np.array([10 ** (o.material.gamma_db / 10) for o in scene.objects])
     cos_i = np.abs(np.einsum("ij,ij->i", normal, flat))
     r = np.where(hit, t, R_REF_M)
-    area = r ** 2 * d_omega / np.maximum(cos_i, 1e-6)                   # patch of surface [m^2]
+    area = r ** 2 * d_omega.reshape(-1) / np.maximum(cos_i, 1e-6)      # patch of surface [m^2]
     sigma = np.where(hit, gamma[owner] * cos_i * area, 0.0)            # sigma0(theta_i) x area
     pattern = 2.0 ** -(st[..., 0] ** 2 + st[..., 1] ** 2).reshape(-1)  # two-way, in amplitude
     amp = A_1M2_AT_10M * np.sqrt(sigma) * (R_REF_M / r) ** 2 * pattern
     amp, rng_m = amp.reshape(n_beams, k), r.reshape(n_beams, k)
-    phase = rng.uniform(0, 2 * np.pi, (n_beams, k))
+    # the scatterer's own phase: fixed per SPECKLE_CELL_M cell of the surface it sits on
+    cells = np.floor((origin + np.where(hit, t, 0.0)[:, None] * flat) / SPECKLE_CELL_M).astype(np.int64)
+    phase = 2 * np.pi * hash_uniform(cells, salt, 3).reshape(n_beams, k)
 
     if scene.points:
         p_amp, p_r = _point_echoes(scene, frames, origin, half_az, half_el)
         amp = np.concatenate([amp, p_amp], axis=1)
         rng_m = np.concatenate([rng_m, p_r], axis=1)
-        phase = np.concatenate([phase, rng.uniform(0, 2 * np.pi, p_amp.shape)], axis=1)
+        fixed = 2 * np.pi * hash_uniform(np.arange(len(scene.points))[:, None], salt, 4)
+        phase = np.concatenate([phase, np.broadcast_to(fixed, p_amp.shape)], axis=1)
     return amp, rng_m, phase
 
 
@@ -133,7 +175,7 @@ def observe(scene, tilts_deg, radar=PAPER_RADAR, seed=0, rays_across=RAYS_ACROSS
     frames, poses, clipped = [], [], 0
     for j, tilt in enumerate(tilts):
         pose = scene.stand_pose(float(tilt))
-        amp, r, phase = observe_frame(scene, pose, radar, rays_across, rng)
+        amp, r, phase = observe_frame(scene, pose, radar, rays_across, salt=seed)
         sim = simulate_beams(radar, amp, r, phase, noise_rms=noise_rms, adc=adc, seed=rng.integers(2 ** 63))
         frames.append(sim.samples.reshape(radar.n_azimuth, radar.n_elevation, radar.n_samples))
         poses.append(pose)
