@@ -32,3 +32,7 @@ def test_the_map_of_some_scans_predicts_the_detections_of_the_others(runtime, sh
     assert len(bins) == 1 and bins.pop() > 10 ** 6                     # every predictor on the same bins
     assert res["map"]["auc"] > 0.55 and res["map"]["coverage"] > 0.9
     assert any("predicts the CFAR detections" in line for line in hs.format_table(r))
+    # the outcomes come from the profile's own detector: a map with another CFAR is judged on them too
+    other = hs.run(runtime, mapconfig.resolve("navtech-cts350x", flags={"cfar.kind": "so", "cfar.pfa": 0.01}), shared_data / "navtech_oxford")
+    assert other["results"]["map"]["detected"] == res["map"]["detected"]
+    assert other["outcome_detector"] == r["outcome_detector"]

@@ -4,7 +4,8 @@ the CFAR detections of the scans it did not see.
 The Oxford sequence (``navtech_map.load``: polar scans with ground-truth odometry) is split by
 interleaving: the even scans make the map, the odd ones are held out (they see the same street a
 quarter of a second later). For every held-out range bin inside the interpreter's range window,
-its CFAR detection (the configuration's own detector) is the outcome and the map's log-odds at
+its CFAR detection by the sensor profile's own detector (the same outcomes for every map
+compared) is the outcome and the map's log-odds at
 the bin's world position (the azimuth's own pose, as the map was fused) the prediction:
 
 - ``auc``: ROC area of the log-odds at detected against not-detected bins (ties one half, an
@@ -43,7 +44,9 @@ def _raw_map(runtime, config, spec, scans, per_beam):
 
 
 def predictions(runtime, config, spec, grid_int, scans, per_beam):
-    """(log-odds [nat] at each held-out bin, its CFAR detection) over the range window."""
+    """(log-odds [nat] at each held-out bin, its CFAR detection) over the range window.
+    ``config`` is the outcome detector's configuration (the sensor profile's own, the same for
+    every map compared: the outcomes must not change with the map's CFAR)."""
     from radarcl.pipeline import Mapping
 
     mapping = Mapping.from_config(runtime, config=config, per_beam_poses=True)
@@ -91,21 +94,26 @@ def run(runtime, config, data_dir, report=None):
     say(f"{len(scans)} scans: map of scans {train}, held out {test}")
     maps = {"map": navtech_map.build_map(runtime, config, spec, [scans[k] for k in train], per_beam[train]).snapshot(),
             "baseline: raw_intensity": _raw_map(runtime, config, spec, [scans[k] for k in train], per_beam[train])}
+    from radarcl import mapconfig
+
+    # the outcomes: the sensor profile's own detector, whatever the compared map's CFAR is
+    outcome = mapconfig.resolve(config.sensor, program={"grid.voxel_m": config["grid.voxel_m"]})
     out = {}
     for name, grid in maps.items():
-        L, y = predictions(runtime, config, spec, grid, [scans[k] for k in test], per_beam[test])
+        L, y = predictions(runtime, outcome, spec, grid, [scans[k] for k in test], per_beam[test])
         out[name] = score(L, y)
     out["baseline: no map"] = score(np.zeros_like(L), y)
     # no radar data beyond one number: the held-out detection rate itself, as a constant log-odds
     rate = float(y.mean())
     out["baseline: detection rate"] = score(np.full_like(L, np.log(rate / (1 - rate))), y)
     return dict(benchmark="heldout-scans", device=runtime.name, sensor=config.sensor.name, scans=len(scans),
-                train=train, held_out=test, voxel_m=config["grid.voxel_m"], config=config.label(), results=out)
+                train=train, held_out=test, voxel_m=config["grid.voxel_m"], config=config.label(),
+                outcome_detector=outcome.label(), results=out)
 
 
 def format_table(r):
     lines = [f"{r['sensor']}: map of scans {r['train']} predicts the CFAR detections of scans {r['held_out']} "
-             f"({r['voxel_m']} m; {r['config']})",
+             f"({r['voxel_m']} m; map: {r['config']}; outcomes: {r['outcome_detector']})",
              f"  {'predictor':26s} {'AUC':>6s} {'log-lik [nat/bin]':>18s} {'coverage':>9s} {'bins':>10s} {'detected':>9s}"]
     for name, s in r["results"].items():
         lines.append(f"  {name:26s} {s['auc']:6.3f} {s['log_likelihood']:18.4f} {s['coverage']:9.3f} {s['bins']:10d} "
