@@ -282,6 +282,8 @@ def quality_figure(r):
     for dim, marker in DIMENSION_MARKERS.items():
         if dim in present:
             ax.scatter([], [], marker=marker, color=colours[dim], edgecolor="k", s=60, label=dim)
+    if any(ref_v is not None and x["voxel_m"] != ref_v for x in runs):
+        ax.scatter([], [], marker="o", color="none", edgecolor="k", s=60, label="hollow: scored on its own voxel set")
     for name, b in (r.get("baselines") or {}).items():
         if "auc_detectable" in b and b["auc_detectable"] is not None:
             marker, colour = BASELINE_MARKERS.get(name, ("X", "k"))
