@@ -17,9 +17,20 @@
  * negative or larger than PROFILE_LIMIT bin (FLAG_BAD_PROFILE: CFAR's float32 sums would
  * overflow) or only zeros (FLAG_SILENT), give 0 evidence and no pulses.
  *
+ * With -D OCCLUSION=1, the occlusion-aware variant (beyond the paper; radarcl's own):
+ *   noise bins before the first SURFACE: E_h interpolated in range, e_high at first_bin to
+ *       e_high_far at last_bin (integer arithmetic, truncated: "no echo" means less far away,
+ *       where a surface's echo may be below the noise);
+ *   noise bins after it: E_l (0 or a weak value chosen by calibration: behind the first
+ *       surface the radar cannot tell);
+ *   a pulse is a surface when it is wide (the paper's rule) or its peak log10(r / n) reaches
+ *   surface_decades (a calibrated test: a strong narrow echo is a tree, a post, a drum).
+ * OCCLUSION=0 is eq. 12 exactly; e_high_far and surface_decades are then unused.
+ *
  * -D constants (set by radarcl/stages/interpret.py):
  *   N_BINS      bins per profile
  *   MAX_PULSES  pulse rows kept per beam; more are counted and still give evidence
+ *   OCCLUSION   0: the paper's eq. 12; 1: the occlusion-aware variant above
  */
 #include "radarcl_common.h"
 
@@ -34,6 +45,8 @@ __kernel void interpret(
     const int first_bin,              // evidence interval [first_bin, last_bin], inclusive
     const int last_bin,
     const int wide_bins,              // a pulse this wide or wider is wide [bins]
+    const int e_high_far,             // OCCLUSION: E_h at last_bin [logodds units]
+    const float surface_decades,      // OCCLUSION: a pulse whose peak log10(r/n) reaches this is a surface
     const int n_beams,
     __global int *evidence,           // (n_beams, N_BINS) out [logodds units]
     __global int4 *pulses,            // (n_beams, MAX_PULSES) out: start, end, peak, wide; -1 unused
@@ -70,18 +83,27 @@ __kernel void interpret(
     for (int j = 0; j < first_bin && j < N_BINS; j++)
         ev[j] = 0;
     int count = 0, after_wide = 0, start = -1, peak = -1;
+    float strongest = -INFINITY;                 /* OCCLUSION: the pulse's largest log10(r / n) */
+    const int span = max(last_bin - first_bin, 1);
     for (int j = first_bin; j <= last_bin; j++) {
         if (m[j]) {
-            const float nats = k_occ * (log10(r[j]) - log10(n[j]));
-            ev[j] = convert_int_rte(clamp(nats, 0.0f, EVIDENCE_LIMIT_NATS) * LOGODDS_SCALE);
+            const float decades = log10(r[j]) - log10(n[j]);
+            ev[j] = convert_int_rte(clamp(k_occ * decades, 0.0f, EVIDENCE_LIMIT_NATS) * LOGODDS_SCALE);
+            strongest = start < 0 ? decades : fmax(strongest, decades);
             if (start < 0) {
                 start = j;
                 peak = j;
             } else if (r[j] > r[peak]) {
                 peak = j;
             }
+        } else if (after_wide) {
+            ev[j] = e_low;
         } else {
-            ev[j] = after_wide ? e_low : e_high;
+#if OCCLUSION
+            ev[j] = e_high + (e_high_far - e_high) * (j - first_bin) / span;
+#else
+            ev[j] = e_high;
+#endif
         }
         /* A pulse ends at the last detected bin of a run, or at the last bin of the interval. */
         if (start >= 0 && (j == last_bin || !m[j + 1])) {
@@ -89,7 +111,11 @@ __kernel void interpret(
             if (count < MAX_PULSES)
                 pl[count] = (int4)(start, j, peak, wide);
             count++;
+#if OCCLUSION
+            after_wide |= wide || strongest >= surface_decades;    /* "after the first surface" */
+#else
             after_wide |= wide;
+#endif
             start = -1;
         }
     }

@@ -265,6 +265,9 @@ class CfarConfig:
         return int(n_bins)
 
 
+INTERPRETERS = ("paper", "occlusion")
+
+
 @dataclass(frozen=True)
 class InterpretConfig:
     """The down-range interpreter, eq. 12, with the paper's defaults.
@@ -282,6 +285,10 @@ class InterpretConfig:
         (sensor 1.5 m above flat ground - our assumption, the paper does not say), lowest
         elevation -14 deg, 2 deg beam, 0.5 m resolution: 1.87 m.
     max_pulses: pulses kept per beam (more are counted, and still give evidence).
+    model: "paper" (eq. 12 as above) or "occlusion" (radarcl's, beyond the paper): noise bins
+        before the first surface get E_h interpolated in range from e_high (first bin) to
+        e_high_far (last bin), noise bins after it E_l; a pulse is a surface when it is wide or
+        its peak 10 log10(r / n) reaches surface_db. (kernels/interpret.cl says why.)
     """
 
     k_occ: float = 1.0
@@ -291,10 +298,15 @@ class InterpretConfig:
     range_max_m: float = 64.0
     wide_pulse_m: float = None
     max_pulses: int = 32
+    model: str = "paper"
+    surface_db: float = 10.0
+    e_high_far: float = None
 
     def __post_init__(self):
         if self.wide_pulse_m is None:
             object.__setattr__(self, "wide_pulse_m", PAPER_WIDE_PULSE_M)
+        if self.e_high_far is None:
+            object.__setattr__(self, "e_high_far", self.e_high)
         for name in ("k_occ", "e_high", "e_low", "range_min_m", "range_max_m", "wide_pulse_m"):
             value = getattr(self, name)
             _require(isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value),
@@ -307,6 +319,11 @@ class InterpretConfig:
                  f"need 0 <= range_min_m < range_max_m, got {self.range_min_m} and {self.range_max_m}")
         _require(self.wide_pulse_m > 0, f"wide_pulse_m must be positive, got {self.wide_pulse_m}")
         _positive_int("max_pulses", self.max_pulses)
+        _require(self.model in INTERPRETERS, f"model must be one of {INTERPRETERS}, got {self.model!r}")
+        _require(isinstance(self.surface_db, (int, float)) and math.isfinite(self.surface_db),
+                 f"surface_db must be a finite number, got {self.surface_db!r}")
+        _require(isinstance(self.e_high_far, (int, float)) and math.isfinite(self.e_high_far) and self.e_high_far <= 0,
+                 f"e_high_far is evidence of emptiness and must be a finite number <= 0, got {self.e_high_far!r}")
 
     def bin_interval(self, bin_spacing_m, n_bins):
         """[first, last] bins (inclusive) whose range lies in [range_min_m, range_max_m]:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from radarcl import tomlfile
-from radarcl.config import CfarConfig, InterpretConfig, is_power_of_two
+from radarcl.config import INTERPRETERS, CfarConfig, InterpretConfig, is_power_of_two
 from radarcl.errors import ConfigError
 from radarcl.geometry import BEAM_MODELS
 
@@ -62,6 +62,12 @@ KEYS = {
     "interpret.range_min_m": Key(lambda v: _N(v, 0, 1e5, unit="m"), "m", "no evidence nearer"),
     "interpret.range_max_m": Key(lambda v: _N(v, 0, 1e5, lo_open=True, unit="m"), "m", "no evidence farther"),
     "interpret.max_pulses": Key(lambda v: tomlfile.integer(v, 1, 1 << 16), "", "pulse rows kept per beam"),
+    "interpret.model": Key(lambda v: tomlfile.choice(v, INTERPRETERS), "",
+                           "paper: eq. 12; occlusion: free evidence only up to the first surface"),
+    "interpret.surface_db": Key(lambda v: _N(v, -100, 100, unit="dB"), "dB",
+                                "occlusion: a pulse whose peak r/n reaches this is a surface"),
+    "interpret.e_high_far": Key(lambda v: _N(v, -16, 0, unit="nat"), "nat",
+                                "occlusion: E_h at the far end of the range (e_high at the near end)"),
     "beam.model": Key(lambda v: tomlfile.choice(v, BEAM_MODELS), "", "beam volume (§3.4, Fig. 7c)"),
     "grid.voxel_m": Key(lambda v: _N(v, 1e-4, 1e3, unit="m"), "m", "voxel edge"),
     "grid.origin_m": Key(lambda v: tomlfile.vector(v, unit="m"), "m", "low corner (x, y, z), world frame"),
@@ -73,6 +79,7 @@ BUILTIN = {
     "range_fft.window": "hann", "cfar.kind": "ca", "cfar.pfa": 1e-3, "cfar.os_rank": 0.75,
     "cfar.noise_floor": 1e-30, "interpret.k_occ": 1.0, "interpret.e_high": -1.0, "interpret.e_low": -0.1,
     "interpret.max_pulses": 32, "beam.model": "cylindrical-conical", "grid.voxel_m": 0.1,
+    "interpret.model": "paper", "interpret.surface_db": 10.0,
 }
 """radarcl's own defaults: the paper's CFAR (CA, P_fa 1e-3, Fig. 6), its eq. 12 constants
 (k_occ 1, E_h -1 from Fig. 10; E_l -0.1 ours, the paper gives none), Rohling's OS rank 3/4,
@@ -178,7 +185,9 @@ class Resolved:
         return InterpretConfig(k_occ=self["interpret.k_occ"], e_high=self["interpret.e_high"],
                                e_low=self["interpret.e_low"], range_min_m=self["interpret.range_min_m"],
                                range_max_m=self["interpret.range_max_m"], wide_pulse_m=self["interpret.wide_pulse_m"],
-                               max_pulses=self["interpret.max_pulses"])
+                               max_pulses=self["interpret.max_pulses"], model=self["interpret.model"],
+                               surface_db=self["interpret.surface_db"],
+                               e_high_far=self.values.get("interpret.e_high_far"))   # unset: E_h (no ramp)
 
     def grid_spec(self):
         """The ``GridSpec`` of [grid]: origin_m, ceil(size_m / voxel_m) voxels."""

@@ -199,7 +199,8 @@ def cfar(profiles, config):
 
 
 def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
-    """The down-range interpreter, eq. 12, on (..., n_bins) arrays, plainly, beam by beam.
+    """The down-range interpreter, eq. 12 (or, with ``config.model == "occlusion"``, radarcl's
+    occlusion-aware variant: ``InterpretConfig``), on (..., n_bins) arrays, plainly, beam by beam.
 
     profiles: power r_i; noise, mask: from ``cfar``; flags: per-beam flags from range
     processing (..., ) or None. Returns ``(evidence, pulses, n_pulses, flags)``:
@@ -221,7 +222,8 @@ def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
         raise ShapeError(f"flags must have shape {batch}, got {flags_in.shape}")
     first, last = config.bin_interval(bin_spacing_m, n_bins)
     wide_bins = config.wide_bins(bin_spacing_m)
-    e_high, e_low = (int(v) for v in logodds.to_fixed([config.e_high, config.e_low]))
+    e_high, e_low, e_far = (int(v) for v in logodds.to_fixed([config.e_high, config.e_low, config.e_high_far]))
+    occlusion, span = config.model == "occlusion", max(last - first, 1)
     evidence = np.zeros(r.shape, np.int32)
     pulses = np.full((*batch, config.max_pulses, 4), -1, np.int32)
     n_pulses = np.zeros(batch, np.int32)
@@ -235,17 +237,24 @@ def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
             flags_out[beam] |= FLAG_SILENT
         if flags_out[beam] & NO_EVIDENCE_FLAGS:
             continue
-        after_wide = False
+        after_wide = False              # the paper: after the first wide pulse; occlusion: the first surface
         j = first
         while j <= last:
             if not mb[j]:
-                evidence[beam][j] = e_low if after_wide else e_high
+                if after_wide:
+                    evidence[beam][j] = e_low
+                elif occlusion:         # E_h in range, in integers truncated toward 0, as C divides
+                    step = (e_far - e_high) * (j - first)
+                    evidence[beam][j] = e_high + (abs(step) // span) * (1 if step >= 0 else -1)
+                else:
+                    evidence[beam][j] = e_high
                 j += 1
                 continue
-            start = j
+            start, strongest = j, -np.inf
             while j <= last and mb[j]:
-                nats = max(0.0, config.k_occ * (np.log10(rb[j]) - np.log10(nb[j])))
-                evidence[beam][j] = logodds.to_fixed(nats)
+                decades = np.log10(rb[j]) - np.log10(nb[j])
+                strongest = max(strongest, decades)
+                evidence[beam][j] = logodds.to_fixed(max(0.0, config.k_occ * decades))
                 j += 1
             end = j - 1
             wide = end - start + 1 >= wide_bins
@@ -254,7 +263,7 @@ def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
                 peak = start + int(np.argmax(rb[start:end + 1]))
                 pulses[beam][k] = (start, end, peak, int(wide))
             n_pulses[beam] += 1
-            after_wide = after_wide or wide
+            after_wide = after_wide or wide or (occlusion and strongest >= config.surface_db / 10.0)
     return evidence, pulses, n_pulses, flags_out
 
 

@@ -134,3 +134,45 @@ def test_refuses_bad_input(runtime):
     with pytest.raises(ShapeError, match=r"expected power profiles of shape \(4, 64\) float32 on the device, "
                                          r"got \(4, 64\) float64"):
         detection.enqueue(cla.to_device(runtime.queue, np.ones((4, 64))))     # once read the wrong bytes
+
+
+def test_the_occlusion_aware_variant_matches_its_oracle(runtime):
+    """OCCLUSION=1: a strong narrow pulse (a post, a trunk) is a surface, so the noise behind it
+    gets E_l, not the paper's E_h; before the first surface E_h runs from e_high at the first
+    bin to e_high_far at the last, in integers exactly as the oracle computes them."""
+    occ = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4, model="occlusion",
+                          surface_db=20.0, e_high=-1.0, e_high_far=-0.25, e_low=0.0)
+    x = frame(seed=7)
+    got, (evidence, pulses, n_pulses, _) = run_both(runtime, x, config=occ)
+    # no pulse peak lies within 1e-3 decades of the surface test (float32 vs float64 could differ there)
+    noise = got.cfar.noise.astype(np.float64)
+    decades = np.log10(np.maximum(x, 1e-30)) - np.log10(noise)
+    assert np.all(np.abs(decades[got.cfar.mask.astype(bool)] - 2.0) > 1e-3)
+    ev = got.interpret.evidence
+    first, last = occ.bin_interval(SPACING, 256)
+    e_high, e_far = logodds.to_fixed([-1.0, -0.25])
+    beam, noise_bins = ev[0, 0], ~got.cfar.mask[0, 0].astype(bool)
+    narrow = [p for p in got.interpret.pulses[0, 0] if p[0] >= 0 and p[3] == 0 and p[0] <= 52 <= p[1]]
+    assert narrow, "the narrow pulse at bins 50-52 was detected"
+    end = narrow[0][1]
+    behind = np.arange(end + 1, 100)[noise_bins[end + 1:100]]
+    assert len(behind) and np.all(beam[behind] == 0)                    # E_l = 0 behind the surface
+    paper = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4)
+    paper_ev = oracle.interpret(x, got.cfar.noise, got.cfar.mask, paper, SPACING)[0]
+    assert np.all(paper_ev[0, 0][behind] == logodds.to_fixed(-1.0))    # the paper: strongly free
+    # a beam with no detection: the ramp, exactly
+    quiet = [b for b in range(ev.shape[0] * ev.shape[1]) if not got.cfar.mask.reshape(-1, 256)[b, first:last + 1].any()]
+    assert quiet
+    ramp = ev.reshape(-1, 256)[quiet[0], first:last + 1].astype(np.int64)
+    assert ramp[0] == e_high and ramp[-1] == e_far and np.all(np.diff(ramp) >= 0)
+    j = np.arange(last - first + 1)
+    step = (int(e_far) - int(e_high)) * j
+    assert np.array_equal(ramp, int(e_high) + np.sign(step) * (np.abs(step) // (last - first)))
+
+
+def test_the_occlusion_keys_are_checked():
+    with pytest.raises(ConfigError, match="model must be one of"):
+        InterpretConfig(model="magic")
+    with pytest.raises(ConfigError, match="e_high_far is evidence of emptiness"):
+        InterpretConfig(model="occlusion", e_high_far=0.5)
+    assert InterpretConfig(e_high=-0.3).e_high_far == -0.3            # defaults to E_h: no ramp

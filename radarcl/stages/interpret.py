@@ -53,9 +53,10 @@ class Interpreter(Stage):
         self.bin_spacing_m = spacing(bin_spacing_m)
         self.first_bin, self.last_bin = self.config.bin_interval(self.bin_spacing_m, self.n_bins)
         self.wide_bins = self.config.wide_bins(self.bin_spacing_m)
-        self.e_high, self.e_low = (int(v) for v in logodds.to_fixed([self.config.e_high, self.config.e_low]))
-        self._kernel = build(runtime, "interpret", dict(N_BINS=self.n_bins,
-                                                        MAX_PULSES=self.config.max_pulses))["interpret"]
+        self.e_high, self.e_low, self.e_high_far = (int(v) for v in logodds.to_fixed(
+            [self.config.e_high, self.config.e_low, self.config.e_high_far]))
+        self._kernel = build(runtime, "interpret", dict(N_BINS=self.n_bins, MAX_PULSES=self.config.max_pulses,
+                                                        OCCLUSION=int(self.config.model == "occlusion")))["interpret"]
         self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
         f32, u8, i32 = np.dtype(np.float32), np.dtype(np.uint8), np.dtype(np.int32)
         shape = self.input_shape
@@ -91,6 +92,7 @@ class Interpreter(Stage):
                             flags_in=self._no_flags if flags is None else self.device("flags_in", flags),
                             k_occ=float(self.config.k_occ), e_high=self.e_high, e_low=self.e_low,
                             first_bin=self.first_bin, last_bin=self.last_bin, wide_bins=self.wide_bins,
+                            e_high_far=self.e_high_far, surface_decades=float(self.config.surface_db / 10.0),
                             n_beams=self.n_beams, evidence=a["evidence"], pulses=a["pulses"],
                             n_pulses=a["n_pulses"], flags_out=a["flags_out"])
 
