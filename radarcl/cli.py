@@ -173,6 +173,25 @@ def build_parser():
     p.add_argument("--force", action="store_true", help="replace an existing --save file")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
+    p = command("calibrate", commands.cmd_calibrate, "fit the interpreter's constants by maximum likelihood on the "
+                                                   "training scenes; --save writes them as a configuration file",
+                "Simulates the generated training scenes (radarcl/scene/generator.py), fits the eq. 12 constants "
+                "(or the occlusion-aware interpreter's) by logistic regression of the visibility truth on the fused "
+                "per-bin features, chooses the CFAR settings and the surface test by the log-likelihood on "
+                "validation scenes, prints the constants with standard errors and writes a configuration file "
+                "and a reliability diagram. The held-out scenes are never used (radarcl bench scenes reports on them).")
+    p.add_argument("--model", choices=("occlusion", "paper"), default="occlusion",
+                   help="the interpreter to calibrate (default: %(default)s)")
+    p.add_argument("--voxel", type=positive_float, default=0.2, help="voxel edge [m] (default: %(default)s)")
+    p.add_argument("--seeds", type=int, nargs="+", default=None,
+                   help="training scene seeds (default: generator.TRAIN_SEEDS; the last third validates)")
+    p.add_argument("--unknown-behind", action="store_true",
+                   help="hold E_l at 0: the map stays unknown behind the first surface (shadows are unknowable)")
+    p.add_argument("--save", default=None, metavar="FILE", help="write the calibrated configuration to FILE")
+    p.add_argument("--figure", default=None, metavar="PNG", help="write the before/after reliability diagram")
+    p.add_argument("--json", default=None, metavar="FILE", help="write the whole result as JSON")
+    p.add_argument("--force", action="store_true", help="replace existing output files")
+
     p = command("fuse", commands.cmd_fuse, "fuse any sensor's frames into a map file (rewritten every --every frames for "
                                   "radarcl view --live)",
                 "Reads INPUT as the sensor's reader says (a radarcl recording; a directory of polar PNG scans, "

@@ -130,6 +130,33 @@ def cmd_tune(args):
     return 0
 
 
+def cmd_calibrate(args):
+    import json
+
+    from radarcl import outputs
+    from radarcl.jobs import calibrate, plots
+
+    save = outputs.check(args.save, args.force, what="configuration file") if args.save else None
+    figure = outputs.check(args.figure, args.force, what="figure") if args.figure else None
+    json_out = outputs.check(args.json, args.force, what="JSON file") if args.json else None
+    config, result = calibrate.run(_runtime(), args.model, args.voxel, args.seeds, report=print,
+                                   unknown_behind=args.unknown_behind)
+    print("\n".join(calibrate.format_lines(result)))
+    if save:
+        config.save(save, header=("radarcl map configuration fitted by `radarcl calibrate`",
+                                  f"{result['model']} interpreter, training scenes {result['fit_seeds']} "
+                                  f"(validation {result['validation_seeds']}), {result['voxel_m']} m"), overwrite=True)
+        print(f"wrote {save} (use it with --config)")
+    if figure:
+        plots.save(calibrate.reliability_figure(result), figure)
+        print(f"wrote {figure}")
+    if json_out:
+        with outputs.atomic(json_out) as tmp:
+            tmp.write_text(json.dumps(result, indent=1))
+        print(f"wrote {json_out}")
+    return 0
+
+
 def cmd_fuse(args):
     from radarcl import outputs
     from radarcl.jobs import fuse_recording

@@ -17,18 +17,25 @@ KEYS = ("auc_detectable", "iou_detectable", "auc_obstacles", "iou_obstacles", "a
         "shadow_unknown", "ece", "brier")
 
 
-def configurations(voxel_m):
-    """(name, Resolved) of the compared configurations; the first is the reference."""
+def configurations(voxel_m, extra=()):
+    """(name, Resolved) of the compared configurations; the first is the reference. ``extra``:
+    configuration files (e.g. from `radarcl calibrate --save`), named by their stem, at
+    ``voxel_m``."""
+    from pathlib import Path
+
+    from radarcl import mapconfig
     from radarcl.evaluation.evaluate import paper_config
     from radarcl.evaluation.tuning import TUNED
 
     tuned = paper_config(voxel_m, TUNED)
     out = [("tuned", tuned), ("paper constants", paper_config(voxel_m))]
     out += [(f"tuned, beam {b}", tuned.replaced(beam__model=b)) for b in BEAM_MODELS if b != tuned["beam.model"]]
+    out += [(Path(f).stem, mapconfig.resolve(path=f, program={"grid.voxel_m": voxel_m}).replaced(grid__voxel_m=voxel_m))
+            for f in extra]
     return out
 
 
-def run(runtime, seeds, voxel_m=0.2, report=None):
+def run(runtime, seeds, voxel_m=0.2, report=None, extra=()):
     """Score every configuration and baseline on every scene of ``seeds``; returns the --json dict."""
     from radarcl.evaluation.evaluate import baselines, instrument, map_observations, radar_score
     from radarcl.scene.generator import generate
@@ -36,7 +43,7 @@ def run(runtime, seeds, voxel_m=0.2, report=None):
     from radarcl.scene.outdoor import PAPER_TILTS_DEG
 
     say = report or (lambda _: None)
-    configs = configurations(voxel_m)
+    configs = configurations(voxel_m, extra)
     per_scene = []
     for n, seed in enumerate(seeds, 1):
         scene, described = generate(seed)
@@ -97,6 +104,8 @@ def add_arguments(parser):
                         help="which scenes (default: %(default)s; tune only on train)")
     parser.add_argument("--voxel", type=positive_float, default=0.2, help="voxel [m] (default: %(default)s)")
     parser.add_argument("--seeds", type=int, nargs="+", default=None, help="these scene seeds instead of a split")
+    parser.add_argument("--with", dest="extra", nargs="+", default=(), metavar="FILE",
+                        help="also score these configuration files (e.g. from radarcl calibrate --save)")
 
 
 def command(args, runtime, say):
@@ -104,5 +113,5 @@ def command(args, runtime, say):
     from radarcl.scene.generator import HELD_OUT_SEEDS, TRAIN_SEEDS
 
     seeds = args.seeds or (HELD_OUT_SEEDS if args.split == "held-out" else TRAIN_SEEDS)
-    result = run(runtime(), seeds, args.voxel, report=say)
+    result = run(runtime(), seeds, args.voxel, report=say, extra=args.extra)
     return result, format_table(result)
