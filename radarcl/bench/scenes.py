@@ -35,7 +35,7 @@ def configurations(voxel_m, extra=()):
     return out
 
 
-def run(runtime, seeds, voxel_m=0.2, report=None, extra=()):
+def run(runtime, seeds, voxel_m=0.2, report=None, extra=(), physics=0):
     """Score every configuration and baseline on every scene of ``seeds``; returns the --json dict."""
     from radarcl.evaluation.evaluate import baselines, instrument, map_observations, radar_score
     from radarcl.scene.generator import generate
@@ -49,7 +49,7 @@ def run(runtime, seeds, voxel_m=0.2, report=None, extra=()):
         scene, described = generate(seed)
         say(f"scene {seed} ({n}/{len(seeds)}): {described['terrain']} terrain, sensor at "
             f"{described['sensor_height_m']} m, {len(described['objects'])} solids ...")
-        obs = observe(scene, PAPER_TILTS_DEG, seed=seed)
+        obs = observe(scene, PAPER_TILTS_DEG, seed=seed, physics=physics)
         inst = instrument(runtime, scene, obs, configs[0][1])
         maps = {}
         for name, config in configs:
@@ -69,8 +69,15 @@ def run(runtime, seeds, voxel_m=0.2, report=None, extra=()):
         mean[name] = {k: _mean([r[k] for r in rows]) for k in KEYS + ("ms_per_frame",)}
         mean[name]["objects_found"] = sum(r["objects_found"] for r in rows)
         mean[name]["objects_total"] = sum(r["objects_total"] for r in rows)
-    return dict(benchmark="scenes", device=runtime.name, seeds=list(seeds), voxel_m=voxel_m, mean=mean,
-                scenes=per_scene)
+    return dict(benchmark="scenes", device=runtime.name, seeds=list(seeds), voxel_m=voxel_m, physics=physics_names(physics),
+                mean=mean, scenes=per_scene)
+
+
+def physics_names(physics):
+    """The simulator switches of a ``physics`` bit mask, as words."""
+    from radarcl.scene.observe import MULTIPATH, SIDELOBES
+
+    return [name for bit, name in ((SIDELOBES, "sidelobes"), (MULTIPATH, "multipath")) if physics & bit] or ["none"]
 
 
 def _mean(values):
@@ -80,8 +87,9 @@ def _mean(values):
 
 def format_table(r):
     """Human-readable lines: the mean of each score per configuration over the scenes."""
-    lines = [f"{len(r['seeds'])} generated scenes (seeds {', '.join(map(str, r['seeds']))}) at {r['voxel_m']} m on "
-             f"{r['device']}; each scored on its own fixed voxel set, means over the scenes",
+    lines = [f"{len(r['seeds'])} generated scenes (seeds {', '.join(map(str, r['seeds']))}) at {r['voxel_m']} m, "
+             f"harder physics: {', '.join(r.get('physics', ['none']))}, on {r['device']}; each scored on its own fixed "
+             f"voxel set, means over the scenes",
              f"  {'map':28s} {'AUCdet':>6s} {'IoUdet':>6s} {'AUCobs':>6s} {'IoUobs':>6s} {'AUCwk':>6s} {'f-free':>6s} "
              f"{'shd-unk':>7s} {'ECE':>6s} {'Brier':>6s} {'objects':>8s} {'ms/frame':>8s}"]
     for name, m in r["mean"].items():
@@ -104,6 +112,8 @@ def add_arguments(parser):
                         help="which scenes (default: %(default)s; tune only on train)")
     parser.add_argument("--voxel", type=positive_float, default=0.2, help="voxel [m] (default: %(default)s)")
     parser.add_argument("--seeds", type=int, nargs="+", default=None, help="these scene seeds instead of a split")
+    parser.add_argument("--physics", default="", metavar="LIST",
+                        help="harder physics in the simulator: sidelobes, multipath, or both comma-separated")
     parser.add_argument("--with", dest="extra", nargs="+", default=(), metavar="FILE",
                         help="also score these configuration files (e.g. from radarcl calibrate --save)")
 
@@ -113,5 +123,13 @@ def command(args, runtime, say):
     from radarcl.scene.generator import HELD_OUT_SEEDS, TRAIN_SEEDS
 
     seeds = args.seeds or (HELD_OUT_SEEDS if args.split == "held-out" else TRAIN_SEEDS)
-    result = run(runtime(), seeds, args.voxel, report=say, extra=args.extra)
+    from radarcl.errors import ConfigError
+    from radarcl.scene.observe import MULTIPATH, SIDELOBES
+
+    bits = {"sidelobes": SIDELOBES, "multipath": MULTIPATH}
+    words = [w.strip() for w in args.physics.split(",") if w.strip()]
+    unknown = [w for w in words if w not in bits]
+    if unknown:
+        raise ConfigError(f"--physics takes sidelobes and/or multipath, got {', '.join(unknown)}")
+    result = run(runtime(), seeds, args.voxel, report=say, extra=args.extra, physics=sum(bits[w] for w in set(words)))
     return result, format_table(result)

@@ -131,7 +131,7 @@ def instrument(runtime, scene, obs, reference, progress=None):
 
     ref_map = map_observations(runtime, obs, reference, progress)
     radar = reference.sensor.radar
-    quiet = observe(scene, obs.tilts_deg, radar=radar, seed=obs.seed, noise_rms=0.0, adc=None)
+    quiet = observe(scene, obs.tilts_deg, radar=radar, seed=obs.seed, noise_rms=0.0, adc=None, physics=obs.physics)
     if quiet.rays_per_beam != obs.rays_per_beam or not np.allclose(quiet.poses, obs.poses):
         raise ConfigError(f"the recording (seed {obs.seed}, {obs.rays_per_beam} echoes per beam) was not simulated "
                           f"from this scene with radarcl's defaults ({quiet.rays_per_beam} echoes per beam): its "

@@ -21,6 +21,7 @@ from radarcl.geometry import check_poses
 
 VERSION = 2
 _META = ("tilts_deg", "seed", "rays_per_beam", "n_clipped")
+_OPTIONAL_META = ("physics",)          # simulator switches (scene.observe.SIDELOBES | MULTIPATH); 0 when absent
 
 
 @dataclass(frozen=True)
@@ -47,7 +48,7 @@ def save(path, recording, overwrite=True):
         obs = recording
         recording = Recording(obs.samples, obs.poses, "paper", None,
                               dict(tilts_deg=obs.tilts_deg, seed=obs.seed, rays_per_beam=obs.rays_per_beam,
-                                   n_clipped=obs.n_clipped))
+                                   n_clipped=obs.n_clipped, physics=obs.physics))
     path.parent.mkdir(parents=True, exist_ok=True)
     arrays = dict(version=VERSION, sensor=np.str_(recording.sensor), frames=recording.frames, poses=recording.poses,
                   **{k: np.asarray(v) for k, v in recording.meta.items()})
@@ -78,7 +79,7 @@ def load(path):
             frames, poses = z[frames_key], z["poses"]
             flags = z["flags"] if "flags" in z.files else None
             sensor = "paper" if version == 1 else str(z["sensor"])
-            meta = {k: z[k] for k in _META if k in z.files}
+            meta = {k: z[k] for k in _META + _OPTIONAL_META if k in z.files}
     except (OSError, ValueError, EOFError) as exc:
         if isinstance(exc, FrameFormatError):
             raise
@@ -118,4 +119,5 @@ def load_observations(path):
     if rec.meta["tilts_deg"].shape != (len(rec),):
         raise FrameFormatError(f"{path}: {len(rec)} frames need tilts ({len(rec)},), got {rec.meta['tilts_deg'].shape}")
     m = rec.meta
-    return Observations(rec.frames, rec.poses, m["tilts_deg"], m["seed"], m["rays_per_beam"], m["n_clipped"])
+    return Observations(rec.frames, rec.poses, m["tilts_deg"], m["seed"], m["rays_per_beam"], m["n_clipped"],
+                        m.get("physics", 0))

@@ -25,7 +25,7 @@ from radarcl.scene.shapes import Box, Cylinder, Ground, Slope, Sphere
 
 TRAIN_SEEDS = (101, 102, 103, 104, 105, 106)
 HELD_OUT_SEEDS = (201, 202, 203, 204)
-CONCRETE = Material("concrete", -8.0)
+CONCRETE = Material("smooth concrete", -8.0, specular=True)    # specular only with observe.MULTIPATH
 TERRAIN_NAMES = ("ground", "mound")
 LATTICE_M = 0.05
 HALF_FAN_DEG = 30.0                  # inside the paper radar's +-32 deg, so objects are seen whole

@@ -39,6 +39,13 @@ A_1M2_AT_10M = 0.05          # tone amplitude [V] of a 1 m^2 target at 10 m on t
 R_REF_M = 10.0
 NOISE_RMS = 1e-3             # receiver noise per sample [V]
 SPECKLE_CELL_M = 0.05        # a scatterer's phase is fixed per cell of this edge on the surface
+# Harder physics (the paper's future work), each a switch, off by default:
+SIDELOBES = 1                # the pattern beyond the main lobe: a sidelobe ring at -20 dB out to SIDELOBE_SPAN
+MULTIPATH = 2                # a ground bounce (a ghost below the surface) and specular surfaces
+SIDELOBE_SPAN = 3.0          # sampled radius with sidelobes, in half-power half-widths
+SIDELOBE_DB = -20.0          # first sidelobe, one-way power (the pattern's amplitude here, two-way)
+GROUND_BOUNCE = 0.5          # amplitude reflection coefficient of the terrain (-6 dB), twice on the image path
+SPECULAR_EXPONENT = 40       # a specular surface returns gamma cos^41(incidence): at 30 deg, 0.3 % of diffuse
 ADC = Adc(bits=12)           # full scale 1 V
 
 
@@ -53,6 +60,7 @@ class Observations:
     seed: int
     rays_per_beam: int
     n_clipped: int
+    physics: int = 0             # SIDELOBES | MULTIPATH: the switches it was simulated with
 
 
 def _beam_frames(pose, lattice):
@@ -75,7 +83,7 @@ def hash_uniform(keys, salt, stream=0):
     return (h >> np.uint64(11)).astype(np.float64) / 2.0 ** 53
 
 
-def lattice_rays(frames, half_az, half_el, rays_across=RAYS_ACROSS, salt=0):
+def lattice_rays(frames, half_az, half_el, rays_across=RAYS_ACROSS, salt=0, span=SPAN):
     """The rays that sample each beam, drawn from one lattice of directions fixed in the world:
     cells ``2 SPAN / rays_across`` half-power half-widths wide in world azimuth and elevation,
     one ray per cell at a jitter fixed per cell (``hash_uniform``). A beam takes the lattice's
@@ -84,12 +92,12 @@ def lattice_rays(frames, half_az, half_el, rays_across=RAYS_ACROSS, salt=0):
 
     Returns (dirs (n_beams, k, 3), offsets (n_beams, k, 2) in half-widths, solid angle per ray
     (n_beams, k) [sr], used (n_beams, k) bool); k is the most rays a beam holds."""
-    cell = 2 * SPAN / rays_across
+    cell = 2 * SPAN / rays_across                 # the lattice does not change with the span
     d_az, d_el = cell * half_az, cell * half_el
     u = frames[:, :, 0]
     a_b, e_b = np.arctan2(u[:, 1], u[:, 0]), np.arcsin(np.clip(u[:, 2], -1, 1))
-    worst = np.cos(np.minimum(np.abs(e_b).max() + SPAN * half_el, 1.4))
-    n_i, n_k = int(math.ceil(SPAN * half_az / (d_az * worst))) + 1, int(math.ceil(SPAN / cell)) + 1
+    worst = np.cos(np.minimum(np.abs(e_b).max() + span * half_el, 1.4))
+    n_i, n_k = int(math.ceil(span * half_az / (d_az * worst))) + 1, int(math.ceil(span / cell)) + 1
     di, dk = np.meshgrid(np.arange(-n_i, n_i + 1), np.arange(-n_k, n_k + 1), indexing="ij")
     I = np.rint(a_b / d_az).astype(np.int64)[:, None] + di.reshape(1, -1)
     K = np.rint(e_b / d_el).astype(np.int64)[:, None] + dk.reshape(1, -1)
@@ -99,26 +107,39 @@ def lattice_rays(frames, half_az, half_el, rays_across=RAYS_ACROSS, salt=0):
     dirs = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=-1)
     du, dv, dw = (np.einsum("bkj,bj->bk", dirs, frames[:, :, c]) for c in range(3))
     st = np.stack([np.arctan2(dv, du) / half_az, np.arctan2(dw, du) / half_el], axis=-1)
-    inside = (du > 0) & ((st ** 2).sum(axis=-1) <= SPAN ** 2)
+    inside = (du > 0) & ((st ** 2).sum(axis=-1) <= span ** 2)
     order = np.argsort(~inside, axis=1, kind="stable")[:, :int(inside.sum(axis=1).max())]
     take = lambda a: np.take_along_axis(a, order.reshape(order.shape + (1,) * (a.ndim - 2)), axis=1)  # noqa: E731
     used = take(inside)
     return take(dirs), take(st), np.where(used, d_az * d_el * np.cos(take(el)), 0.0), used
 
 
-def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, salt=0):
+def pattern_amplitude(rho, sidelobes=False):
+    """Two-way pattern in amplitude at ``rho`` half-power half-widths off the axis: the main lobe
+    2^-rho^2 (the square root of ``geometry.two_way_weight``); with sidelobes, beyond it a ring
+    peaking at SIDELOBE_DB between 1.5 and SIDELOBE_SPAN (a stylised first sidelobe)."""
+    main = 2.0 ** -(rho ** 2)
+    if not sidelobes:
+        return main
+    ring = 10 ** (SIDELOBE_DB / 20) * np.sin(np.pi * np.clip((rho - SPAN) / (SIDELOBE_SPAN - SPAN), 0, 1)) ** 2
+    return np.maximum(main, ring * (rho > SPAN))
+
+
+def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, salt=0, physics=0):
     """Echoes of every beam of one frame: (amplitude, range_m, phase) arrays (n_beams, k).
 
     ``salt`` fixes the recording's scatterers: ray jitter and speckle phases are functions of
     the world direction and of the scatterer, not random draws (``lattice_rays``,
-    ``hash_uniform``), so the same salt gives the same echoes at the same pose."""
+    ``hash_uniform``), so the same salt gives the same echoes at the same pose. ``physics``:
+    SIDELOBES | MULTIPATH (module constants), 0 for neither."""
     lattice = BeamLattice.from_radar(radar)
     frames = _beam_frames(pose, lattice)
     n_beams = len(frames)
     half_az, half_el = math.radians(radar.beamwidth_az_deg) / 2, math.radians(radar.beamwidth_el_deg) / 2
     origin = np.asarray(scene.sensor_m, float)
 
-    dirs, st, d_omega, used = lattice_rays(frames, half_az, half_el, rays_across, salt)
+    span = SIDELOBE_SPAN if physics & SIDELOBES else SPAN
+    dirs, st, d_omega, used = lattice_rays(frames, half_az, half_el, rays_across, salt, span)
     k = dirs.shape[1]
     flat = dirs.reshape(-1, 3)
     t, owner, normal = scene.first_hit(np.broadcast_to(origin, flat.shape), flat)
@@ -128,12 +149,20 @@ def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, salt=
     r = np.where(hit, t, R_REF_M)
     area = r ** 2 * d_omega.reshape(-1) / np.maximum(cos_i, 1e-6)      # patch of surface [m^2]
     sigma = np.where(hit, gamma[owner] * cos_i * area, 0.0)            # sigma0(theta_i) x area
-    pattern = 2.0 ** -(st[..., 0] ** 2 + st[..., 1] ** 2).reshape(-1)  # two-way, in amplitude
+    if physics & MULTIPATH:              # a specular surface sends the beam away unless it meets it square on
+        specular = np.array([getattr(o.material, "specular", False) for o in scene.objects])
+        sigma = np.where(hit & specular[owner], sigma * cos_i ** SPECULAR_EXPONENT, sigma)
+    pattern = pattern_amplitude(np.sqrt((st ** 2).sum(axis=-1)), bool(physics & SIDELOBES)).reshape(-1)
     amp = A_1M2_AT_10M * np.sqrt(sigma) * (R_REF_M / r) ** 2 * pattern
     amp, rng_m = amp.reshape(n_beams, k), r.reshape(n_beams, k)
     # the scatterer's own phase: fixed per SPECKLE_CELL_M cell of the surface it sits on
     cells = np.floor((origin + np.where(hit, t, 0.0)[:, None] * flat) / SPECKLE_CELL_M).astype(np.int64)
     phase = 2 * np.pi * hash_uniform(cells, salt, 3).reshape(n_beams, k)
+    if physics & MULTIPATH:              # the ground bounce: the echo of the object's mirror image below the terrain
+        ghost_amp, ghost_r = _ground_bounce(scene, origin, flat, t, hit, owner, amp.reshape(-1))
+        amp = np.concatenate([amp, ghost_amp.reshape(n_beams, k)], axis=1)
+        rng_m = np.concatenate([rng_m, ghost_r.reshape(n_beams, k)], axis=1)
+        phase = np.concatenate([phase, (phase + np.pi) % (2 * np.pi)], axis=1)    # two reflections: pi each
 
     if scene.points:
         p_amp, p_r = _point_echoes(scene, frames, origin, half_az, half_el)
@@ -142,6 +171,21 @@ def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, salt=
         fixed = 2 * np.pi * hash_uniform(np.arange(len(scene.points))[:, None], salt, 4)
         phase = np.concatenate([phase, np.broadcast_to(fixed, p_amp.shape)], axis=1)
     return amp, rng_m, phase
+
+
+def _ground_bounce(scene, origin, dirs, t, hit, owner, amp):
+    """(amplitude, range) of the double-bounce echo of every ray that hit a solid above the
+    terrain: sensor -> terrain -> object -> terrain -> sensor, whose length is the distance to the
+    object's mirror image in the terrain (flat ground at z = 0, or the terrain's height below the
+    hit), with GROUND_BOUNCE^2 of the direct amplitude. A ghost in the map below the surface."""
+    terrain = scene.objects[0].shape
+    p = origin + np.where(hit, t, 0.0)[:, None] * dirs
+    ground = terrain.height(p[:, 0], p[:, 1]) if hasattr(terrain, "height") else np.zeros(len(p))
+    above = hit & (owner > 0) & (p[:, 2] > ground + 0.05)
+    image = p.copy()
+    image[:, 2] = 2 * ground - p[:, 2]
+    r = np.where(above, np.linalg.norm(image - origin, axis=1), R_REF_M)
+    return np.where(above, amp * GROUND_BOUNCE ** 2, 0.0), r
 
 
 def _point_echoes(scene, frames, origin, half_az, half_el):
@@ -163,7 +207,7 @@ def _point_echoes(scene, frames, origin, half_az, half_el):
 
 
 def observe(scene, tilts_deg, radar=PAPER_RADAR, seed=0, rays_across=RAYS_ACROSS, noise_rms=NOISE_RMS, adc=ADC,
-            progress=None):
+            progress=None, physics=0):
     """Simulate one frame per tilt (``outdoor.PAPER_TILTS_DEG``); returns ``Observations``.
     ``progress(done_frames, n_frames)`` is called after each frame."""
     tilts = np.asarray(tilts_deg, float).reshape(-1)
@@ -175,11 +219,11 @@ def observe(scene, tilts_deg, radar=PAPER_RADAR, seed=0, rays_across=RAYS_ACROSS
     frames, poses, clipped = [], [], 0
     for j, tilt in enumerate(tilts):
         pose = scene.stand_pose(float(tilt))
-        amp, r, phase = observe_frame(scene, pose, radar, rays_across, salt=seed)
+        amp, r, phase = observe_frame(scene, pose, radar, rays_across, salt=seed, physics=physics)
         sim = simulate_beams(radar, amp, r, phase, noise_rms=noise_rms, adc=adc, seed=rng.integers(2 ** 63))
         frames.append(sim.samples.reshape(radar.n_azimuth, radar.n_elevation, radar.n_samples))
         poses.append(pose)
         clipped += sim.n_clipped
         if progress is not None:
             progress(j + 1, len(tilts))
-    return Observations(np.stack(frames), np.stack(poses), tilts, int(seed), int(amp.shape[1]), clipped)
+    return Observations(np.stack(frames), np.stack(poses), tilts, int(seed), int(amp.shape[1]), clipped, int(physics))

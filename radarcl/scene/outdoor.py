@@ -49,10 +49,12 @@ FENCE_HEIGHT_M = 1.2
 
 @dataclass(frozen=True)
 class Material:
-    """Backscatter of a surface: gamma [dB] of the constant-gamma model."""
+    """Backscatter of a surface: gamma [dB] of the constant-gamma model; ``specular`` for a
+    smooth surface (``scene.observe.MULTIPATH``)."""
 
     name: str
     gamma_db: float
+    specular: bool = False       # smooth: with MULTIPATH it returns only near normal incidence
 
 
 GRASS = Material("grass", -15.0)

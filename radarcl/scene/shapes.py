@@ -46,6 +46,10 @@ class Ground:
         """None: the ground is unbounded."""
         return None
 
+    def height(self, x, y):
+        """Terrain height [m] at (x, y)."""
+        return np.full(np.broadcast(np.asarray(x), np.asarray(y)).shape, float(self.height_m))
+
     def intersect(self, origins, dirs):
         """(t, normal) of the first entry of each ray; see the module docstring."""
         dz = dirs[:, 2]
