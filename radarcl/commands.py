@@ -100,7 +100,7 @@ def cmd_demo(args):
     from radarcl.jobs import demo
 
     demo.run(_runtime(), args.out, seed=args.seed, quick=args.quick, replay=args.replay, report=print,
-             progress=_progress(args))
+             progress=_progress(args), shown=args.show)
     return 0
 
 

@@ -5,7 +5,10 @@
 2. The outdoor scene of §4.3 (``scene.outdoor``): 15 tilts x 64 azimuths x 4 stacked beams =
    3,840 observations simulated to raw samples (``scene.observe``, seed ``EVALUATION_SEED``), or
    replayed from a recording, and saved as ``reference_scene.npz`` (replay it with --replay).
-3. The map with the paper's constants and with the tuned ones (``tuning.TUNED``) at 0.1 m
+3. The maps with the paper's constants, the tuned ones (``tuning.TUNED``, the one written and
+   shown unless ``shown`` names another) and the calibrated occlusion-aware interpreter
+   (``calibration.CALIBRATED``) at 0.1 m. The tuned map stays the one shown: the calibrated
+   constants are calibrated (ECE) but rank detectable voxels worse (README, issue 16).
    (--quick: 0.4 m), the OctoMap-style baseline on the same detections, and their metrics
    against the exact ground truth (``metrics``), with timings.
 4. Plots: ``fig10_scene.png`` (two beams of the scene like the paper's Fig. 10),
@@ -47,7 +50,7 @@ def _metrics_line(name, m, ms):
     return f"  {name:34s} {cells} {m['objects_found']:>3d}/{m['objects_total']:<3d} {ms:9.1f}"
 
 
-def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report=print, progress=None):
+def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report=print, progress=None, shown="tuned"):
     """Run the main job into ``out_dir``; ``report`` gets lines, ``progress(done, total, what)``
     counts simulated frames and fused observations. Returns the summary dict."""
     out = Path(out_dir)
@@ -75,16 +78,24 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
            f"{summary['simulate_s']:.1f} s")
 
     tuned = paper_config(voxel, TUNED)
+    from radarcl.evaluation.calibration import CALIBRATED
+
+    configs = {"paper constants": paper_config(voxel), "tuned": tuned,
+               "calibrated": paper_config(voxel, CALIBRATED)}
+    if shown not in configs:
+        raise ConfigError(f"the demo shows one of {', '.join(configs)}, not {shown!r}")
     report("truth: the line of sight and the noiseless echo of every voxel the tuned map's beams reach ...")
     inst = instrument(runtime, scene, obs, tuned, progress=tick("observations fused"))
     report(inst.describe())
     maps = {}
-    for name, config in (("paper constants", paper_config(voxel)), ("tuned", tuned)):
+    for name, config in configs.items():
         report(f"fusing with the {name} ({config.label()}) ...")
         res = inst.reference_map if config is tuned else map_observations(runtime, obs, config,
                                                                          progress=tick("observations fused"))
         maps[name] = (config, res, radar_score(inst, res.log_odds))
-    config, res, _ = maps["tuned"]
+    config, res, _ = maps[shown]
+    report(f"the map written, rendered and plotted is the {shown} one ({config.label()})")
+    summary["shown"] = shown
     report("baselines on the same voxel set: prior_only, raw_intensity, octomap ...")
     base = baselines(runtime, inst, obs)
     report(f"  {'map':34s} " + " ".join(f"{k.replace('_', ' ')[:7]:>7s}" for k in METRIC_KEYS) + " objects  ms/frame")
@@ -99,7 +110,7 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
 
     res.grid.save(out / "map.npz", poses=obs.poses)
     summary["view"] = _render_view(out, report)
-    _plot_profiles(obs, config, out / "fig10_scene.png")
+    _plot_profiles(obs, config, out / "fig10_scene.png", shown)
     _plot_topdown(res.log_odds, inst.truth.labels, res.spec, out / "topdown.png")
     report("error against run time at 0.4 m (bench quality) ...")
     q = quality.run(runtime, scene, obs, paper_config(QUICK_VOXEL_M, TUNED), voxels=(QUICK_VOXEL_M,))
@@ -123,14 +134,14 @@ def _write_report(out, summary, maps, base, q):
     rows += [[f"baseline: {name}"] + [b[k] for k in METRIC_KEYS] + [f"{b['objects_found']}/{b['objects_total']}",
                                                                     b["ms_per_frame"]]
              for name, b in base.items() if "error" not in b]
-    tuned = maps["tuned"][0]
+    shown = summary["shown"]
     figures = [("fig9.png", "Fig. 9: two point targets 1.0 m apart, without and with zero padding"),
                ("frame.png", "One frame of the paper's radar, range x azimuth, per stacked beam"),
                ("fig10_scene.png", "Two beams of the reference scene as in Fig. 10, with CFAR and eq. 12"),
-               ("topdown.png", "The tuned map from above beside the ground truth"),
+               ("topdown.png", f"The {shown} map from above beside the ground truth"),
                ("quality.png", "Error against run time (bench quality at 0.4 m)"),
                ("reliability.png", "Reliability of the 0.4 m reference map and the baselines"),
-               ("view.png", "The tuned map's isosurface at 1 nat, rendered by the viewer")]
+               ("view.png", f"The {shown} map's isosurface at 1 nat, rendered by the viewer")]
     sections = [
         ("Run", [page.Pairs({"device": summary["device"], "recording": summary["recording"],
                              "observations": summary["observations"], "seed": summary["seed"],
@@ -140,7 +151,7 @@ def _write_report(out, summary, maps, base, q):
                                             page.Text(quality.METRICS_TEXT)]),
         ("Error against run time", [quality.sweep_table(q)]),
         ("Figures", [page.Figure(out / name, caption) for name, caption in figures if (out / name).is_file()]),
-        ("Configuration of the tuned map", [page.configuration(tuned)]),
+        (f"Configuration of the {shown} map", [page.configuration(maps[shown][0])]),
     ]
     page.write(out / "report.html", "radarcl demo: the paper's reference scene", sections,
                f"Foessel-Bunting's sensor model on the reference scene (§4.3), {summary['observations']} observations.")
@@ -159,7 +170,7 @@ def _render_view(out, report):
         return dict(error=str(exc))
 
 
-def _plot_profiles(obs, config, path, beams=((2, 32, 0), (14, 20, 3))):
+def _plot_profiles(obs, config, path, name, beams=((2, 32, 0), (14, 20, 3))):
     """Two beams of the recording like the paper's Fig. 10: a steep one on the grass and a
     near-horizontal one, each with its CFAR threshold and its eq. 12 evidence (float64 oracle)."""
     spacing = config.bin_spacing_m
@@ -173,7 +184,7 @@ def _plot_profiles(obs, config, path, beams=((2, 32, 0), (14, 20, 3))):
         azimuth = np.degrees(BeamLattice.from_radar(PAPER_RADAR).azimuths[az])
         panels.append((np.arange(len(prof)) * spacing, prof, cfar.alpha * noise[0], mask[0], evidence,
                        f"beam at {elevation:.1f} deg elevation, {azimuth:+.1f} deg azimuth"))
-    plots.save(plots.beams_figure(panels, "Two beams of the reference scene (as the paper's Fig. 10), tuned "
+    plots.save(plots.beams_figure(panels, f"Two beams of the reference scene (as the paper's Fig. 10), {name} "
                                           "constants"), path, dpi=100)
 
 
