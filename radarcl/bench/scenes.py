@@ -6,7 +6,11 @@ the tuned configuration; every map and the three baselines (prior_only, raw_inte
 are scored on that scene's fixed voxel set (what the tuned configuration's beams reach,
 ``evaluate.instrument``). The table gives per configuration the mean of each score over the
 scenes (objects: found / total summed). Nothing is tuned here: the held-out split is for
-reporting only.
+reporting only. The two "oracle detections" rows are not maps one can make: the beams fused
+with the noiseless truth of every bin (``evaluate.oracle_detections``), +1 nat on detectable bins
+and 0 (or -1 nat) on the others: what a perfect per-bin detector gives through the same beam
+footprint. They are not upper bounds on AUC (a graded evidence can rank better than +1/0,
+whose ties count one half); they show what the footprint and strong free evidence cost.
 """
 
 import numpy as np
@@ -37,7 +41,7 @@ def configurations(voxel_m, extra=()):
 
 def run(runtime, seeds, voxel_m=0.2, report=None, extra=(), physics=0):
     """Score every configuration and baseline on every scene of ``seeds``; returns the --json dict."""
-    from radarcl.evaluation.evaluate import baselines, instrument, map_observations, radar_score
+    from radarcl.evaluation.evaluate import baselines, oracle_detections, instrument, map_observations, radar_score
     from radarcl.scene.generator import generate
     from radarcl.scene.observe import observe
     from radarcl.scene.outdoor import PAPER_TILTS_DEG
@@ -57,6 +61,8 @@ def run(runtime, seeds, voxel_m=0.2, report=None, extra=(), physics=0):
             maps[name] = dict(radar_score(inst, res.log_odds), ms_per_frame=res.ms_per_frame)
             del res
         maps.update({f"baseline: {k}": v for k, v in baselines(runtime, inst, obs).items()})
+        maps["oracle detections, free 0"] = dict(oracle_detections(runtime, inst, obs), ms_per_frame=0.0)
+        maps["oracle detections, free -1"] = dict(oracle_detections(runtime, inst, obs, -1.0), ms_per_frame=0.0)
         per_scene.append(dict(scene=described, voxel_set=inst.describe(), classes=inst.truth.counts(),
                               hidden_objects=inst.hidden, maps=maps))
     names = list(per_scene[0]["maps"]) if per_scene else []

@@ -110,6 +110,8 @@ class Instrument:
     hidden: list
     reference: object
     reference_map: MapResult
+    noiseless_power: np.ndarray = None      # (n_frames, n_beams, n_bins) without receiver noise
+    noise_power: float = None               # its noise level per bin
 
     def describe(self):
         """One line: the voxel set and its classes."""
@@ -139,11 +141,11 @@ def instrument(runtime, scene, obs, reference, progress=None):
     n = quiet.samples.shape
     power = oracle.range_profile(quiet.samples.reshape(n[0], n[1] * n[2], n[3]), reference.n_fft, output="power")
     half = (math.radians(radar.beamwidth_az_deg) / 2, math.radians(radar.beamwidth_el_deg) / 2)
-    truth = vis.visibility_truth(scene, ref_map.spec, ref_map.observed, obs.poses, power,
-                                 vis.noise_power_per_bin(NOISE_RMS, radar.n_samples), reference.sensor.lattice(), half,
-                                 radar.bin_spacing_m(reference.n_fft))
+    noise = vis.noise_power_per_bin(NOISE_RMS, radar.n_samples)
+    truth = vis.visibility_truth(scene, ref_map.spec, ref_map.observed, obs.poses, power, noise,
+                                 reference.sensor.lattice(), half, radar.bin_spacing_m(reference.n_fft))
     objects, hidden = vis.object_surfaces(scene, truth, ref_map.spec)
-    return Instrument(ref_map.spec, truth, objects, hidden, reference, ref_map)
+    return Instrument(ref_map.spec, truth, objects, hidden, reference, ref_map, power, noise)
 
 
 def radar_score(inst, log_odds):
@@ -170,3 +172,24 @@ def baselines(runtime, inst, obs):
     except ConfigError as exc:
         out["octomap"] = dict(error=str(exc))
     return out
+
+
+def oracle_detections(runtime, inst, obs, free_nats=0.0):
+    """Scores (on ``inst``) of the map a perfect per-bin detector would give through the same
+    beams: +1 nat on every bin whose noiseless echo is DETECTABLE (>= 10 dB over the noise),
+    ``free_nats`` on the other bins of the range window. It shows what the beam's footprint
+    costs (free voxels beside a surface at the same range share its bins) and, with -1, what
+    strong free evidence adds. Not an upper bound on AUC: graded evidence can rank better than
+    +1/0, whose ties count one half."""
+    from radarcl.evaluation.visibility import DETECTABLE_DB
+    from radarcl.pipeline import Mapping
+
+    mapping = Mapping.from_config(runtime, config=inst.reference)
+    fusion = mapping.fusion
+    loud = inst.noiseless_power >= inst.noise_power * 10 ** (DETECTABLE_DB / 10)
+    for frame_loud, pose in zip(loud, obs.poses):
+        evidence = np.where(frame_loud, 1.0, free_nats) * logodds.SCALE
+        fusion.upload(np.rint(evidence).astype(np.int32).reshape(fusion.evidence_shape)).wait()
+        fusion.enqueue(plan=fusion.plan(pose))
+    runtime.queue.finish()
+    return radar_score(inst, (mapping.grid.snapshot() / np.float32(logodds.SCALE)).astype(np.float32))
