@@ -114,7 +114,7 @@ def design(features, truth, model):
     X = features[keep]
     if model == "paper":
         X = np.column_stack([X[:, 0], X[:, 1] + X[:, 2], X[:, 3]])
-    return X, (c[keep] != vis.FREE_VISIBLE)
+    return X.astype(np.float32), (c[keep] != vis.FREE_VISIBLE)      # float32: half the memory; fit in float64
 
 
 @dataclass

@@ -65,7 +65,7 @@ def run(runtime, model="occlusion", voxel_m=0.2, seeds=None, report=None, unknow
         say(f"scene {seed}: {described['terrain']} terrain, sensor at {described['sensor_height_m']} m: truth ...")
         obs = observe(scene, PAPER_TILTS_DEG, seed=seed)
         scenes.append((seed, obs, instrument(runtime, scene, obs, paper_config(voxel_m, TUNED))))
-    rows, designs = [], {}
+    rows, best_design = [], None            # only the best candidate's features are kept (memory)
     for cfg in candidates(base, model):
         label = cfg.label(base)
         say(f"candidate {label} ...")
@@ -79,10 +79,12 @@ def run(runtime, model="occlusion", voxel_m=0.2, seeds=None, report=None, unknow
         yv = np.concatenate([per[s][1] for s in val_seeds])
         rows.append(dict(candidate=label, config=cfg.as_dict(), fit=f.values, held=f.held,
                          fit_log_likelihood=f.log_likelihood, validation_log_likelihood=cal.log_likelihood(Xv, yv, beta)))
-        designs[label] = (cfg, per)
+        if best_design is None or rows[-1]["validation_log_likelihood"] > best_design[0]:
+            best_design = (rows[-1]["validation_log_likelihood"], label, cfg, per)
+        del per, X, y, Xv, yv
         say(f"  validation log-likelihood {rows[-1]['validation_log_likelihood']:.5f} nat/voxel")
-    best = max(rows, key=lambda r: r["validation_log_likelihood"])
-    cfg, per = designs[best["candidate"]]
+    _, chosen, cfg, per = best_design
+    best = next(r for r in rows if r["candidate"] == chosen)
     X = np.concatenate([per[s][0] for s, _, _ in scenes])
     y = np.concatenate([per[s][1] for s, _, _ in scenes])
     final = cal.fit(X, y, model, zero=zero)
