@@ -61,6 +61,10 @@ def test_radar_scores_by_hand():
     # OCCUPIED within the observed set: 2.0, -0.1, 0.1, 1.0, -0.7 (the unobserved 9.0 is not in
     # it); p < 0.35 means L < -0.619: only -0.7
     assert s["false_free"] == pytest.approx(1 / 5)
+    assert s["false_free_obstacles"] == 0.0                             # the obstacle voxel holds 1.0
+    L2 = L.copy()
+    L2[0, 1, 1] = -0.7
+    assert metrics.radar_scores(L2, t)["false_free_obstacles"] == 1.0
     # SHADOWED {0.1, -3.0, 0.0}: two within 0.2 nat
     assert s["shadow_unknown"] == pytest.approx(2 / 3)
     visible = np.array([-1.0, 0.5, 2.0, -0.1, -2.0, 1.0, -0.7])

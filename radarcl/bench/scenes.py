@@ -18,7 +18,7 @@ import numpy as np
 from radarcl.geometry import BEAM_MODELS
 
 KEYS = ("auc_detectable", "iou_detectable", "auc_obstacles", "iou_obstacles", "auc_weak", "false_free",
-        "shadow_unknown", "ece", "brier")
+        "false_free_obstacles", "shadow_unknown", "ece", "brier")
 
 
 def configurations(voxel_m, extra=()):
@@ -97,12 +97,12 @@ def format_table(r):
              f"harder physics: {', '.join(r.get('physics', ['none']))}, on {r['device']}; each scored on its own fixed "
              f"voxel set, means over the scenes",
              f"  {'map':28s} {'AUCdet':>6s} {'IoUdet':>6s} {'AUCobs':>6s} {'IoUobs':>6s} {'AUCwk':>6s} {'f-free':>6s} "
-             f"{'shd-unk':>7s} {'ECE':>6s} {'Brier':>6s} {'objects':>8s} {'ms/frame':>8s}"]
+             f"{'ff-obs':>6s} {'shd-unk':>7s} {'ECE':>6s} {'Brier':>6s} {'objects':>8s} {'ms/frame':>8s}"]
     for name, m in r["mean"].items():
         if "error" in m:
             lines.append(f"  {name:28s} {m['error']}")
             continue
-        cells = " ".join(f"{m[k]:6.3f}" if m[k] is not None else f"{'-':>6s}" for k in KEYS[:6])
+        cells = " ".join(f"{m[k]:6.3f}" if m[k] is not None else f"{'-':>6s}" for k in KEYS[:7])
         lines.append(f"  {name:28s} {cells} {m['shadow_unknown']:7.3f} {m['ece']:6.3f} {m['brier']:6.3f} "
                      f"{m['objects_found']:>3d}/{m['objects_total']:<4d} {m['ms_per_frame']:8.1f}")
     for s in r["scenes"]:

@@ -138,6 +138,8 @@ def radar_scores(log_odds_nats, truth, objects=()):
     - ``auc_obstacles``, ``iou_obstacles``: DETECTABLE voxels of every solid but the ground vs
       FREE-visible (the ground is predictable without a radar, obstacles are not);
     - ``false_free``: the share of OCCUPIED voxels of any visibility with p < 0.35;
+      ``false_free_obstacles`` the same on the surface voxels of every solid but the ground
+      (most OCCUPIED voxels are ground at grazing incidence, whose echo is WEAK);
     - ``shadow_unknown``: the share of SHADOWED voxels with |L| <= 0.2 nat;
     - ``brier``, ``ece`` (10 bins) and ``reliability`` rows on the visible voxels (FREE-visible,
       DETECTABLE, WEAK), occupied = surface voxel;
@@ -157,6 +159,10 @@ def radar_scores(log_odds_nats, truth, objects=()):
     occupied = truth.observed & (truth.labels == OCCUPIED)
     n_occ = int(np.count_nonzero(occupied))
     out["false_free"] = float(np.count_nonzero(probability(L[occupied]) < FREE_BELOW_P) / n_occ) if n_occ else float("nan")
+    obst = occupied & truth.obstacle
+    n_obst = int(np.count_nonzero(obst))
+    out["false_free_obstacles"] = float(np.count_nonzero(probability(L[obst]) < FREE_BELOW_P) / n_obst) if n_obst \
+        else float("nan")
     n_sh = int(np.count_nonzero(shadow))
     out["shadow_unknown"] = float(np.count_nonzero(np.abs(L[shadow]) <= UNKNOWN_NATS) / n_sh) if n_sh else float("nan")
     visible = free | det | weak
