@@ -195,6 +195,25 @@ def build_parser():
     p.add_argument("--json", default=None, metavar="FILE", help="write the whole result as JSON")
     p.add_argument("--force", action="store_true", help="replace existing output files")
 
+    p = command("calibrate-scans", commands.cmd_calibrate_scans,
+                "fit the interpreter's constants on a real radar's own polar scans: a map of some scans predicts "
+                "the detections of the others",
+                "Splits the sequence in time. On the first part, a map of the even scans (each interpreter feature "
+                "fused as its own channel) predicts the CFAR detections of the odd scans (the sensor profile's own "
+                "detector); a logistic fit of those detections gives the constants, and the map's CFAR and surface "
+                "test are chosen by its likelihood. On the last part, never seen by the fit, it compares the profile's "
+                "constants, the calibrated ones and the baselines on the same held-out bins, and writes a "
+                "configuration file for --config.")
+    p.add_argument("data", nargs="?", default=None,
+                   help="a directory of radar/*.png and gt/radar_odometry.csv (default: the shared Oxford sequence)")
+    add_config(p, "navtech-cts350x")
+    p.add_argument("--model", choices=("occlusion", "paper"), default="occlusion",
+                   help="the interpreter to calibrate (default: %(default)s)")
+    p.add_argument("--save", default=None, metavar="FILE", help="write the calibrated configuration to FILE")
+    p.add_argument("--figure", default=None, metavar="PNG", help="write the before/after reliability diagram")
+    p.add_argument("--json", default=None, metavar="FILE", help="write the whole result as JSON")
+    p.add_argument("--force", action="store_true", help="replace existing output files")
+
     p = command("fuse", commands.cmd_fuse, "fuse any sensor's frames into a map file (rewritten every --every frames for "
                                   "radarcl view --live)",
                 "Reads INPUT as the sensor's reader says (a radarcl recording; a directory of polar PNG scans, "

@@ -157,6 +157,36 @@ def cmd_calibrate(args):
     return 0
 
 
+def cmd_calibrate_scans(args):
+    import json
+
+    from radarcl import outputs
+    from radarcl.errors import ConfigError
+    from radarcl.jobs import calibrate_scans, plots
+
+    save = outputs.check(args.save, args.force, what="configuration file") if args.save else None
+    figure = outputs.check(args.figure, args.force, what="figure") if args.figure else None
+    json_out = outputs.check(args.json, args.force, what="JSON file") if args.json else None
+    data = args.data or default_data("navtech_oxford")
+    if not Path(data).is_dir():
+        raise ConfigError(f"no data directory {data}; give DATA (radar/*.png and gt/radar_odometry.csv)")
+    config, result = calibrate_scans.run(_runtime(), resolve_config(args), data, args.model, report=print)
+    print("\n".join(calibrate_scans.format_lines(result)))
+    if save:
+        config.save(save, header=("radarcl map configuration fitted by `radarcl calibrate-scans`",
+                                  f"{result['model']} interpreter, {result['sensor']} scans {result['fit_scans']} of "
+                                  f"{data}"), overwrite=True)
+        print(f"wrote {save} (use it with --config)")
+    if figure:
+        plots.save(calibrate_scans.reliability_figure(result), figure)
+        print(f"wrote {figure}")
+    if json_out:
+        with outputs.atomic(json_out) as tmp:
+            tmp.write_text(json.dumps(result, indent=1))
+        print(f"wrote {json_out}")
+    return 0
+
+
 def cmd_fuse(args):
     from radarcl import outputs
     from radarcl.jobs import fuse_recording

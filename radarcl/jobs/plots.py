@@ -343,10 +343,11 @@ def _number_points(ax, points, near_px=12):
         ax.annotate(text, points[g[0]], xytext=(dx, dy), textcoords="offset points", fontsize=10)
 
 
-def reliability_figure(curves, subtitle=""):
+def reliability_figure(curves, subtitle="", what="visible voxels", outcome="occupied"):
     """Reliability diagram: per map ({name: rows (lo, hi, count, mean p, frequency)} from
-    ``metrics.calibration``) the observed frequency of occupied against the mean predicted p in
-    each bin, the diagonal being perfect calibration; beneath, how many voxels each bin holds."""
+    ``metrics.calibration``) the observed frequency of ``outcome`` against the mean predicted p
+    in each bin, the diagonal being perfect calibration; beneath, how many ``what`` each bin
+    holds."""
     import textwrap
 
     plt = _pyplot()
@@ -358,16 +359,16 @@ def reliability_figure(curves, subtitle=""):
         mean_p, freq, count = [x[3] for x in rows], [x[4] for x in rows], [x[2] for x in rows]
         ax.plot(mean_p, freq, "o-", label=name, lw=1.5)
         hist.bar([x[0] + (n + 0.5) * width for x in rows], count, width=width, label=name)
-    ax.set_ylabel("observed frequency of occupied")
+    ax.set_ylabel(f"observed frequency of {outcome}")
     ax.set_xlim(0, 1)
     ax.set_ylim(-0.02, 1.02)
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left")
-    ax.set_title("Reliability on the visible voxels\n" + "\n".join(textwrap.wrap(subtitle, 70)), fontsize=10)
+    ax.set_title(f"Reliability on the {what}\n" + "\n".join(textwrap.wrap(subtitle, 70)), fontsize=10)
     ax._radarcl_shared_x = True                         # the x label sits under the panel below
     hist.set_yscale("log")
-    hist.set_xlabel("predicted p (bin: mean p of its voxels)")
-    hist.set_ylabel("voxels per bin")
+    hist.set_xlabel(f"predicted p (bin: mean p of its {what})")
+    hist.set_ylabel(f"{what} per bin")
     hist.grid(alpha=0.3)
     fig.tight_layout()
     return fig
