@@ -34,7 +34,6 @@ from radarcl.stages import Port, Stage, build, count, spacing, work_group_size
 #   skips 75 % of the rows, which counts on devices where rows are not the cost.
 DEFAULT_LOCAL_SIZE = 64
 VECTOR_WIDTHS = (4, 8)             # voxels along x per work-item, one per SIMD lane
-SUPER = 8                          # bricks per edge of the coarse level of the brick search
 WINDOW_SLACK = 1e-4                # [rad] added to the window half-widths (float rounding)
 
 
@@ -45,9 +44,17 @@ class FramePlan:
     beams: np.ndarray        # (n_beams, 3, 4) float32: u, v, w axes; [.., 3] = origin [m, grid coords]
     bricks: np.ndarray       # (n, 4) int32: bx, by, bz, slot of every brick the beams may reach
     windows: np.ndarray      # (n, 4) int32: candidate beams of each brick, i_lo, i_hi, k_lo, k_hi
-    beams_outside: int       # beams that reach no brick of the grid (they give nothing)
     owner: object = field(default=None, compare=False, repr=False)   # the Fusion that made it
     generation: int = -1     # the grid's generation it was made for (slots die with grid.clear())
+    _outside: list = field(default_factory=list, compare=False, repr=False)
+
+    @property
+    def beams_outside(self):
+        """Beams that reach no brick of the grid (they give nothing); counted when first asked
+        (a moving radar plans every frame, and few callers ask)."""
+        if not self._outside:
+            self._outside.append(self.owner._beams_outside(self.windows))
+        return self._outside[0]
 
 
 class HeadFrame(NamedTuple):
@@ -157,6 +164,7 @@ class Fusion(Stage):
         self.r_hi = (self.last_bin + 0.5) * self.bin_spacing_m
         self._cached = (None, None)
         self._plan_arrays, self._uploaded = None, None
+        self._planner = None             # a FusionPlanner, built on the first plan
         # Evidence from a raw radar's detection comes as (n_az, n_el, n_bins) even for one
         # elevation; (n_beams, n_bins) is the same rows.
         aliases = ((lattice.n_az, lattice.n_el, self.n_bins), (lattice.n_beams, self.n_bins))
@@ -181,21 +189,25 @@ class Fusion(Stage):
             return self._cached[1]
         spec = self.grid.spec
         ref = P[len(P) // 2]
-        head = ref[:3, :3] @ self.lattice.head_rotation()
         rots = (P[:, :3, :3] if len(P) > 1 else ref[:3, :3]) @ self._rotations
         origins = np.broadcast_to(P[:, :3, 3], (self.lattice.n_beams, 3)) - np.asarray(spec.origin_m)
         beams = np.concatenate([np.swapaxes(rots, 1, 2), origins[:, :, None]], axis=2)
-        cos_rot = (np.trace(ref[:3, :3].T @ P[:, :3, :3], axis1=1, axis2=2) - 1) / 2
-        frame = HeadFrame(head, ref[:3, 3] - np.asarray(spec.origin_m),
-                               float(np.linalg.norm(P[:, :3, 3] - ref[:3, 3], axis=1).max()),
-                               float(np.arccos(np.clip(cos_rot, -1, 1)).max()))
-        bricks, windows = self._reached_bricks(frame)
+        bricks, windows = self._reached_bricks(self.head_frame(P))
         slots = self.grid.allocate(bricks)
         listed = np.concatenate([bricks, slots[:, None]], axis=1).astype(np.int32)
         plan = FramePlan(np.ascontiguousarray(beams, np.float32), listed, np.ascontiguousarray(windows, np.int32),
-                         self._beams_outside(windows), self, self.grid.generation)
+                         self, self.grid.generation)
         self._cached = (key, plan)
         return plan
+
+    def head_frame(self, P):
+        """The ``HeadFrame`` the windows of a frame at poses ``P`` ((n, 4, 4), checked) are
+        computed in: the middle beam's pose, and how far the others stray from it."""
+        ref = P[len(P) // 2]
+        cos_rot = (np.trace(ref[:3, :3].T @ P[:, :3, :3], axis1=1, axis2=2) - 1) / 2
+        return HeadFrame(ref[:3, :3] @ self.lattice.head_rotation(), ref[:3, 3] - np.asarray(self.grid.spec.origin_m),
+                         float(np.linalg.norm(P[:, :3, 3] - ref[:3, 3], axis=1).max()),
+                         float(np.arccos(np.clip(cos_rot, -1, 1)).max()))
 
     def restrict(self, plan, az_lo, az_hi):
         """The part of ``plan`` that the beams of azimuths ``az_lo``..``az_hi`` (every elevation)
@@ -216,7 +228,7 @@ class Fusion(Stage):
         keep = i_lo <= i_hi
         windows = w[keep].copy()
         windows[:, 0], windows[:, 1] = i_lo[keep], i_hi[keep]
-        return FramePlan(plan.beams, plan.bricks[keep], windows, plan.beams_outside, self, plan.generation)
+        return FramePlan(plan.beams, plan.bricks[keep], windows, self, plan.generation, [plan.beams_outside])
 
     def _windows(self, brick_index, edge, frame):
         centres = (brick_index + 0.5) * edge * self.grid.spec.voxel_m
@@ -224,32 +236,35 @@ class Fusion(Stage):
         return candidate_windows(centres, radius, frame, self.r_lo, self.r_hi, self.lattice, self.model)
 
     def _reached_bricks(self, frame):
-        """(n, 3) bricks (bx, by, bz) some beam may reach: a coarse pass over blocks of
-        SUPER^3 bricks, then the bricks of the blocks kept."""
+        """(n, 3) bricks (bx, by, bz) some beam may reach, and their windows: a coarse pass over
+        blocks of BLOCK^3 bricks on the host, then the bricks of the kept blocks on the device
+        (``FusionPlanner``), block by block."""
+        from radarcl.stages.fusion_plan import BLOCK, FusionPlanner
+
         shape = np.asarray(self.grid.spec.brick_shape)
-        coarse = np.stack(np.meshgrid(*[np.arange(-(-n // SUPER)) for n in shape], indexing="ij"), -1).reshape(-1, 3)
-        kept = coarse[_nonempty(self._windows(coarse, BRICK * SUPER, frame))]
-        offsets = np.stack(np.meshgrid(*[np.arange(SUPER)] * 3, indexing="ij"), -1).reshape(-1, 3)
-        fine = (kept[:, None, :] * SUPER + offsets[None]).reshape(-1, 3)
-        fine = fine[(fine < shape).all(axis=1)]
-        windows = self._windows(fine, BRICK, frame)
-        keep = _nonempty(windows)
-        fine, windows = fine[keep], windows[keep]
-        order = np.lexsort((fine[:, 0], fine[:, 1], fine[:, 2]))
-        return fine[order], windows[order]
+        coarse = np.stack(np.meshgrid(*[np.arange(-(-n // BLOCK)) for n in shape], indexing="ij"), -1).reshape(-1, 3)
+        kept = coarse[_nonempty(self._windows(coarse, BRICK * BLOCK, frame))] * BLOCK
+        if self._planner is None:
+            self._planner = FusionPlanner(self.runtime, self.lattice, self.model, self.r_lo, self.r_hi)
+        windows = self._planner.windows(kept, shape, BRICK * self.grid.spec.voxel_m, frame)
+        keep = np.flatnonzero(_nonempty(windows))
+        return FusionPlanner.bricks_of(kept)[keep], windows[keep]
 
     def _beams_outside(self, w):
         """Beams in no reached brick's window ``w``: they certainly miss the grid (a lower bound)."""
         lat = self.lattice
         if not len(w):
             return lat.n_beams
-        covered = np.zeros((lat.n_az + 1, lat.n_el + 1), np.int64)
+        size = (lat.n_az + 1) * (lat.n_el + 1)
+        covered = np.zeros(size, np.int64)
+        w = w.astype(np.int64)
         for lo, hi in ((w[:, 0], w[:, 1]), (w[:, 0] + lat.n_az, w[:, 1] + lat.n_az), (w[:, 0] - lat.n_az, w[:, 1] - lat.n_az)):
             lo_c, hi_c = np.clip(lo, 0, lat.n_az), np.clip(hi + 1, 0, lat.n_az)
             ok = hi_c > lo_c
-            for a, sign in ((lo_c, 1), (hi_c, -1)):
-                np.add.at(covered, (a[ok], w[ok, 2]), sign)
-                np.add.at(covered, (a[ok], w[ok, 3] + 1), -sign)
+            for a, sign in ((lo_c, 1), (hi_c, -1)):        # 2-D difference array of the windows' rectangles
+                for k, s in ((w[ok, 2], sign), (w[ok, 3] + 1, -sign)):
+                    covered += s * np.bincount(a[ok] * (lat.n_el + 1) + k, minlength=size)
+        covered = covered.reshape(lat.n_az + 1, lat.n_el + 1)
         reached = np.cumsum(np.cumsum(covered, axis=0), axis=1)[:lat.n_az, :lat.n_el] > 0
         return int(np.count_nonzero(~reached))
 
