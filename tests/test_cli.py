@@ -128,10 +128,13 @@ def test_bench_fusion_has_the_issue_keys():
     from radarcl.cl import Runtime
     from radarcl.grid import GridSpec
 
-    r = fusion.run(Runtime(), repeat=2, spec=GridSpec((-8.0, -35.0, -10.0), 0.5, (160, 140, 40)))
-    for key in ("fusion_ms_per_frame", "pipeline_ms_per_frame", "voxels_per_frame", "floor_ms_per_frame",
-                "ratio_vs_floor", "ratio_vs_numpy"):
+    r = fusion.run(Runtime(), repeat=2, spec=GridSpec((-8.0, -35.0, -10.0), 0.5, (160, 140, 40)),
+                   spin_spec=GridSpec((-20.0, -20.0, -2.0), 0.5, (80, 80, 8)))
+    for key in ("still_ms_per_frame", "moving_ms_per_frame", "spinning_ms_per_frame", "planning_ms",
+                "planning_ms_numpy", "pipeline_ms_per_frame", "voxels_per_frame", "floor_ms_per_frame",
+                "spinning_voxels_per_frame", "ratio_vs_floor", "ratio_vs_numpy"):
         assert r[key] > 0, key
+    assert set(r["load"]) == {"still", "moving", "planning", "planning_numpy", "spinning", "pipeline"}
     assert r["max_error_units"] <= 1 and r["oracle_voxels_compared"] > 10000
     assert r["sparse_mib"] < r["dense_mib"]
     assert any("ratio_vs_floor" in line for line in fusion.format_table(r))
