@@ -19,7 +19,18 @@
  *
  * -D: VEC (4 or 8), N_AZ, N_EL, N_BINS (frame shape); NEAR_FIELD (cylinder of the antenna's cross-section),
  *     GAUSSIAN (two-way weight), PER_BEAM_POSES (each beam measures range from its own origin),
- *     AZ_WRAP (the azimuths span a full turn, windows may run past either end).
+ *     AZ_WRAP (the azimuths span a full turn, windows may run past either end),
+ *     RECORD (1 or 2: instead of fusing, record what each voxel takes, for fusion_cached below;
+ *     1 counts each voxel's beams into counts[], 2 writes each voxel's first (beam * N_BINS +
+ *     bin, weight) into first[] and the rest into extras[] from row_start[], the host's prefix
+ *     sums of the counts beyond the first).
+ *
+ * fusion_cached: a still radar's frame from the recorded table: each voxel sums
+ * rint(evidence[entry] * weight) over its entries, the same integers the gather gives (the
+ * weights are the gather's own float32 values), streaming the table instead of testing beams.
+ * Table rows are the gather's: row t = work-item t / 16, row t % 16 of its VEC x 4 x 4 block.
+ * The first entries are dense (one per voxel, read as vectors: on a regular lattice almost every
+ * voxel lies in one beam), the weight's sign bit set where more follow; the rest follow per row.
  */
 #include "radarcl_common.h"
 
@@ -34,9 +45,11 @@
 #define vloadV CAT(vload, VEC)
 #define vstoreV CAT(vstore, VEC)
 #if VEC == 4
+#define VEC2 8
 #define LANES ((float4)(0.0f, 1.0f, 2.0f, 3.0f))
 #define GATHER(p, j) ((int4)(p[j.s0], p[j.s1], p[j.s2], p[j.s3]))
 #elif VEC == 8
+#define VEC2 16
 #define LANES ((float8)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f))
 #define GATHER(p, j) ((int8)(p[j.s0], p[j.s1], p[j.s2], p[j.s3], p[j.s4], p[j.s5], p[j.s6], p[j.s7]))
 #else
@@ -50,6 +63,23 @@
 #define MAXF(a, b) ((a) > (b) ? (a) : (b))
 #define MINF(a, b) ((a) < (b) ? (a) : (b))
 #define RINT_INTV(x) (as_intV((x) + 12582912.0f) - 0x4B400000)
+/* the OR of an intV's lanes (any lane nonzero; any sign bit set), without the any() builtin */
+static inline int or_lanes(intV v)
+{
+#if VEC == 8
+    const int4 h = v.lo | v.hi;
+    const int2 q = h.lo | h.hi;
+#else
+    const int2 q = v.lo | v.hi;
+#endif
+    return q.x | q.y;
+}
+#define vstore_ucharV CAT(vstore, VEC)
+#define vload_ucharV CAT(vload, VEC)
+#define intV2 CAT(int, VEC2)
+#define vloadV2 CAT(vload, VEC2)
+#define convert_intV CAT(convert_int, VEC)
+#define convert_ucharV_sat CAT(CAT(convert_uchar, VEC), _sat)
 #define LAST CAT(s, CAT(VEC, _LAST))
 #define s4_LAST s3
 #define s8_LAST s7
@@ -100,6 +130,11 @@ __kernel void fusion(
     const float a_az,                 // half apertures [m] (0 without NEAR_FIELD)
     const float a_el,
     const int n_items,                // listed bricks x SUBS: work-items past it do nothing
+    __global uchar *counts,           // RECORD: (n_items * 16 * VEC,) beams per voxel (out with 1)
+    const __global int *row_start,    // RECORD 2: (n_items * 16,) first extra entry of each table row
+    __global int2 *first,             // RECORD 2: out, per voxel its first (beam * N_BINS + bin,
+                                      //   as_int(weight)); (0, 0) where no beam reaches
+    __global int2 *extras,            // RECORD 2: out, the voxels' further entries, row by row
     __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
 {
     const int id = get_global_id(0);
@@ -132,6 +167,10 @@ __kernel void fusion(
     }
 #else
     for (int row = 0; row < SUB * SUB; ++row)
+        acc[row] = 0;
+#endif
+#if RECORD == 2
+    for (int row = 0; row < SUB * SUB; ++row)            /* entries each lane has written */
         acc[row] = 0;
 #endif
     int touched = 0;
@@ -200,14 +239,48 @@ __kernel void fusion(
                 if (!any(inside))
                     continue;
                 const intV j = max(bin, 0);
+#if RECORD == 1
+                acc[row] -= inside;                               /* inside is -1 */
+#elif RECORD == 2
+  #ifdef GAUSSIAN
+                const floatV wt = weight_nb(num / den);
+  #else
+                const floatV wt = (floatV)1.0f;
+  #endif
+                const size_t t = (size_t)id * 16 + row;
+                for (int lane = 0; lane < VEC; ++lane) {
+                    if (((const int *)&inside)[lane]) {
+                        const int written = ((const int *)&acc[row])[lane];
+                        const int2 entry = (int2)(b * N_BINS + ((const int *)&j)[lane], as_int(((const float *)&wt)[lane]));
+                        if (written == 0) {                   /* sign bit: more entries follow */
+                            first[t * VEC + lane] = counts[t * VEC + lane] > 1 ? (int2)(entry.x, entry.y | (int)0x80000000) : entry;
+                        } else {                                  /* the row's extras, lane by lane */
+                            int at = row_start[t];
+                            for (int l = 0; l < lane; ++l)
+                                at += max((int)counts[t * VEC + l] - 1, 0);
+                            extras[at + written - 1] = entry;
+                        }
+                    }
+                }
+                acc[row] -= inside;                               /* inside is -1 */
+#else
                 intV e = GATHER(row_ev, j);
-#ifdef GAUSSIAN
-                e = RINT_INTV(convert_floatV(e) * weight_nb(num / den));
-#endif
+  #ifdef GAUSSIAN
+                const floatV product = convert_floatV(e) * weight_nb(num / den);
+                e = RINT_INTV(product);
+  #endif
                 acc[row] += e & inside;
+#endif
             }
         }
     }
+#if RECORD == 1
+    for (int row = 0; row < SUB * SUB; ++row)
+        vstore_ucharV(convert_ucharV_sat(acc[row]), 0, counts + ((size_t)id * 16 + row) * VEC);
+    return;
+#elif RECORD == 2
+    return;
+#endif
     if (!touched)
         return;
     __global int *cells = pool + brick.w * 512 + (corner.z * 8 + corner.y) * 8 + corner.x;
@@ -215,6 +288,60 @@ __kernel void fusion(
         if (any(acc[row] != 0)) {
             __global int *cell = cells + ((row >> 2) * 8 + (row & 3)) * 8;
             vstoreV(clamp(add_sat(vloadV(0, cell), acc[row]), -GRID_LIMIT, GRID_LIMIT), 0, cell);
+        }
+    }
+}
+
+
+__kernel void fusion_cached(
+    const __global int *evidence,     // (n_beams, N_BINS) eq. 12 updates [logodds units]
+    const __global int4 *bricks,      // (n_listed,) bx, by, bz, slot: the recorded plan's
+    const __global uchar *counts,     // (n_items * 16 * VEC,) entries per voxel (RECORD 1)
+    const __global int *row_start,    // (n_items * 16,) first extra entry of each table row
+    const __global int2 *first,       // (n_items * 16 * VEC,) each voxel's first entry (RECORD 2)
+    const __global int2 *extras,      // the further entries (RECORD 2)
+    const int n_items,                // the gather's work-items: listed bricks x SUBS
+    __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
+{
+    const int id = get_global_id(0);
+    if (id >= n_items)
+        return;
+    const int4 brick = bricks[id / SUBS];
+    const int sub = id % SUBS;
+    const int3 corner = (int3)((sub >> 2) * VEC, (sub & 1) * SUB, ((sub >> 1) & 1) * SUB);
+    __global int *cells = pool + brick.w * 512 + (corner.z * 8 + corner.y) * 8 + corner.x;
+    const __global int *dense = (const __global int *)first + (size_t)id * 16 * VEC * 2;
+    for (int row = 0; row < SUB * SUB; ++row) {
+        const intV2 pairs = vloadV2(0, dense + row * VEC * 2);       /* idx, weight, idx, weight, ... */
+        const intV bits = pairs.odd;
+        if (!or_lanes(bits))                   /* no beam reaches the row */
+            continue;
+        const intV index = pairs.even;
+        /* the weight's sign bit says "more entries follow" (weights are positive) */
+        const floatV product = convert_floatV(GATHER(evidence, index)) * as_floatV(bits & 0x7FFFFFFF);
+        intV sum = RINT_INTV(product);
+        if (or_lanes(bits) < 0) {              /* the few voxels several beams reach */
+            const size_t t = (size_t)id * 16 + row;
+            int extra[VEC];
+            int at = row_start[t];
+            for (int lane = 0; lane < VEC; ++lane) {
+                int add = 0;
+                const int n = counts[t * VEC + lane];
+                for (int m = 1; m < n; ++m, ++at) {
+                    const int2 entry = extras[at];
+                    const float p = (float)evidence[entry.x] * as_float(entry.y);
+                    add += as_int(p + 12582912.0f) - 0x4B400000;    /* rint, half to even, as RINT_INTV */
+                }
+                extra[lane] = add;
+            }
+            sum += vloadV(0, extra);
+        }
+        if (or_lanes(sum)) {
+            /* |sum| < 255 beams x 2^14 (RECORD refuses more) and |cell| <= GRID_LIMIT = 2^30: no
+             * int32 overflow to saturate */
+            __global int *cell = cells + ((row >> 2) * 8 + (row & 3)) * 8;
+            const intV v = vloadV(0, cell) + sum;
+            vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : (v < (intV)-GRID_LIMIT ? (intV)-GRID_LIMIT : v), 0, cell);
         }
     }
 }

@@ -14,6 +14,7 @@ for a repeated pose are cached (a radar on a stand).
 """
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -35,6 +36,8 @@ from radarcl.stages import Port, Stage, build, count, spacing, work_group_size
 DEFAULT_LOCAL_SIZE = 64
 VECTOR_WIDTHS = (4, 8)             # voxels along x per work-item, one per SIMD lane
 WINDOW_SLACK = 1e-4                # [rad] added to the window half-widths (float rounding)
+STILL_TABLE_SHARE = 0.25           # the still tables held may take this share of the device's memory
+PLAN_CACHE = 16                    # plans kept for poses that come back (the paper's stand has 15 tilts)
 
 
 @dataclass(frozen=True)
@@ -47,6 +50,12 @@ class FramePlan:
     owner: object = field(default=None, compare=False, repr=False)   # the Fusion that made it
     generation: int = -1     # the grid's generation it was made for (slots die with grid.clear())
     _outside: list = field(default_factory=list, compare=False, repr=False)
+    _table: list = field(default_factory=list, compare=False, repr=False)    # a StillTable, once recorded
+
+    @property
+    def table(self):
+        """The ``StillTable`` recorded for this plan (a still radar), or None."""
+        return self._table[0] if self._table else None       # [None]: recording was declined
 
     @property
     def beams_outside(self):
@@ -55,6 +64,25 @@ class FramePlan:
         if not self._outside:
             self._outside.append(self.owner._beams_outside(self.windows))
         return self._outside[0]
+
+
+@dataclass
+class StillTable:
+    """What every voxel of a plan takes from a frame, recorded once for a still radar (the
+    kernel's RECORD passes), on the device: per voxel its count of beams and its first entry
+    (beam * n_bins + bin, the weight's float32 bits), the further entries row by row."""
+
+    counts: object           # pyopencl Array uint8 (n_rows * VEC,): beams per voxel
+    row_start: object        # pyopencl Array int32 (n_rows,): first extra entry of each row
+    first: object            # pyopencl Array int32 (n_rows * VEC, 2): each voxel's first entry
+    extras: object           # pyopencl Array int32 (n, 2): the further entries
+    n_rows: int
+    n_entries: int
+
+    @property
+    def nbytes(self):
+        """Device memory the table takes."""
+        return sum(a.nbytes for a in (self.counts, self.row_start, self.first, self.extras))
 
 
 class HeadFrame(NamedTuple):
@@ -133,11 +161,15 @@ class Fusion(Stage):
     frame's ``BeamLattice`` (beam b = i * n_el + k); model: a ``BeamModel`` (near-field
     cylinder and Gaussian weight as -D switches); n_bins, bin_spacing_m: the evidence rows
     (bin j at j x spacing); first_bin, last_bin: bins that carry evidence (others are skipped);
-    per_beam_poses: accept one pose per beam (a radar scanning while it moves).
+    per_beam_poses: accept one pose per beam (a radar scanning while it moves); still: "auto"
+    records a ``StillTable`` when a plan's pose comes back (a radar on a stand, a parked
+    vehicle) and the table fits ``STILL_TABLE_SHARE`` of the device's memory, then fuses that
+    pose's frames from it (``fusion_cached``, the same integers); True records on the first
+    repeat whatever its size, False never.
     """
 
     def __init__(self, runtime, grid, lattice, model, n_bins, bin_spacing_m, first_bin=0, last_bin=None,
-                 *, per_beam_poses=False, vector_width=8, local_size=None):
+                 *, per_beam_poses=False, still="auto", vector_width=8, local_size=None):
         if not isinstance(grid, EvidenceGrid):
             raise ConfigError(f"grid must be an EvidenceGrid, got {type(grid).__name__}")
         if not isinstance(lattice, BeamLattice) or not isinstance(model, BeamModel):
@@ -157,18 +189,28 @@ class Fusion(Stage):
         defines = dict(VEC=self.vector_width, N_AZ=lattice.n_az, N_EL=lattice.n_el, N_BINS=self.n_bins,
                        NEAR_FIELD=model.near_field, GAUSSIAN=model.gaussian,
                        PER_BEAM_POSES=self.per_beam_poses, AZ_WRAP=lattice.wraps)
-        self._kernel = build(runtime, "fusion", {k: v for k, v in defines.items() if v is not False})["fusion"]
+        self._defines = {k: v for k, v in defines.items() if v is not False}
+        if still not in ("auto", True, False):
+            raise ConfigError(f"still must be 'auto', True or False, got {still!r}")
+        self.still = still
+        kernels = build(runtime, "fusion", self._defines)
+        self._kernel, self._cached_kernel = kernels["fusion"], kernels["fusion_cached"]
+        self._record_kernels = None
         self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
         self._rotations = lattice.beam_rotations()
         self.r_lo = (self.first_bin - 0.5) * self.bin_spacing_m
         self.r_hi = (self.last_bin + 0.5) * self.bin_spacing_m
-        self._cached = (None, None)
+        self._plans = OrderedDict()      # (grid generation, poses) -> FramePlan, least recent first
         self._plan_arrays, self._uploaded = None, None
         self._planner = None             # a FusionPlanner, built on the first plan
         # Evidence from a raw radar's detection comes as (n_az, n_el, n_bins) even for one
         # elevation; (n_beams, n_bins) is the same rows.
         aliases = ((lattice.n_az, lattice.n_el, self.n_bins), (lattice.n_beams, self.n_bins))
         self._allocate([Port("evidence", (*lattice.batch, self.n_bins), np.dtype(np.int32), "evidence", aliases)], [])
+        import pyopencl.array as cla
+
+        q = runtime.queue               # the RECORD buffers the plain gather ignores
+        self._no_table = (cla.zeros(q, (1,), np.uint8), cla.zeros(q, (1,), np.int32), cla.zeros(q, (1, 2), np.int32))
 
     @property
     def evidence_shape(self):
@@ -185,8 +227,14 @@ class Fusion(Stage):
             raise ConfigError("this Fusion takes one pose per frame; build it with per_beam_poses=True "
                               "to give one pose per beam")
         key = (self.grid.generation, P.tobytes())
-        if cache and self._cached[0] == key:
-            return self._cached[1]
+        if self._plans and next(iter(self._plans))[0] != self.grid.generation:
+            self._plans = OrderedDict((k, p) for k, p in self._plans.items() if k[0] == self.grid.generation)
+        if cache and key in self._plans:
+            plan = self._plans.pop(key)
+            self._plans[key] = plan                              # the most recent last
+            if self.still and not plan._table:
+                self.record(plan)
+            return plan
         spec = self.grid.spec
         ref = P[len(P) // 2]
         rots = (P[:, :3, :3] if len(P) > 1 else ref[:3, :3]) @ self._rotations
@@ -197,8 +245,56 @@ class Fusion(Stage):
         listed = np.concatenate([bricks, slots[:, None]], axis=1).astype(np.int32)
         plan = FramePlan(np.ascontiguousarray(beams, np.float32), listed, np.ascontiguousarray(windows, np.int32),
                          self, self.grid.generation)
-        self._cached = (key, plan)
+        if cache:
+            self._plans[key] = plan
+            while len(self._plans) > PLAN_CACHE:
+                self._plans.popitem(last=False)                  # the oldest, and its table
         return plan
+
+    def record(self, plan):
+        """Record ``plan``'s ``StillTable`` (two passes of the gather that write instead of
+        fuse); returns it, or None (and remembers so) where ``still`` is "auto" and the table
+        would take more than ``STILL_TABLE_SHARE`` of the device's memory, or a voxel lies in
+        255 beams or more."""
+        import pyopencl as cl
+        import pyopencl.array as cla
+
+        if not isinstance(plan, FramePlan) or plan.owner is not self:
+            raise ConfigError("plan must be a FramePlan made by this Fusion's plan()")
+        if plan.table is not None:
+            return plan.table
+        q = self.runtime.queue
+        n_items = len(plan.bricks) * (8 // self.vector_width) * 4
+        n_rows = n_items * 16
+        device = q.device
+        held = sum(p.table.nbytes for p in self._plans.values() if p.table is not None)
+        budget = STILL_TABLE_SHARE * device.global_mem_size - held if self.still == "auto" else float("inf")
+        if not n_rows or n_rows * (9 * self.vector_width + 4) > min(budget, device.max_mem_alloc_size):
+            plan._table.append(None)
+            return None
+        if self._record_kernels is None:
+            self._record_kernels = [build(self.runtime, "fusion", {**self._defines, "RECORD": r})["fusion"] for r in (1, 2)]
+        counts = cla.zeros(q, (n_rows * self.vector_width,), np.uint8)
+        row_start = cla.zeros(q, (n_rows,), np.int32)
+        dummy = cla.zeros(q, (1, 2), np.int32)
+        self._launch(self._record_kernels[0], plan, self.arrays["evidence"], counts=counts, row_start=row_start,
+                     first=dummy, extras=dummy).wait()
+        host = counts.get(q)
+        per_row = host.reshape(n_rows, self.vector_width).sum(axis=1, dtype=np.int64)
+        total = int(per_row.sum())
+        if host.max(initial=0) == 255 or 8 * total + n_rows * (9 * self.vector_width + 4) > min(budget, device.max_mem_alloc_size):
+            plan._table.append(None)
+            return None
+        extra_per_row = np.maximum(host.reshape(n_rows, self.vector_width).astype(np.int64) - 1, 0).sum(axis=1)
+        starts = np.concatenate([[0], np.cumsum(extra_per_row)[:-1]]).astype(np.int32)
+        cl.enqueue_copy(q, row_start.data, starts, is_blocking=True)
+        first = cla.zeros(q, (n_rows * self.vector_width, 2), np.int32)     # (0, 0): evidence[0] x 0.0
+        extras = cla.zeros(q, (max(int(extra_per_row.sum()), 1), 2), np.int32)
+        self._launch(self._record_kernels[1], plan, self.arrays["evidence"], counts=counts, row_start=row_start,
+                     first=first, extras=extras).wait()
+        table = StillTable(counts, row_start, first, extras, n_rows, total)
+        plan._table.append(table)
+        return table
 
     def head_frame(self, P):
         """The ``HeadFrame`` the windows of a frame at poses ``P`` ((n, 4, 4), checked) are
@@ -286,11 +382,12 @@ class Fusion(Stage):
         """Copy a checked frame of evidence into the plan's input array; returns the copy event."""
         return super().upload(evidence=self.check(evidence))[0]
 
-    def enqueue(self, evidence=None, plan=None, wait_for=None):
+    def enqueue(self, evidence=None, plan=None, wait_for=None, gather=False):
         """Fuse one frame of evidence (a device array (*batch, n_bins) int32 within
         +-``logodds.EVIDENCE_LIMIT``, e.g. an ``Interpreter``'s ``arrays["evidence"]``, whose
         values are clamped there; None: this plan's own, as ``upload`` checked it) taken as ``plan``
-        (from this Fusion's ``plan``, for the grid as it is now) says. Returns the kernel event
+        (from this Fusion's ``plan``, for the grid as it is now) says: from its ``StillTable``
+        where one is recorded (the same integers), unless ``gather``. Returns the kernel event
         (None when no brick is reached)."""
         if not isinstance(plan, FramePlan) or plan.owner is not self:
             raise ConfigError("plan must be a FramePlan made by this Fusion's plan() (a plan of another "
@@ -298,26 +395,44 @@ class Fusion(Stage):
         if plan.generation != self.grid.generation:
             raise ConfigError("the plan was made before grid.clear(): its bricks are gone; call plan() again")
         evidence = self.device("evidence", evidence)
-        rt, m = self.runtime, self.model
         if not len(plan.bricks):
             return None
+        if plan.table is not None and not gather:
+            t = plan.table
+            ls = self.local_size
+            n_items = t.n_rows // 16
+            return self._cached_kernel(self.runtime.queue, (-(-n_items // ls) * ls,), (ls,), wait_for=wait_for,
+                                       evidence=evidence, bricks=self._plan_device(plan)["bricks"], counts=t.counts,
+                                       row_start=t.row_start, first=t.first, extras=t.extras, n_items=n_items,
+                                       pool=self.grid.pool)
+        none = self._no_table
+        return self._launch(self._kernel, plan, evidence, wait_for=wait_for, counts=none[0], row_start=none[1],
+                            first=none[2], extras=none[2])
+
+    def _plan_device(self, plan):
+        """The plan's arrays on the device (uploaded once per plan)."""
         if self._uploaded is not plan:
             import pyopencl.array as cla
 
-            q = rt.queue
+            q = self.runtime.queue
             self._plan_arrays = dict(beams=cla.to_device(q, plan.beams), bricks=cla.to_device(q, plan.bricks),
                                      windows=cla.to_device(q, plan.windows))
             self._uploaded = plan
+        return self._plan_arrays
+
+    def _launch(self, kernel, plan, evidence, wait_for=None, **record):
+        """One gather launch over ``plan`` (the fusion, or a RECORD pass with its buffers)."""
+        rt, m = self.runtime, self.model
         a_az, a_el = m.apertures
         n_items = len(plan.bricks) * (8 // self.vector_width) * 4
         ls = self.local_size
         gsize = (-(-n_items // ls) * ls,)
         nx, ny, nz = self.grid.spec.shape
-        return self._kernel(rt.queue, gsize, (ls,), wait_for=wait_for, evidence=evidence, **self._plan_arrays,
-                            voxel=self.grid.spec.voxel_m, inv_spacing=1.0 / self.bin_spacing_m,
-                            first_bin=self.first_bin, last_bin=self.last_bin, nx=nx, ny=ny, nz=nz,
-                            tan_half_az=math.tan(m.beamwidth_az_rad / 2), tan_half_el=math.tan(m.beamwidth_el_rad / 2),
-                            a_az=a_az, a_el=a_el, n_items=n_items, pool=self.grid.pool)
+        return kernel(rt.queue, gsize, (ls,), wait_for=wait_for, evidence=evidence, **self._plan_device(plan),
+                      voxel=self.grid.spec.voxel_m, inv_spacing=1.0 / self.bin_spacing_m,
+                      first_bin=self.first_bin, last_bin=self.last_bin, nx=nx, ny=ny, nz=nz,
+                      tan_half_az=math.tan(m.beamwidth_az_rad / 2), tan_half_el=math.tan(m.beamwidth_el_rad / 2),
+                      a_az=a_az, a_el=a_el, n_items=n_items, pool=self.grid.pool, **record)
 
     def download(self, wait_for=None):
         """Fusion writes the grid, not arrays of its own: read the map with ``grid.snapshot()``."""
