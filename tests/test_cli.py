@@ -134,7 +134,8 @@ def test_bench_fusion_has_the_issue_keys():
                 "planning_ms_numpy", "pipeline_ms_per_frame", "voxels_per_frame", "floor_ms_per_frame",
                 "spinning_voxels_per_frame", "ratio_vs_floor", "ratio_vs_numpy"):
         assert r[key] > 0, key
-    assert set(r["load"]) == {"still", "moving", "planning", "planning_numpy", "spinning", "pipeline"}
+    assert set(r["load"]) == {"still", "gather", "moving", "planning", "planning_numpy", "spinning", "spinning_gather",
+                              "pipeline"}
     assert r["max_error_units"] <= 1 and r["oracle_voxels_compared"] > 10000
     assert r["sparse_mib"] < r["dense_mib"]
     assert any("ratio_vs_floor" in line for line in fusion.format_table(r))
