@@ -212,9 +212,13 @@ __kernel void fusion(
                               & (MINF(-y0 - wa0, -y1 - wa1) <= 0.0f) & (MINF(z0 - we0, z1 - we1) <= 0.0f)
                               & (MINF(-z0 - we0, -z1 - we1) <= 0.0f);
             uint rows = ROW_BITS(maybe);
-            while (rows) {
-                const int row = 31 - clz(rows & (0u - rows));
-                rows &= rows - 1u;
+            /* a loop of fixed trip count over the rows, unrolled: acc[] and bins[] indexed by
+             * constants stay in registers (indexed by a row found at run time they went through
+             * memory: 34.9 -> 32.7 ms per paper frame here) */
+#pragma unroll
+            for (int row = 0; row < SUB * SUB; ++row) {
+                if (!(rows & (1u << row)))
+                    continue;
                 const float qy = (base.y + (row & 3) + 0.5f) * voxel - o.y;
                 const float qz = (base.z + (row >> 2) + 0.5f) * voxel - o.z;
 #ifdef PER_BEAM_POSES
