@@ -186,13 +186,14 @@ __kernel void fusion(
             const float3 o = (float3)(U.w, V.w, W.w);
             /* can this beam reach the sub-brick's bounding sphere? */
             const float3 c = centre - o;
-            const float dc = dot(c, U.xyz) + radius;
+            const float dc = c.x * U.x + c.y * U.y + c.z * U.z + radius;
 #ifdef NEAR_FIELD
-            const float wa_c = fmax(dc * tan_half_az, a_az), we_c = fmax(dc * tan_half_el, a_el);
+            const float wa_c = MAXF(dc * tan_half_az, a_az), we_c = MAXF(dc * tan_half_el, a_el);
 #else
             const float wa_c = dc * tan_half_az, we_c = dc * tan_half_el;
 #endif
-            if (dc <= 0.0f || fabs(dot(c, V.xyz)) - radius > wa_c || fabs(dot(c, W.xyz)) - radius > we_c)
+            const float yc = c.x * V.x + c.y * V.y + c.z * V.z, zc = c.x * W.x + c.y * W.y + c.z * W.z;
+            if (dc <= 0.0f || (yc < 0.0f ? -yc : yc) - radius > wa_c || (zc < 0.0f ? -zc : zc) - radius > we_c)
                 continue;
             touched = 1;
             const __global int *row_ev = evidence + b * N_BINS;
@@ -240,9 +241,9 @@ __kernel void fusion(
                 const floatV wa2 = wa * wa, we2 = we * we;
                 const floatV num = y * y * we2 + z * z * wa2, den = wa2 * we2;
                 const intV inside = (bin >= 0) & (d > 0.0f) & (den > 0.0f) & (num <= den);
-                if (!any(inside))
+                if (!or_lanes(inside))
                     continue;
-                const intV j = max(bin, 0);
+                const intV j = bin & ~(bin >> 31);                /* max(bin, 0) without the builtin */
 #if RECORD == 1
                 acc[row] -= inside;                               /* inside is -1 */
 #elif RECORD == 2
@@ -289,9 +290,12 @@ __kernel void fusion(
         return;
     __global int *cells = pool + brick.w * 512 + (corner.z * 8 + corner.y) * 8 + corner.x;
     for (int row = 0; row < SUB * SUB; ++row) {
-        if (any(acc[row] != 0)) {
+        if (or_lanes(acc[row])) {
+            /* |acc| < n_beams x 2^14 <= 2^31 - 2^30 - 1 (Fusion refuses larger lattices) and |cell| <=
+             * GRID_LIMIT = 2^30: the sum cannot overflow int32, so no add_sat */
             __global int *cell = cells + ((row >> 2) * 8 + (row & 3)) * 8;
-            vstoreV(clamp(add_sat(vloadV(0, cell), acc[row]), -GRID_LIMIT, GRID_LIMIT), 0, cell);
+            const intV v = vloadV(0, cell) + acc[row];
+            vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : (v < (intV)-GRID_LIMIT ? (intV)-GRID_LIMIT : v), 0, cell);
         }
     }
 }

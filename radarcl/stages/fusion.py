@@ -183,6 +183,9 @@ class Fusion(Stage):
         if self.first_bin > self.last_bin:
             raise ConfigError(f"no bin carries evidence: first_bin {first_bin} > last_bin {last_bin}")
         self.per_beam_poses = bool(per_beam_poses)
+        if lattice.n_beams * logodds.EVIDENCE_LIMIT > (1 << 30) - 1:
+            raise ConfigError(f"{lattice.n_beams} beams per frame: a voxel's sum of one frame's updates could overflow "
+                              f"int32 beside the grid's +-2^30 (at most {((1 << 30) - 1) // logodds.EVIDENCE_LIMIT} beams)")
         if vector_width not in VECTOR_WIDTHS:
             raise ConfigError(f"vector_width must be one of {VECTOR_WIDTHS}, got {vector_width!r}")
         self.vector_width = int(vector_width)
