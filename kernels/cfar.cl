@@ -97,11 +97,33 @@ inline void cfar_bin(const __global float *p, int i, float alpha, float noise_fl
     const int n_below = have_below + (TRAIN - have_above);
     const int below0 = i - GUARD - n_below;
     const int above0 = i + GUARD + 1 - n_below;
+    float estimate;
+#if KIND == KIND_OS
     float c[N_TRAIN];
     for (int u = 0; u < N_TRAIN; u++)
         c[u] = p[u < n_below ? below0 + u : above0 + u];
-    float estimate;
     ESTIMATE(float, int, STRUE, c, estimate);
+#else
+    /* the same cells summed as ESTIMATE sums them, without the private array (an edge bin
+     * took 4x an interior one with it) */
+#if KIND == KIND_CA
+    /* CA needs no halves: the two contiguous runs, cells below0 .. below0 + n_below - 1 and
+     * above0 + n_below .. above0 + N_TRAIN - 1 */
+    float below = 0.0f, above = 0.0f;
+    for (int u = 0; u < n_below; u++)
+        below += p[below0 + u];
+    for (int u = n_below; u < N_TRAIN; u++)
+        above += p[above0 + u];
+    HALVES_TO_ESTIMATE(float, below, above, estimate);
+#else
+    float lower = 0.0f, upper = 0.0f;
+    for (int u = 0; u < TRAIN; u++)
+        lower += p[u < n_below ? below0 + u : above0 + u];
+    for (int u = TRAIN; u < N_TRAIN; u++)
+        upper += p[u < n_below ? below0 + u : above0 + u];
+    HALVES_TO_ESTIMATE(float, lower, upper, estimate);
+#endif
+#endif
     /* Comparisons, not fmax/fmin, so that NaN propagates as in the oracle. */
     const float n = estimate < noise_floor ? noise_floor : estimate;
     const float r = p[i];

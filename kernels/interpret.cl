@@ -34,6 +34,31 @@
  */
 #include "radarcl_common.h"
 
+/* log10 of x >= 0 without a builtin call (PoCL may call its builtins out of line): the
+ * exponent, and ln of the mantissa in [sqrt(1/2), sqrt(2)) by the atanh series to t^9 (error
+ * < 1e-9); float32 rounding of the sum dominates, ~4e-6 decades at 1e38, 1e-7 near 1.
+ * Subnormals are scaled by 2^64 first; log10(0) = -inf as log10's. */
+static inline float log10_nb(float x)
+{
+    int bias = 0;
+    if (x < 1.17549435e-38f) {                  /* FLT_MIN */
+        if (x <= 0.0f)
+            return x == 0.0f ? -INFINITY : NAN;
+        x *= 18446744073709551616.0f;          /* 2^64 */
+        bias = -64;
+    }
+    const int i = as_int(x);
+    int e = ((i >> 23) & 255) - 127 + bias;
+    float m = as_float((i & 0x7FFFFF) | 0x3F800000);
+    if (m > 1.41421356f) {
+        m *= 0.5f;
+        e += 1;
+    }
+    const float t = (m - 1.0f) / (m + 1.0f), t2 = t * t;
+    const float ln_m = 2.0f * t * (1.0f + t2 * (1.0f / 3.0f + t2 * (0.2f + t2 * (1.0f / 7.0f + t2 * (1.0f / 9.0f)))));
+    return (float)e * 0.30102999566f + ln_m * 0.43429448190f;
+}
+
 __kernel void interpret(
     const __global float *profiles,   // (n_beams, N_BINS) power r_i
     const __global float *noise,      // (n_beams, N_BINS) CFAR noise estimate n_i (floored)
@@ -65,8 +90,19 @@ __kernel void interpret(
 
     uchar flags = flags_in[beam];
     int bad = 0, any_signal = 0;
-    for (int j = 0; j < N_BINS; j++) {
-        bad |= !(r[j] >= 0.0f && r[j] <= PROFILE_LIMIT);     /* false for NaN; +Inf is beyond */
+    /* eight bins at a time (PoCL does not vectorise a work-item's loop), then the tail */
+    int8 bad8 = 0, signal8 = 0;
+    int j0 = 0;
+    for (; j0 + 8 <= N_BINS; j0 += 8) {
+        const float8 v = vload8(0, r + j0);
+        bad8 |= ~((v >= 0.0f) & (v <= PROFILE_LIMIT));       /* false for NaN; +Inf is beyond */
+        signal8 |= v != 0.0f;
+    }
+    const int4 b4 = bad8.lo | bad8.hi, s4 = signal8.lo | signal8.hi;
+    bad = (b4.x | b4.y | b4.z | b4.w) != 0;
+    any_signal = (s4.x | s4.y | s4.z | s4.w) != 0;
+    for (int j = j0; j < N_BINS; j++) {
+        bad |= !(r[j] >= 0.0f && r[j] <= PROFILE_LIMIT);
         any_signal |= r[j] != 0.0f;
     }
     flags |= (bad ? FLAG_BAD_PROFILE : 0) | (any_signal ? 0 : FLAG_SILENT);
@@ -86,8 +122,22 @@ __kernel void interpret(
     float strongest = -INFINITY;                 /* OCCLUSION: the pulse's largest log10(r / n) */
     const int span = max(last_bin - first_bin, 1);
     for (int j = first_bin; j <= last_bin; j++) {
+        /* Eight noise bins at once where no pulse is open and none starts: most of a profile
+         * (PoCL does not vectorise a work-item's loop; the bins' values are as below). */
+        while (start < 0 && j + 8 <= last_bin + 1 && as_ulong(vload8(0, m + j)) == 0) {
+#if OCCLUSION
+            const int8 e = after_wide ? (int8)e_low
+                : e_high + (e_high_far - e_high) * ((int8)(j - first_bin) + (int8)(0, 1, 2, 3, 4, 5, 6, 7)) / span;
+#else
+            const int8 e = (int8)(after_wide ? e_low : e_high);
+#endif
+            vstore8(e, 0, ev + j);
+            j += 8;
+        }
+        if (j > last_bin)
+            break;
         if (m[j]) {
-            const float decades = log10(r[j]) - log10(n[j]);
+            const float decades = log10_nb(r[j]) - log10_nb(n[j]);
             ev[j] = convert_int_rte(clamp(k_occ * decades, 0.0f, EVIDENCE_LIMIT_NATS) * LOGODDS_SCALE);
             strongest = start < 0 ? decades : fmax(strongest, decades);
             if (start < 0) {
