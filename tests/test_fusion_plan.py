@@ -29,9 +29,10 @@ CASES = {
 }
 
 
+@pytest.mark.parametrize("vector_width", [1, 8])
 @pytest.mark.parametrize("case", CASES.values(), ids=CASES.keys())
 @pytest.mark.parametrize("near_field", [True, False])
-def test_windows_match_the_float64_oracle(runtime, case, near_field):
+def test_windows_match_the_float64_oracle(runtime, case, near_field, vector_width):
     lattice, pose, trans_margin, rot_margin = case
     model = BeamModel.from_radar(RADAR, near_field=near_field)
     spec = GridSpec((-30.0, -30.0, -6.0), 0.1, (600, 600, 120))
@@ -40,7 +41,8 @@ def test_windows_match_the_float64_oracle(runtime, case, near_field):
     r_lo, r_hi = 1.0, 28.0
     shape = np.asarray(spec.brick_shape)
     blocks = np.stack(np.meshgrid(*[np.arange(0, n, BLOCK) for n in shape], indexing="ij"), -1).reshape(-1, 3)
-    got = FusionPlanner(runtime, lattice, model, r_lo, r_hi).windows(blocks, shape, BRICK * spec.voxel_m, frame)
+    got = FusionPlanner(runtime, lattice, model, r_lo, r_hi, vector_width).windows(blocks, shape, BRICK * spec.voxel_m,
+                                                                                frame)
     bricks = FusionPlanner.bricks_of(blocks)
     inside = (bricks < shape).all(axis=1)
     assert (got[~inside] == (0, -1, 0, -1)).all(), "bricks past the grid get empty windows"

@@ -335,19 +335,23 @@ class Fusion(Stage):
         return candidate_windows(centres, radius, frame, self.r_lo, self.r_hi, self.lattice, self.model)
 
     def _reached_bricks(self, frame):
-        """(n, 3) bricks (bx, by, bz) some beam may reach, and their windows: a coarse pass over
-        blocks of BLOCK^3 bricks on the host, then the bricks of the kept blocks on the device
-        (``FusionPlanner``), block by block."""
+        """(n, 3) bricks (bx, by, bz) some beam may reach, and their windows, both levels on the
+        device (``FusionPlanner``): the blocks of BLOCK^3 bricks some beam may reach (evaluated
+        as bricks of a coarser grid), then the bricks of those blocks."""
         from radarcl.stages.fusion_plan import BLOCK, FusionPlanner
 
         shape = np.asarray(self.grid.spec.brick_shape)
-        coarse = np.stack(np.meshgrid(*[np.arange(-(-n // BLOCK)) for n in shape], indexing="ij"), -1).reshape(-1, 3)
-        kept = coarse[_nonempty(self._windows(coarse, BRICK * BLOCK, frame))] * BLOCK
+        coarse = -(-shape // BLOCK)
         if self._planner is None:
             self._planner = FusionPlanner(self.runtime, self.lattice, self.model, self.r_lo, self.r_hi)
-        windows = self._planner.windows(kept, shape, BRICK * self.grid.spec.voxel_m, frame)
+            supers = [np.arange(0, n, BLOCK) for n in coarse]       # blocks of BLOCK^3 blocks
+            self._supers = np.stack(np.meshgrid(*supers, indexing="ij"), -1).reshape(-1, 3)
+        edge = BRICK * self.grid.spec.voxel_m
+        coarse_windows = self._planner.windows(self._supers, coarse, edge * BLOCK, frame)
+        kept = FusionPlanner.bricks_of(self._supers, np.flatnonzero(_nonempty(coarse_windows))) * BLOCK
+        windows = self._planner.windows(kept, shape, edge, frame)
         keep = np.flatnonzero(_nonempty(windows))
-        return FusionPlanner.bricks_of(kept)[keep], windows[keep]
+        return FusionPlanner.bricks_of(kept, keep), windows[keep]
 
     def _beams_outside(self, w):
         """Beams in no reached brick's window ``w``: they certainly miss the grid (a lower bound)."""

@@ -18,18 +18,28 @@ from radarcl.stages import build
 # rounding of angles up to 2 pi (~1e-6 rad) a hundred times over.
 WINDOW_SLACK = 1e-4
 BLOCK = 4                   # bricks per block edge: the coarse pass's unit
+PVEC_CPU = 8                # bricks per work-item on a CPU, one per SIMD lane
 
 
 class FusionPlanner:
     """Windows (i_lo, i_hi, k_lo, k_hi) of every brick of a list of blocks of BLOCK^3 bricks,
-    for one lattice and beam model and the range interval [r_lo, r_hi] that carries evidence."""
+    for one lattice and beam model and the range interval [r_lo, r_hi] that carries evidence;
+    vector_width: bricks per work-item (default 8 on a CPU, 1 elsewhere)."""
 
-    def __init__(self, runtime, lattice, model, r_lo, r_hi):
+    def __init__(self, runtime, lattice, model, r_lo, r_hi, vector_width=None):
         import pyopencl.array as cla
+
+        from radarcl.errors import ConfigError
 
         self.runtime, self.lattice, self.model = runtime, lattice, model
         self.r_lo, self.r_hi = float(r_lo), float(r_hi)
-        defines = dict(N_AZ=lattice.n_az, N_EL=lattice.n_el, WINDOW_SLACK=WINDOW_SLACK, BLOCK=BLOCK)
+        if vector_width is None:
+            vector_width = PVEC_CPU if runtime.is_cpu else 1
+        if vector_width not in (1, PVEC_CPU):
+            raise ConfigError(f"vector_width must be 1 or {PVEC_CPU}, got {vector_width!r}")
+        self.vector_width = vector_width
+        defines = dict(N_AZ=lattice.n_az, N_EL=lattice.n_el, WINDOW_SLACK=WINDOW_SLACK, BLOCK=BLOCK,
+                       PVEC=self.vector_width)
         if lattice.wraps:
             defines["AZ_WRAP"] = True
         self._kernel = build(runtime, "fusion_plan", defines)["fusion_plan"]
@@ -75,8 +85,13 @@ class FusionPlanner:
         return host
 
     @staticmethod
-    def bricks_of(blocks):
-        """(n_blocks * BLOCK^3, 3) the bricks ``windows`` evaluates, in its order."""
-        o = np.arange(BLOCK ** 3)
-        offsets = np.stack([o % BLOCK, (o // BLOCK) % BLOCK, o // (BLOCK * BLOCK)], axis=1)
-        return (np.asarray(blocks, np.int64).reshape(-1, 1, 3) + offsets[None]).reshape(-1, 3)
+    def bricks_of(blocks, which=None):
+        """(n, 3) the bricks ``windows`` evaluates for ``blocks``, in its order; or only those at
+        positions ``which`` of that order."""
+        o = np.arange(BLOCK ** 3) if which is None else np.asarray(which, np.int64)
+        blocks = np.asarray(blocks, np.int64).reshape(-1, 3)
+        local = o % BLOCK ** 3
+        offsets = np.stack([local % BLOCK, (local // BLOCK) % BLOCK, local // (BLOCK * BLOCK)], axis=1)
+        if which is None:
+            return (blocks[:, None, :] + offsets[None]).reshape(-1, 3)
+        return blocks[o // BLOCK ** 3] + offsets
