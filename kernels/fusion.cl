@@ -150,28 +150,13 @@ __kernel void fusion(
     const floatV px = (convert_float(base.x) + 0.5f + LANES) * voxel;
     const intV in_x = (floatV)((float)base.x) + LANES < (float)nx;
     intV acc[SUB * SUB];
-#ifndef PER_BEAM_POSES
-    /* one origin for the frame: one bin per voxel, -1 where no evidence can come */
-    intV bins[SUB * SUB];
-    {
-        const float3 o = (float3)(beams[0].w, beams[1].w, beams[2].w);
-        const floatV qx = px - o.x;
-        for (int row = 0; row < SUB * SUB; ++row) {
-            const float qy = (base.y + (row & 3) + 0.5f) * voxel - o.y;
-            const float qz = (base.z + (row >> 2) + 0.5f) * voxel - o.z;
-            const intV bin = convert_intV_rte(sqrt(qx * qx + (qy * qy + qz * qz)) * inv_spacing);
-            const int ok_row = base.y + (row & 3) < ny && base.z + (row >> 2) < nz;
-            bins[row] = select((intV)-1, bin, in_x & (bin >= first_bin) & (bin <= last_bin) & (ok_row ? -1 : 0));
-            acc[row] = 0;
-        }
-    }
-#else
     for (int row = 0; row < SUB * SUB; ++row)
         acc[row] = 0;
-#endif
-#if RECORD == 2
-    for (int row = 0; row < SUB * SUB; ++row)            /* entries each lane has written */
-        acc[row] = 0;
+#ifndef PER_BEAM_POSES
+    /* one origin for the frame: one bin per voxel, -1 where no evidence can come; computed when
+     * the first beam reaches the block (a quarter of the kernel's time went here, for blocks
+     * no beam reaches as well) */
+    intV bins[SUB * SUB];
 #endif
     int touched = 0;
     for (int k = w.s2; k <= w.s3; ++k) {
@@ -195,6 +180,22 @@ __kernel void fusion(
             const float yc = c.x * V.x + c.y * V.y + c.z * V.z, zc = c.x * W.x + c.y * W.y + c.z * W.z;
             if (dc <= 0.0f || (yc < 0.0f ? -yc : yc) - radius > wa_c || (zc < 0.0f ? -zc : zc) - radius > we_c)
                 continue;
+#ifndef PER_BEAM_POSES
+            if (!touched) {
+                const float3 o0 = (float3)(beams[0].w, beams[1].w, beams[2].w);
+                const floatV qx0 = px - o0.x;
+                for (int row = 0; row < SUB * SUB; ++row) {
+                    const float qy = (base.y + (row & 3) + 0.5f) * voxel - o0.y;
+                    const float qz = (base.z + (row >> 2) + 0.5f) * voxel - o0.z;
+                    /* clamped below 2^22 for RINT_INTV: a bin that far is past last_bin anyway */
+                    const floatV x = MINF(sqrt(qx0 * qx0 + (qy * qy + qz * qz)) * inv_spacing, (floatV)4194303.0f);
+                    const intV bin = RINT_INTV(x);
+                    const int ok_row = base.y + (row & 3) < ny && base.z + (row >> 2) < nz;
+                    const intV keep = in_x & (bin >= first_bin) & (bin <= last_bin) & (ok_row ? -1 : 0);
+                    bins[row] = keep ? bin : (intV)-1;
+                }
+            }
+#endif
             touched = 1;
             const __global int *row_ev = evidence + b * N_BINS;
             const floatV qx = px - o.x;
