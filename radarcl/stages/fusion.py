@@ -6,11 +6,16 @@ of its centre, times the two-way weight, rounded half to even; identical to the 
 no decision (inside or not, which bin) lies within ``FUSION_DECISION_MARGIN`` of its boundary,
 and within one unit per update of it (float32 vs float64 weights; tests/test_fusion.py).
 
-A frame is a gather over the bricks its beams can reach: the host lists those bricks (and
-allocates them in the grid) with ``candidate_windows``, a conservative bound in the frame's
-head frame (the middle beam's pose) that also gives each brick its window of candidate beams; the kernel
-narrows the window per 8x4x4 block (a bounding-sphere test) and per row of 8 voxels. Plans
-for a repeated pose are cached (a radar on a stand).
+A frame is a gather over the bricks its beams can reach. Planning lists those bricks (and
+allocates them in the grid) with a conservative bound in the frame's head frame (the middle
+beam's pose) that also gives each brick its window of candidate beams: ``candidate_windows``,
+computed on the device by ``FusionPlanner`` (its float32 twin). The kernel narrows the window
+per 8x4x4 block (a bounding-sphere test) and per row of 8 voxels.
+
+The plans of the last ``PLAN_CACHE`` poses are kept. When a pose comes back (a radar on a
+stand, a tilting stand's positions), the plan gets a ``StillTable``: what each voxel takes,
+recorded by the kernel's RECORD passes, which ``fusion_cached`` then streams (the same
+integers, about a third of the gather's time for the paper's frame).
 """
 
 import math
@@ -70,7 +75,8 @@ class FramePlan:
 class StillTable:
     """What every voxel of a plan takes from a frame, recorded once for a still radar (the
     kernel's RECORD passes), on the device: per voxel its count of beams and its first entry
-    (beam * n_bins + bin, the weight's float32 bits), the further entries row by row."""
+    (beam * n_bins + bin, the weight's float32 bits, whose sign bit says that more entries
+    follow), the further entries row by row."""
 
     counts: object           # pyopencl Array uint8 (n_rows * VEC,): beams per voxel
     row_start: object        # pyopencl Array int32 (n_rows,): first extra entry of each row
@@ -206,6 +212,7 @@ class Fusion(Stage):
         self._plans = OrderedDict()      # (grid generation, poses) -> FramePlan, least recent first
         self._plan_arrays, self._uploaded = None, None
         self._planner = None             # a FusionPlanner, built on the first plan
+        self._supers = None              # the planner's coarse level: blocks of BLOCK^3 blocks of bricks
         # Evidence from a raw radar's detection comes as (n_az, n_el, n_bins) even for one
         # elevation; (n_beams, n_bins) is the same rows.
         aliases = ((lattice.n_az, lattice.n_el, self.n_bins), (lattice.n_beams, self.n_bins))
