@@ -130,60 +130,61 @@ def cmd_tune(args):
     return 0
 
 
-def cmd_calibrate(args):
-    import json
-
+def _fit_outputs(args):
+    """The checked --save, --figure and --json paths of a calibration command (None where not
+    asked), refused before any work when they exist without --force."""
     from radarcl import outputs
-    from radarcl.jobs import calibrate, plots
 
-    save = outputs.check(args.save, args.force, what="configuration file") if args.save else None
-    figure = outputs.check(args.figure, args.force, what="figure") if args.figure else None
-    json_out = outputs.check(args.json, args.force, what="JSON file") if args.json else None
-    config, result = calibrate.run(_runtime(), args.model, args.voxel, args.seeds, report=print,
-                                   unknown_behind=args.unknown_behind)
-    print("\n".join(calibrate.format_lines(result)))
+    return tuple(outputs.check(path, args.force, what=what) if path else None
+                 for path, what in ((args.save, "configuration file"), (args.figure, "figure"), (args.json, "JSON file")))
+
+
+def _write_fit(paths, config, header, figure, result):
+    """Write a calibration's configuration, figure (a callable drawing it) and JSON to
+    ``paths`` (from ``_fit_outputs``)."""
+    from radarcl import outputs
+    from radarcl.jobs import plots
+
+    save, figure_path, json_out = paths
     if save:
-        config.save(save, header=("radarcl map configuration fitted by `radarcl calibrate`",
-                                  f"{result['model']} interpreter, training scenes {result['fit_seeds']} "
-                                  f"(validation {result['validation_seeds']}), {result['voxel_m']} m"), overwrite=True)
+        config.save(save, header=header, overwrite=True)
         print(f"wrote {save} (use it with --config)")
-    if figure:
-        plots.save(calibrate.reliability_figure(result), figure)
-        print(f"wrote {figure}")
+    if figure_path:
+        plots.save(figure(), figure_path)
+        print(f"wrote {figure_path}")
     if json_out:
         with outputs.atomic(json_out) as tmp:
             tmp.write_text(json.dumps(result, indent=1))
         print(f"wrote {json_out}")
+
+
+def cmd_calibrate(args):
+    from radarcl.jobs import calibrate
+
+    paths = _fit_outputs(args)
+    config, result = calibrate.run(_runtime(), args.model, args.voxel, args.seeds, report=print,
+                                   unknown_behind=args.unknown_behind)
+    print("\n".join(calibrate.format_lines(result)))
+    _write_fit(paths, config, ("radarcl map configuration fitted by `radarcl calibrate`",
+                               f"{result['model']} interpreter, training scenes {result['fit_seeds']} "
+                               f"(validation {result['validation_seeds']}), {result['voxel_m']} m"),
+               lambda: calibrate.reliability_figure(result), result)
     return 0
 
 
 def cmd_calibrate_scans(args):
-    import json
-
-    from radarcl import outputs
     from radarcl.errors import ConfigError
-    from radarcl.jobs import calibrate_scans, plots
+    from radarcl.jobs import calibrate_scans
 
-    save = outputs.check(args.save, args.force, what="configuration file") if args.save else None
-    figure = outputs.check(args.figure, args.force, what="figure") if args.figure else None
-    json_out = outputs.check(args.json, args.force, what="JSON file") if args.json else None
+    paths = _fit_outputs(args)
     data = args.data or default_data("navtech_oxford")
     if not Path(data).is_dir():
         raise ConfigError(f"no data directory {data}; give DATA (radar/*.png and gt/radar_odometry.csv)")
     config, result = calibrate_scans.run(_runtime(), resolve_config(args), data, args.model, report=print)
     print("\n".join(calibrate_scans.format_lines(result)))
-    if save:
-        config.save(save, header=("radarcl map configuration fitted by `radarcl calibrate-scans`",
-                                  f"{result['model']} interpreter, {result['sensor']} scans {result['fit_scans']} of "
-                                  f"{data}"), overwrite=True)
-        print(f"wrote {save} (use it with --config)")
-    if figure:
-        plots.save(calibrate_scans.reliability_figure(result), figure)
-        print(f"wrote {figure}")
-    if json_out:
-        with outputs.atomic(json_out) as tmp:
-            tmp.write_text(json.dumps(result, indent=1))
-        print(f"wrote {json_out}")
+    _write_fit(paths, config, ("radarcl map configuration fitted by `radarcl calibrate-scans`",
+                               f"{result['model']} interpreter, {result['sensor']} scans {result['fit_scans']} of {data}"),
+               lambda: calibrate_scans.reliability_figure(result), result)
     return 0
 
 

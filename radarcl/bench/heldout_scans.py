@@ -46,7 +46,9 @@ def _raw_map(runtime, config, spec, scans, per_beam):
 def predictions(runtime, config, spec, grid_int, scans, per_beam):
     """(log-odds [nat] at each held-out bin, its CFAR detection) over the range window.
     ``config`` is the outcome detector's configuration (the sensor profile's own, the same for
-    every map compared: the outcomes must not change with the map's CFAR)."""
+    every map compared: the outcomes must not change with the map's CFAR). ``grid_int`` may
+    carry trailing axes (several maps of one grid stacked): the log-odds then have them too, and
+    the scans are detected once for all."""
     from radarcl.pipeline import Mapping
 
     mapping = Mapping.from_config(runtime, config=config, per_beam_poses=True)
@@ -62,7 +64,7 @@ def predictions(runtime, config, spec, grid_int, scans, per_beam):
         points = poses[:, None, :3, 3] + ranges[None, window, None] * dirs[:, None, :]
         idx = spec.world_to_index(points.reshape(-1, 3))
         inside = spec.contains(idx)
-        values = np.zeros(len(idx), np.float64)
+        values = np.zeros((len(idx),) + np.shape(grid_int)[3:], np.float64)
         values[inside] = grid_int[idx[inside, 2], idx[inside, 1], idx[inside, 0]] / logodds.SCALE
         keep = np.repeat(valid, window.sum())
         L.append(values[keep])
@@ -98,14 +100,13 @@ def run(runtime, config, data_dir, report=None):
 
     # the outcomes: the sensor profile's own detector, whatever the compared map's CFAR is
     outcome = mapconfig.resolve(config.sensor, program={"grid.voxel_m": config["grid.voxel_m"]})
-    out = {}
-    for name, grid in maps.items():
-        L, y = predictions(runtime, outcome, spec, grid, [scans[k] for k in test], per_beam[test])
-        out[name] = score(L, y)
-    out["baseline: no map"] = score(np.zeros_like(L), y)
+    stacked, y = predictions(runtime, outcome, spec, np.stack(list(maps.values()), axis=-1),
+                             [scans[k] for k in test], per_beam[test])
+    out = {name: score(stacked[:, m], y) for m, name in enumerate(maps)}
+    out["baseline: no map"] = score(np.zeros(len(y)), y)
     # no radar data beyond one number: the held-out detection rate itself, as a constant log-odds
     rate = float(y.mean())
-    out["baseline: detection rate"] = score(np.full_like(L, np.log(rate / (1 - rate))), y)
+    out["baseline: detection rate"] = score(np.full(len(y), np.log(rate / (1 - rate))), y)
     return dict(benchmark="heldout-scans", device=runtime.name, sensor=config.sensor.name, scans=len(scans),
                 train=train, held_out=test, voxel_m=config["grid.voxel_m"], config=config.label(),
                 outcome_detector=outcome.label(), results=out)

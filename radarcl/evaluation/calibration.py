@@ -166,3 +166,27 @@ def fit(X, y, model, max_iter=100, zero=()):
     se[free] = np.sqrt(np.diag(cov))
     return Fit(dict(zip(names, beta.tolist())), dict(zip(names, se.tolist())), log_likelihood(X, y.astype(bool), beta),
                [k for k, f in zip(names, free) if not f and k not in zero], len(y))
+
+
+def with_intervals(final, jackknife):
+    """The constants of ``final`` (a ``Fit``) with their Wald and jackknife standard errors and
+    the 95 % interval from the jackknife. ``jackknife``: the refitted values with each part (a
+    scene, a scan) left out in turn, (parts, constants)."""
+    jack = np.asarray(jackknife, np.float64)
+    k = len(jack)
+    se = np.sqrt((k - 1) / k * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
+    return {key: dict(value=v, wald_se=final.stderr[key], jackknife_se=float(s),
+                      ci95=[v - 1.96 * float(s), v + 1.96 * float(s)])
+            for (key, v), s in zip(final.values.items(), se)}
+
+
+def constant_lines(constants, held, parts, note_zero=""):
+    """Printed lines of ``with_intervals``'s constants; ``held``: those the sign constraint held
+    at 0; ``parts``: what the jackknife left out; ``note_zero``: why a constant fixed at 0 is."""
+    lines = [f"  fitted constants (value, Wald SE, jackknife SE over {parts}, 95 % interval from the jackknife):"]
+    for key, c in constants.items():
+        why = " (held at 0: the fit wanted the other sign)" if key in held else \
+            (f" (held at 0: {note_zero})" if note_zero and c["value"] == 0 else "")
+        lines.append(f"    {key:22s} {c['value']:9.4f}  {c['wald_se']:.4f}  {c['jackknife_se']:.4f}  "
+                     f"[{c['ci95'][0]:.4f}, {c['ci95'][1]:.4f}]{why}")
+    return lines

@@ -93,9 +93,6 @@ def run(runtime, model="occlusion", voxel_m=0.2, seeds=None, report=None, unknow
         Xj = np.concatenate([per[s][0] for s in per if s != leave])
         yj = np.concatenate([per[s][1] for s in per if s != leave])
         jack.append(list(cal.fit(Xj, yj, model, zero=zero).values.values()))
-    jack = np.array(jack)
-    k = len(jack)
-    jack_se = np.sqrt((k - 1) / k * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
     calibrated = with_fit(cfg, final.values)
     say("reliability on the validation scenes, before and after ...")
     reliability = {}
@@ -105,9 +102,7 @@ def run(runtime, model="occlusion", voxel_m=0.2, seeds=None, report=None, unknow
         reliability[name] = dict(rows=_pool([s["reliability"] for s in scores]),
                                  ece=float(np.mean([s["ece"] for s in scores])),
                                  brier=float(np.mean([s["brier"] for s in scores])))
-    constants = {key: dict(value=final.values[key], wald_se=final.stderr[key], jackknife_se=float(se),
-                           ci95=[final.values[key] - 1.96 * float(se), final.values[key] + 1.96 * float(se)])
-                 for key, se in zip(final.values, jack_se)}
+    constants = cal.with_intervals(final, jack)
     result = dict(model=model, voxel_m=voxel_m, unknown_behind=bool(unknown_behind), fit_seeds=fit_seeds, validation_seeds=val_seeds,
                   candidates=rows, chosen=best["candidate"], constants=constants, held=final.held,
                   voxels=final.n, log_likelihood=final.log_likelihood, reliability=reliability,
@@ -133,12 +128,8 @@ def format_lines(r):
     for row in r["candidates"]:
         mark = "*" if row["candidate"] == r["chosen"] else " "
         lines.append(f"{mark} {row['candidate'][:60]:60s} {row['validation_log_likelihood']:.5f}")
-    lines.append("  fitted constants (value, Wald SE, jackknife SE over scenes, 95 % interval from the jackknife):")
-    for key, c in r["constants"].items():
-        held = " (held at 0: the fit wanted the other sign)" if key in r["held"] else \
-            (" (held at 0: unknown behind the first surface)" if c["value"] == 0 and r.get("unknown_behind") else "")
-        lines.append(f"    {key:22s} {c['value']:9.4f}  {c['wald_se']:.4f}  {c['jackknife_se']:.4f}  "
-                     f"[{c['ci95'][0]:.4f}, {c['ci95'][1]:.4f}]{held}")
+    lines += cal.constant_lines(r["constants"], r["held"], "scenes",
+                                "unknown behind the first surface" if r.get("unknown_behind") else "")
     for name, rel in r["reliability"].items():
         lines.append(f"  validation scenes, {name:16s} ECE {rel['ece']:.4f}  Brier {rel['brier']:.4f}")
     return lines

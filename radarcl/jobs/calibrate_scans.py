@@ -61,18 +61,13 @@ def design(runtime, config, outcome, spec, scans, per_beam, map_idx, test_idx, m
     from radarcl.bench.heldout_scans import predictions
 
     grids = scan_features(runtime, config, spec, [scans[k] for k in map_idx], per_beam[map_idx])
-    cols, y, which = [], None, []
-    for c in range(grids.shape[-1]):
-        L, y_c = [], []
-        for k in test_idx:
-            values, detected = predictions(runtime, outcome, spec, grids[..., c], [scans[k]], per_beam[[k]])
-            L.append(values)
-            y_c.append(detected)
-            if c == 0:
-                which.append(np.full(len(values), k))
-        cols.append(np.concatenate(L))
-        y = np.concatenate(y_c)
-    X = np.stack(cols, axis=1)
+    X, y, which = [], [], []
+    for k in test_idx:                     # every channel at once: each scan detected once
+        values, detected = predictions(runtime, outcome, spec, grids, [scans[k]], per_beam[[k]])
+        X.append(values)
+        y.append(detected)
+        which.append(np.full(len(values), k))
+    X, y = np.concatenate(X), np.concatenate(y)
     if model == "paper":
         X = np.column_stack([X[:, 0], X[:, 1] + X[:, 2], X[:, 3]])
     return X.astype(np.float32), y, np.concatenate(which)
@@ -115,13 +110,9 @@ def run(runtime, config, data_dir, model="occlusion", report=None):
             if best is None or f.log_likelihood > best[0].log_likelihood:
                 best = (f, cfg, X, y, which)
     final, cfg, X, y, which = best
-    jack = np.array([list(cal.fit(X[which != k], y[which != k], model).values.values()) for k in fit_test])
-    n = len(jack)
-    jack_se = np.sqrt((n - 1) / n * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
+    jack = [list(cal.fit(X[which != k], y[which != k], model).values.values()) for k in fit_test]
     calibrated = with_fit(cfg, final.values)
-    constants = {key: dict(value=final.values[key], wald_se=final.stderr[key], jackknife_se=float(se),
-                           ci95=[final.values[key] - 1.96 * float(se), final.values[key] + 1.96 * float(se)])
-                 for key, se in zip(final.values, jack_se)}
+    constants = cal.with_intervals(final, jack)
 
     say(f"reporting on scans {report_part} ...")
     test_scans = [scans[k] for k in rep_test]
@@ -131,12 +122,13 @@ def run(runtime, config, data_dir, model="occlusion", report=None):
             "calibrated": navtech_map.build_map(runtime, calibrated, spec, [scans[k] for k in rep_map],
                                                 per_beam[rep_map]).snapshot(),
             "baseline: raw_intensity": hs._raw_map(runtime, config, spec, [scans[k] for k in rep_map], per_beam[rep_map])}
-    for name, grid in maps.items():
-        L, yt = hs.predictions(runtime, outcome, spec, grid, test_scans, per_beam[rep_test])
+    stacked, yt = hs.predictions(runtime, outcome, spec, np.stack(list(maps.values()), axis=-1), test_scans,
+                                 per_beam[rep_test])
+    for m, name in enumerate(maps):
+        L = stacked[:, m]
         results[name] = hs.score(L, yt)
-        p = 1.0 / (1.0 + np.exp(-L))
-        results[name]["ece"], reliability[name] = calibration(p, yt)
-    results["baseline: no map"] = dict(hs.score(np.zeros_like(L), yt), ece=calibration(np.full(len(yt), 0.5), yt)[0])
+        results[name]["ece"], reliability[name] = calibration(1.0 / (1.0 + np.exp(-L)), yt)
+    results["baseline: no map"] = dict(hs.score(np.zeros(len(yt)), yt), ece=calibration(np.full(len(yt), 0.5), yt)[0])
     rate = float(y.mean())                  # the fit part's detection rate: no peeking at the report part
     const = np.full(len(yt), np.log(rate / (1 - rate)))
     results["baseline: detection rate"] = dict(hs.score(const, yt), ece=calibration(1 / (1 + np.exp(-const)), yt)[0])
@@ -156,11 +148,7 @@ def format_lines(r):
     for row in r["candidates"]:
         mark = "*" if row["candidate"] == r["chosen"] else " "
         lines.append(f"{mark} {row['candidate'][:60]:60s} {row['log_likelihood']:.5f}")
-    lines.append("  fitted constants (value, Wald SE, jackknife SE over predicted scans, 95 % interval from the jackknife):")
-    for key, c in r["constants"].items():
-        held = " (held at 0: the fit wanted the other sign)" if key in r["held"] else ""
-        lines.append(f"    {key:22s} {c['value']:9.4f}  {c['wald_se']:.4f}  {c['jackknife_se']:.4f}  "
-                     f"[{c['ci95'][0]:.4f}, {c['ci95'][1]:.4f}]{held}")
+    lines += cal.constant_lines(r["constants"], r["held"], "predicted scans")
     lines.append(f"  on the report scans {r['report_scans']} (the same held-out bins for every row):")
     lines.append(f"  {'predictor':26s} {'AUC':>6s} {'log-lik [nat/bin]':>18s} {'ECE':>6s} {'coverage':>9s}")
     for name, s in r["results"].items():

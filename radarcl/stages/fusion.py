@@ -274,12 +274,13 @@ class Fusion(Stage):
         if plan.table is not None:
             return plan.table
         q = self.runtime.queue
-        n_items = len(plan.bricks) * (8 // self.vector_width) * 4
-        n_rows = n_items * 16
+        n_rows = self._n_items(plan) * 16
         device = q.device
         held = sum(p.table.nbytes for p in self._plans.values() if p.table is not None)
         budget = STILL_TABLE_SHARE * device.global_mem_size - held if self.still == "auto" else float("inf")
-        if not n_rows or n_rows * (9 * self.vector_width + 4) > min(budget, device.max_mem_alloc_size):
+        limit = min(budget, device.max_mem_alloc_size)
+        dense_bytes = n_rows * (9 * self.vector_width + 4)   # counts, first entries, row starts
+        if not n_rows or dense_bytes > limit:
             plan._table.append(None)
             return None
         if self._record_kernels is None:
@@ -292,7 +293,7 @@ class Fusion(Stage):
         host = counts.get(q)
         per_row = host.reshape(n_rows, self.vector_width).sum(axis=1, dtype=np.int64)
         total = int(per_row.sum())
-        if host.max(initial=0) == 255 or 8 * total + n_rows * (9 * self.vector_width + 4) > min(budget, device.max_mem_alloc_size):
+        if host.max(initial=0) == 255 or dense_bytes + 8 * total > limit:
             plan._table.append(None)
             return None
         extra_per_row = np.maximum(host.reshape(n_rows, self.vector_width).astype(np.int64) - 1, 0).sum(axis=1)
@@ -434,11 +435,15 @@ class Fusion(Stage):
             self._uploaded = plan
         return self._plan_arrays
 
+    def _n_items(self, plan):
+        """The gather's work-items for ``plan``: one per VEC x 4 x 4 block of its bricks."""
+        return len(plan.bricks) * (8 // self.vector_width) * 4
+
     def _launch(self, kernel, plan, evidence, wait_for=None, **record):
         """One gather launch over ``plan`` (the fusion, or a RECORD pass with its buffers)."""
         rt, m = self.runtime, self.model
         a_az, a_el = m.apertures
-        n_items = len(plan.bricks) * (8 // self.vector_width) * 4
+        n_items = self._n_items(plan)
         ls = self.local_size
         gsize = (-(-n_items // ls) * ls,)
         nx, ny, nz = self.grid.spec.shape

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from radarcl.errors import ConfigError
 from radarcl.stages import build
 
 # [rad] added to every angle bound, as the float64 oracle's WINDOW_SLACK: it covers float32's
@@ -28,8 +29,6 @@ class FusionPlanner:
 
     def __init__(self, runtime, lattice, model, r_lo, r_hi, vector_width=None):
         import pyopencl.array as cla
-
-        from radarcl.errors import ConfigError
 
         self.runtime, self.lattice, self.model = runtime, lattice, model
         self.r_lo, self.r_hi = float(r_lo), float(r_hi)
