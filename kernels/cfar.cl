@@ -45,6 +45,23 @@ typedef CAT(int, VEC) intv;
 #define VTRUE(c) (-(c))             /* vector comparisons give -1 for true */
 #endif
 #define STRUE(c) (c)                 /* scalar comparisons give 1 for true */
+#if VEC == 2
+#define LANE_IDS ((int2)(0, 1))
+#elif VEC == 4
+#define LANE_IDS ((int4)(0, 1, 2, 3))
+#elif VEC == 8
+#define LANE_IDS ((int8)(0, 1, 2, 3, 4, 5, 6, 7))
+#elif VEC == 16
+#define LANE_IDS ((int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
+#endif
+#define as_floatv CAT(as_float, VEC)
+#define as_intv CAT(as_int, VEC)
+/* min / max / clamp by the ternary (PoCL may call the builtins out of line) */
+#define MINV(a, b) ((a) < (b) ? (a) : (b))
+#define MAXV(a, b) ((a) > (b) ? (a) : (b))
+#define CLAMPV(x, a, b) MINV(MAXV(x, a), b)
+#define MINI(a, b) ((a) < (b) ? (a) : (b))
+#define MAXI(a, b) ((a) > (b) ? (a) : (b))
 
 /* The estimate of the cells c[0 .. 2 TRAIN-1] (increasing position; the first TRAIN are the
  * lower half). Written once for scalars and vectors of bins alike. */
@@ -152,12 +169,48 @@ __kernel void cfar(
     ratio += row;
     mask += row;
 
+    floatv estimate;
     if (i0 - GUARD - TRAIN < 0 || i0 + VEC - 1 + GUARD + TRAIN > N_BINS - 1) {
+#if KIND == KIND_OS || VEC == 1
         for (int lane = 0; lane < VEC && i0 + lane < N_BINS; lane++)
             cfar_bin(p, i0 + lane, alpha, noise_floor, noise, ratio, mask);
         return;
-    }
-    floatv estimate;
+#else
+        if (i0 + VEC > N_BINS) {              /* the tail group: lane by lane */
+            for (int lane = 0; lane < VEC && i0 + lane < N_BINS; lane++)
+                cfar_bin(p, i0 + lane, alpha, noise_floor, noise, ratio, mask);
+            return;
+        }
+        /* An edge group as vectors: each lane's window is two runs of cells (cfar_bin's), and
+         * every cell of the group's span is broadcast to the lanes whose runs hold it, added
+         * in increasing position as cfar_bin adds them, so the sums are bit for bit
+         * cfar_bin's. Lane by lane, these groups took 60 % of the kernel's time. */
+        const intv i = i0 + LANE_IDS;
+        const intv have_below = CLAMPV(i - GUARD, 0, TRAIN);
+        const intv have_above = CLAMPV(N_BINS - 1 - i - GUARD, 0, TRAIN);
+        const intv n_below = have_below + (TRAIN - have_above);
+        const intv s1 = i - GUARD - n_below, e1 = i - GUARD;          /* run 1: [s1, e1) */
+        const intv s2 = i + GUARD + 1, e2 = s2 + (N_TRAIN - n_below);  /* run 2: [s2, e2) */
+#if KIND == KIND_CA
+        /* CA sums the runs as cfar_bin does: below = run 1, above = run 2 */
+        const intv l1 = s1, l2 = e1, l3 = s2, l4 = s2;                /* lower half: run 1 */
+#else
+        /* GO / SO: the lower half is the window's first TRAIN cells, the upper the rest */
+        const intv l2 = MINV(e1, s1 + TRAIN), l1 = s1;
+        const intv l3 = s2, l4 = s2 + MAXV(TRAIN - n_below, 0);
+#endif
+        const int lo = MAXI(i0 - GUARD - N_TRAIN, 0), hi = MINI(i0 + VEC - 1 + GUARD + N_TRAIN, N_BINS - 1);
+        floatv lower = 0.0f, upper = 0.0f;
+        for (int c = lo; c <= hi; c++) {
+            const floatv x = (floatv)(p[c]);
+            const intv in1 = (c >= s1) & (c < e1), in2 = (c >= s2) & (c < e2);
+            const intv low = ((c >= l1) & (c < l2)) | ((c >= l3) & (c < l4));
+            lower += as_floatv(as_intv(x) & (low & (in1 | in2)));
+            upper += as_floatv(as_intv(x) & (~low & (in1 | in2)));
+        }
+        HALVES_TO_ESTIMATE(floatv, lower, upper, estimate);
+#endif
+    } else {
 #if KIND == KIND_OS
     floatv c[N_TRAIN];
     for (int u = 0; u < TRAIN; u++) {
@@ -175,6 +228,7 @@ __kernel void cfar(
         upper += VLOAD(p + i0 + GUARD + 1 + u);
     HALVES_TO_ESTIMATE(floatv, lower, upper, estimate);
 #endif
+    }
     const floatv n = select(estimate, (floatv)(noise_floor), estimate < noise_floor);
     const floatv r = VLOAD(p + i0);
     const floatv q = r / n;
