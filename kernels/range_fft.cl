@@ -65,6 +65,28 @@ typedef float16 cvec;
 #error "VEC must be 1, 2, 4 or 8"
 #endif
 typedef union { rvec v; float s[VEC]; } lanes_t;
+#if VEC == 2
+typedef int2 ivec;
+#define EVEN_BEAMS(p) ((float2)((float)(p)[0], (float)(p)[2 * N_SAMPLES]))
+#define ODD_BEAMS(p) ((float2)((float)(p)[N_SAMPLES], (float)(p)[3 * N_SAMPLES]))
+#elif VEC == 4
+typedef int4 ivec;
+#define EVEN_BEAMS(p) ((float4)((float)(p)[0], (float)(p)[2 * N_SAMPLES], (float)(p)[4 * N_SAMPLES], \
+                                (float)(p)[6 * N_SAMPLES]))
+#define ODD_BEAMS(p) EVEN_BEAMS((p) + N_SAMPLES)
+#elif VEC == 8
+typedef int8 ivec;
+#define EVEN_BEAMS(p) ((float8)((float)(p)[0], (float)(p)[2 * N_SAMPLES], (float)(p)[4 * N_SAMPLES], \
+                                (float)(p)[6 * N_SAMPLES], (float)(p)[8 * N_SAMPLES], (float)(p)[10 * N_SAMPLES], \
+                                (float)(p)[12 * N_SAMPLES], (float)(p)[14 * N_SAMPLES]))
+#define ODD_BEAMS(p) EVEN_BEAMS((p) + N_SAMPLES)
+#endif
+#if VEC > 1
+typedef union { ivec v; int s[VEC]; } ilanes_t;
+#endif
+/* |x| and max by the ternary (PoCL may call fabs / fmax out of line) */
+#define ABSV(x) ((x) < 0.0f ? -(x) : (x))
+#define MAXV(a, b) ((a) > (b) ? (a) : (b))
 
 /* Lanes times one scalar twiddle t. */
 inline cvec cmul_tw(cvec a, float2 t)
@@ -129,6 +151,65 @@ void range_fft(
 
     /* Load each sample once: buf0[q M + j] = w_j z_j W_N^{j q} for the P blocks, zero beyond
      * the samples and beyond the last beam. */
+#if !COMPLEX_INPUT && VEC > 1
+    /* A group whose beams all exist (all but perhaps the last): each sample row loaded as two
+     * vectors, the even and the odd beams, with the checks and the peaks per lane (lane by lane
+     * with branches, as below, the loads took half the kernel's time). The same values and
+     * flags as the general path: the clip test is max |sample| >= clip_level. */
+    if (beam0 + 2 * VEC <= n_beams) {
+        const __global sample_t *s0 = samples + (size_t)beam0 * N_SAMPLES;
+        rvec peak_a = 0.0f, peak_b = 0.0f;
+#if CHECK_FINITE
+        ivec nonfinite_a = 0, nonfinite_b = 0, over_a = 0, over_b = 0;
+#endif
+        for (int j = lid; j < M; j += LOCAL_SIZE) {
+            rvec a = 0.0f, b = 0.0f;
+            if (j < N_SAMPLES) {
+                a = EVEN_BEAMS(s0 + j);
+                b = ODD_BEAMS(s0 + j);
+#if CHECK_FINITE
+                const ivec inf_a = ABSV(a) == INFINITY, nan_a = a != a;
+                const ivec inf_b = ABSV(b) == INFINITY, nan_b = b != b;
+                const ivec big_a = ABSV(a) > SAMPLE_LIMIT & ~inf_a, big_b = ABSV(b) > SAMPLE_LIMIT & ~inf_b;
+                nonfinite_a |= inf_a | nan_a;
+                nonfinite_b |= inf_b | nan_b;
+                over_a |= big_a & ~nan_a;
+                over_b |= big_b & ~nan_b;
+                a = (inf_a | nan_a | big_a) ? (rvec)0.0f : a;       /* enters the FFT as 0 */
+                b = (inf_b | nan_b | big_b) ? (rvec)0.0f : b;
+#endif
+                peak_a = MAXV(peak_a, ABSV(a));
+                peak_b = MAXV(peak_b, ABSV(b));
+            }
+            cvec z = (cvec)(a, b);
+#if WINDOWED
+            if (j < N_SAMPLES) z *= window[j];
+#endif
+            buf0[j] = z;
+            for (int q = 1; q < P; q++)
+                buf0[q * M + j] = cmul_tw(z, twiddle[j * q]);
+        }
+        lanes_t pa, pb;
+        pa.v = peak_a;
+        pb.v = peak_b;
+#if CHECK_FINITE
+        ilanes_t na, nb, oa, ob;
+        na.v = nonfinite_a; nb.v = nonfinite_b; oa.v = over_a; ob.v = over_b;
+#endif
+        for (int l = 0; l < VEC; l++) {
+            int fa = pa.s[l] >= clip_level ? FLAG_CLIPPED : 0, fb = pb.s[l] >= clip_level ? FLAG_CLIPPED : 0;
+#if CHECK_FINITE
+            fa |= (na.s[l] ? FLAG_NONFINITE : 0) | (oa.s[l] ? FLAG_OVERRANGE : 0);
+            fb |= (nb.s[l] ? FLAG_NONFINITE : 0) | (ob.s[l] ? FLAG_OVERRANGE : 0);
+#endif
+            if (fa) atomic_or(&job_flags[2 * l], fa);
+            if (fb) atomic_or(&job_flags[2 * l + 1], fb);
+            if (pa.s[l] > 0.0f) atomic_max(&job_peak[2 * l], as_int(pa.s[l]));
+            if (pb.s[l] > 0.0f) atomic_max(&job_peak[2 * l + 1], as_int(pb.s[l]));
+        }
+    } else
+#endif
+    {
     int bad[BEAMS_PER_JOB * VEC];
     float peak[BEAMS_PER_JOB * VEC];
     for (int b = 0; b < BEAMS_PER_JOB * VEC; b++) { bad[b] = 0; peak[b] = 0.0f; }
@@ -164,6 +245,7 @@ void range_fft(
     for (int b = 0; b < BEAMS_PER_JOB * VEC; b++) {
         if (bad[b]) atomic_or(&job_flags[b], bad[b]);
         if (peak[b] > 0.0f) atomic_max(&job_peak[b], as_int(peak[b]));   /* >= 0: int order = float order */
+    }
     }
     barrier(CLK_LOCAL_MEM_FENCE);
 #if !COMPLEX_INPUT

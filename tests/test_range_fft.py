@@ -223,3 +223,27 @@ def test_impossible_plans_are_refused(runtime, kwargs, match):
 def test_gain_of_wrong_length_is_refused(runtime):
     with pytest.raises(ShapeError, match=r"gain must be finite with shape \(256,\)"):
         RangeFFT(runtime, (64, 4), 256, 512, gain=np.ones(10))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.int16])
+def test_full_groups_check_samples_as_vectors(runtime, dtype):
+    """Groups whose beams all exist load each sample row as vectors (the even and the odd
+    beams) with their checks per lane: the same flags as the oracle, and the same profiles as
+    one job per group (vector_width 1, the lane-by-lane path), for NaN, Inf, over-range,
+    clipped and silent beams in the first and last lanes of a group."""
+    x = make_samples(np.random.default_rng(9), (16, 2, 256), dtype)
+    if dtype == np.float32:
+        x[0, 0, 3], x[3, 1, 200], x[7, 1, 0] = np.nan, -np.inf, 1e30     # lanes 0, 7 and 15 of group 0
+        x[8, 0, 255] = np.inf
+    x[12, 1, 40] = np.iinfo(np.int16).max if dtype == np.int16 else 32767.0   # clipped
+    x[15, 1] = 0                                                            # the last lane: silent
+    vector = RangeFFT(runtime, (16, 2), 256, 512, dtype=dtype, vector_width=8)
+    got = vector(x)
+    one = RangeFFT(runtime, (16, 2), 256, 512, dtype=dtype, vector_width=1)(x)
+    assert np.array_equal(got.flags, oracle.beam_flags(x, vector.clip_level))
+    assert np.array_equal(got.flags, one.flags)
+    assert np.array_equal(np.isnan(got.profiles), np.isnan(one.profiles))
+    valid = got.valid
+    assert 0 < valid.sum() < 32
+    assert rel_err(got.profiles[valid], one.profiles[valid]) <= RANGE_FFT_RTOL
+    assert rel_err(got.profiles[valid], oracle.range_profile(x, 512)[valid]) <= RANGE_FFT_RTOL
