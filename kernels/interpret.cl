@@ -59,6 +59,24 @@ static inline float log10_nb(float x)
     return (float)e * 0.30102999566f + ln_m * 0.43429448190f;
 }
 
+/* log10_nb on eight bins at once, lane for lane the same floats (the same operations, the
+ * branches as selects): a chunk of bins holding a detection takes its logs this way. */
+static inline float8 log10_nb8(float8 x)
+{
+    const int8 sub = x < 1.17549435e-38f;                       /* FLT_MIN; also 0 and below */
+    const float8 xs = sub ? x * 18446744073709551616.0f : x;     /* 2^64 */
+    const int8 i = as_int8(xs);
+    int8 e = ((i >> 23) & 255) - 127 + (sub & -64);
+    float8 m = as_float8((i & 0x7FFFFF) | 0x3F800000);
+    const int8 big = m > 1.41421356f;
+    m = big ? m * 0.5f : m;
+    e -= big;                                                    /* big is -1 */
+    const float8 t = (m - 1.0f) / (m + 1.0f), t2 = t * t;
+    const float8 ln_m = 2.0f * t * (1.0f + t2 * (1.0f / 3.0f + t2 * (0.2f + t2 * (1.0f / 7.0f + t2 * (1.0f / 9.0f)))));
+    const float8 y = convert_float8(e) * 0.30102999566f + ln_m * 0.43429448190f;
+    return x == 0.0f ? (float8)(-INFINITY) : (x < 0.0f ? (float8)(NAN) : y);
+}
+
 __kernel void interpret(
     const __global float *profiles,   // (n_beams, N_BINS) power r_i
     const __global float *noise,      // (n_beams, N_BINS) CFAR noise estimate n_i (floored)
@@ -120,6 +138,8 @@ __kernel void interpret(
         ev[j] = 0;
     int count = 0, after_wide = 0, start = -1, peak = -1;
     float strongest = -INFINITY;                 /* OCCLUSION: the pulse's largest log10(r / n) */
+    union { float8 v; float s[8]; } logs;        /* log10(r / n) of bins chunk .. chunk + 7 */
+    int chunk = -16;
     const int span = max(last_bin - first_bin, 1);
     for (int j = first_bin; j <= last_bin; j++) {
         /* Eight noise bins at once where no pulse is open and none starts: most of a profile
@@ -136,8 +156,17 @@ __kernel void interpret(
         }
         if (j > last_bin)
             break;
+        /* this bin and the next seven: their logs at once where a detection lies among them
+         * (a pulse's bins come in runs; one at a time, the logs were most of the kernel) */
+        if (j >= chunk + 8) {
+            chunk = j;
+            if (j + 8 <= N_BINS && as_ulong(vload8(0, m + j)) != 0)
+                logs.v = log10_nb8(vload8(0, r + j)) - log10_nb8(vload8(0, n + j));
+            else
+                chunk = -16;                                     /* no logs held */
+        }
         if (m[j]) {
-            const float decades = log10_nb(r[j]) - log10_nb(n[j]);
+            const float decades = j < chunk + 8 ? logs.s[j - chunk] : log10_nb(r[j]) - log10_nb(n[j]);
             ev[j] = convert_int_rte(clamp(k_occ * decades, 0.0f, EVIDENCE_LIMIT_NATS) * LOGODDS_SCALE);
             strongest = start < 0 ? decades : fmax(strongest, decades);
             if (start < 0) {
