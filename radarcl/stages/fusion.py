@@ -9,8 +9,9 @@ and within one unit per update of it (float32 vs float64 weights; tests/test_fus
 A frame is a gather over the bricks its beams can reach. Planning lists those bricks (and
 allocates them in the grid) with a conservative bound in the frame's head frame (the middle
 beam's pose) that also gives each brick its window of candidate beams: ``candidate_windows``,
-computed on the device by ``FusionPlanner`` (its float32 twin). The kernel narrows the window
-per 8x4x4 block (a bounding-sphere test) and per row of 8 voxels.
+computed on the device by ``FusionPlanner`` (its float32 twin), and lists them in the pool's
+order (the kernel's reads and writes then stream). The kernel narrows the window per 8x4x4 block
+(a bounding-sphere test) and per row of 8 voxels, and takes ``rows`` rows as one vector.
 
 The plans of the last ``PLAN_CACHE`` poses are kept. When a pose comes back (a radar on a
 stand, a tilting stand's positions), the plan gets a ``StillTable``: what each voxel takes,
