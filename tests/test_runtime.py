@@ -165,3 +165,23 @@ def test_kernel_tests_run_on_every_device_when_asked():
     bad = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
                           "tests/test_cfar.py"], cwd=root, env=env, capture_output=True, text=True)
     assert bad.returncode != 0 and "must be 'all' or unset" in bad.stdout + bad.stderr
+
+
+def test_pocl_workers_are_pinned_only_where_safe(monkeypatch):
+    """POCL_AFFINITY=1 by default; never over the user's value, never with a limited worker
+    count (one-thread workers would all be pinned to CPU 0), never where some CPU is not
+    allowed to the process (PoCL stops the process when a pin is refused)."""
+    from radarcl.cl.runtime import pin_pocl_workers
+
+    n = 4
+    monkeypatch.setattr("os.cpu_count", lambda: n)
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: set(range(n)), raising=False)
+    env = {}
+    assert pin_pocl_workers(env) == "1" and env == {"POCL_AFFINITY": "1"}
+    env = {"POCL_AFFINITY": "0"}
+    assert pin_pocl_workers(env) == "0" and env == {"POCL_AFFINITY": "0"}
+    env = {"POCL_MAX_PTHREAD_COUNT": "1"}
+    assert pin_pocl_workers(env) is None and "POCL_AFFINITY" not in env
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: {2, 3}, raising=False)
+    env = {}
+    assert pin_pocl_workers(env) is None and env == {}

@@ -26,6 +26,8 @@ from radarcl.grid import GRID_LIMIT
 def fuse_one(config_values, sensor_toml, path, spec_tuple):
     """On a worker: fuse every frame of ``path``; returns (keys, data, frames, seconds)."""
     os.environ.setdefault("POCL_MAX_PTHREAD_COUNT", "1")
+    if os.environ["POCL_MAX_PTHREAD_COUNT"] == "1":
+        os.environ["POCL_AFFINITY"] = "0"       # one thread per worker: pinned, all would share CPU 0
     from pathlib import Path
     import tempfile
 
@@ -107,6 +109,7 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
             logging.getLogger(name).setLevel(logging.ERROR)      # its INFO lines are not ours to show
 
         os.environ["POCL_MAX_PTHREAD_COUNT"] = "1"          # the workers inherit it
+        os.environ["POCL_AFFINITY"] = "0"                   # and each its one thread unpinned
         if scheduler:
             client = own = Client(scheduler)
         else:
