@@ -204,10 +204,15 @@ class EvidenceGrid:
 
     def allocate_index(self, index):
         """Slots of the bricks at flat positions ``index`` of the brick table
-        ((bz * nby + by) * nbx + bx, int64, trusted to lie in the table: Fusion's planner makes
-        them), allocating the missing ones in increasing index order, so a grid's layout depends
-        only on the bricks seen. Returns (n,) int32 slots."""
+        ((bz * nby + by) * nbx + bx, integers; Fusion's planner makes them), allocating the
+        missing ones in increasing index order, so a grid's layout depends only on the bricks
+        seen. Returns (n,) int32 slots."""
         flat = self.table.reshape(-1)
+        index = np.asarray(index)
+        if index.dtype.kind not in "iu":
+            raise ConfigError(f"brick indices must be integers, got {index.dtype}")
+        if len(index) and (index.min() < 0 or index.max() >= flat.size):   # a negative one would wrap
+            raise ConfigError(f"flat brick indices must lie in [0, {flat.size}), got {index.min()}..{index.max()}")
         slots = flat[index]
         missing = slots < 0
         if missing.any():

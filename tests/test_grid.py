@@ -49,6 +49,12 @@ def test_bricks_are_allocated_once_in_sorted_order(runtime):
     assert mem["dense_bytes"] == 4 * 20 * 12 * 9
     with pytest.raises(ConfigError, match="brick indices"):
         grid.allocate([[3, 0, 0]])
+    # the flat form: the same slots, out-of-table and non-integer indices refused
+    assert grid.allocate_index(np.array([0, 1, 1 * 3 * 2 + 1 * 3 + 2])).tolist() == [0, 2, 1]
+    for bad in (np.array([-1]), np.array([12]), np.array([0.5])):
+        with pytest.raises(ConfigError, match="brick indices"):
+            grid.allocate_index(bad)
+    assert grid.n_bricks == 3
 
 
 def test_growth_keeps_data_and_save_load_round_trip(runtime, tmp_path):
