@@ -115,6 +115,17 @@ inline float load_part(float v, float clip_level, int *bad, float *peak)
     return v;
 }
 
+/* Sample row j of the group's jobs into the P blocks: buf[q M + j] = w_j z_j W_N^{j q}. */
+inline void put_row(__local cvec *buf, int j, cvec z, const __global float *window, const __global float2 *twiddle)
+{
+#if WINDOWED
+    if (j < N_SAMPLES) z *= window[j];
+#endif
+    buf[j] = z;
+    for (int q = 1; q < P; q++)
+        buf[q * M + j] = cmul_tw(z, twiddle[j * q]);
+}
+
 /* |x| or |x|^2 per lane. */
 inline rvec detect(cvec x)
 {
@@ -181,13 +192,7 @@ void range_fft(
                 peak_a = MAXV(peak_a, ABSV(a));
                 peak_b = MAXV(peak_b, ABSV(b));
             }
-            cvec z = (cvec)(a, b);
-#if WINDOWED
-            if (j < N_SAMPLES) z *= window[j];
-#endif
-            buf0[j] = z;
-            for (int q = 1; q < P; q++)
-                buf0[q * M + j] = cmul_tw(z, twiddle[j * q]);
+            put_row(buf0, j, (cvec)(a, b), window, twiddle);
         }
         lanes_t pa, pb;
         pa.v = peak_a;
@@ -210,42 +215,36 @@ void range_fft(
     } else
 #endif
     {
-    int bad[BEAMS_PER_JOB * VEC];
-    float peak[BEAMS_PER_JOB * VEC];
-    for (int b = 0; b < BEAMS_PER_JOB * VEC; b++) { bad[b] = 0; peak[b] = 0.0f; }
-    for (int j = lid; j < M; j += LOCAL_SIZE) {
-        lanes_t re, im;
-        for (int l = 0; l < VEC; l++) {
-            const int beam = beam0 + l * BEAMS_PER_JOB;
-            float a = 0.0f, b = 0.0f;
-            if (j < N_SAMPLES && beam < n_beams) {
+        int bad[BEAMS_PER_JOB * VEC];
+        float peak[BEAMS_PER_JOB * VEC];
+        for (int b = 0; b < BEAMS_PER_JOB * VEC; b++) { bad[b] = 0; peak[b] = 0.0f; }
+        for (int j = lid; j < M; j += LOCAL_SIZE) {
+            lanes_t re, im;
+            for (int l = 0; l < VEC; l++) {
+                const int beam = beam0 + l * BEAMS_PER_JOB;
+                float a = 0.0f, b = 0.0f;
+                if (j < N_SAMPLES && beam < n_beams) {
 #if COMPLEX_INPUT
-                const float2 s = samples[(size_t)beam * N_SAMPLES + j];
-                a = load_part(s.x, clip_level, &bad[l], &peak[l]);
-                b = load_part(s.y, clip_level, &bad[l], &peak[l]);
+                    const float2 s = samples[(size_t)beam * N_SAMPLES + j];
+                    a = load_part(s.x, clip_level, &bad[l], &peak[l]);
+                    b = load_part(s.y, clip_level, &bad[l], &peak[l]);
 #else
-                a = load_part((float)samples[(size_t)beam * N_SAMPLES + j], clip_level, &bad[2 * l],
-                              &peak[2 * l]);
-                if (beam + 1 < n_beams)
-                    b = load_part((float)samples[(size_t)(beam + 1) * N_SAMPLES + j], clip_level,
-                                  &bad[2 * l + 1], &peak[2 * l + 1]);
+                    a = load_part((float)samples[(size_t)beam * N_SAMPLES + j], clip_level, &bad[2 * l],
+                                  &peak[2 * l]);
+                    if (beam + 1 < n_beams)
+                        b = load_part((float)samples[(size_t)(beam + 1) * N_SAMPLES + j], clip_level,
+                                      &bad[2 * l + 1], &peak[2 * l + 1]);
 #endif
+                }
+                re.s[l] = a;
+                im.s[l] = b;
             }
-            re.s[l] = a;
-            im.s[l] = b;
+            put_row(buf0, j, (cvec)(re.v, im.v), window, twiddle);
         }
-        cvec z = (cvec)(re.v, im.v);
-#if WINDOWED
-        if (j < N_SAMPLES) z *= window[j];
-#endif
-        buf0[j] = z;
-        for (int q = 1; q < P; q++)
-            buf0[q * M + j] = cmul_tw(z, twiddle[j * q]);
-    }
-    for (int b = 0; b < BEAMS_PER_JOB * VEC; b++) {
-        if (bad[b]) atomic_or(&job_flags[b], bad[b]);
-        if (peak[b] > 0.0f) atomic_max(&job_peak[b], as_int(peak[b]));   /* >= 0: int order = float order */
-    }
+        for (int b = 0; b < BEAMS_PER_JOB * VEC; b++) {
+            if (bad[b]) atomic_or(&job_flags[b], bad[b]);
+            if (peak[b] > 0.0f) atomic_max(&job_peak[b], as_int(peak[b]));   /* >= 0: int order = float order */
+        }
     }
     barrier(CLK_LOCAL_MEM_FENCE);
 #if !COMPLEX_INPUT
