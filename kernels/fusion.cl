@@ -13,7 +13,7 @@
  *   one vector (a unit: LN = VEC x ROWS voxels; ROWS = 2 fills AVX-512's 16 lanes with rows
  *   y, y + 1, which are contiguous in the brick). Any local size is correct.
  * Candidates: the host gives each listed brick a conservative window of beams (i, k)
- * (radarcl.stages.fusion.candidate_windows). Each work-item first drops the candidates whose
+ * (radarcl.stages.fusion_plan.candidate_windows). Each work-item first drops the candidates whose
  * volume cannot reach its sub-brick's bounding sphere: |y_c| - R > W_az(d_c + R) (or the same
  * in elevation) means no point of the sphere is inside, since |y| is 1-Lipschitz and W grows
  * with d.

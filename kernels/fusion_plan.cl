@@ -1,7 +1,7 @@
 /* Planning a frame on the device: which bricks the beams may reach, and each one's window of
  * candidate beams (i_lo, i_hi, k_lo, k_hi), for every brick of a list of blocks of bricks.
  *
- * The same bounds as radarcl.stages.fusion.candidate_windows (its docstring derives them; it is
+ * The same bounds as radarcl.stages.fusion_plan.candidate_windows (its docstring derives them; it is
  * this kernel's float64 oracle), in float32: every angle bound carries WINDOW_SLACK, far more
  * than float32's rounding of angles up to 2 pi (~1e-6 rad), so a window may differ from the
  * oracle's by one beam only where the oracle's own bound lies within the slack of a beam: never

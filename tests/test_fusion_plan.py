@@ -1,5 +1,5 @@
 """kernels/fusion_plan.cl <-> radarcl/stages/fusion_plan.py against its float64 oracle,
-radarcl.stages.fusion.candidate_windows: every brick's window of candidate beams.
+radarcl.stages.fusion_plan.candidate_windows: every brick's window of candidate beams.
 
 float32 may move a bound across a beam only where the oracle's bound lies within WINDOW_SLACK of
 it; so windows must agree exactly on almost every brick and differ by at most one beam index
@@ -13,7 +13,7 @@ import pytest
 from radarcl.config import RadarConfig
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
 from radarcl.grid import BRICK, GridSpec
-from radarcl.stages.fusion import HeadFrame, candidate_windows
+from radarcl.stages.fusion_plan import HeadFrame, candidate_windows
 from radarcl.stages.fusion_plan import BLOCK, FusionPlanner
 
 RADAR = RadarConfig()

@@ -50,17 +50,17 @@ def numpy_planning(fusion, pose):
     blocks of 8^3 bricks, then of every brick of the kept blocks (the baseline of planning_ms)."""
     from radarcl.geometry import check_poses
     from radarcl.grid import BRICK
-    from radarcl.stages.fusion import _nonempty
+    from radarcl.stages.fusion_plan import nonempty
 
     frame = fusion.head_frame(check_poses(pose, fusion.lattice.n_beams))
     shape = np.asarray(fusion.grid.spec.brick_shape)
     coarse = np.stack(np.meshgrid(*[np.arange(-(-n // 8)) for n in shape], indexing="ij"), -1).reshape(-1, 3)
-    kept = coarse[_nonempty(fusion._windows(coarse, BRICK * 8, frame))]
+    kept = coarse[nonempty(fusion._windows(coarse, BRICK * 8, frame))]
     offsets = np.stack(np.meshgrid(*[np.arange(8)] * 3, indexing="ij"), -1).reshape(-1, 3)
     fine = (kept[:, None, :] * 8 + offsets[None]).reshape(-1, 3)
     fine = fine[(fine < shape).all(axis=1)]
     windows = fusion._windows(fine, BRICK, frame)
-    keep = _nonempty(windows)
+    keep = nonempty(windows)
     return fine[keep], windows[keep]
 
 

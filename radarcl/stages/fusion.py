@@ -8,9 +8,9 @@ and within one unit per update of it (float32 vs float64 weights; tests/test_fus
 
 A frame is a gather over the bricks its beams can reach. Planning lists those bricks (and
 allocates them in the grid) with a conservative bound in the frame's head frame (the middle
-beam's pose) that also gives each brick its window of candidate beams: ``candidate_windows``,
-computed on the device by ``FusionPlanner`` (its float32 twin), and lists them in the pool's
-order (the kernel's reads and writes then stream). The kernel narrows the window per 8x4x4 block
+beam's pose) that also gives each brick its window of candidate beams (``fusion_plan``:
+``candidate_windows``, computed on the device by ``FusionPlanner``, its float32 twin), and
+lists them in the pool's order (the kernel's reads and writes then stream). The kernel narrows the window per 8x4x4 block
 (a bounding-sphere test) and per row of 8 voxels, and takes ``rows`` rows as one vector.
 
 The plans of the last ``PLAN_CACHE`` poses are kept. When a pose comes back (a radar on a
@@ -22,7 +22,6 @@ integers, about a third of the gather's time for the paper's frame).
 import math
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 
@@ -31,6 +30,7 @@ from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, BeamModel, check_poses
 from radarcl.grid import BRICK, EvidenceGrid
 from radarcl.stages import Port, Stage, build, count, spacing, work_group_size
+from radarcl.stages.fusion_plan import BLOCK, FusionPlanner, HeadFrame, candidate_windows, nonempty
 
 # Measured on PoCL, 2 cores, the paper's frame at 0.1 m (35k bricks), ms per frame:
 #   one work-item per voxel, window per 4^3 sub-brick in the kernel: 450; the same without
@@ -45,7 +45,6 @@ VECTOR_WIDTHS = (4, 8)             # voxels along x per row of a work-item's blo
 # brick): the paper's frame moving, 21.6 -> 17.7 ms here (PoCL 3.1, Zen 5), same integers. The
 # default on CPUs; elsewhere one row (a GPU's lanes are its work-items: unmeasured).
 CPU_ROWS = 2
-WINDOW_SLACK = 1e-4                # [rad] added to the window half-widths (float rounding)
 STILL_TABLE_SHARE = 0.25           # the still tables held may take this share of the device's memory
 PLAN_CACHE = 16                    # plans kept for poses that come back (the paper's stand has 15 tilts)
 
@@ -96,71 +95,6 @@ class StillTable:
         return sum(a.nbytes for a in (self.counts, self.row_start, self.first, self.extras))
 
 
-class HeadFrame(NamedTuple):
-    """The head frame the windows are computed in, and how far any beam's own frame strays."""
-
-    rotation: np.ndarray     # (3, 3) head -> world
-    origin: np.ndarray       # (3,) [m, grid coordinates]
-    trans_margin: float      # max |beam origin - origin| [m]
-    rot_margin: float        # max rotation angle between a beam's frame and this one [rad]
-
-
-def candidate_windows(centres, radius, ref, r_lo, r_hi, lattice, model):
-    """Beams that may reach balls of ``radius`` around ``centres`` (n, 3) [m, grid coords],
-    seen from ``ref`` (a ``HeadFrame``), for ranges in [r_lo, r_hi]: (n, 4) int64 windows
-    (i_lo, i_hi, k_lo, k_hi), empty where i_lo > i_hi or k_lo > k_hi.
-
-    The bounds, for a point at range r >= r_min, elevation el and azimuth offset daz from beam
-    (i, k) in the head frame (a ball of radius rs = radius + trans_margin around the centre,
-    whose direction is known within delta = asin(rs / r_c) + rot_margin):
-    - inside needs |y| = r cos(el) |sin daz| <= max(a_az, r tan(theta_az / 2)), so
-      |sin daz| <= s_az = max(tan(theta_az / 2), a_az / r_min) / cos(el); this bounds daz
-      below 90 deg only when tan|el| tan|el_k| < sqrt(1 - s_az^2) (else d > 0 allows daz past
-      90 deg, and every azimuth is a candidate);
-    - z = r [sin(el - el_k) + sin(el_k) cos(el) (1 - cos daz)], so |sin(el - el_k)| <=
-      max(tan(theta_el / 2), a_el / r_min) + (1 - cos daz), and |el - el_k| < 90 deg since d > 0;
-    - a cap of radius delta at elevation el spans asin(sin delta / cos el) in azimuth.
-    """
-    c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
-    n = len(c)
-    q = (c - ref.origin) @ ref.rotation
-    rs = radius + ref.trans_margin
-    tan_el_max = math.tan(float(np.abs(lattice.elevations).max()))
-    r = np.linalg.norm(q, axis=1)
-    out = np.empty((n, 4), np.int64)
-    out[:] = (0, lattice.n_az - 1, 0, lattice.n_el - 1)
-    none = (r + rs < r_lo) | (r - rs > r_hi)
-    r_min = r - rs
-    with np.errstate(divide="ignore", invalid="ignore"):
-        delta = np.arcsin(np.minimum(1.0, rs / r)) + ref.rot_margin + WINDOW_SLACK
-        el = np.arctan2(q[:, 2], np.hypot(q[:, 0], q[:, 1]))
-        el_abs = np.abs(el) + delta
-        a_az, a_el = model.apertures
-        s_az = np.maximum(math.tan(model.beamwidth_az_rad / 2), a_az / r_min) / np.cos(el_abs)
-        full = (r_min <= 0) | (el_abs >= 0.5 * math.pi - 1e-3) | (s_az >= 1)
-        full |= np.tan(el_abs) * tan_el_max >= np.sqrt(np.maximum(0.0, 1 - s_az ** 2))
-        haz = np.arcsin(np.clip(s_az, 0, 1))
-        daz = np.arcsin(np.minimum(1.0, np.sin(delta) / np.cos(np.abs(el))))
-        s_el = np.maximum(math.tan(model.beamwidth_el_rad / 2), a_el / r_min) + (1 - np.cos(haz))
-        hel = np.where(s_el >= 1, 0.5 * math.pi, np.arcsin(np.clip(s_el, 0, 1))) + delta
-        az = np.arctan2(q[:, 1], q[:, 0])
-        inv_az = 1.0 / lattice.az_step_rad if lattice.n_az > 1 else 0.0
-        inv_el = 1.0 / lattice.el_step_rad if lattice.n_el > 1 else 0.0
-        i_lo = np.ceil((az - haz - daz - lattice.az0_rad) * inv_az)
-        i_hi = np.floor((az + haz + daz - lattice.az0_rad) * inv_az)
-        k_lo = np.maximum(0, np.ceil((el - hel - lattice.el0_rad) * inv_el))
-        k_hi = np.minimum(lattice.n_el - 1, np.floor((el + hel - lattice.el0_rad) * inv_el))
-    part = ~full & ~none
-    if lattice.wraps:
-        wide = i_hi - i_lo + 1 >= lattice.n_az
-        i_lo, i_hi = np.where(wide, 0, i_lo), np.where(wide, lattice.n_az - 1, i_hi)
-    else:
-        i_lo, i_hi = np.maximum(i_lo, 0), np.minimum(i_hi, lattice.n_az - 1)
-    out[part] = np.stack([i_lo, i_hi, k_lo, k_hi], axis=1)[part].astype(np.int64)
-    out[none] = (0, -1, 0, -1)
-    return out
-
-
 def _pool_order(slots, n_slots):
     """The order that sorts ``slots`` (distinct, in [0, n_slots)): a scatter where the pool is
     not much larger than the list (0.08 ms for 32k of 40k slots here), else argsort (0.25 ms)."""
@@ -176,10 +110,6 @@ def _take_rows(a, order):
     fancy indexing of 2-D rows took 0.47 ms for a frame's bricks and windows, this 0.14)."""
     a = np.ascontiguousarray(a, np.int32)
     return a.view(np.complex128)[:, 0][order].view(np.int32).reshape(-1, 4)
-
-
-def _nonempty(windows):
-    return (windows[:, 0] <= windows[:, 1]) & (windows[:, 2] <= windows[:, 3])
 
 
 class Fusion(Stage):
@@ -381,8 +311,6 @@ class Fusion(Stage):
         windows as ``windows[keep]``, both levels on the device (``FusionPlanner``): the blocks
         of BLOCK^3 bricks some beam may reach (evaluated as bricks of a coarser grid), then the
         bricks of those blocks."""
-        from radarcl.stages.fusion_plan import BLOCK, FusionPlanner
-
         shape = np.asarray(self.grid.spec.brick_shape)
         coarse = -(-shape // BLOCK)
         if self._planner is None:
@@ -391,9 +319,9 @@ class Fusion(Stage):
             self._supers = np.stack(np.meshgrid(*supers, indexing="ij"), -1).reshape(-1, 3)
         edge = BRICK * self.grid.spec.voxel_m
         coarse_windows = self._planner.windows(self._supers, coarse, edge * BLOCK, frame)
-        kept = FusionPlanner.bricks_of(self._supers, np.flatnonzero(_nonempty(coarse_windows))) * BLOCK
+        kept = FusionPlanner.bricks_of(self._supers, np.flatnonzero(nonempty(coarse_windows))) * BLOCK
         windows = self._planner.windows(kept, shape, edge, frame)
-        keep = np.flatnonzero(_nonempty(windows))
+        keep = np.flatnonzero(nonempty(windows))
         return FusionPlanner.brick_index(kept, keep, shape), windows, keep
 
     def _beams_outside(self, w):

@@ -1,7 +1,7 @@
-"""Planning a frame on the device: each brick's window of candidate beams.
+"""Planning a frame: each brick's window of candidate beams.
 
-``FusionPlanner`` wraps ``kernels/fusion_plan.cl``, the float32 device twin of
-``radarcl.stages.fusion.candidate_windows`` (its float64 oracle, tests/test_fusion_plan.py),
+``candidate_windows`` is the float64 oracle, in numpy, of the bound. ``FusionPlanner`` wraps
+``kernels/fusion_plan.cl``, its float32 device twin (tests/test_fusion_plan.py),
 evaluated for every brick of a list of blocks (the blocks a coarse host pass keeps). A moving
 radar plans every frame: numpy windows over the paper frustum's bricks at 0.1 m took 30-45 ms
 per frame. The kernel computes its angles without builtin calls (``atan2_nb``: PoCL may call
@@ -9,17 +9,88 @@ its builtins out of line), which made it 3x faster here.
 """
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from radarcl.errors import ConfigError
 from radarcl.stages import build
 
-# [rad] added to every angle bound, as the float64 oracle's WINDOW_SLACK: it covers float32's
+# [rad] added to every angle bound, by the oracle and the kernel alike: it covers float32's
 # rounding of angles up to 2 pi (~1e-6 rad) a hundred times over.
 WINDOW_SLACK = 1e-4
 BLOCK = 4                   # bricks per block edge: the coarse pass's unit
 PVEC_CPU = 8                # bricks per work-item on a CPU, one per SIMD lane
+
+
+class HeadFrame(NamedTuple):
+    """The head frame the windows are computed in, and how far any beam's own frame strays."""
+
+    rotation: np.ndarray     # (3, 3) head -> world
+    origin: np.ndarray       # (3,) [m, grid coordinates]
+    trans_margin: float      # max |beam origin - origin| [m]
+    rot_margin: float        # max rotation angle between a beam's frame and this one [rad]
+
+
+def candidate_windows(centres, radius, ref, r_lo, r_hi, lattice, model):
+    """Beams that may reach balls of ``radius`` around ``centres`` (n, 3) [m, grid coords],
+    seen from ``ref`` (a ``HeadFrame``), for ranges in [r_lo, r_hi]: (n, 4) int64 windows
+    (i_lo, i_hi, k_lo, k_hi), empty where i_lo > i_hi or k_lo > k_hi.
+
+    The bounds, for a point at range r >= r_min, elevation el and azimuth offset daz from beam
+    (i, k) in the head frame (a ball of radius rs = radius + trans_margin around the centre,
+    whose direction is known within delta = asin(rs / r_c) + rot_margin):
+    - inside needs |y| = r cos(el) |sin daz| <= max(a_az, r tan(theta_az / 2)), so
+      |sin daz| <= s_az = max(tan(theta_az / 2), a_az / r_min) / cos(el); this bounds daz
+      below 90 deg only when tan|el| tan|el_k| < sqrt(1 - s_az^2) (else d > 0 allows daz past
+      90 deg, and every azimuth is a candidate);
+    - z = r [sin(el - el_k) + sin(el_k) cos(el) (1 - cos daz)], so |sin(el - el_k)| <=
+      max(tan(theta_el / 2), a_el / r_min) + (1 - cos daz), and |el - el_k| < 90 deg since d > 0;
+    - a cap of radius delta at elevation el spans asin(sin delta / cos el) in azimuth.
+    """
+    c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    n = len(c)
+    q = (c - ref.origin) @ ref.rotation
+    rs = radius + ref.trans_margin
+    tan_el_max = math.tan(float(np.abs(lattice.elevations).max()))
+    r = np.linalg.norm(q, axis=1)
+    out = np.empty((n, 4), np.int64)
+    out[:] = (0, lattice.n_az - 1, 0, lattice.n_el - 1)
+    none = (r + rs < r_lo) | (r - rs > r_hi)
+    r_min = r - rs
+    with np.errstate(divide="ignore", invalid="ignore"):
+        delta = np.arcsin(np.minimum(1.0, rs / r)) + ref.rot_margin + WINDOW_SLACK
+        el = np.arctan2(q[:, 2], np.hypot(q[:, 0], q[:, 1]))
+        el_abs = np.abs(el) + delta
+        a_az, a_el = model.apertures
+        s_az = np.maximum(math.tan(model.beamwidth_az_rad / 2), a_az / r_min) / np.cos(el_abs)
+        full = (r_min <= 0) | (el_abs >= 0.5 * math.pi - 1e-3) | (s_az >= 1)
+        full |= np.tan(el_abs) * tan_el_max >= np.sqrt(np.maximum(0.0, 1 - s_az ** 2))
+        haz = np.arcsin(np.clip(s_az, 0, 1))
+        daz = np.arcsin(np.minimum(1.0, np.sin(delta) / np.cos(np.abs(el))))
+        s_el = np.maximum(math.tan(model.beamwidth_el_rad / 2), a_el / r_min) + (1 - np.cos(haz))
+        hel = np.where(s_el >= 1, 0.5 * math.pi, np.arcsin(np.clip(s_el, 0, 1))) + delta
+        az = np.arctan2(q[:, 1], q[:, 0])
+        inv_az = 1.0 / lattice.az_step_rad if lattice.n_az > 1 else 0.0
+        inv_el = 1.0 / lattice.el_step_rad if lattice.n_el > 1 else 0.0
+        i_lo = np.ceil((az - haz - daz - lattice.az0_rad) * inv_az)
+        i_hi = np.floor((az + haz + daz - lattice.az0_rad) * inv_az)
+        k_lo = np.maximum(0, np.ceil((el - hel - lattice.el0_rad) * inv_el))
+        k_hi = np.minimum(lattice.n_el - 1, np.floor((el + hel - lattice.el0_rad) * inv_el))
+    part = ~full & ~none
+    if lattice.wraps:
+        wide = i_hi - i_lo + 1 >= lattice.n_az
+        i_lo, i_hi = np.where(wide, 0, i_lo), np.where(wide, lattice.n_az - 1, i_hi)
+    else:
+        i_lo, i_hi = np.maximum(i_lo, 0), np.minimum(i_hi, lattice.n_az - 1)
+    out[part] = np.stack([i_lo, i_hi, k_lo, k_hi], axis=1)[part].astype(np.int64)
+    out[none] = (0, -1, 0, -1)
+    return out
+
+
+def nonempty(windows):
+    """Which windows (n, 4) hold a beam."""
+    return (windows[:, 0] <= windows[:, 1]) & (windows[:, 2] <= windows[:, 3])
 
 
 class FusionPlanner:
@@ -48,7 +119,7 @@ class FusionPlanner:
     def windows(self, blocks, grid_bricks, brick_m, frame):
         """(n_blocks * BLOCK^3, 4) int32 windows of the bricks of ``blocks`` ((n, 3) first
         brick of each block; bricks x fastest within a block), seen from ``frame`` (a
-        ``fusion.HeadFrame``); (0, -1, 0, -1) where no beam can reach or past ``grid_bricks``."""
+        ``HeadFrame``); (0, -1, 0, -1) where no beam can reach or past ``grid_bricks``."""
         import pyopencl as cl
         import pyopencl.array as cla
 
