@@ -112,21 +112,34 @@ def device_array(value, what):
 
 def scalar_value(arg, value, kernel):
     """A scalar argument converted to its C type, or ConfigError when it cannot hold it."""
+    return _converter(arg, kernel)(value)
+
+
+def _converter(arg, kernel):
+    """``scalar_value`` for one argument, its dtype and limits looked up once (np.dtype,
+    np.iinfo and np.finfo cost microseconds a call, and a moving radar's frame makes three
+    launches of about 20 scalars)."""
     dtype = arg.dtype
-    if isinstance(value, (bool, np.bool_)):
-        raise ConfigError(f"{kernel}: {arg.name} must be a number, got {value!r}")
-    if dtype.kind in "iu":
-        if not float(value).is_integer():
-            raise ConfigError(f"{kernel}: {arg.name} must be an integer, got {value!r}")
-        info = np.iinfo(dtype)
-        if not info.min <= int(value) <= info.max:
-            raise ConfigError(f"{kernel}: {arg.name} = {value} does not fit {arg.ctype} "
-                              f"[{info.min}, {info.max}]")
-        return dtype.type(int(value))
-    v = float(value)
-    if math.isnan(v) or (math.isfinite(v) and abs(v) > np.finfo(dtype).max):
-        raise ConfigError(f"{kernel}: {arg.name} = {value!r} is not a {arg.ctype} value")
-    return dtype.type(v)
+    to_c = dtype.type
+    integer = dtype.kind in "iu"
+    info = np.iinfo(dtype) if integer else np.finfo(dtype)
+    lo, hi = info.min, info.max
+
+    def convert(value):
+        if isinstance(value, (bool, np.bool_)):
+            raise ConfigError(f"{kernel}: {arg.name} must be a number, got {value!r}")
+        if integer:
+            if not float(value).is_integer():
+                raise ConfigError(f"{kernel}: {arg.name} must be an integer, got {value!r}")
+            if not lo <= int(value) <= hi:
+                raise ConfigError(f"{kernel}: {arg.name} = {value} does not fit {arg.ctype} [{lo}, {hi}]")
+            return to_c(int(value))
+        v = float(value)
+        if math.isnan(v) or (math.isfinite(v) and abs(v) > hi):
+            raise ConfigError(f"{kernel}: {arg.name} = {value!r} is not a {arg.ctype} value")
+        return to_c(v)
+
+    return convert
 
 
 class KernelFunction:
@@ -139,22 +152,19 @@ class KernelFunction:
         self.kernel, self.args, self.path = kernel, tuple(args), path
         self.name = kernel.function_name
         self.names = tuple(a.name for a in self.args)
+        self._name_set = frozenset(self.names)
+        self._convert = tuple(None if a.pointer else _converter(a, self.name) for a in self.args)
         kernel.set_scalar_arg_dtypes([None if a.pointer else a.dtype for a in self.args])
 
     def __call__(self, queue, global_size, local_size, *, wait_for=None, **arguments):
-        given = set(arguments)
-        missing = [n for n in self.names if n not in given]
-        unknown = sorted(given - set(self.names))
-        if missing or unknown:
+        given = arguments.keys()
+        if given != self._name_set:
+            missing = [n for n in self.names if n not in given]
+            unknown = sorted(given - self._name_set)
             raise ConfigError(f"kernel {self.name} ({self.path.name}) takes {', '.join(self.names)}; "
                               + (f"missing {missing}" if missing else "")
                               + ("; " if missing and unknown else "")
                               + (f"unknown {unknown}" if unknown else ""))
-        values = []
-        for a in self.args:
-            v = arguments[a.name]
-            if a.pointer:
-                values.append(device_array(v, f"{self.name}: {a.name}"))
-            else:
-                values.append(scalar_value(a, v, self.name))
+        values = [device_array(arguments[name], f"{self.name}: {name}") if convert is None else convert(arguments[name])
+                  for name, convert in zip(self.names, self._convert)]
         return self.kernel(queue, global_size, local_size, *values, wait_for=wait_for)
