@@ -19,7 +19,8 @@ from radarcl.stages import build
 # [rad] added to every angle bound, by the oracle and the kernel alike: it covers float32's
 # rounding of angles up to 2 pi (~1e-6 rad) a hundred times over.
 WINDOW_SLACK = 1e-4
-BLOCK = 4                   # bricks per block edge: the coarse pass's unit
+BLOCK_BITS = 2
+BLOCK = 1 << BLOCK_BITS     # bricks per block edge: the coarse pass's unit
 PVEC_CPU = 8                # bricks per work-item on a CPU, one per SIMD lane
 
 
@@ -178,4 +179,4 @@ class FusionPlanner:
         local = np.arange(BLOCK ** 3)
         offset = ((local // (BLOCK * BLOCK)) * nby + (local // BLOCK) % BLOCK) * nbx + local % BLOCK
         which = np.asarray(which, np.int64)
-        return first[which // BLOCK ** 3] + offset[which % BLOCK ** 3]
+        return first[which >> (3 * BLOCK_BITS)] + offset[which & (BLOCK ** 3 - 1)]
