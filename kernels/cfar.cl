@@ -10,9 +10,10 @@
  * Work mapping: get_global_id(1) = beam; get_global_id(0) = g handles the VEC bins
  * g*VEC .. g*VEC+VEC-1, one per SIMD lane (PoCL does not vectorise this loop across
  * work-items by itself; GPUs take VEC = 1). Groups whose windows all lie inside the profile take
- * the vector path; the few at the ends, and the tail past N_BINS, go lane by lane through
- * cfar_bin. Both sum the cells in the same order, so the result does not depend on the path.
- * Any local size works.
+ * the vector path; the few at the ends take a vector path of their own (each cell broadcast to
+ * the lanes whose windows hold it), except for OS-CFAR, and the tail past N_BINS goes lane by
+ * lane through cfar_bin. All sum the cells in the same order, so the result does not depend on
+ * the path (tests/test_cfar.py compares them bit for bit). Any local size works.
  *
  * -D constants (set by radarcl/stages/cfar.py):
  *   N_BINS        bins per profile, >= 1 + 2 GUARD + 2 TRAIN
@@ -210,23 +211,23 @@ __kernel void cfar(
         }
         HALVES_TO_ESTIMATE(floatv, lower, upper, estimate);
 #endif
-    } else {
+    } else {                                  /* an interior group: straight vector loads */
 #if KIND == KIND_OS
-    floatv c[N_TRAIN];
-    for (int u = 0; u < TRAIN; u++) {
-        c[u] = VLOAD(p + i0 - GUARD - TRAIN + u);
-        c[TRAIN + u] = VLOAD(p + i0 + GUARD + 1 + u);
-    }
-    ESTIMATE(floatv, intv, VTRUE, c, estimate);
+        floatv c[N_TRAIN];
+        for (int u = 0; u < TRAIN; u++) {
+            c[u] = VLOAD(p + i0 - GUARD - TRAIN + u);
+            c[TRAIN + u] = VLOAD(p + i0 + GUARD + 1 + u);
+        }
+        ESTIMATE(floatv, intv, VTRUE, c, estimate);
 #else
-    /* Summed straight from the loads: a private array of cells costs PoCL a copy per
-     * work-item. Same order as in cfar_bin. */
-    floatv lower = 0.0f, upper = 0.0f;
-    for (int u = 0; u < TRAIN; u++)
-        lower += VLOAD(p + i0 - GUARD - TRAIN + u);
-    for (int u = 0; u < TRAIN; u++)
-        upper += VLOAD(p + i0 + GUARD + 1 + u);
-    HALVES_TO_ESTIMATE(floatv, lower, upper, estimate);
+        /* Summed straight from the loads: a private array of cells costs PoCL a copy per
+         * work-item. Same order as in cfar_bin. */
+        floatv lower = 0.0f, upper = 0.0f;
+        for (int u = 0; u < TRAIN; u++)
+            lower += VLOAD(p + i0 - GUARD - TRAIN + u);
+        for (int u = 0; u < TRAIN; u++)
+            upper += VLOAD(p + i0 + GUARD + 1 + u);
+        HALVES_TO_ESTIMATE(floatv, lower, upper, estimate);
 #endif
     }
     const floatv n = select(estimate, (floatv)(noise_floor), estimate < noise_floor);
