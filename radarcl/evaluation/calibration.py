@@ -180,6 +180,16 @@ def with_intervals(final, jackknife):
             for (key, v), s in zip(final.values.items(), se)}
 
 
+def candidate_lines(candidates, chosen, heading, key):
+    """Printed lines of a calibration's candidate search: a heading (what the candidates are,
+    then the criterion in ``heading``), then each candidate's ``key``, the chosen one starred."""
+    lines = [f"  {heading}"]
+    for row in candidates:
+        mark = "*" if row["candidate"] == chosen else " "
+        lines.append(f"{mark} {row['candidate'][:60]:60s} {row[key]:.5f}")
+    return lines
+
+
 def constant_lines(constants, held, parts, note_zero=""):
     """Printed lines of ``with_intervals``'s constants; ``held``: those the sign constraint held
     at 0; ``parts``: what the jackknife left out; ``note_zero``: why a constant fixed at 0 is."""

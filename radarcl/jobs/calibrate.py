@@ -123,11 +123,9 @@ def _pool(row_sets):
 def format_lines(r):
     """What `radarcl calibrate` prints."""
     lines = [f"model {r['model']}, {r['voxel_m']} m; fitted on scenes {r['fit_seeds']}, validated on "
-             f"{r['validation_seeds']}; {r['voxels']:,} visible voxels in the final fit",
-             "  candidate (CFAR, surface)                                   validation log-lik [nat/voxel]"]
-    for row in r["candidates"]:
-        mark = "*" if row["candidate"] == r["chosen"] else " "
-        lines.append(f"{mark} {row['candidate'][:60]:60s} {row['validation_log_likelihood']:.5f}")
+             f"{r['validation_seeds']}; {r['voxels']:,} visible voxels in the final fit"]
+    lines += cal.candidate_lines(r["candidates"], r["chosen"], "candidate (CFAR, surface)                                   "
+                                 "validation log-lik [nat/voxel]", "validation_log_likelihood")
     lines += cal.constant_lines(r["constants"], r["held"], "scenes",
                                 "unknown behind the first surface" if r.get("unknown_behind") else "")
     for name, rel in r["reliability"].items():

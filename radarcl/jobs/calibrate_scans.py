@@ -143,11 +143,9 @@ def run(runtime, config, data_dir, model="occlusion", report=None):
 def format_lines(r):
     """What `radarcl calibrate-scans` prints."""
     lines = [f"{r['sensor']}, {r['model']} interpreter, {r['voxel_m']} m: fitted on scans {r['fit_scans']} "
-             f"({r['bins']:,} held-out bins), reported on scans {r['report_scans']}; outcomes: {r['outcome_detector']}",
-             "  candidate (map CFAR, surface)                               fit log-lik [nat/bin]"]
-    for row in r["candidates"]:
-        mark = "*" if row["candidate"] == r["chosen"] else " "
-        lines.append(f"{mark} {row['candidate'][:60]:60s} {row['log_likelihood']:.5f}")
+             f"({r['bins']:,} held-out bins), reported on scans {r['report_scans']}; outcomes: {r['outcome_detector']}"]
+    lines += cal.candidate_lines(r["candidates"], r["chosen"], "candidate (map CFAR, surface)                               "
+                                 "fit log-lik [nat/bin]", "log_likelihood")
     lines += cal.constant_lines(r["constants"], r["held"], "predicted scans")
     lines.append(f"  on the report scans {r['report_scans']} (the same held-out bins for every row):")
     lines.append(f"  {'predictor':26s} {'AUC':>6s} {'log-lik [nat/bin]':>18s} {'ECE':>6s} {'coverage':>9s}")
