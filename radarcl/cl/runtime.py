@@ -61,11 +61,17 @@ def pin_pocl_workers(environ=None):
 
 def _cl():
     """Import pyopencl lazily so that io/, config and the viewer never need it; PoCL's CPU
-    workers are pinned first (``pin_pocl_workers``)."""
-    pin_pocl_workers()
+    workers are pinned first (``pin_pocl_workers``, once per process)."""
+    global _pin_checked
+    if not _pin_checked:
+        pin_pocl_workers()
+        _pin_checked = True
     import pyopencl
 
     return pyopencl
+
+
+_pin_checked = False
 
 
 def kernels_dir():
