@@ -1,9 +1,9 @@
 /* CFAR detection of a whole frame of power profiles in one launch (paper §3.3, Fig. 6).
  *
- * Equivalent to radarcl.reference.cfar(profiles, config) in float32, edge rule "shift": every
+ * Equivalent to radarcl.oracle.cfar(profiles, config) in float32, edge rule "shift": every
  * cell uses exactly 2*TRAIN training cells inside the profile; the cells one side lacks near
  * an end are taken further out on the other side, outside the guard band (see
- * reference.training_cells). The estimate is summed directly from the cells, never from
+ * oracle.training_cells). The estimate is summed directly from the cells, never from
  * running or prefix sums, so a 120 dB echo elsewhere in the profile cannot cancel the digits of
  * a weak window.
  *

@@ -1,6 +1,6 @@
 /* Beam-to-voxel fusion of one whole frame: eq. 9 with the beam volume of §3.4 (Fig. 7c).
  *
- * Equivalent to radarcl.reference.fuse(...): every voxel whose centre lies inside a beam's
+ * Equivalent to radarcl.oracle.fusion(...): every voxel whose centre lies inside a beam's
  * volume takes that beam's eq. 12 update for the range bin of its centre, scaled by the two-way
  * weight (GAUSSIAN) and rounded half to even; the grid adds the voxel's sum of updates once.
  * See radarcl/geometry.py for the frames and the beam volume, radarcl/grid.py for the storage.
@@ -252,12 +252,12 @@ __kernel void fusion(
             rows |= rows >> 1;                            /* bit 2u: row 2u or 2u + 1 may be inside */
             /* and units u, u + 2 (z, z + 1) decided together: about half of the units a beam's
              * block tests pass, so a branch per unit was a coin toss to predict; fewer, surer
-             * branches beat the work they add (14.5 against 15.0 ms per paper frame here) */
+             * branches beat the work they add */
             rows = ((rows | (rows >> 4)) & 0x0505u) * 17u;
 #endif
             /* a loop of fixed trip count over the units, unrolled: acc[] and bins[] indexed by
-             * constants stay in registers (indexed by a row found at run time they went through
-             * memory: 34.9 -> 32.7 ms per paper frame here) */
+             * constants stay in registers (indexed by a row found at run time they go through
+             * memory) */
 #pragma unroll
             for (int u = 0; u < UNITS; ++u) {
                 const int r0 = ROWS * u;
@@ -290,8 +290,7 @@ __kernel void fusion(
                     continue;
 #endif
                 /* no branch on "any lane inside" when fusing: 40 % of the units tested have none,
-                 * too many for the branch predictor (16.2 -> 15.1 ms per paper frame here); the
-                 * mask zeroes them */
+                 * too many for the branch predictor; the mask zeroes them */
                 const intL j = bin & ~(bin >> 31);                /* max(bin, 0) without the builtin */
 #if RECORD == 1
                 acc[u] -= inside;                                 /* inside is -1 */

@@ -1,6 +1,6 @@
 /* The down-range interpreter, eq. 12, on a whole frame in one launch (paper §3.3, Fig. 10).
  *
- * Equivalent to radarcl.reference.interpret(profiles, noise, mask, config, bin_spacing, flags):
+ * Equivalent to radarcl.oracle.interpret(profiles, noise, mask, config, bin_spacing, flags):
  *   pulse bins (mask = 1):                  k_occ * log10(r / n), clamped to [0, 16 nat]
  *   noise bins before the first wide pulse: E_h;   after its last bin: E_l
  *   bins outside [FIRST_BIN, LAST_BIN]:     0

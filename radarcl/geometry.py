@@ -294,3 +294,43 @@ def interpolate_se2(start, end, fractions):
     rel = np.linalg.inv(start) @ end
     dx, dy, dyaw = rel[0, 3], rel[1, 3], math.atan2(rel[1, 0], rel[0, 0])
     return np.stack([start @ se2_pose(f * dx, f * dy, f * dyaw) for f in np.asarray(fractions, float)])
+
+
+# -- SE(3) interpolation -------------------------------------------------------------------------------
+def interpolate_pose(times_ns, poses, t_ns):
+    """The pose at ``t_ns``: positions interpolated linearly, rotations by slerp of the two
+    nearest poses' quaternions; held at the ends."""
+    i = int(np.searchsorted(times_ns, t_ns))
+    if i <= 0 or i >= len(times_ns):
+        return poses[0 if i <= 0 else -1]
+    a = (t_ns - times_ns[i - 1]) / max(1, times_ns[i] - times_ns[i - 1])
+    out = np.eye(4)
+    out[:3, 3] = (1 - a) * poses[i - 1][:3, 3] + a * poses[i][:3, 3]
+    q0, q1 = _quaternion(poses[i - 1][:3, :3]), _quaternion(poses[i][:3, :3])
+    if q0 @ q1 < 0:
+        q1 = -q1
+    theta = np.arccos(np.clip(q0 @ q1, -1, 1))
+    q = q0 if theta < 1e-9 else (np.sin((1 - a) * theta) * q0 + np.sin(a * theta) * q1) / np.sin(theta)
+    out[:3, :3] = _rotation(q / np.linalg.norm(q))
+    return out
+
+
+def _quaternion(r):
+    w = np.sqrt(max(0.0, 1 + np.trace(r))) / 2
+    if w > 1e-6:
+        return np.array([w, (r[2, 1] - r[1, 2]) / (4 * w), (r[0, 2] - r[2, 0]) / (4 * w), (r[1, 0] - r[0, 1]) / (4 * w)])
+    k = int(np.argmax(np.diag(r)))                 # a half turn: from the largest diagonal term
+    i, j = (k + 1) % 3, (k + 2) % 3
+    q = np.zeros(4)
+    q[1 + k] = np.sqrt(max(0.0, 1 + r[k, k] - r[i, i] - r[j, j])) / 2
+    q[1 + i] = (r[i, k] + r[k, i]) / (4 * q[1 + k])
+    q[1 + j] = (r[j, k] + r[k, j]) / (4 * q[1 + k])
+    q[0] = (r[j, i] - r[i, j]) / (4 * q[1 + k])
+    return q
+
+
+def _rotation(q):
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])

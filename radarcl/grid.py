@@ -13,24 +13,22 @@ p = 1 in float64 anyway); only there would the order matter. Views (``log_odds``
 
 Storage: bricks of 8 x 8 x 8 voxels (2 KiB), allocated the first time some beam reaches them
 ("leave out what the scene does not need"). A host table maps brick -> slot in one device pool.
+This module holds the grid on the device only; ``radarcl.maps`` reads and writes it as files.
 """
 
-import logging
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from radarcl import logodds
-from radarcl.errors import ConfigError, DeviceCapabilityError, FrameFormatError, ShapeError
+from radarcl.errors import ConfigError, DeviceCapabilityError, ShapeError
 
 BRICK = 8                           # voxels per brick edge
 BRICK_VOXELS = BRICK ** 3
 BRICK_BYTES = 4 * BRICK_VOXELS
 GRID_LIMIT = 2 ** 30                # stored sums saturate here [units]
 MAX_TABLE_BRICKS = 2 ** 28          # the host brick table (int32) stays below 1 GiB
-FILE_VERSION = 1
-log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -286,149 +284,6 @@ class EvidenceGrid:
         self.keys = np.empty((0, 3), np.int32)
         self.pool, self.capacity = None, 0
         self.generation += 1
-
-    def save(self, path, poses=None):
-        """Write the grid (spec and allocated bricks, not the dense volume) to an npz file,
-        with the sensor's ``poses`` (n, 4, 4) when given (the viewer draws them); see
-        ``write_npz``."""
-        write_npz(path, self.spec, *self.bricks(), poses=poses)
-
-    @classmethod
-    def load(cls, runtime, path):
-        """Read a grid written by ``save`` onto ``runtime``'s device."""
-        import pyopencl as cl
-
-        spec, keys, data = read(path)
-        grid = cls(runtime, spec)
-        slots = grid.allocate(keys)
-        if len(keys):
-            ordered = np.empty_like(data)
-            ordered[slots] = data
-            cl.enqueue_copy(runtime.queue, grid.pool, ordered, is_blocking=True)
-        return grid
-
-
-def write_npz(path, spec, keys, data, poses=None, meta=None):
-    """A map file: ``spec``, the bricks (``keys`` (n, 3) int32, ``data`` (n, 8, 8, 8) int32),
-    the sensor's ``poses`` and ``meta`` (a JSON-able dict) when given. Written beside ``path``
-    and renamed over it, so a reader (``radarcl view --live``) sees the old map or the new one,
-    never half of one."""
-    import json
-
-    from radarcl.outputs import atomic
-
-    extra = {} if poses is None else dict(poses=check_trajectory(poses))
-    if meta:
-        extra["meta"] = np.str_(json.dumps(meta))
-    with atomic(path) as tmp, open(tmp, "wb") as f:
-        np.savez_compressed(f, version=FILE_VERSION, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
-                            shape=np.asarray(spec.shape), keys=keys, data=data, **extra)
-
-
-def read(path):
-    """Read a map, an npz file written by ``EvidenceGrid.save`` or a map store directory
-    (``radarcl.store``), without a device (numpy only, for the viewer): returns (spec, keys (n, 3) int32, data (n, 8, 8, 8) int32). A file that is not a
-    radarcl grid raises ``FrameFormatError`` saying what was wrong; array sizes are checked
-    against their headers and the memory budget before they are read (``io.safe_npz``)."""
-    from pathlib import Path
-
-    from radarcl import store
-    from radarcl.io import safe_npz
-
-    if Path(path).is_dir() and store.is_store(path):
-        spec, keys, data, manifest = store.read(path)
-        if manifest["incomplete"]:
-            log.warning("%s: a save after version %d did not complete (%s left behind); read version %d",
-                        path, manifest["version"], ", ".join(manifest["incomplete"]), manifest["version"])
-        return spec, keys, data
-    if not Path(path).is_file():
-        raise FrameFormatError(f"{path} does not exist (yet)" if not Path(path).exists()
-                               else f"{path} is not a map file or store")
-    with safe_npz(path, what="radarcl grid file (an npz written by EvidenceGrid.save)") as f:
-        missing = {"version", "origin_m", "voxel_m", "shape", "keys", "data"} - set(f.files)
-        if missing:
-            raise FrameFormatError(f"{path} is not a radarcl grid file: it lacks {sorted(missing)} "
-                                   f"(expected an npz written by EvidenceGrid.save, e.g. radarcl demo's map.npz)")
-        try:
-            version = int(f["version"])
-            if version != FILE_VERSION:
-                raise FrameFormatError(f"{path} has grid file version {version}, this radarcl reads {FILE_VERSION}")
-            spec = GridSpec(tuple(f["origin_m"]), float(f["voxel_m"]), tuple(int(n) for n in f["shape"]))
-        except (TypeError, ValueError) as exc:
-            if isinstance(exc, FrameFormatError):
-                raise
-            raise FrameFormatError(f"{path}: a bad grid description ({exc})") from exc
-        n_keys = f.header("keys")[0]
-        n_data = f.header("data")[0]
-        if len(n_keys) != 2 or n_keys[1:] != (3,) or n_data != (n_keys[0], BRICK, BRICK, BRICK):
-            raise FrameFormatError(f"{path}: expected brick keys (n, 3) and bricks (n, 8, 8, 8), got {n_keys} "
-                                   f"and {n_data}")
-        if n_keys[0] > int(np.prod(spec.brick_shape, dtype=np.int64)):
-            raise FrameFormatError(f"{path}: {n_keys[0]} bricks in a grid of only {spec.brick_shape} bricks")
-        keys, data = f["keys"], f["data"]
-    if data.dtype != np.int32:
-        raise FrameFormatError(f"{path}: expected bricks ({len(keys)}, 8, 8, 8) int32, got {data.shape} {data.dtype}")
-    if keys.dtype != np.int32:
-        raise FrameFormatError(f"{path}: expected brick keys (n, 3) int32, got {keys.shape} {keys.dtype}")
-    if len(keys) and ((keys < 0).any() or (keys >= np.asarray(spec.brick_shape)).any()):
-        raise FrameFormatError(f"{path}: brick keys outside the grid's {spec.brick_shape} bricks")
-    if len(np.unique(keys, axis=0)) != len(keys):
-        raise FrameFormatError(f"{path}: a brick key appears more than once")
-    if data.size and (data.max() > GRID_LIMIT or data.min() < -GRID_LIMIT):
-        raise FrameFormatError(f"{path}: values beyond the grid's saturation +-{GRID_LIMIT} units; "
-                               "radarcl never writes them")
-    return spec, keys, data
-
-
-MAX_POSES = 10000          # a map keeps at most this many sensor poses (evenly subsampled)
-
-
-def check_trajectory(poses):
-    """Sensor poses (n, 4, 4) float64 to keep with a map: finite, at most MAX_POSES (evenly
-    subsampled, the last kept)."""
-    P = np.asarray(poses, dtype=np.float64)
-    if P.ndim != 3 or P.shape[1:] != (4, 4) or not np.isfinite(P).all():
-        raise ShapeError(f"poses must be finite (n, 4, 4), got {P.shape}")
-    if len(P) > MAX_POSES:
-        P = P[np.unique(np.r_[np.linspace(0, len(P) - 1, MAX_POSES).astype(int), len(P) - 1])]
-    return P
-
-
-def read_poses(path):
-    """The sensor poses (n, 4, 4) a map file or store keeps, or None."""
-    from pathlib import Path
-
-    from radarcl import store
-    from radarcl.io import safe_npz
-
-    try:
-        if Path(path).is_dir():
-            poses = store.read_manifest(path).get("poses")
-            return None if not poses else check_trajectory(np.asarray(poses, float).reshape(-1, 4, 4))
-        with safe_npz(path) as f:
-            return check_trajectory(f["poses"]) if "poses" in f.files else None
-    except (ShapeError, ValueError) as exc:
-        raise FrameFormatError(f"{path}: bad sensor poses ({exc})") from exc
-
-
-def read_meta(path, key):
-    """The ``key`` entry a map's saver kept (``store.MapSaver(..., key=value)``: the store's
-    manifest, or the npz's ``meta``), or None."""
-    import json
-    from pathlib import Path
-
-    from radarcl import store
-    from radarcl.io import safe_npz
-
-    if Path(path).is_dir():
-        return store.read_manifest(path).get(key)
-    with safe_npz(path) as f:
-        if "meta" not in f.files:
-            return None
-        try:
-            return json.loads(str(f["meta"])).get(key)
-        except (ValueError, AttributeError) as exc:
-            raise FrameFormatError(f"{path}: its meta is not a JSON object ({exc})") from exc
 
 
 def assemble(spec, keys, data):

@@ -8,6 +8,7 @@ import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
+from radarcl.geometry import check_poses
 
 WINDOWS = ("hann", "rect")
 OUTPUTS = ("magnitude", "power")
@@ -293,8 +294,6 @@ def fusion_at_points(centres, evidence, lattice, model, poses, bin_spacing_m, fi
                      beams=None):
     """``fusion`` at voxel centres (n, 3) [m, world], over ``beams`` (indices; default all).
     Returns (sums, updates, ambiguous), each (n,)."""
-    from radarcl.geometry import check_poses
-
     evidence = np.asarray(evidence)
     P = check_poses(poses, lattice.n_beams)
     centres = np.asarray(centres, dtype=np.float64)

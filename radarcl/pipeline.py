@@ -10,12 +10,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl.errors import ConfigError
+from radarcl.config import mapconfig, sensors
+from radarcl.errors import ConfigError, DeviceCapabilityError
 from radarcl.geometry import BeamLattice, BeamModel
 from radarcl.grid import EvidenceGrid
 from radarcl.stages.cfar import Cfar, CfarResult
 from radarcl.stages.fusion import Fusion
-from radarcl.stages.interpret import InterpretResult, Interpreter
+from radarcl.stages.interpret import Interpreter, InterpretResult
 from radarcl.stages.range_fft import RangeFFT
 
 
@@ -109,8 +110,6 @@ class Mapping:
         a configuration file, or None for the sensor's defaults; grid: an ``EvidenceGrid`` to
         fuse into (default: a new one as [grid] says); per_beam_poses: one pose per beam
         (default: for a spinning radar, which moves during its turn)."""
-        from radarcl import mapconfig, sensors
-
         if not isinstance(config, mapconfig.Resolved):
             config = mapconfig.resolve(sensor, config)
         elif sensor is not None and sensors.load(sensor).name != config.sensor.name:
@@ -173,6 +172,21 @@ class Mapping:
         self.frames += 1
         return plan
 
+    def fuse_source(self, source, after_frame=None):
+        """Fuse every frame of ``source`` (an ``io.inputs.FrameSource``: frames, their poses and,
+        for range profiles, their flags) in order; ``after_frame(j, trajectory)`` runs after
+        frame j (progress, checkpoints). Returns (the sensor's trajectory (n, 4, 4): each frame's
+        pose, or its middle beam's, the number of beams that reached no voxel of the grid)."""
+        trajectory, outside = [], 0
+        for j in range(len(source)):
+            poses = np.asarray(source.poses[j])
+            plan = self.fuse(source.frames[j], poses, flags=None if self.range_fft is not None else source.flags[j])
+            trajectory.append(poses if poses.ndim == 2 else poses[len(poses) // 2])
+            outside += plan.beams_outside
+            if after_frame is not None:
+                after_frame(j, trajectory)
+        return np.array(trajectory).reshape(-1, 4, 4), outside
+
     def flags(self):
         """Per-beam flags (oracle.FLAG_*) of the last frame, uint8 (*batch,)."""
         return self.detection.interpreter.arrays["flags_out"].get(self.runtime.queue)
@@ -192,11 +206,8 @@ FIT_FRACTION = 0.5
 def _check_fits(runtime, config, spec):
     """DeviceCapabilityError, with the sizes, when one frame of ``config`` cannot fit the
     device's largest buffer (``radarcl info``: "largest buffer")."""
-    from radarcl.errors import DeviceCapabilityError
-    from radarcl.sensors import frame_volume_m3
-
     v = spec.voxel_m
-    swept = frame_volume_m3(config.sensor, config["interpret.range_min_m"], config["interpret.range_max_m"], v)
+    swept = sensors.frame_volume_m3(config.sensor, config["interpret.range_min_m"], config["interpret.range_max_m"], v)
     voxels = min(FIT_FRACTION * swept / v ** 3, float(spec.n_voxels))
     needed, limit = 4.0 * voxels, float(runtime.device.max_mem_alloc_size)
     if needed > limit:

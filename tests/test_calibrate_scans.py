@@ -13,7 +13,7 @@ from radarcl.jobs import calibrate_scans as cs
 
 @pytest.fixture(scope="module")
 def calibrated(runtime, shared_data):
-    from radarcl import mapconfig
+    from radarcl.config import mapconfig
 
     saved = cs.CFAR_CANDIDATES, cs.SURFACE_CANDIDATES_DB
     cs.CFAR_CANDIDATES, cs.SURFACE_CANDIDATES_DB = (("ca", 1e-3), ("ca", 1e-2)), (15.0,)   # a quicker search

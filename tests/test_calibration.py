@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from radarcl import logodds, oracle
-from radarcl.config import CfarConfig, InterpretConfig
+from radarcl.config.stage_config import CfarConfig, InterpretConfig
 from radarcl.evaluation import calibration as cal
 
 

@@ -2,12 +2,12 @@
 
 import numpy as np
 import pytest
+from tolerances import CFAR_RTOL, DECISION_MARGIN
 
 from radarcl import oracle
-from radarcl.config import CfarConfig
+from radarcl.config.stage_config import CfarConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.stages.cfar import Cfar
-from tolerances import CFAR_RTOL, DECISION_MARGIN
 
 
 def check_against_oracle(got, profiles, config):

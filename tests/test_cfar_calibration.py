@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from radarcl import cfar_theory
-from radarcl.config import CfarConfig
+from radarcl.config.stage_config import CfarConfig
 from radarcl.stages.cfar import Cfar
 
 N_BEAMS, N_BINS = 8192, 512

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from radarcl import cfar_theory, logodds, physics
-from radarcl.config import PAPER_WIDE_PULSE_M, CfarConfig, InterpretConfig
+from radarcl.config.stage_config import PAPER_WIDE_PULSE_M, CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from radarcl import physics
-from radarcl.config import PAPER_RADAR, RadarConfig
+from radarcl.config.stage_config import PAPER_RADAR, RadarConfig
 from radarcl.errors import ConfigError
 
 

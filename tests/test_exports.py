@@ -4,10 +4,10 @@ map_server reads it, rosbags; an empty map gives valid empty files."""
 import numpy as np
 import pytest
 
-from radarcl import exports
 from radarcl.cli import main
 from radarcl.grid import GridSpec, assemble
-from radarcl.maps import Map
+from radarcl.maps import exports
+from radarcl.maps.map import Map
 
 SPEC = GridSpec((-2.0, -3.0, -1.0), 0.25, (24, 16, 16))
 

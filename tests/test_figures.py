@@ -4,11 +4,11 @@ the report page opens in a real browser with every image loaded and no console m
 
 import numpy as np
 import pytest
+from browser import open_in_browser
 
 from radarcl.grid import GridSpec
-from radarcl.jobs import plots, report
-
-from browser import open_in_browser
+from radarcl.report import figures as plots
+from radarcl.report import html
 
 
 def test_the_checker_catches_what_it_should():
@@ -89,22 +89,22 @@ def test_a_report_opens_in_a_real_browser(tmp_path):
     fig = figures()["topdown"]()
     png = tmp_path / "topdown.png"
     plots.save(fig, png)
-    page = report.write(tmp_path / "report.html", "a run <with> characters & more", [
-        ("Numbers", [report.Table(["map", "AUC"], [["tuned", 0.634], ["baseline", 0.5]]),
-                     report.Pairs({"voxel_m": 0.1, "sensor": "paper"})]),
-        ("Figures", [report.Figure(png, "from above"), report.Figure(png.read_bytes(), "again, from bytes")]),
-        ("Notes", [report.Text("x < y & y > z")])])
+    page = html.write(tmp_path / "report.html", "a run <with> characters & more", [
+        ("Numbers", [html.Table(["map", "AUC"], [["tuned", 0.634], ["baseline", 0.5]]),
+                     html.Pairs({"voxel_m": 0.1, "sensor": "paper"})]),
+        ("Figures", [html.Figure(png, "from above"), html.Figure(png.read_bytes(), "again, from bytes")]),
+        ("Notes", [html.Text("x < y & y > z")])])
     dom, console = open_in_browser(page, tmp_path)
     assert 'data-images="2/2"' in dom and 'data-errors="0"' in dom, dom[-400:]
     assert console == []
     assert "a run &lt;with&gt; characters &amp; more" in dom and "x &lt; y &amp; y &gt; z" in dom
-    broken = report.write(tmp_path / "broken.html", "a broken image", [("F", [report.Figure(b"not a png")])])
+    broken = html.write(tmp_path / "broken.html", "a broken image", [("F", [html.Figure(b"not a png")])])
     dom, _ = open_in_browser(broken, tmp_path)
     assert 'data-images="0/1"' in dom                   # the check can fail
 
 
 def test_the_bench_quality_page_opens_with_its_table_and_chart(tmp_path):
-    from radarcl.bench import quality
+    from radarcl.report import quality
 
     plots.save(figures()["quality"](), tmp_path / "quality.png")
     page = tmp_path / "quality.html"

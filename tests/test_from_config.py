@@ -5,9 +5,11 @@ a sensor that does not match its input is refused with both shapes and nothing w
 import numpy as np
 import pytest
 
-from radarcl import io, logodds, mapconfig, oracle
+from radarcl import logodds, oracle
 from radarcl.cli import main
+from radarcl.config import mapconfig
 from radarcl.errors import ConfigError, DeviceCapabilityError, FrameFormatError
+from radarcl.io.inputs import open_input
 from radarcl.pipeline import Mapping
 
 
@@ -42,7 +44,7 @@ def test_ti_capture_maps_its_reflector(runtime, shared_data):
     """simple_frame_1: 128 chirps of one virtual antenna (the data README: a strong static
     reflector near 1.95 m). Fused along the boresight, the map is occupied at 1.95 m and free at
     1.0 m in front of it."""
-    source = io.open_input(mapconfig.resolve("ti-xwr-openradar").sensor,
+    source = open_input(mapconfig.resolve("ti-xwr-openradar").sensor,
                            shared_data / "ti_adc_openradar" / "simple_frame_1.npy")
     assert len(source) == 128 and source.frames.shape[1:] == (1, 1, 128) and source.frames.dtype == np.complex64
     m = Mapping.from_config(runtime, "ti-xwr-openradar")
@@ -61,7 +63,7 @@ def test_oxford_navtech_scan(runtime, shared_data):
     """One scan read as the navtech-cts350x profile (bins, layout, per-azimuth poses from the
     encoder): free space in front of the car, a wall at the right of the street occupied."""
     sensor = mapconfig.resolve("navtech-cts350x").sensor
-    source = io.open_input(sensor, shared_data / "navtech_oxford" / "radar" / "1547131046353776.png")
+    source = open_input(sensor, shared_data / "navtech_oxford" / "radar" / "1547131046353776.png")
     assert len(source) == 1 and source.poses[0].shape == (400, 4, 4)
     m = Mapping.from_config(runtime, sensor, mapconfig.resolve(sensor, flags={"grid.voxel_m": 0.5}))
     assert m.fusion.per_beam_poses and m.frame_shape == (400, 3768)
@@ -73,7 +75,7 @@ def test_oxford_navtech_scan(runtime, shared_data):
 def test_a_generic_polar_profile_learns_its_bins_from_the_data(runtime, shared_data):
     sensor = mapconfig.resolve("polar-png").sensor
     assert sensor.n_bins() is None
-    source = io.open_input(sensor, shared_data / "navtech_oxford" / "radar" / "1547131046353776.png")
+    source = open_input(sensor, shared_data / "navtech_oxford" / "radar" / "1547131046353776.png")
     assert source.sensor.n_bins() == 3768
     with pytest.raises(ConfigError, match="does not say how many range bins"):
         Mapping.from_config(runtime, sensor)
@@ -110,11 +112,11 @@ def test_tune_save_feeds_fuse_config(runtime, tmp_path, capsys):
     assert main(["fuse", str(rec), "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
     assert main(["config", "show", "--config", str(cfg)]) == 0
     assert f"file {cfg}" in capsys.readouterr().out
-    from radarcl.grid import read
-    from radarcl.io import recording
+    from radarcl.maps.disk import read
+    from radarcl.scene.observe import load_observations
 
     m = Mapping.from_config(runtime, "paper", tuned)
-    obs = recording.load_observations(rec)
+    obs = load_observations(rec)
     for frame, pose in zip(obs.samples, obs.poses):
         m.fuse(frame, pose)
     spec, keys, data = read(out)
@@ -137,4 +139,4 @@ def test_a_sensor_that_does_not_match_its_input_is_refused(tmp_path, capsys):
     assert main(["fuse", str(tmp_path / "x.npy"), "--out", str(out)]) == 2
     assert "is not a readable .npz file" in capsys.readouterr().err
     with pytest.raises(FrameFormatError, match="not a readable .npz"):
-        io.open_input(mapconfig.resolve("paper").sensor, tmp_path / "x.npy")
+        open_input(mapconfig.resolve("paper").sensor, tmp_path / "x.npy")

@@ -5,10 +5,11 @@ before any work."""
 import numpy as np
 import pytest
 
-from radarcl import mapconfig
+from radarcl.config import mapconfig
 from radarcl.errors import ConfigError, FrameFormatError
-from radarcl.grid import assemble, read
+from radarcl.grid import assemble
 from radarcl.jobs import fuse_many
+from radarcl.maps.disk import read
 from radarcl.pipeline import Mapping
 
 
@@ -69,7 +70,7 @@ def test_cli_fuse_many_writes_a_store(recordings, tmp_path, capsys):
     out = tmp_path / "fleet.rcmap"
     assert main(["fuse-many", *map(str, recordings[:2]), "--voxel", "0.8", "--workers", "1", "--out", str(out)]) == 0
     assert "merged in" in capsys.readouterr().out
-    from radarcl import store
+    from radarcl.maps import store
 
     manifest = store.read_manifest(out)
     assert [i["path"] for i in manifest["provenance"]["inputs"]] == [str(p) for p in recordings[:2]]

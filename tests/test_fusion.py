@@ -9,14 +9,15 @@ import math
 
 import numpy as np
 import pytest
+from tolerances import FUSION_AMBIGUOUS_MAX, FUSION_DECISION_MARGIN, FUSION_UNITS_PER_UPDATE
 
 from radarcl import oracle
-from radarcl.config import RadarConfig
+from radarcl.config.stage_config import RadarConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
 from radarcl.grid import GRID_LIMIT, EvidenceGrid, GridSpec
+from radarcl.maps.disk import load_grid
 from radarcl.stages.fusion import Fusion
-from tolerances import FUSION_AMBIGUOUS_MAX, FUSION_DECISION_MARGIN, FUSION_UNITS_PER_UPDATE
 
 RADAR = RadarConfig()
 N_BINS, SPACING, FIRST, LAST = 160, 0.1, 5, 150
@@ -160,7 +161,7 @@ def test_sums_saturate_at_the_grid_limit(runtime, tmp_path):
     data[reached] = GRID_LIMIT - 1
     np.savez_compressed(tmp_path / "g.npz", version=1, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
                         shape=np.asarray(spec.shape), keys=keys, data=data)
-    loaded = EvidenceGrid.load(runtime, tmp_path / "g.npz")
+    loaded = load_grid(runtime, tmp_path / "g.npz")
     Fusion(runtime, loaded, lattice, model, N_BINS, SPACING, FIRST, LAST)(ev, np.eye(4))
     _, after = loaded.bricks()
     assert (after[reached] == GRID_LIMIT).all() and (after[~reached] == 0).all()

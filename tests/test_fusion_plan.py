@@ -10,11 +10,10 @@ import math
 import numpy as np
 import pytest
 
-from radarcl.config import RadarConfig
+from radarcl.config.stage_config import RadarConfig
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
 from radarcl.grid import BRICK, GridSpec
-from radarcl.stages.fusion_plan import HeadFrame, candidate_windows
-from radarcl.stages.fusion_plan import BLOCK, FusionPlanner
+from radarcl.stages.fusion_plan import BLOCK, FusionPlanner, HeadFrame, candidate_windows
 
 RADAR = RadarConfig()
 WINDOWS_DIFFERING_MAX = 1e-3        # share of bricks whose window may differ (by one index) from float64's

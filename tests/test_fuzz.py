@@ -19,7 +19,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from radarcl import mapconfig, sensors
+from radarcl.config import mapconfig, sensors
 from radarcl.errors import RadarclError
 
 LONG = os.environ.get("RADARCL_FUZZ", "") == "long"
@@ -75,7 +75,7 @@ def test_configuration_flags(values, sensor):
                                                         "e_high", "voxel_m", "size_m", "model", "x"]),
                                        SCALARS, max_size=4), max_size=4))
 def test_configuration_files(tmp_path_factory, tables):
-    from radarcl import tomlfile
+    from radarcl.config import tomlfile
 
     path = tmp_path_factory.mktemp("cfg") / "c.toml"
     try:
@@ -91,7 +91,7 @@ def test_configuration_files(tmp_path_factory, tables):
                         "meta_columns", "encoder_counts", "n_samples", "sample_rate_hz", "spinning", "nope"]),
        SCALARS, st.sampled_from(["polar-png", "navtech-cts350x", "paper", "ti-xwr-openradar"]))
 def test_profiles(tmp_path_factory, section, key, value, base):
-    from radarcl import tomlfile
+    from radarcl.config import tomlfile
 
     path = tmp_path_factory.mktemp("prof") / "p.toml"
     parent = sensors.load(base)
@@ -205,8 +205,8 @@ def _member(key):
 def test_damaged_files(tmp_path, shared_data):
     """Every loader on truncated and bit-flipped copies of a valid file: a radarcl error, or (npz,
     PNG: checksummed) exactly the original content."""
-    from radarcl.grid import read
     from radarcl.io import polar_png, recording
+    from radarcl.maps.disk import read
 
     rng = np.random.default_rng(0)
     spec_arrays = dict(version=1, origin_m=np.zeros(3), voxel_m=0.5, shape=np.array([24, 16, 8]),
@@ -235,7 +235,7 @@ def test_damaged_files(tmp_path, shared_data):
 def test_crafted_files(tmp_path):
     """Wrong keys, repeated keys, keys outside the grid, declared sizes far beyond the data and a
     1 GiB deflate bomb: refused, within memory."""
-    from radarcl.grid import read
+    from radarcl.maps.disk import read
 
     start = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     good = dict(version=1, origin_m=np.zeros(3), voxel_m=0.5, shape=np.array([16, 16, 16]),

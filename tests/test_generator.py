@@ -7,7 +7,7 @@ import pytest
 
 from radarcl.grid import GridSpec
 from radarcl.scene import generator
-from radarcl.scene.outdoor import INTERIOR, OCCUPIED, Scene, SceneObject, GRASS
+from radarcl.scene.outdoor import GRASS, INTERIOR, OCCUPIED, Scene, SceneObject
 from radarcl.scene.shapes import Box, Slope
 
 

@@ -5,10 +5,19 @@ import math
 import numpy as np
 import pytest
 
-from radarcl.config import RadarConfig
+from radarcl.config.stage_config import RadarConfig
 from radarcl.errors import ConfigError
-from radarcl.geometry import (BeamLattice, BeamModel, beam_half_width, check_pose, cone_start_range,
-                              interpolate_se2, pose_from_xyz_rpy, se2_pose, two_way_weight)
+from radarcl.geometry import (
+    BeamLattice,
+    BeamModel,
+    beam_half_width,
+    check_pose,
+    cone_start_range,
+    interpolate_se2,
+    pose_from_xyz_rpy,
+    se2_pose,
+    two_way_weight,
+)
 
 RADAR = RadarConfig()
 

@@ -5,6 +5,7 @@ import pytest
 
 from radarcl.errors import ConfigError, DeviceCapabilityError, FrameFormatError
 from radarcl.grid import BRICK, BRICK_BYTES, EvidenceGrid, GridSpec, assemble
+from radarcl.maps.disk import load_grid, save_grid
 
 SPEC = GridSpec((-2.0, -1.0, 0.5), 0.25, (20, 12, 9))
 
@@ -71,8 +72,8 @@ def test_growth_keeps_data_and_save_load_round_trip(runtime, tmp_path):
     dense = grid.snapshot()
     assert np.array_equal(dense, assemble(SPEC, keys, data))
     assert np.array_equal(dense[8:9, 8:12, 8:16], values[:1, :4, :])   # clipped at the grid's edge
-    grid.save(tmp_path / "map.npz")
-    loaded = EvidenceGrid.load(runtime, tmp_path / "map.npz")
+    save_grid(grid, tmp_path / "map.npz")
+    loaded = load_grid(runtime, tmp_path / "map.npz")
     assert loaded.spec == SPEC and np.array_equal(loaded.snapshot(), dense)
     assert np.allclose(loaded.probability()[8, 8, 8], 1 / (1 + np.exp(100 / 1024)))
 
@@ -80,11 +81,11 @@ def test_growth_keeps_data_and_save_load_round_trip(runtime, tmp_path):
 def test_bad_files_are_refused(runtime, tmp_path):
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     with pytest.raises(FrameFormatError, match="not a radarcl grid"):
-        EvidenceGrid.load(runtime, tmp_path / "junk.npz")
+        load_grid(runtime, tmp_path / "junk.npz")
     np.savez(tmp_path / "v9.npz", version=9, origin_m=[0, 0, 0], voxel_m=1.0, shape=[8, 8, 8],
              keys=np.zeros((0, 3), np.int32), data=np.zeros((0, 8, 8, 8), np.int32))
     with pytest.raises(FrameFormatError, match="version 9"):
-        EvidenceGrid.load(runtime, tmp_path / "v9.npz")
+        load_grid(runtime, tmp_path / "v9.npz")
 
 
 def test_a_grid_too_big_for_the_device_says_what_to_do(runtime):
@@ -97,7 +98,7 @@ def test_a_grid_too_big_for_the_device_says_what_to_do(runtime):
 
 
 def test_clear_forgets_evidence_and_fusion_replans(runtime):
-    from radarcl.config import RadarConfig
+    from radarcl.config.stage_config import RadarConfig
     from radarcl.geometry import BeamLattice, BeamModel
     from radarcl.stages.fusion import Fusion
 

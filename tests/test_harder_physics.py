@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from radarcl.config import PAPER_RADAR
+from radarcl.config.stage_config import PAPER_RADAR
 from radarcl.scene import observe as ob
 from radarcl.scene.outdoor import GRASS, Material, Scene, SceneObject
 from radarcl.scene.shapes import Box, Ground

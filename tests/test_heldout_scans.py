@@ -21,7 +21,7 @@ def test_scores_by_hand():
 
 
 def test_the_map_of_some_scans_predicts_the_detections_of_the_others(runtime, shared_data):
-    from radarcl import mapconfig
+    from radarcl.config import mapconfig
 
     r = hs.run(runtime, mapconfig.resolve("navtech-cts350x"), shared_data / "navtech_oxford")
     res = r["results"]

@@ -2,13 +2,13 @@
 
 import numpy as np
 import pytest
+from tolerances import EVIDENCE_UNITS_TOL
 
 from radarcl import logodds, oracle
-from radarcl.config import CfarConfig, InterpretConfig
+from radarcl.config.stage_config import CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.pipeline import Detection
 from radarcl.stages.interpret import Interpreter
-from tolerances import EVIDENCE_UNITS_TOL
 
 SPACING = 0.125
 

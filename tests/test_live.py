@@ -7,19 +7,19 @@ import os
 
 import numpy as np
 import pytest
+from conftest import SHARED_DATA
 
-from radarcl import mapconfig
+from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
-from radarcl.grid import assemble, read, read_meta
-from radarcl.io import emulator, open_input
+from radarcl.grid import assemble
+from radarcl.io import emulator
+from radarcl.io.inputs import open_input
 from radarcl.io.stream import PortReader, StreamRecorder, open_port
 from radarcl.jobs import live
+from radarcl.maps.disk import MapSaver, read, read_meta
 from radarcl.pipeline import Mapping
 from radarcl.scene.observe import observe
 from radarcl.scene.outdoor import paper_scene
-from radarcl.store import MapSaver
-
-from conftest import SHARED_DATA
 
 VOXEL = 0.4
 
@@ -113,7 +113,7 @@ def test_ti_demo_frames_over_a_pty(runtime, tmp_path):
     for row in q9:
         m.fuse(profile_power(row, antennas, q_bits)[None], np.eye(4))
     assert np.array_equal(mapper.mapping.snapshot(), m.snapshot())
-    from radarcl.maps import Map
+    from radarcl.maps.map import Map
 
     nats = Map.of_grid(mapper.mapping.grid).log_odds_at([[1.975, 0.0, 0.0], [1.0, 0.0, 0.0]])
     assert nats[0] > 20 and nats[1] < -20                      # the 1.95 m reflector, free space before it

@@ -3,8 +3,8 @@ round trips, and the CLI's `config show` / `config save`."""
 
 import pytest
 
-from radarcl import mapconfig
 from radarcl.cli import main
+from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
 
 

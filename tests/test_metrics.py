@@ -37,7 +37,7 @@ def test_auc_iou_brier_and_ece_match_scikit_learn():
 def small_truth():
     """A 1 x 2 x 6 grid by hand: classes and labels chosen so every metric has a known value."""
     classes = np.array([[[vis.FREE_VISIBLE, vis.FREE_VISIBLE, vis.DETECTABLE, vis.WEAK, vis.SHADOWED, vis.SHADOWED],
-                         [vis.FREE_VISIBLE, vis.DETECTABLE, vis.UNOBSERVED, vis.INTERIOR, vis.SHADOWED, vis.WEAK]]],
+                         [vis.FREE_VISIBLE, vis.DETECTABLE, vis.UNOBSERVED, vis.INSIDE_SOLID, vis.SHADOWED, vis.WEAK]]],
                        np.uint8)
     labels = np.array([[[FREE, FREE, OCCUPIED, OCCUPIED, OCCUPIED, FREE],
                         [FREE, OCCUPIED, OCCUPIED, INTERIOR, FREE, OCCUPIED]]], np.uint8)

@@ -3,16 +3,16 @@ with the kernels against the float64 oracle; the `radarcl navtech` command."""
 
 import numpy as np
 import pytest
+from test_cfar import check_against_oracle
+from tolerances import EVIDENCE_UNITS_TOL
 
 from radarcl import oracle
 from radarcl.cli import main
-from radarcl.config import CfarConfig, InterpretConfig
+from radarcl.config.sensors import load as load_sensor
+from radarcl.config.stage_config import CfarConfig, InterpretConfig
 from radarcl.errors import FrameFormatError
 from radarcl.io import polar_png as navtech
 from radarcl.pipeline import Detection
-from radarcl.sensors import load as load_sensor
-from test_cfar import check_against_oracle
-from tolerances import EVIDENCE_UNITS_TOL
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from radarcl import mapconfig
+from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
 from radarcl.io import polar_png
 from radarcl.jobs import navtech_map as nm

@@ -1,4 +1,4 @@
-"""Outputs are never destructive by surprise and never half-written (radarcl.outputs)."""
+"""Outputs are never destructive by surprise and never half-written (radarcl.io.files)."""
 
 import os
 import subprocess
@@ -6,8 +6,8 @@ import sys
 
 import pytest
 
-from radarcl import outputs
 from radarcl.errors import ConfigError
+from radarcl.io import files as outputs
 
 
 def test_refusals(tmp_path):
@@ -65,13 +65,13 @@ def test_sigterm_and_ctrl_c_leave_no_temporary_file(tmp_path):
     """A writer stopped by SIGTERM or Ctrl-C inside ``atomic`` under the CLI's handlers exits
     with 143 or 130 and removes its temporary file."""
     script = ("import os, signal, sys, time\n"
-              "from radarcl import cli, commands, outputs\n"
+              "from radarcl import cli\nfrom radarcl.commands import info\nfrom radarcl.io import files as outputs\n"
               "def job(args):\n"
               "    with outputs.atomic(sys.argv[1]) as tmp:\n"
               "        tmp.write_bytes(b'partial')\n"
               "        os.kill(os.getpid(), getattr(signal, sys.argv[2]))\n"
               "        time.sleep(5)\n"
-              "commands.cmd_info = job\n"
+              "info.run = job\n"
               "sys.exit(cli.main(['info']))\n")
     for sig, status in (("SIGTERM", 143), ("SIGINT", 130)):
         out = tmp_path / f"{sig}.npz"

@@ -20,7 +20,7 @@ peaks off the targets: by up to 0.26 m with 256 zeros and 0.21 m with 768 (measu
 import numpy as np
 import pytest
 
-from radarcl.config import PAPER_RADAR
+from radarcl.config.stage_config import PAPER_RADAR
 from radarcl.scene.resolution import two_target_experiment
 from radarcl.stages.range_fft import RangeFFT
 

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from radarcl import logodds
-from radarcl.config import PAPER_RADAR, InterpretConfig
+from radarcl.config.stage_config import PAPER_RADAR, InterpretConfig
 from radarcl.pipeline import Detection
-from radarcl.scene import profiles
+from radarcl.scene import echoes
 
 SPACING = PAPER_RADAR.bin_spacing_m(1024)
 E_HIGH, E_LOW = (int(v) for v in logodds.to_fixed([-1.0, -0.1]))
@@ -24,7 +24,7 @@ def detect(runtime, profile):
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_fig10a_wide_ground_return(runtime, seed):
     """-9 deg beam: strong empty before the ground, strong occupied on it, weaker after."""
-    profile, (near, far) = profiles.fig10_ground_beam(seed)
+    profile, (near, far) = echoes.fig10_ground_beam(seed)
     mask, evidence, pulses = detect(runtime, profile)
     first, last = InterpretConfig().bin_interval(SPACING, profile.size)
     ground = [p for p in pulses if p[0] * SPACING <= far and p[1] * SPACING >= near]
@@ -45,7 +45,7 @@ def test_fig10a_wide_ground_return(runtime, seed):
 def test_fig10b_fence_and_tree(runtime, seed):
     """Beam almost parallel to the ground: two narrow pulses, strong empty everywhere else."""
     fence, tree = 14.0, 23.0
-    profile = profiles.fig10_fence_and_tree(seed, fence_m=fence, tree_m=tree)
+    profile = echoes.fig10_fence_and_tree(seed, fence_m=fence, tree_m=tree)
     mask, evidence, pulses = detect(runtime, profile)
     first, last = InterpretConfig().bin_interval(SPACING, profile.size)
     assert not np.any(pulses[:, 3]), "no pulse may be wide"

@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 
 from radarcl import oracle
-from radarcl.config import PAPER_RADAR, InterpretConfig
+from radarcl.config.stage_config import PAPER_RADAR, InterpretConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
 from radarcl.grid import EvidenceGrid, GridSpec
 from radarcl.pipeline import Detection, Mapping
-from radarcl.scene.profiles import paper_like_samples
+from radarcl.scene.echoes import paper_like_samples
 from radarcl.stages.fusion import Fusion
 from radarcl.stages.range_fft import RangeFFT
 

@@ -6,12 +6,12 @@ import math
 import numpy as np
 import pytest
 
-from radarcl.evaluation import metrics
 from radarcl.errors import ConfigError, FrameFormatError
+from radarcl.evaluation import metrics
 from radarcl.grid import GridSpec
 from radarcl.io import recording
 from radarcl.scene import outdoor
-from radarcl.scene.observe import observe
+from radarcl.scene.observe import load_observations, observe
 from radarcl.scene.shapes import Box, Cylinder, Ground, Sphere
 
 SHAPES = [Sphere((3.0, 0.2, 0.1), 0.7), Cylinder((4.0, -0.3), 0.4, -0.5, 1.2), Box((2.5, -1.0, -0.2), (3.1, 0.4, 0.9))]
@@ -93,7 +93,7 @@ def test_observation_of_one_plate_puts_its_echo_at_its_range():
     """A metal plate 20 m ahead of a level beam (no ground): the strongest bin of the centre
     beam's profile lies within one bin of 20 m, and the same seed gives the same samples."""
     from radarcl import oracle
-    from radarcl.config import PAPER_RADAR
+    from radarcl.config.stage_config import PAPER_RADAR
 
     plate = outdoor.SceneObject("plate", Box((20.0, -2.0, -1.0), (20.1, 2.0, 4.0)), outdoor.METAL)
     scene = outdoor.Scene((plate,), (), (0.0, 0.0, 1.5))
@@ -109,7 +109,7 @@ def test_recording_round_trip_and_refusals(tmp_path):
     obs = observe(outdoor.paper_scene(), [-7.2], seed=3)
     path = tmp_path / "rec.npz"
     recording.save(path, obs)
-    back = recording.load_observations(path)
+    back = load_observations(path)
     assert np.array_equal(back.samples, obs.samples) and np.array_equal(back.poses, obs.poses)
     assert back.seed == 3 and np.array_equal(back.tilts_deg, obs.tilts_deg)
     assert recording.load(path).sensor == "paper"
@@ -118,7 +118,7 @@ def test_recording_round_trip_and_refusals(tmp_path):
     other = tmp_path / "other.npz"
     recording.save(other, recording.Recording(obs.samples[:, :32], obs.poses, "half-paper"))
     with pytest.raises(FrameFormatError, match=r"frames are \(32, 4, 256\) int16; the paper radar's are"):
-        recording.load_observations(other)
+        load_observations(other)
     bad = tmp_path / "bad.npz"
     np.savez(bad, version=2, samples=obs.samples)
     with pytest.raises(FrameFormatError, match="missing"):
@@ -164,7 +164,7 @@ def test_a_still_radar_sees_the_same_speckle_at_every_tilt():
     """Rays come from one lattice fixed in the world, and a scatterer's phase is fixed per
     surface cell: two tilts whose beams overlap share rays, echo ranges and phases; another
     recording (another salt) has other scatterers."""
-    from radarcl.config import PAPER_RADAR
+    from radarcl.config.stage_config import PAPER_RADAR
     from radarcl.scene import observe as ob
 
     scene = outdoor.paper_scene()

@@ -78,9 +78,8 @@ def test_shared_constants_have_one_source(runtime):
     and the kernels see exactly the Python values (interpret flags a silent beam with
     oracle.FLAG_SILENT and clamps evidence at logodds.EVIDENCE_LIMIT)."""
     from radarcl import logodds, oracle
-    from radarcl.config import CfarConfig, InterpretConfig
+    from radarcl.config.stage_config import CfarConfig, InterpretConfig
     from radarcl.pipeline import Detection
-
     from radarcl.stages import COMMON_DEFINES
 
     bare = {k: v for k, v in _defines().items() if k not in COMMON_DEFINES}

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from radarcl import mapconfig, sensors
 from radarcl.cli import main
+from radarcl.config import mapconfig, sensors
 from radarcl.errors import ConfigError
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from radarcl import oracle
-from radarcl.config import PAPER_RADAR, RadarConfig
+from radarcl.config.stage_config import PAPER_RADAR, RadarConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.scene.fmcw import Adc, PointTarget, beat_signal, simulate_beams, simulate_frame
 

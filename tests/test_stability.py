@@ -6,17 +6,17 @@ import math
 
 import numpy as np
 import pytest
+from test_fusion import MODELS, check_against_oracle, evidence, fuse_frame
+from tolerances import CFAR_RTOL, DECISION_MARGIN, EVIDENCE_UNITS_TOL
 
 from radarcl import oracle
-from radarcl.config import PAPER_RADAR, CfarConfig, InterpretConfig, RadarConfig
+from radarcl.config.stage_config import PAPER_RADAR, CfarConfig, InterpretConfig, RadarConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
 from radarcl.grid import GRID_LIMIT, EvidenceGrid, GridSpec
 from radarcl.pipeline import Detection, Mapping
 from radarcl.scene.fmcw import simulate_beams
 from radarcl.stages.fusion import Fusion
-from test_fusion import MODELS, check_against_oracle, evidence, fuse_frame
-from tolerances import CFAR_RTOL, DECISION_MARGIN, EVIDENCE_UNITS_TOL
 
 COARSE = GridSpec((-8.0, -35.0, -10.0), 1.0, (80, 70, 20))
 LATTICE = BeamLattice.from_radar(PAPER_RADAR)

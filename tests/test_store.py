@@ -10,11 +10,12 @@ import time
 import numpy as np
 import pytest
 
-from radarcl import store
 from radarcl.cli import main
 from radarcl.errors import ConfigError, FrameFormatError
-from radarcl.grid import GridSpec, assemble, read
-from radarcl.maps import UNKNOWN, Map
+from radarcl.grid import GridSpec, assemble
+from radarcl.maps import store
+from radarcl.maps.disk import read
+from radarcl.maps.map import UNKNOWN, Map
 
 SPEC = GridSpec((-2.0, -3.0, -1.0), 0.25, (40, 30, 20))
 

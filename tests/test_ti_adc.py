@@ -4,13 +4,14 @@ import numpy as np
 import pytest
 
 from radarcl import oracle
+from radarcl.config.sensors import load as load_sensor
 from radarcl.errors import FrameFormatError
 from radarcl.io.ti_adc import load_capture, words_to_int16
-from radarcl.sensors import load as load_sensor
 
 TI_OPENRADAR = load_sensor("ti-xwr-openradar").radar
-from radarcl.stages.range_fft import RangeFFT
 from tolerances import RANGE_FFT_RTOL
+
+from radarcl.stages.range_fft import RangeFFT
 
 
 def test_unsigned_word_trap():

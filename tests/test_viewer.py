@@ -6,13 +6,14 @@ within the projection of its box grown by one voxel on each side, and nowhere el
 
 import numpy as np
 import pytest
-
-from radarcl.errors import ConfigError, FrameFormatError, ShapeError
-from radarcl.grid import BRICK, GridSpec, read
 from radarcl.viewer import volume as V
 from radarcl.viewer.camera import Camera, box
 from radarcl.viewer.modes import MODES, Settings
 from radarcl.viewer.renderer import Renderer, ViewerError, create_context
+
+from radarcl.errors import ConfigError, FrameFormatError, ShapeError
+from radarcl.grid import BRICK, GridSpec
+from radarcl.maps.disk import read
 
 SIZE = (160, 120)
 RAY_MODES = [m for m in MODES if m != "spheres"]

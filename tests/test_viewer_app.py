@@ -9,10 +9,10 @@ import sys
 import numpy as np
 import pytest
 from PIL import Image
+from radarcl.viewer.modes import Settings
 
 from radarcl import cli
 from radarcl.grid import BRICK, GridSpec
-from radarcl.viewer.modes import Settings
 
 SPEC = GridSpec((-4.0, -3.0, -1.0), 0.25, (40, 32, 24))
 CUBE = (16, 24, 8, 16, 8, 16)   # brick-aligned: the view frames it in the middle
@@ -20,7 +20,7 @@ BACKGROUND = np.round(np.asarray(Settings().background) * 255).astype(np.uint8)
 
 
 def write_map(path, cube=CUBE, value=4.0, poses=None):
-    """A map file as EvidenceGrid.save writes it, with one cube (x0, x1, y0, y1, z0, z1) of
+    """A map file as radarcl writes it, with one cube (x0, x1, y0, y1, z0, z1) of
     ``value`` nat in free space (-1 nat) and the sensor's ``poses`` when given; numpy only."""
     nats = np.full(SPEC.array_shape, -1.0)
     x0, x1, y0, y1, z0, z1 = cube

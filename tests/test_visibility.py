@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from radarcl.config import PAPER_RADAR
+from radarcl.config.stage_config import PAPER_RADAR
 from radarcl.evaluation import visibility as vis
 from radarcl.geometry import BeamLattice
 from radarcl.grid import GridSpec
@@ -42,7 +42,7 @@ def test_a_box_in_front_of_a_wall_shadows_the_wall_behind_it():
     assert c[voxel_at(10.1, 2.5, 1.0)] == vis.DETECTABLE            # the wall's face beside it
     assert c[voxel_at(5.1, 0.0, 1.0)] == vis.DETECTABLE             # the box's front face
     assert c[voxel_at(5.9, 0.0, 1.1)] == vis.SHADOWED               # the box's back face
-    assert c[voxel_at(5.5, 0.0, 1.0)] == vis.INTERIOR               # inside the box
+    assert c[voxel_at(5.5, 0.0, 1.0)] == vis.INSIDE_SOLID               # inside the box
     assert c[voxel_at(8.1, 0.0, 1.1)] == vis.SHADOWED               # air behind the box
     assert c[voxel_at(8.1, 2.5, 1.1)] == vis.FREE_VISIBLE           # air beside that
     assert c[voxel_at(3.1, 0.0, 1.1)] == vis.FREE_VISIBLE           # air in front of the box
@@ -51,7 +51,7 @@ def test_a_box_in_front_of_a_wall_shadows_the_wall_behind_it():
     # noise model given), every INTERIOR label is INTERIOR
     occ = t.labels == OCCUPIED
     assert set(np.unique(c[occ])) == {vis.DETECTABLE, vis.SHADOWED}
-    assert (c[t.labels == INTERIOR] == vis.INTERIOR).all()
+    assert (c[t.labels == INTERIOR] == vis.INSIDE_SOLID).all()
     # the shadow of the box on the wall's front face (the layer x 10.0-10.2): the rays from the
     # sensor through the box's outline, scaled by 10.07 / 5.03, within a voxel or two
     front = np.argwhere((c[:, :, 50] == vis.SHADOWED) & occ[:, :, 50])       # (z, y)

@@ -13,12 +13,13 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from radarcl.errors import RadarclError
-from radarcl.grid import read, read_poses
 from radarcl.viewer.camera import Camera
 from radarcl.viewer.modes import COLORMAPS, MODES, Settings
 from radarcl.viewer.renderer import Renderer, ViewerError, import_moderngl, read_rgb
 from radarcl.viewer.volume import changed_bricks, from_bricks, load_map, update, write_bricks
+
+from radarcl.errors import RadarclError
+from radarcl.maps.disk import read, read_poses
 
 log = logging.getLogger(__name__)
 POLL_S = 0.25                       # how often --live looks at the file

@@ -19,7 +19,8 @@ import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
-from radarcl.grid import BRICK, GridSpec, assemble, read
+from radarcl.grid import BRICK, GridSpec, assemble
+from radarcl.maps.disk import read
 
 TEXTURE_LIMIT_NATS = 1000.0        # texture values are clamped here: float16 holds them to 0.5 nat
 
@@ -209,13 +210,13 @@ def from_nats(spec, nats, max_size=2048):
 
 
 def load_map(path, max_size=2048, budget=None):
-    """Read a map file (``EvidenceGrid.save``'s npz, e.g. ``radarcl demo``'s map.npz) into a
+    """Read a map file (an npz or map store, e.g. ``radarcl demo``'s map.npz) into a
     ``Volume``; anything else raises ``FrameFormatError`` with the reason. A grid over the GL
     3D-texture limit ``max_size`` or whose volume would not fit the memory ``budget`` (bytes;
-    default ``radarcl.io.memory_budget()``) is max-pooled by the smallest factor that fits,
+    default ``radarcl.io.files.memory_budget()``) is max-pooled by the smallest factor that fits,
     assembled a slab at a time from its bricks (a small file declaring 1000^3 voxels never
     becomes a 4 GB array), and the note says so."""
-    from radarcl.grid import read_poses
+    from radarcl.maps.disk import read_poses
 
     spec, keys, bricks = read(path)
     volume = from_bricks(spec, keys, bricks, max_size, budget)
@@ -224,9 +225,9 @@ def load_map(path, max_size=2048, budget=None):
 
 
 def from_bricks(spec, keys, bricks, max_size=2048, budget=None):
-    """A ``Volume`` from a sparse snapshot (``grid.read``'s keys and bricks), pooled as
+    """A ``Volume`` from a sparse snapshot (``maps.disk.read``'s keys and bricks), pooled as
     ``load_map`` says."""
-    from radarcl.io import memory_budget
+    from radarcl.io.files import memory_budget
 
     budget = memory_budget() if budget is None else budget
     factor = pool_factor(spec, max_size, budget)

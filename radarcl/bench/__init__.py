@@ -1,77 +1,48 @@
-"""Benchmarks: each prints ratios against a baseline measured in the same run."""
+"""`radarcl bench NAME`: benchmarks, each printing its figures and their ratio to a baseline
+measured in the same run (interleaved, medians: ``timing``). Each benchmark module has
+``add_arguments(parser)`` and ``command(args, runtime, say)`` -> (result dict, table lines)."""
 
-import time
+import json
+import sys
 
-import numpy as np
+from radarcl.bench import cfar, fusion, heldout_scans, live, quality, range_fft, scenes, store, viewer
+from radarcl.commands.options import runtime
 
+SUMMARY = "benchmarks, each against a baseline measured in the same run"
+DESCRIPTION = ("Each benchmark prints its figures and their ratio to a baseline measured in the same run "
+               "(interleaved, medians). `radarcl bench NAME --help` for its options.")
 
-def interleaved_medians(functions, repeat, block=10, warmup=3, load=None, max_other=0.25):
-    """Median seconds per call of each callable.
-
-    The callables take turns in blocks of ``block`` back-to-back calls, so machine noise (other
-    processes, clock changes) falls on all of them alike while each runs in the steady state of a
-    frame-rate loop. (Measured on PoCL: alternating single calls made the range-FFT kernel take
-    0.8 ms instead of 0.59, likely the cost of waking PoCL's idle worker threads, which a
-    streaming pipeline does not pay.)
-
-    These machines are shared: a block during which other processes used more than
-    ``max_other`` of a core (``OtherLoad``, from /proc) is discarded, unless every block of a
-    callable was. ``load``, a dict, receives per callable the blocks kept and discarded and the
-    other processes' mean share of a core.
-    """
-    for fn in functions.values():
-        for _ in range(warmup):
-            fn()
-    times = {name: [] for name in functions}
-    others = {name: [] for name in functions}
-    for _ in range(max(1, repeat // block)):
-        for name, fn in functions.items():
-            meter = OtherLoad()
-            start = time.perf_counter()
-            for _ in range(block):
-                fn()
-            times[name].append((time.perf_counter() - start) / block)
-            others[name].append(meter.cores())
-    out = {}
-    for name, t in times.items():
-        t, o = np.array(t), np.array(others[name], float)
-        quiet = ~(o > max_other)                     # NaN (no /proc) counts as quiet
-        out[name] = float(np.median(t[quiet] if quiet.any() else t))
-        if load is not None:
-            load[name] = dict(blocks_kept=int(quiet.sum()) if quiet.any() else len(t),
-                              blocks_discarded=int((~quiet).sum()) if quiet.any() else 0,
-                              other_cores=float(np.nanmean(o)) if np.isfinite(o).any() else None)
-    return out
+BENCHES = {
+    "range-fft": (range_fft, "window + FFT + magnitude of a paper frame vs scipy.fft, same run"),
+    "cfar": (cfar, "CFAR + eq. 12 of a paper frame vs vectorised numpy, same run"),
+    "fusion": (fusion, "one paper frame into the 0.1 m grid vs the float64 oracle and the memory floor, same run"),
+    "quality": (quality, "map error against run time on the reference scene (zero padding, beam model, voxel, CFAR "
+                         "kind) on one fixed voxel set, with three baselines"),
+    "heldout-scans": (heldout_scans, "real data without lidar: a map of the even Navtech scans predicts the CFAR "
+                                     "detections of the odd ones, vs raw intensity"),
+    "scenes": (scenes, "the maps of generated scenes (held-out or training split) scored on their visibility truth, "
+                       "beside the three baselines"),
+    "store": (store, "saving and loading the paper's 0.1 m map as .npz vs the map store, with an incremental save, "
+                     "same run"),
+    "live": (live, "the reference scene streamed beam by beam over a pty into the live engine: throughput, latency, "
+                   "faults, vs waiting for whole frames"),
+    "viewer": (viewer, "the paper's full grid rendered at 512 x 512 through EGL vs a plain ray march, same run"),
+}
 
 
-class OtherLoad:
-    """CPU used by other processes since creation, in cores (Linux /proc; NaN elsewhere): all
-    CPUs' busy time less this process's (its threads, PoCL's included), per second of wall."""
+def add_arguments(parser):
+    """One sub-command per benchmark, each with --json and its own options."""
+    benches = parser.add_subparsers(dest="bench", required=True, metavar="NAME")
+    for name, (module, summary) in BENCHES.items():
+        b = benches.add_parser(name, help=summary, description=summary[0].upper() + summary[1:] + ".")
+        b.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+        module.add_arguments(b)
+        b.set_defaults(module=module)
 
-    def __init__(self):
-        self.start = (time.perf_counter(), *self._ticks())
 
-    @staticmethod
-    def _ticks():
-        try:
-            with open("/proc/stat") as f:
-                cpu = [int(v) for v in f.readline().split()[1:]]
-            with open("/proc/self/stat") as f:
-                own = f.read().rsplit(")", 1)[1].split()
-            return sum(cpu) - cpu[3] - cpu[4], int(own[11]) + int(own[12])      # busy - (idle, iowait); utime + stime
-        except (OSError, ValueError, IndexError):
-            return float("nan"), float("nan")
-
-    MIN_WALL_S = 0.1        # /proc counts in ticks of 10 ms: a shorter span cannot be judged
-
-    def cores(self):
-        """Other processes' mean share of a core since creation; NaN for spans under
-        ``MIN_WALL_S`` or without /proc."""
-        import os
-
-        wall = time.perf_counter() - self.start[0]
-        if wall < self.MIN_WALL_S:
-            return float("nan")
-        busy, own = self._ticks()
-        hz = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
-        return max(0.0, ((busy - self.start[1]) - (own - self.start[2])) / hz / wall)
+def run(args):
+    say = (lambda line: None) if args.json else (lambda line: print(line, file=sys.stderr))
+    say(f"measuring {args.bench} ...")
+    result, lines = args.module.command(args, runtime, say)
+    print(json.dumps(result) if args.json else "\n".join(lines))
+    return 0

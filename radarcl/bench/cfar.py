@@ -11,8 +11,8 @@ pulse per beam from one scatter-min. The kernel's figure includes uploading the 
 import numpy as np
 
 from radarcl import logodds, oracle
-from radarcl.bench import interleaved_medians
-from radarcl.config import PAPER_RADAR, CfarConfig, InterpretConfig
+from radarcl.bench.timing import interleaved_medians
+from radarcl.config.stage_config import PAPER_RADAR, CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError
 from radarcl.pipeline import Detection
 
@@ -81,9 +81,9 @@ class NumpyDetection:
 
 
 def paper_profiles(seed=0):
-    """Power profiles of one paper frame (``scene.profiles.paper_like_frame``): receiver noise,
+    """Power profiles of one paper frame (``scene.echoes.paper_like_frame``): receiver noise,
     ground returns, and point echoes up to ~100 dB above the noise."""
-    from radarcl.scene.profiles import paper_like_frame
+    from radarcl.scene.echoes import paper_like_frame
 
     return paper_like_frame(seed)
 
@@ -151,7 +151,7 @@ def format_table(result):
 
 def add_arguments(parser):
     """`radarcl bench cfar` options."""
-    from radarcl.cli import positive_int
+    from radarcl.commands.options import positive_int
 
     parser.add_argument("--repeat", type=positive_int, default=200, help="timed repetitions per variant "
                                                                           "(default: %(default)s)")

@@ -27,12 +27,12 @@ import time
 import numpy as np
 
 from radarcl import oracle
-from radarcl.bench import interleaved_medians
-from radarcl.config import PAPER_RADAR
+from radarcl.bench.timing import interleaved_medians
+from radarcl.config.stage_config import PAPER_RADAR
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
 from radarcl.grid import EvidenceGrid, GridSpec
 from radarcl.pipeline import Mapping
-from radarcl.scene.profiles import paper_like_samples
+from radarcl.scene.echoes import paper_like_samples
 from radarcl.stages.fusion import Fusion
 
 N_FFT = 1024
@@ -178,7 +178,8 @@ def run(runtime, repeat=20, report=None, spec=PAPER_GRID, spin_spec=SPIN_GRID):
 def _spinning(runtime, spec):
     """A Navtech-like spinning radar, still, every bin -1 nat: {"fuse": one frame, "voxels":
     the voxels it updates}."""
-    from radarcl import logodds, mapconfig
+    from radarcl import logodds
+    from radarcl.config import mapconfig
 
     config = mapconfig.resolve("navtech-cts350x")
     sensor = config.sensor
@@ -232,7 +233,7 @@ def format_table(r):
 
 def add_arguments(parser):
     """`radarcl bench fusion` options."""
-    from radarcl.cli import bounded_int
+    from radarcl.commands.options import bounded_int
 
     parser.add_argument("--repeat", type=bounded_int(1, 400), default=20,
                         help="timed frames per variant, 1-400 (default: %(default)s)")

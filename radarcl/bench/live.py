@@ -39,8 +39,8 @@ def stream_once(runtime, config, packets, baud, faults=None):
 
 def run(voxel_m=0.1, frames=2, report=None):
     """Measure; returns the --json dict."""
-    from radarcl import mapconfig
     from radarcl.cl import Runtime
+    from radarcl.config import mapconfig
     from radarcl.io import emulator
     from radarcl.pipeline import Mapping
 
@@ -123,7 +123,7 @@ def format_table(r):
 
 def add_arguments(parser):
     """`radarcl bench live` options."""
-    from radarcl.cli import bounded_int, positive_float
+    from radarcl.commands.options import bounded_int, positive_float
 
     parser.add_argument("--voxel", type=positive_float, default=0.1, help="voxel [m] (default: %(default)s)")
     parser.add_argument("--frames", type=bounded_int(1, 15), default=2, help="frames streamed per run "

@@ -10,8 +10,8 @@ pays per frame; the profiles stay on the device for CFAR). Errors are against th
 import numpy as np
 
 from radarcl import oracle
-from radarcl.bench import interleaved_medians
-from radarcl.config import PAPER_RADAR
+from radarcl.bench.timing import interleaved_medians
+from radarcl.config.stage_config import PAPER_RADAR
 from radarcl.scene.fmcw import Adc, PointTarget, simulate_frame
 from radarcl.stages.range_fft import RangeFFT
 
@@ -89,7 +89,7 @@ def format_table(result):
 
 def add_arguments(parser):
     """`radarcl bench range-fft` options."""
-    from radarcl.cli import positive_int
+    from radarcl.commands.options import positive_int
 
     parser.add_argument("--repeat", type=positive_int, default=200, help="timed repetitions per variant "
                                                                           "(default: %(default)s)")

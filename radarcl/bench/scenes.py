@@ -27,8 +27,8 @@ def configurations(voxel_m, extra=()):
     ``voxel_m``."""
     from pathlib import Path
 
-    from radarcl import mapconfig
-    from radarcl.evaluation.evaluate import paper_config
+    from radarcl.config import mapconfig
+    from radarcl.config.presets import paper_config
     from radarcl.evaluation.tuning import TUNED
 
     tuned = paper_config(voxel_m, TUNED)
@@ -41,7 +41,7 @@ def configurations(voxel_m, extra=()):
 
 def run(runtime, seeds, voxel_m=0.2, report=None, extra=(), physics=0):
     """Score every configuration and baseline on every scene of ``seeds``; returns the --json dict."""
-    from radarcl.evaluation.evaluate import baselines, oracle_detections, instrument, map_observations, radar_score
+    from radarcl.evaluation.evaluate import baselines, instrument, map_observations, oracle_detections, radar_score
     from radarcl.scene.generator import generate
     from radarcl.scene.observe import observe
     from radarcl.scene.outdoor import PAPER_TILTS_DEG
@@ -112,7 +112,7 @@ def format_table(r):
 
 def add_arguments(parser):
     """`radarcl bench scenes` options."""
-    from radarcl.cli import positive_float
+    from radarcl.commands.options import positive_float
 
     parser.add_argument("--split", choices=("held-out", "train"), default="held-out",
                         help="which scenes (default: %(default)s; tune only on train)")

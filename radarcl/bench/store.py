@@ -14,14 +14,15 @@ from pathlib import Path
 
 import numpy as np
 
-from radarcl import store
-from radarcl.grid import FILE_VERSION, read
+from radarcl.maps import store
+from radarcl.maps.disk import read
+from radarcl.maps.npz import FILE_VERSION
 
 
 def reference_map(voxel_m=0.1, report=None):
     """(spec, keys, data) of the reference scene fused at ``voxel_m`` with the tuned constants."""
     from radarcl.cl import Runtime
-    from radarcl.evaluation.evaluate import paper_config
+    from radarcl.config.presets import paper_config
     from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
     from radarcl.pipeline import Mapping
     from radarcl.scene.observe import observe
@@ -97,7 +98,7 @@ def format_table(r):
 
 def add_arguments(parser):
     """`radarcl bench store` options."""
-    from radarcl.cli import bounded_int
+    from radarcl.commands.options import bounded_int
 
     parser.add_argument("--map", default=None, help="time this map instead of the reference scene's at 0.1 m")
     parser.add_argument("--repeat", type=bounded_int(1, 50), default=3, help="rounds (default: %(default)s)")

@@ -16,7 +16,7 @@ spans the whole fan, so the occupied part is not a small box. ``--map`` times a 
 import numpy as np
 
 from radarcl import logodds
-from radarcl.bench import interleaved_medians
+from radarcl.bench.timing import interleaved_medians
 from radarcl.viewer.camera import Camera
 from radarcl.viewer.headless import time_frames
 from radarcl.viewer.modes import Settings
@@ -146,7 +146,7 @@ def format_table(result):
 
 def add_arguments(parser):
     """`radarcl bench viewer` options."""
-    from radarcl.cli import bounded_int
+    from radarcl.commands.options import bounded_int
 
     parser.add_argument("--repeat", type=bounded_int(1, 100), default=6,
                         help="timed frames per mode, 1-100 (default: %(default)s)")

@@ -12,7 +12,6 @@ import os
 import sys
 from pathlib import Path
 
-
 from radarcl.cl.signature import KernelFunction, parse_kernels
 from radarcl.errors import KernelBuildError, NoOpenCLError
 
@@ -32,10 +31,8 @@ AFFINITY_ENV = "POCL_AFFINITY"
 """PoCL's switch that pins its CPU driver's worker thread i to CPU i. radarcl sets it to 1
 before PoCL starts, unless it is set already (``POCL_AFFINITY=0`` keeps the scheduler free)
 or this process may not run on every CPU (PoCL stops the process when a pin is refused).
-Measured here (2 cores, PoCL 3.1), against unpinned workers in the same session: a moving
-radar's frame 22.6 -> 18.9 ms, CFAR + eq. 12 interleaved with numpy 0.46 -> 0.32 ms, the range
-FFT 0.31 -> 0.18 ms at 1024 points. Unpinned, the workers follow the host thread between the
-planning and the kernels and lose their caches."""
+Unpinned, the workers follow the host thread between the planning and the kernels and lose
+their caches (README, "Why the code is shaped so")."""
 
 
 def pin_pocl_workers(environ=None):

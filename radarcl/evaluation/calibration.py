@@ -29,6 +29,10 @@ import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError
+from radarcl.evaluation import visibility as vis
+from radarcl.grid import EvidenceGrid
+from radarcl.pipeline import Mapping
+from radarcl.stages.fusion import Fusion
 
 CHANNELS = ("occ", "near", "far", "after")
 
@@ -82,10 +86,6 @@ def bin_features(profiles, noise, mask, config, bin_spacing_m):
 def fused_features(runtime, obs, config, spec, progress=None):
     """(nz, ny, nx, 4) float64: each feature of every frame of ``obs`` fused as its own channel
     with ``config``'s CFAR, beams and beam model (eq. 9's weights), into grids of ``spec``."""
-    from radarcl.grid import EvidenceGrid
-    from radarcl.pipeline import Mapping
-    from radarcl.stages.fusion import Fusion
-
     mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec))
     f, lattice, model = mapping.fusion, mapping.fusion.lattice, mapping.fusion.model
     icfg, spacing = config.interpret_config(), f.bin_spacing_m
@@ -107,8 +107,6 @@ def fused_features(runtime, obs, config, spec, progress=None):
 def design(features, truth, model):
     """(X, y) of the visible voxels of ``truth`` (a ``VisibilityTruth``): the fused features
     (merged to the paper's three for model "paper") and occupied (DETECTABLE or WEAK) or not."""
-    from radarcl.evaluation import visibility as vis
-
     c = truth.classes
     keep = (c == vis.FREE_VISIBLE) | (c == vis.DETECTABLE) | (c == vis.WEAK)
     X = features[keep]

@@ -14,18 +14,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl import logodds, mapconfig
+from radarcl import logodds, oracle
 from radarcl.errors import ConfigError
-from radarcl.evaluation.metrics import evaluate
+from radarcl.evaluation import baseline
+from radarcl.evaluation import visibility as vis
+from radarcl.evaluation.baseline import detection_scans, octree, read_back
+from radarcl.evaluation.metrics import evaluate, radar_scores
+from radarcl.evaluation.visibility import DETECTABLE_DB
 from radarcl.grid import EvidenceGrid
 from radarcl.pipeline import Mapping
+from radarcl.scene.observe import NOISE_RMS, observe
 from radarcl.stages.fusion import Fusion
-
-
-def paper_config(voxel_m=0.1, values=None):
-    """The paper radar's configuration at ``voxel_m`` with ``values`` {"section.key": value}
-    set by the program (the reference scene lies in the paper's grid)."""
-    return mapconfig.resolve("paper", program={"grid.voxel_m": voxel_m, **(values or {})})
 
 
 @dataclass
@@ -82,8 +81,6 @@ def map_observations(runtime, obs, config, progress=None):
 def baseline_map(obs, detections, config):
     """OctoMap's map (``baseline.octree``, ``baseline.read_back``) of the same frames' CFAR
     detections: (log_odds, ms_per_frame); the time is OctoMap's insertion, not our read-back."""
-    from radarcl.evaluation.baseline import detection_scans, octree, read_back
-
     spec = config.grid_spec()
     scans = detection_scans(obs, detections, config)
     start = time.perf_counter()
@@ -127,10 +124,6 @@ def instrument(runtime, scene, obs, reference, progress=None):
     DETECTABLE/WEAK need the frames' noiseless range profiles: the recording is simulated again
     with its seed and tilts and no receiver noise or ADC (the same rays, phases and echoes: they
     are functions of the seed, ``observe.lattice_rays``)."""
-    from radarcl import oracle
-    from radarcl.evaluation import visibility as vis
-    from radarcl.scene.observe import NOISE_RMS, observe
-
     ref_map = map_observations(runtime, obs, reference, progress)
     radar = reference.sensor.radar
     quiet = observe(scene, obs.tilts_deg, radar=radar, seed=obs.seed, noise_rms=0.0, adc=None, physics=obs.physics)
@@ -150,8 +143,6 @@ def instrument(runtime, scene, obs, reference, progress=None):
 
 def radar_score(inst, log_odds):
     """``metrics.radar_scores`` of ``log_odds`` on ``inst``, NaN as None (JSON)."""
-    from radarcl.evaluation.metrics import radar_scores
-
     out = radar_scores(log_odds, inst.truth, inst.objects)
     return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in out.items()}
 
@@ -159,8 +150,6 @@ def radar_score(inst, log_odds):
 def baselines(runtime, inst, obs):
     """The three baselines on ``inst``'s voxel set: {name: scores with ms_per_frame}; octomap
     uses the reference map's CFAR detections. Without octomap-python, its entry says so."""
-    from radarcl.evaluation import baseline
-
     out = {}
     out["prior_only"] = dict(radar_score(inst, baseline.prior_only(inst.spec)), ms_per_frame=0.0)
     start = time.perf_counter()
@@ -181,9 +170,6 @@ def oracle_detections(runtime, inst, obs, free_nats=0.0):
     costs (free voxels beside a surface at the same range share its bins) and, with -1, what
     strong free evidence adds. Not an upper bound on AUC: graded evidence can rank better than
     +1/0, whose ties count one half."""
-    from radarcl.evaluation.visibility import DETECTABLE_DB
-    from radarcl.pipeline import Mapping
-
     mapping = Mapping.from_config(runtime, config=inst.reference)
     fusion = mapping.fusion
     loud = inst.noiseless_power >= inst.noise_power * 10 ** (DETECTABLE_DB / 10)

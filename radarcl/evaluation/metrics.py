@@ -28,6 +28,8 @@ voxels that are observed and not INTERIOR (a radar sees surfaces, not the inside
 import numpy as np
 
 from radarcl.errors import ShapeError
+from radarcl.evaluation import visibility as vis
+from radarcl.evaluation.visibility import dilate
 from radarcl.scene.outdoor import INTERIOR, OCCUPIED
 
 
@@ -44,20 +46,6 @@ def roc_auc(scores, positive):
     neg = np.bincount(inverse[~positive], minlength=inverse.max() + 1).astype(np.float64)
     neg_below = np.cumsum(neg) - neg
     return float((pos * (neg_below + 0.5 * neg)).sum() / (n_pos * float(n_neg)))
-
-
-def dilate(mask):
-    """Boolean dilation by the 3 x 3 x 3 cube (one voxel, 26-neighbourhood), as three 1-D passes."""
-    out = np.asarray(mask, bool).copy()
-    for axis in range(out.ndim):
-        grown = out.copy()
-        lo = [slice(None)] * out.ndim
-        hi = [slice(None)] * out.ndim
-        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
-        grown[tuple(lo)] |= out[tuple(hi)]
-        grown[tuple(hi)] |= out[tuple(lo)]
-        out = grown
-    return out
 
 
 def evaluate(log_odds_nats, truth, observed):
@@ -146,8 +134,6 @@ def radar_scores(log_odds_nats, truth, objects=()):
     - ``objects_found`` / ``objects_total`` and per object its range and peak log-odds
       (``objects``: ``visibility.object_surfaces``).
     Voxel counts of each class come with them."""
-    from radarcl.evaluation import visibility as vis
-
     L = np.asarray(log_odds_nats, np.float32)
     c = truth.classes
     if L.shape != c.shape:

@@ -11,7 +11,7 @@ score a map against these classes (``visibility_truth``):
 - ``WEAK``: a surface voxel on the line of sight, below that;
 - ``SHADOWED``: behind the first surface along the ray from every sensor position (air or
   surface: a radar cannot tell);
-- ``INTERIOR``: inside a solid.
+- ``INSIDE_SOLID``: inside a solid (the scene's INTERIOR label).
 
 Line of sight: one ray from each sensor position to the voxel's centre; the voxel is visible
 when the first surface on that ray lies no nearer than the voxel's own near boundary (its
@@ -31,13 +31,27 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarcl.errors import ShapeError
-from radarcl.scene.outdoor import INTERIOR as SCENE_INTERIOR
-from radarcl.scene.outdoor import OCCUPIED as SCENE_OCCUPIED
+from radarcl.grid import GridSpec
+from radarcl.scene.outdoor import INTERIOR, OCCUPIED
 
-UNOBSERVED, FREE_VISIBLE, DETECTABLE, WEAK, SHADOWED, INTERIOR = range(6)
+UNOBSERVED, FREE_VISIBLE, DETECTABLE, WEAK, SHADOWED, INSIDE_SOLID = range(6)
 CLASS_NAMES = ("unobserved", "free-visible", "detectable", "weak", "shadowed", "interior")
 DETECTABLE_DB = 10.0
 CHUNK = 1 << 20                  # rays cast at once (memory: about 200 bytes per ray)
+
+
+def dilate(mask):
+    """Boolean dilation by the 3 x 3 x 3 cube (one voxel, 26-neighbourhood), as three 1-D passes."""
+    out = np.asarray(mask, bool).copy()
+    for axis in range(out.ndim):
+        grown = out.copy()
+        lo = [slice(None)] * out.ndim
+        hi = [slice(None)] * out.ndim
+        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
+        grown[tuple(lo)] |= out[tuple(hi)]
+        grown[tuple(hi)] |= out[tuple(lo)]
+        out = grown
+    return out
 
 
 def detectable_snr_db(pfa=1e-3, n_train=32, pd=0.5):
@@ -131,14 +145,14 @@ def visibility_truth(scene, spec, observed, poses, noiseless_power=None, noise_p
         raise ShapeError(f"observed {observed.shape} must be the grid's {labels.shape}")
     obstacles = type(scene)(tuple(o for o in scene.objects if o.shape.bounds() is not None and not is_terrain(o.name)),
                             (), scene.sensor_m)
-    obstacle = obstacles.truth(spec) == SCENE_OCCUPIED
+    obstacle = obstacles.truth(spec) == OCCUPIED
     classes = np.full(labels.shape, UNOBSERVED, np.uint8)
-    classes[observed & (labels == SCENE_INTERIOR)] = INTERIOR
-    cast = observed & (labels != SCENE_INTERIOR)
+    classes[observed & (labels == INTERIOR)] = INSIDE_SOLID
+    cast = observed & (labels != INTERIOR)
     idx = np.argwhere(cast)[:, ::-1]                                   # (x, y, z)
     origins = np.unique(np.asarray(poses, float)[:, :3, 3].round(9), axis=0)
     seen = line_of_sight(scene, spec, idx, origins)
-    occ = labels[idx[:, 2], idx[:, 1], idx[:, 0]] == SCENE_OCCUPIED
+    occ = labels[idx[:, 2], idx[:, 1], idx[:, 0]] == OCCUPIED
     cls = np.where(~seen, SHADOWED, np.where(occ, DETECTABLE, FREE_VISIBLE)).astype(np.uint8)
     if noiseless_power is not None:
         surface = np.flatnonzero(seen & occ)
@@ -172,9 +186,6 @@ def object_surfaces(scene, truth, spec, sensor_m=None):
     with a visible surface voxel (DETECTABLE or WEAK) in ``truth``: {"name", "range_m" (sensor
     to its nearest visible surface voxel), "near" (n, 3) voxel indices (x, y, z) within one
     voxel of its visible surface (26-neighbourhood)}; and the names of objects with none."""
-    from radarcl.evaluation.metrics import dilate
-    from radarcl.grid import GridSpec
-
     sensor = np.asarray(scene.sensor_m if sensor_m is None else sensor_m, float)
     groups = {}
     for obj in scene.objects:
@@ -191,7 +202,7 @@ def object_surfaces(scene, truth, spec, sensor_m=None):
             hidden.append(name)
             continue
         sub = GridSpec(tuple(origin + i0 * v), v, tuple(int(n) for n in i1 - i0))
-        mine = type(scene)(tuple(objs), (), scene.sensor_m).truth(sub) == 1          # OCCUPIED
+        mine = type(scene)(tuple(objs), (), scene.sensor_m).truth(sub) == OCCUPIED
         cls = truth.classes[i0[2]:i1[2], i0[1]:i1[1], i0[0]:i1[0]]
         seen = mine & ((cls == DETECTABLE) | (cls == WEAK))
         if not seen.any():

@@ -18,6 +18,7 @@ import threading
 import numpy as np
 
 from radarcl.errors import ConfigError, FrameFormatError
+from radarcl.grid import GridSpec
 
 MAGIC = b"RCVS"
 HEAD = struct.Struct("<4sBI")
@@ -153,8 +154,6 @@ class BrickSubscriber:
         return bytes(buf)
 
     def _read(self):
-        from radarcl.grid import GridSpec
-
         try:
             while True:
                 magic, kind, length = HEAD.unpack(self._exact(HEAD.size))

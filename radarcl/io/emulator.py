@@ -17,8 +17,6 @@ import numpy as np
 from radarcl.errors import ConfigError
 from radarcl.io import beam_protocol, ti_uart
 
-PROTOCOLS = ("beams", "ti")
-
 
 @dataclass(frozen=True)
 class Faults:

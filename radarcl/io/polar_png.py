@@ -234,6 +234,43 @@ def scan_poses(stamps, odometry, invert=False):
     return np.stack(poses)
 
 
+@dataclass
+class PolarSequence:
+    """The scans of one recording in time order with their odometry (``load_odometry`` rows, or
+    None) and the file it came from."""
+
+    scans: list
+    odometry: dict = None
+    odometry_path: Path = None
+
+    @property
+    def stamps(self):
+        """The scans' UNIX times [us], from their names (``<unix_us>.png``)."""
+        try:
+            return [int(s.path.stem) for s in self.scans]
+        except ValueError:
+            raise FrameFormatError("odometry needs scans named by their UNIX time in us (<stamp>.png)") from None
+
+    def poses(self, invert=False):
+        """(n_scans, 4, 4) scan poses in the first scan's frame (``scan_poses``); the origin for
+        every scan without odometry."""
+        if self.odometry is None:
+            return np.broadcast_to(np.eye(4), (len(self.scans), 4, 4))
+        return scan_poses(self.stamps, self.odometry, invert=invert)
+
+
+def read_sequence(path, layout, odometry=None):
+    """A ``PolarSequence`` of one scan file or a directory of scans read with ``layout``; its
+    odometry from ``odometry``, else ``radar_odometry.csv`` beside the scans or in ``../gt``."""
+    path = Path(path)
+    paths = [path] if path.is_file() else scan_paths(path)
+    scans = [load_scan(p, layout) for p in paths]
+    if odometry is None and path.is_dir():
+        odometry = next((c for c in (path / "radar_odometry.csv", path.parent / "gt" / "radar_odometry.csv")
+                         if c.is_file()), None)
+    return PolarSequence(scans, None if odometry is None else load_odometry(odometry), odometry)
+
+
 def beam_poses(scans, poses, n_az, azimuth_sign=1.0, motion=True):
     """(n_scans, n_az, 4, 4) per-azimuth poses for a spinning lattice of ``n_az`` azimuths: the
     scan poses interpolated at each azimuth's time (a line fitted to its bursty timestamps),

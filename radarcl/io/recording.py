@@ -18,9 +18,10 @@ import numpy as np
 
 from radarcl.errors import FrameFormatError
 from radarcl.geometry import check_poses
+from radarcl.io.files import atomic, safe_npz
 
 VERSION = 2
-_META = ("tilts_deg", "seed", "rays_per_beam", "n_clipped")
+SIMULATION_META = ("tilts_deg", "seed", "rays_per_beam", "n_clipped")       # a simulation's metadata
 _OPTIONAL_META = ("physics",)          # simulator switches (scene.observe.SIDELOBES | MULTIPATH); 0 when absent
 
 
@@ -54,8 +55,6 @@ def save(path, recording, overwrite=True):
                   **{k: np.asarray(v) for k, v in recording.meta.items()})
     if recording.flags is not None:
         arrays["flags"] = recording.flags
-    from radarcl.outputs import atomic
-
     with atomic(path) as tmp, open(tmp, "wb") as f:   # a file object: numpy would append .npz
         np.savez_compressed(f, **arrays)
 
@@ -63,8 +62,6 @@ def save(path, recording, overwrite=True):
 def load(path):
     """Read a recording (version 1 or 2); checks keys, version, dtypes, shapes and poses.
     Returns a ``Recording``."""
-    from radarcl.io import safe_npz
-
     try:
         with safe_npz(path) as z:
             if "version" not in z.files:
@@ -73,13 +70,13 @@ def load(path):
             if version not in (1, VERSION):
                 raise FrameFormatError(f"{path} has recording version {version}; this radarcl reads 1 and {VERSION}")
             frames_key = "samples" if version == 1 else "frames"
-            missing = [k for k in (frames_key, "poses") + (_META if version == 1 else ("sensor",)) if k not in z.files]
+            missing = [k for k in (frames_key, "poses") + (SIMULATION_META if version == 1 else ("sensor",)) if k not in z.files]
             if missing:
                 raise FrameFormatError(f"{path} is not a radarcl recording: missing {', '.join(missing)}")
             frames, poses = z[frames_key], z["poses"]
             flags = z["flags"] if "flags" in z.files else None
             sensor = "paper" if version == 1 else str(z["sensor"])
-            meta = {k: z[k] for k in _META + _OPTIONAL_META if k in z.files}
+            meta = {k: z[k] for k in SIMULATION_META + _OPTIONAL_META if k in z.files}
     except (OSError, ValueError, EOFError) as exc:
         if isinstance(exc, FrameFormatError):
             raise
@@ -100,24 +97,3 @@ def load(path):
         raise FrameFormatError(f"{path}: flags must be (n_frames, *batch) uint8, got {flags.shape} {flags.dtype}")
     meta = {k: (v.astype(np.float64) if k == "tilts_deg" else int(v)) for k, v in meta.items()}
     return Recording(frames, poses.astype(np.float64), sensor, flags, meta)
-
-
-def load_observations(path):
-    """A simulation of the paper's reference scene (``scene.observe.Observations``) from its
-    recording; refuses recordings of other sensors or without the simulation's metadata."""
-    from radarcl.config import PAPER_RADAR
-    from radarcl.scene.observe import Observations
-
-    rec = load(path)
-    if rec.frames.shape[1:] != PAPER_RADAR.frame_shape or rec.frames.dtype != np.int16:
-        raise FrameFormatError(f"{path}: frames are {rec.frames.shape[1:]} {rec.frames.dtype}; the paper radar's "
-                               f"are {PAPER_RADAR.frame_shape} int16")
-    missing = [k for k in _META if k not in rec.meta]
-    if missing or rec.poses.ndim != 3:
-        raise FrameFormatError(f"{path} is not a recording of the reference scene: it lacks {', '.join(missing)}"
-                               if missing else f"{path}: the reference scene has one pose per frame")
-    if rec.meta["tilts_deg"].shape != (len(rec),):
-        raise FrameFormatError(f"{path}: {len(rec)} frames need tilts ({len(rec)},), got {rec.meta['tilts_deg'].shape}")
-    m = rec.meta
-    return Observations(rec.frames, rec.poses, m["tilts_deg"], m["seed"], m["rays_per_beam"], m["n_clipped"],
-                        m.get("physics", 0))

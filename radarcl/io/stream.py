@@ -15,8 +15,11 @@ import threading
 import time
 from dataclasses import asdict, dataclass
 
+from radarcl.errors import ConfigError, FrameFormatError
+
 log = logging.getLogger(__name__)
 
+PROTOCOLS = ("beams", "ti")        # radarcl.io.beam_protocol, radarcl.io.ti_uart
 NEED_MORE, BAD, BAD_CRC = "need more", "bad header", "bad crc"
 
 
@@ -142,8 +145,6 @@ class ScanningParser:
 def open_port(url, baud=921600, timeout=0.2):
     """A pyserial port for ``url`` (a device, ``socket://``, ``rfc2217://``, ``loop://``);
     ConfigError with pyserial's reason when it cannot be opened."""
-    from radarcl.errors import ConfigError
-
     try:
         import serial
     except ImportError as exc:
@@ -213,8 +214,6 @@ class StreamRecorder:
     ``read_stream`` stops at a torn last record and says so. Refuses an existing file."""
 
     def __init__(self, path, header, flush_s=0.5):
-        from radarcl.errors import ConfigError
-
         try:
             self._f = open(path, "xb")
         except FileExistsError:
@@ -250,8 +249,6 @@ def read_stream(path):
     """(header dict, iterator of (time_ns, bytes)) of a ``StreamRecorder`` file. A file that is
     not one is refused; a torn last record (the writer was killed) ends the iteration, and the
     iterator's ``torn`` attribute says how many bytes were left over."""
-    from radarcl.errors import FrameFormatError
-
     f = open(path, "rb")
     try:
         if f.read(len(STREAM_MAGIC)) != STREAM_MAGIC:
@@ -278,8 +275,6 @@ class _Records:
         self._f, self.torn = f, 0
 
     def __iter__(self):
-        from radarcl.errors import FrameFormatError
-
         with self._f as f:
             while True:
                 head = f.read(RECORD.size)

@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from radarcl.errors import FrameFormatError
+from radarcl.io.files import declared_bytes, memory_budget, read_npy_header
+
 
 def words_to_int16(values):
     """Raw unsigned 16-bit words (any real dtype, integral values in 0..65535) -> int16 by two's
@@ -50,8 +52,6 @@ def load_capture(path):
 
 def _check_npy_header(path):
     """Refuse a .npy whose header declares more than the memory budget, before reading it."""
-    from radarcl.io import declared_bytes, memory_budget, read_npy_header
-
     try:
         with open(path, "rb") as f:
             shape, dtype = read_npy_header(f)

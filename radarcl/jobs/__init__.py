@@ -1,2 +1,3 @@
-"""What the CLI runs: the main job (demo, Fig. 9), fusing a recording, the Navtech map and report,
-and the figures they draw. Library code lives one level up; nothing below imports from here."""
+"""What the commands run: the main job (demo, Fig. 9), fusing any input (``fuse``, ``fuse_many``),
+the Navtech map and report, calibration, the live loop. Library code lives below; nothing
+below imports from here."""

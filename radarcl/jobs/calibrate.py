@@ -17,8 +17,15 @@ log-likelihood on validation scenes, and a configuration file every command read
 
 import numpy as np
 
+from radarcl.config.presets import paper_config
 from radarcl.errors import ConfigError
 from radarcl.evaluation import calibration as cal
+from radarcl.evaluation.evaluate import instrument, map_observations, radar_score
+from radarcl.evaluation.tuning import TUNED
+from radarcl.report import figures
+from radarcl.scene.generator import TRAIN_SEEDS, generate
+from radarcl.scene.observe import observe
+from radarcl.scene.outdoor import PAPER_TILTS_DEG
 
 CFAR_CANDIDATES = (("ca", 1e-3), ("ca", 1e-2), ("so", 1e-2))
 SURFACE_CANDIDATES_DB = (6.0, 10.0, 15.0, 20.0)
@@ -45,12 +52,6 @@ def run(runtime, model="occlusion", voxel_m=0.2, seeds=None, report=None, unknow
     holds E_l at 0: behind the first surface the map stays unknown (the fit sees only visible
     voxels, so left free it sets E_l by the visible air behind surfaces, and the shadowed
     voxels behind them get it too)."""
-    from radarcl.evaluation.evaluate import instrument, map_observations, paper_config, radar_score
-    from radarcl.evaluation.tuning import TUNED
-    from radarcl.scene.generator import TRAIN_SEEDS, generate
-    from radarcl.scene.observe import observe
-    from radarcl.scene.outdoor import PAPER_TILTS_DEG
-
     say = report or (lambda _: None)
     seeds = list(seeds or TRAIN_SEEDS)
     if len(seeds) < 3:
@@ -135,8 +136,6 @@ def format_lines(r):
 
 def reliability_figure(r):
     """Before / after reliability on the validation scenes."""
-    from radarcl.jobs import plots
-
-    return plots.reliability_figure({name: rel["rows"] for name, rel in r["reliability"].items()},
+    return figures.reliability_figure({name: rel["rows"] for name, rel in r["reliability"].items()},
                                     f"validation scenes {r['validation_seeds']}, {r['voxel_m']} m, "
                                     f"calibrated: {r['model']} interpreter, {r['chosen']}")

@@ -23,8 +23,18 @@ outcome:
 import numpy as np
 
 from radarcl import logodds
+from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
 from radarcl.evaluation import calibration as cal
+from radarcl.evaluation import heldout
+from radarcl.evaluation.metrics import calibration
+from radarcl.grid import EvidenceGrid
+from radarcl.io import polar_png
+from radarcl.jobs import navtech_map
+from radarcl.jobs.calibrate import with_fit
+from radarcl.pipeline import Mapping
+from radarcl.report import figures
+from radarcl.stages.fusion import Fusion
 
 CFAR_CANDIDATES = (("ca", 1e-3), ("ca", 1e-2), ("os", 1e-2))
 SURFACE_CANDIDATES_DB = (10.0, 15.0, 20.0)
@@ -34,10 +44,6 @@ def scan_features(runtime, config, spec, scans, per_beam):
     """(nz, ny, nx, 4) float64: the features of ``scans`` (``calibration.bin_features`` with
     ``config``'s CFAR and interpreter) each fused as its own channel with per-beam poses.
     Beams a scan marks invalid give nothing."""
-    from radarcl.grid import EvidenceGrid
-    from radarcl.pipeline import Mapping
-    from radarcl.stages.fusion import Fusion
-
     mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec), per_beam_poses=True)
     f = mapping.fusion
     icfg = config.interpret_config()
@@ -58,12 +64,11 @@ def scan_features(runtime, config, spec, scans, per_beam):
 def design(runtime, config, outcome, spec, scans, per_beam, map_idx, test_idx, model):
     """(X, y, scan of each row): the fused features of the ``map_idx`` scans at every held-out
     bin of the ``test_idx`` scans, and each bin's detection by ``outcome``."""
-    from radarcl.bench.heldout_scans import predictions
 
     grids = scan_features(runtime, config, spec, [scans[k] for k in map_idx], per_beam[map_idx])
     X, y, which = [], [], []
     for k in test_idx:                     # every channel at once: each scan detected once
-        values, detected = predictions(runtime, outcome, spec, grids, [scans[k]], per_beam[[k]])
+        values, detected = heldout.predictions(runtime, outcome, spec, grids, [scans[k]], per_beam[[k]])
         X.append(values)
         y.append(detected)
         which.append(np.full(len(values), k))
@@ -76,13 +81,6 @@ def design(runtime, config, outcome, spec, scans, per_beam, map_idx, test_idx, m
 def run(runtime, config, data_dir, model="occlusion", report=None):
     """Calibrate ``config`` (a ``Resolved`` for a polar-scan sensor) on ``data_dir``; returns
     (the calibrated ``Resolved``, the result dict)."""
-    from radarcl import mapconfig
-    from radarcl.bench import heldout_scans as hs
-    from radarcl.evaluation.metrics import calibration
-    from radarcl.io import polar_png
-    from radarcl.jobs import navtech_map
-    from radarcl.jobs.calibrate import with_fit
-
     say = report or (lambda _: None)
     scans, poses, _, _ = navtech_map.load(config, data_dir)
     if len(scans) < 8:
@@ -121,17 +119,17 @@ def run(runtime, config, data_dir, model="occlusion", report=None):
                                                        per_beam[rep_map]).snapshot(),
             "calibrated": navtech_map.build_map(runtime, calibrated, spec, [scans[k] for k in rep_map],
                                                 per_beam[rep_map]).snapshot(),
-            "baseline: raw_intensity": hs._raw_map(runtime, config, spec, [scans[k] for k in rep_map], per_beam[rep_map])}
-    stacked, yt = hs.predictions(runtime, outcome, spec, np.stack(list(maps.values()), axis=-1), test_scans,
+            "baseline: raw_intensity": heldout.raw_map(runtime, config, spec, [scans[k] for k in rep_map], per_beam[rep_map])}
+    stacked, yt = heldout.predictions(runtime, outcome, spec, np.stack(list(maps.values()), axis=-1), test_scans,
                                  per_beam[rep_test])
     for m, name in enumerate(maps):
         L = stacked[:, m]
-        results[name] = hs.score(L, yt)
+        results[name] = heldout.score(L, yt)
         results[name]["ece"], reliability[name] = calibration(1.0 / (1.0 + np.exp(-L)), yt)
-    results["baseline: no map"] = dict(hs.score(np.zeros(len(yt)), yt), ece=calibration(np.full(len(yt), 0.5), yt)[0])
+    results["baseline: no map"] = dict(heldout.score(np.zeros(len(yt)), yt), ece=calibration(np.full(len(yt), 0.5), yt)[0])
     rate = float(y.mean())                  # the fit part's detection rate: no peeking at the report part
     const = np.full(len(yt), np.log(rate / (1 - rate)))
-    results["baseline: detection rate"] = dict(hs.score(const, yt), ece=calibration(1 / (1 + np.exp(-const)), yt)[0])
+    results["baseline: detection rate"] = dict(heldout.score(const, yt), ece=calibration(1 / (1 + np.exp(-const)), yt)[0])
     result = dict(benchmark="calibrate-scans", sensor=config.sensor.name, model=model, scans=len(scans),
                   fit_scans=fit_part, report_scans=report_part, voxel_m=config["grid.voxel_m"],
                   outcome_detector=outcome.label(), candidates=rows, chosen=cfg.label(config), constants=constants,
@@ -156,8 +154,6 @@ def format_lines(r):
 
 def reliability_figure(r):
     """Reliability of the held-out detections on the report scans, before and after."""
-    from radarcl.jobs import plots
-
-    return plots.reliability_figure(r["reliability"], f"{r['sensor']}: maps of scans predict the CFAR detections of "
+    return figures.reliability_figure(r["reliability"], f"{r['sensor']}: maps of scans predict the CFAR detections of "
                                                       f"held-out scans {r['report_scans']}; calibrated: {r['chosen']}",
                                     what="held-out bins", outcome="detected")

@@ -13,9 +13,9 @@
    against the exact ground truth (``metrics``), with timings.
 4. Plots: ``fig10_scene.png`` (two beams of the scene like the paper's Fig. 10),
    ``topdown.png`` (the map seen from above beside the truth), ``quality.png`` (error against
-   run time, ``bench.quality`` at 0.4 m), ``view.png`` (the tuned map's isosurface rendered
+   run time, ``evaluation.quality`` at 0.4 m), ``view.png`` (the tuned map's isosurface rendered
    headless by the viewer, ``radarcl render``); the map itself as ``map.npz``
-   (``EvidenceGrid.load``, ``radarcl view``); everything in ``summary.json``, and one page
+   (``maps.disk.load_grid``, ``radarcl view``); everything in ``summary.json``, and one page
    with the configuration, the tables and every figure in ``report.html``.
 """
 
@@ -26,16 +26,20 @@ from pathlib import Path
 import numpy as np
 
 from radarcl import oracle
-from radarcl.geometry import BeamLattice
-from radarcl.jobs import demo_fig9, plots
-from radarcl.bench import quality
-from radarcl.config import PAPER_RADAR
+from radarcl.config.presets import paper_config
+from radarcl.config.stage_config import PAPER_RADAR
 from radarcl.errors import ConfigError
-from radarcl.evaluation.evaluate import baselines, instrument, map_observations, paper_config, radar_score
-from radarcl.io import recording
-from radarcl.scene.observe import observe
-from radarcl.scene.outdoor import OCCUPIED, PAPER_TILTS_DEG, paper_scene
+from radarcl.evaluation import quality
+from radarcl.evaluation.evaluate import baselines, instrument, map_observations, radar_score
 from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
+from radarcl.geometry import BeamLattice
+from radarcl.io import recording
+from radarcl.jobs import demo_fig9
+from radarcl.maps.disk import save_grid
+from radarcl.report import figures
+from radarcl.report.quality import METRICS_TEXT, chart, format_table, sweep_table
+from radarcl.scene.observe import load_observations, observe
+from radarcl.scene.outdoor import OCCUPIED, PAPER_TILTS_DEG, paper_scene
 
 QUICK_VOXEL_M = 0.4
 VIEW_CAMERA = "-160,30"               # behind and left of the stand, looking down the field
@@ -54,7 +58,7 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
     """Run the main job into ``out_dir``; ``report`` gets lines, ``progress(done, total, what)``
     counts simulated frames and fused observations. Returns the summary dict."""
     out = Path(out_dir)
-    replayed = recording.load_observations(replay) if replay else None     # a bad file stops here
+    replayed = load_observations(replay) if replay else None     # a bad file stops here
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {out} is not a directory")
     out.mkdir(parents=True, exist_ok=True)
@@ -108,14 +112,14 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
                                   memory_mib=r.memory["sparse_bytes"] / 2 ** 20) for name, (c, r, m) in maps.items()}
     summary["baselines"] = base
 
-    res.grid.save(out / "map.npz", poses=obs.poses)
+    save_grid(res.grid, out / "map.npz", poses=obs.poses)
     summary["view"] = _render_view(out, report)
     _plot_profiles(obs, config, out / "fig10_scene.png", shown)
     _plot_topdown(res.log_odds, inst.truth.labels, res.spec, out / "topdown.png")
     report("error against run time at 0.4 m (bench quality) ...")
     q = quality.run(runtime, scene, obs, paper_config(QUICK_VOXEL_M, TUNED), voxels=(QUICK_VOXEL_M,))
-    quality.chart(q, out / "quality.png", out / "reliability.png")
-    for line in quality.format_table(q):
+    chart(q, out / "quality.png", out / "reliability.png")
+    for line in format_table(q):
         report(line)
     summary["quality"] = q
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
@@ -126,7 +130,7 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
 
 def _write_report(out, summary, maps, base, q):
     """report.html: the run's configuration, its metrics, every figure and the viewer's render."""
-    from radarcl.jobs import report as page
+    from radarcl.report import html as page
 
     headers = ["map"] + list(METRIC_NAMES) + ["objects", "ms/frame"]
     rows = [[name] + [m[k] for k in METRIC_KEYS] + [f"{m['objects_found']}/{m['objects_total']}", r.ms_per_frame]
@@ -135,7 +139,7 @@ def _write_report(out, summary, maps, base, q):
                                                                     b["ms_per_frame"]]
              for name, b in base.items() if "error" not in b]
     shown = summary["shown"]
-    figures = [("fig9.png", "Fig. 9: two point targets 1.0 m apart, without and with zero padding"),
+    pictures = [("fig9.png", "Fig. 9: two point targets 1.0 m apart, without and with zero padding"),
                ("frame.png", "One frame of the paper's radar, range x azimuth, per stacked beam"),
                ("fig10_scene.png", "Two beams of the reference scene as in Fig. 10, with CFAR and eq. 12"),
                ("topdown.png", f"The {shown} map from above beside the ground truth"),
@@ -148,9 +152,9 @@ def _write_report(out, summary, maps, base, q):
                              "voxel [m]": QUICK_VOXEL_M if summary["quick"] else 0.1,
                              "simulation [s]": round(summary["simulate_s"], 1)})]),
         ("Metrics on the fixed voxel set", [page.Text(summary["voxel_set"]), page.Table(headers, rows),
-                                            page.Text(quality.METRICS_TEXT)]),
-        ("Error against run time", [quality.sweep_table(q)]),
-        ("Figures", [page.Figure(out / name, caption) for name, caption in figures if (out / name).is_file()]),
+                                            page.Text(METRICS_TEXT)]),
+        ("Error against run time", [sweep_table(q)]),
+        ("Figures", [page.Figure(out / name, caption) for name, caption in pictures if (out / name).is_file()]),
         (f"Configuration of the {shown} map", [page.configuration(maps[shown][0])]),
     ]
     page.write(out / "report.html", "radarcl demo: the paper's reference scene", sections,
@@ -184,10 +188,10 @@ def _plot_profiles(obs, config, path, name, beams=((2, 32, 0), (14, 20, 3))):
         azimuth = np.degrees(BeamLattice.from_radar(PAPER_RADAR).azimuths[az])
         panels.append((np.arange(len(prof)) * spacing, prof, cfar.alpha * noise[0], mask[0], evidence,
                        f"beam at {elevation:.1f} deg elevation, {azimuth:+.1f} deg azimuth"))
-    plots.save(plots.beams_figure(panels, f"Two beams of the reference scene (as the paper's Fig. 10), {name} "
+    figures.save(figures.beams_figure(panels, f"Two beams of the reference scene (as the paper's Fig. 10), {name} "
                                           "constants"), path, dpi=100)
 
 
 def _plot_topdown(log_odds, truth, spec, path):
     """Largest log-odds over z per (x, y) (Fig. 11 seen from above) beside the truth."""
-    plots.save(plots.topdown_figure(log_odds, truth == OCCUPIED, spec, above_z_m=0.0), path, dpi=100)
+    figures.save(figures.topdown_figure(log_odds, truth == OCCUPIED, spec, above_z_m=0.0), path, dpi=100)

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from radarcl.config import PAPER_RADAR
+from radarcl.config.stage_config import PAPER_RADAR
 from radarcl.geometry import BeamLattice
-from radarcl.jobs import plots
+from radarcl.report import figures
 from radarcl.scene.fmcw import Adc, PointTarget, simulate_frame
 from radarcl.scene.resolution import count_peaks, two_target_experiment
 from radarcl.stages.range_fft import RangeFFT
@@ -69,11 +69,11 @@ def run(runtime, out_dir, seed=0, report=log.info):
                + ", ".join(f"n_fft {n}: {f:.2f}" for n, f in fractions.items()))
 
     labels = [f"n_fft = {n}: " + ("no padding" if n == cfg.n_samples else f"{n - cfg.n_samples} zeros") for n in N_FFTS]
-    plots.save(plots.fig9_figure([cfg.bin_ranges_m(n) for n in N_FFTS], [profiles[n][PAIR_BEAM] for n in N_FFTS],
+    figures.save(figures.fig9_figure([cfg.bin_ranges_m(n) for n in N_FFTS], [profiles[n][PAIR_BEAM] for n in N_FFTS],
                                  PAIR_M, labels), out_dir / "fig9.png")
     db = 20 * np.log10(np.maximum(profiles[1024], 1e-3))
     azimuths = np.degrees(BeamLattice.from_radar(cfg).azimuths)
-    plots.save(plots.frame_figure(db, azimuths, cfg.bin_ranges_m(1024)[-1], 1024), out_dir / "frame.png", dpi=90)
+    figures.save(figures.frame_figure(db, azimuths, cfg.bin_ranges_m(1024)[-1], 1024), out_dir / "frame.png", dpi=90)
 
     summary = dict(device=runtime.name, frame_shape=list(frame.samples.shape),
                    range_fft_ms={str(n): t for n, t in timings.items()},

@@ -18,9 +18,9 @@ import time
 
 import numpy as np
 
-from radarcl import io
 from radarcl.errors import ConfigError
 from radarcl.grid import GRID_LIMIT
+from radarcl.io.inputs import open_input
 
 
 def fuse_one(config_values, sensor_toml, path, spec_tuple):
@@ -28,11 +28,11 @@ def fuse_one(config_values, sensor_toml, path, spec_tuple):
     os.environ.setdefault("POCL_MAX_PTHREAD_COUNT", "1")
     if os.environ["POCL_MAX_PTHREAD_COUNT"] == "1":
         os.environ["POCL_AFFINITY"] = "0"       # one thread per worker: pinned, all would share CPU 0
-    from pathlib import Path
     import tempfile
+    from pathlib import Path
 
-    from radarcl import mapconfig
     from radarcl.cl import Runtime
+    from radarcl.config import mapconfig
     from radarcl.grid import EvidenceGrid, GridSpec
     from radarcl.pipeline import Mapping
 
@@ -41,13 +41,12 @@ def fuse_one(config_values, sensor_toml, path, spec_tuple):
         profile.write_text(sensor_toml)
         config = mapconfig.resolve(str(profile), program=config_values)
     runtime = Runtime()
-    source = io.open_input(config.sensor, path)
+    source = open_input(config.sensor, path)
     config = config.for_sensor(source.sensor) if source.sensor is not config.sensor else config
     grid = EvidenceGrid(runtime, GridSpec(*spec_tuple))
     mapping = Mapping.from_config(runtime, config=config, grid=grid)
     start = time.perf_counter()
-    for j in range(len(source)):
-        mapping.fuse(source.frames[j], source.poses[j], flags=None if config.sensor.raw else source.flags[j])
+    mapping.fuse_source(source)
     runtime.queue.finish()
     keys, data = grid.bricks()
     return keys, data, len(source), time.perf_counter() - start
@@ -80,7 +79,7 @@ def check_inputs(config, paths):
     sensor's frames, another frame shape) is refused naming the input and both shapes."""
     shapes = {}
     for p in paths:
-        source = io.open_input(config.sensor, p)            # raises naming both shapes
+        source = open_input(config.sensor, p)            # raises naming both shapes
         shapes[str(p)] = (tuple(source.sensor.frame_shape()), len(source))
     if len({s for s, _ in shapes.values()}) > 1:
         raise ConfigError("the inputs have different frame shapes: " + "; ".join(f"{p}: {s}" for p, (s, _) in shapes.items()))
@@ -91,7 +90,7 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
     """Fuse ``paths`` on a Dask cluster (``client``, a ``scheduler`` address, or a local
     cluster of ``workers`` processes) into ``out`` (.npz or a map store); returns a dict of
     timings. The grid is the configuration's."""
-    from radarcl.store import MapSaver
+    from radarcl.maps.disk import MapSaver
 
     if len(set(map(str, paths))) != len(paths):
         raise ConfigError("an input appears twice; each recording is fused once")
@@ -139,9 +138,9 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
             return keys, data
 
         def save(self, path, poses=None):
-            from radarcl.grid import write_npz
+            from radarcl.maps import npz
 
-            write_npz(path, spec, keys, data, poses)
+            npz.write(path, spec, keys, data, poses)
 
     MapSaver(out, config.sensor.toml(), config.as_dict(), paths)(_Snapshot())
     report(f"wrote {out}: {len(keys)} bricks; fused in {fused:.1f} s on the workers (busy "

@@ -25,7 +25,9 @@ from radarcl.errors import FrameFormatError
 from radarcl.geometry import se2_pose
 from radarcl.grid import EvidenceGrid, GridSpec
 from radarcl.io import polar_png
-from radarcl.pipeline import Mapping
+from radarcl.io.inputs import polar_source
+from radarcl.pipeline import Detection, Mapping
+from radarcl.report import figures
 
 OCCUPIED_NATS = 1.0                 # occupied in the consistency overlap: log-odds above this
 
@@ -42,11 +44,8 @@ def build_map(runtime, config, spec, scans, per_beam, progress=None):
     """Fuse ``scans`` taken at ``per_beam`` poses (n, n_az, 4, 4) into a new grid of ``spec``
     with ``config`` (a ``mapconfig.Resolved``); returns the grid."""
     mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec), per_beam_poses=True)
-    for k, (scan, poses) in enumerate(zip(scans, per_beam)):
-        flags = np.where(scan.valid, 0, 8).astype(np.uint8)     # oracle.FLAG_SILENT: no evidence
-        mapping.fuse(scan.power(), poses, flags=flags)
-        if progress is not None:
-            progress(k + 1, len(scans))
+    source = polar_source(config.sensor, scans, per_beam, f"{len(scans)} polar scans")
+    mapping.fuse_source(source, None if progress is None else lambda j, _: progress(j + 1, len(scans)))
     mapping.runtime.queue.finish()
     return mapping.grid
 
@@ -74,16 +73,12 @@ def load(config, data_dir):
     """(scans, scan poses, timestamps, odometry) of ``data_dir`` (radar/*.png and
     gt/radar_odometry.csv) read as ``config``'s sensor."""
     data_dir = Path(data_dir)
-    layout = polar_png.PolarLayout.of(config.sensor)
-    scans = [polar_png.load_scan(p, layout) for p in polar_png.scan_paths(data_dir / "radar")]
-    if len(scans) < 4:
-        raise FrameFormatError(f"{data_dir / 'radar'}: the half-map check needs at least 4 scans, found {len(scans)}")
-    odometry = polar_png.load_odometry(data_dir / "gt" / "radar_odometry.csv")
-    try:
-        stamps = [int(s.path.stem) for s in scans]
-    except ValueError:
-        raise FrameFormatError("scans must be named by their UNIX time in us (<stamp>.png)") from None
-    return scans, polar_png.scan_poses(stamps, odometry), stamps, odometry
+    sequence = polar_png.read_sequence(data_dir / "radar", polar_png.PolarLayout.of(config.sensor),
+                                       data_dir / "gt" / "radar_odometry.csv")
+    if len(sequence.scans) < 4:
+        raise FrameFormatError(f"{data_dir / 'radar'}: the half-map check needs at least 4 scans, found "
+                               f"{len(sequence.scans)}")
+    return sequence.scans, sequence.poses(), sequence.stamps, sequence.odometry
 
 
 def run(runtime, config, data_dir, report=print, progress=None):
@@ -135,8 +130,6 @@ def run(runtime, config, data_dir, report=print, progress=None):
 def pulse_statistics(runtime, config, scans):
     """What the detector makes of the scans: detections and pulses per scan, pulse widths [m]
     (median, 90th percentile), the share of wide pulses; over the evidence interval."""
-    from radarcl.pipeline import Detection
-
     spacing = config.sensor.bin_spacing_m()
     det = Detection(runtime, (scans[0].levels.shape[0],), scans[0].n_bins, spacing, config.cfar_config(),
                     config.interpret_config())
@@ -161,13 +154,11 @@ def pulse_statistics(runtime, config, scans):
 
 
 def plot_map(grid, poses, path, results=None, title="Navtech"):
-    """Top-down PNG of a one-layer map (``jobs.plots.plane_map_figure``) with the half-map
+    """Top-down PNG of a one-layer map (``jobs.figures.plane_map_figure``) with the half-map
     check's result in the title."""
-    from radarcl.jobs import plots
-
     text = f"{title}, {len(poses)} scans fused at {grid.spec.voxel_m} m (eq. 9)"
     if results:
         r = results["true poses"]["correlation"]
         worst = max(v["correlation"] for k, v in results.items() if k != "true poses")
         text += f"\nhalf-map correlation {r:.3f} with the true poses, at most {worst:.3f} altered"
-    plots.save(plots.plane_map_figure(grid.log_odds()[0], grid.spec, poses, text), path, dpi=120)
+    figures.save(figures.plane_map_figure(grid.log_odds()[0], grid.spec, poses, text), path, dpi=120)

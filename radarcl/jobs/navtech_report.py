@@ -7,8 +7,8 @@ import numpy as np
 
 from radarcl.errors import ConfigError
 from radarcl.io import polar_png
-from radarcl.jobs import plots
 from radarcl.pipeline import Detection
+from radarcl.report import figures
 
 
 def report(runtime, config, scan_path, azimuth, out, say):
@@ -45,11 +45,11 @@ def report(runtime, config, scan_path, azimuth, out, say):
     title = (f"{sensor.name} {Path(scan_path).stem}, azimuth {a} ({np.degrees(scan.angles_rad[a]):.1f} deg): "
              f"{interp.n_pulses[a]} pulses, {cfar_config.kind.upper()}-CFAR Pfa {cfar_config.pfa:g}, eq. 12 with k_occ "
              f"{interpret_config.k_occ:g}, E_h {interpret_config.e_high:g}, E_l {interpret_config.e_low:g}")
-    fig = plots.interpretation_figure(np.arange(scan.n_bins) * spacing, power[a], threshold, rows,
+    fig = figures.interpretation_figure(np.arange(scan.n_bins) * spacing, power[a], threshold, rows,
                                       interp.evidence[a], title,
                                       (detection.interpreter.first_bin, detection.interpreter.last_bin))
     out = Path(out)
-    plots.save(fig, out, dpi=110)
+    figures.save(fig, out, dpi=110)
     say(f"  azimuth {a}: {len(rows)} pulses "
         + ", ".join(f"{r[0] * spacing:.1f}-{r[1] * spacing:.1f} m{' (wide)' if r[3] else ''}" for r in rows[:8])
         + (" ..." if len(rows) > 8 else ""))

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl.config import RadarConfig
+from radarcl.config.stage_config import RadarConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.physics import SPEED_OF_LIGHT
 

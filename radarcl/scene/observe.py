@@ -28,9 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl.config import PAPER_RADAR
-from radarcl.errors import ConfigError
+from radarcl.config.stage_config import PAPER_RADAR
+from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.geometry import BeamLattice
+from radarcl.io import recording
 from radarcl.scene.fmcw import Adc, simulate_beams
 
 SPAN = 1.5                   # sampled pattern radius, in half-power half-widths
@@ -227,3 +228,21 @@ def observe(scene, tilts_deg, radar=PAPER_RADAR, seed=0, rays_across=RAYS_ACROSS
         if progress is not None:
             progress(j + 1, len(tilts))
     return Observations(np.stack(frames), np.stack(poses), tilts, int(seed), int(amp.shape[1]), clipped, int(physics))
+
+
+def load_observations(path):
+    """A simulation of the paper's reference scene (``scene.observe.Observations``) from its
+    recording; refuses recordings of other sensors or without the simulation's metadata."""
+    rec = recording.load(path)
+    if rec.frames.shape[1:] != PAPER_RADAR.frame_shape or rec.frames.dtype != np.int16:
+        raise FrameFormatError(f"{path}: frames are {rec.frames.shape[1:]} {rec.frames.dtype}; the paper radar's "
+                               f"are {PAPER_RADAR.frame_shape} int16")
+    missing = [k for k in recording.SIMULATION_META if k not in rec.meta]
+    if missing or rec.poses.ndim != 3:
+        raise FrameFormatError(f"{path} is not a recording of the reference scene: it lacks {', '.join(missing)}"
+                               if missing else f"{path}: the reference scene has one pose per frame")
+    if rec.meta["tilts_deg"].shape != (len(rec),):
+        raise FrameFormatError(f"{path}: {len(rec)} frames need tilts ({len(rec)},), got {rec.meta['tilts_deg'].shape}")
+    m = rec.meta
+    return Observations(rec.frames, rec.poses, m["tilts_deg"], m["seed"], m["rays_per_beam"], m["n_clipped"],
+                        m.get("physics", 0))

@@ -18,7 +18,7 @@ scatterers with a radar cross-section (RCS) at their centre, visible where nothi
 Ground truth per voxel, exact at any voxel size (``truth``): FREE when the voxel holds only
 air, OCCUPIED when it touches a solid without lying entirely inside one (a surface voxel),
 INTERIOR when it lies entirely inside a solid (below the grass, inside a rock). A radar sees
-surfaces, not the inside of the earth, so metrics leave INTERIOR voxels out (radarcl.metrics).
+surfaces, not the inside of the earth, so metrics leave INTERIOR voxels out (radarcl.evaluation.metrics).
 """
 
 import math
@@ -26,8 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl.config import PAPER_SENSOR_HEIGHT_M
+from radarcl.config.stage_config import PAPER_SENSOR_HEIGHT_M
 from radarcl.errors import ConfigError
+from radarcl.geometry import pose_from_xyz_rpy
 from radarcl.grid import GridSpec
 from radarcl.scene.shapes import Box, Cylinder, Ground, Sphere
 
@@ -144,8 +145,6 @@ class Scene:
         """4x4 pose of the radar head for a lowest-beam elevation ``tilt_deg`` (see
         PAPER_TILTS_DEG): at the sensor position, pitched so the frame's centre points at
         tilt + 3 deg. Use with ``BeamLattice.from_radar(radar, tilt_deg=0)``."""
-        from radarcl.geometry import pose_from_xyz_rpy
-
         if not -90.0 <= tilt_deg <= 84.0:
             raise ConfigError(f"tilt_deg must lie in [-90, 84] so that every beam points within "
                               f"+-90 deg of the horizon, got {tilt_deg}")

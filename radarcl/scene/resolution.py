@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarcl import oracle
-from radarcl.config import RadarConfig
+from radarcl.config.stage_config import RadarConfig
 from radarcl.scene.fmcw import simulate_beams
 
 

@@ -10,14 +10,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl.config import CfarConfig
+from radarcl.config.stage_config import CfarConfig
 from radarcl.errors import ConfigError
 from radarcl.stages import Port, Stage, beam_batch, build, count, work_group_size
 
 _KINDS = {"ca": 0, "go": 1, "so": 2, "os": 3}
-# Measured on PoCL, 2 cores, paper frame (256 beams x 512 bins, CA 16+16 cells), kernel only:
-# vector_width 4 / 8 / 16 with 64 work-items per group: 1.69 / 1.11 / 0.77 ms; local size 8-64
-# changes it by 10-20 %. Any size is correct (the tests run several).
+# Beams as the lanes of a vector on CPUs (PoCL does not vectorise across work-items): the widest
+# was the fastest (README, "Why the code is shaped so"). Any size is correct (the tests run
+# several).
 DEFAULT_LOCAL_SIZE = 64
 CPU_VECTOR_WIDTH = 16
 VECTOR_WIDTHS = (1, 2, 4, 8, 16)

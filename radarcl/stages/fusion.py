@@ -32,18 +32,15 @@ from radarcl.grid import BRICK, EvidenceGrid
 from radarcl.stages import Port, Stage, build, count, spacing, work_group_size
 from radarcl.stages.fusion_plan import BLOCK, FusionPlanner, HeadFrame, candidate_windows, nonempty
 
-# Measured on PoCL, 2 cores, the paper's frame at 0.1 m (35k bricks), ms per frame:
-#   one work-item per voxel, window per 4^3 sub-brick in the kernel: 450; the same without
-#   the candidate loop: 145 (the windows' trigonometry and 280k work-groups);
-#   one work-item per 4^3 sub-brick, rows of 4 as float4, host windows per brick + a
-#   sphere test per sub-brick: 104; rows of 8 as float8 (8x4x4 sub-bricks): 80;
-#   local size 4..256: within noise; a per-row filter (below): within noise, kept because it
-#   skips 75 % of the rows, which counts on devices where rows are not the cost.
+# A work-item per block of rows of 8 voxels (as float8), its beams' windows planned on the
+# host per brick: the shape that measured fastest of those tried (README, "Why the code is
+# shaped so"); the local size hardly matters. The per-row filter skips 3/4 of the rows, which
+# counts on devices where rows are not the cost.
 DEFAULT_LOCAL_SIZE = 64
 VECTOR_WIDTHS = (4, 8)             # voxels along x per row of a work-item's block
 # Rows of 8 taken two at a time, 16 lanes (AVX-512's width; the two rows are contiguous in the
-# brick): the paper's frame moving, 21.6 -> 17.7 ms here (PoCL 3.1, Zen 5), same integers. The
-# default on CPUs; elsewhere one row (a GPU's lanes are its work-items: unmeasured).
+# brick), the same integers: the default on CPUs; elsewhere one row (a GPU's lanes are its
+# work-items: unmeasured).
 CPU_ROWS = 2
 STILL_TABLE_SHARE = 0.25           # the still tables held may take this share of the device's memory
 PLAN_CACHE = 16                    # plans kept for poses that come back (the paper's stand has 15 tilts)
@@ -97,7 +94,7 @@ class StillTable:
 
 def _pool_order(slots, n_slots):
     """The order that sorts ``slots`` (distinct, in [0, n_slots)): a scatter where the pool is
-    not much larger than the list (0.08 ms for 32k of 40k slots here), else argsort (0.25 ms)."""
+    not much larger than the list (linear in the pool), else argsort."""
     if n_slots > 4 * len(slots):
         return np.argsort(slots)
     position = np.full(n_slots, -1, np.int32)
@@ -107,7 +104,7 @@ def _pool_order(slots, n_slots):
 
 def _take_rows(a, order):
     """Rows ``order`` of an (n, 4) int32 array, each moved as one 16-byte item (numpy's
-    fancy indexing of 2-D rows took 0.47 ms for a frame's bricks and windows, this 0.14)."""
+    fancy indexing of 2-D rows moves them element by element)."""
     a = np.ascontiguousarray(a, np.int32)
     return a.view(np.complex128)[:, 0][order].view(np.int32).reshape(-1, 4)
 
@@ -213,7 +210,7 @@ class Fusion(Stage):
         index, windows, keep = self._reached_bricks(self.head_frame(P))
         slots = self.grid.allocate_index(index)
         # listed in pool order: the kernel's reads and writes of the pool then stream, and the
-        # CPU's prefetchers follow (the paper's frame moving: 19.0 -> 16.7 ms here)
+        # CPU's prefetchers follow
         order = _pool_order(slots, self.grid.n_bricks)
         listed = np.empty((len(slots), 4), np.int32)
         self.grid.brick_coords(index[order], out=listed)

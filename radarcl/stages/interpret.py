@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarcl import logodds, oracle
-from radarcl.config import InterpretConfig
+from radarcl.config.stage_config import InterpretConfig
 from radarcl.errors import ConfigError
 from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_group_size
 

@@ -20,12 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarcl import oracle
-from radarcl.config import is_power_of_two
+from radarcl.config.stage_config import is_power_of_two
 from radarcl.errors import ConfigError, DeviceCapabilityError, ShapeError
 from radarcl.stages import Port, Stage, beam_batch, build, count
 
-# Measured on PoCL, 2 cores, paper frame (256 beams), kernel only, n_fft 512 / 1024:
-#   scalar (vector_width 1), 16 workers: 0.34 / 0.59 ms;  vector_width 8, 16 workers: 0.21 / 0.30 ms.
 # PoCL does not vectorise across work-items here, so the lanes of float16 (8 beam pairs) carry
 # the SIMD; GPUs vectorise across work-items and take vector_width 1 and n_fft/4 workers.
 # Full groups of real beams load each sample row as two vectors with the checks per lane

@@ -1,12 +1,10 @@
 """The map store: a chunked, versioned directory of zarr v3 arrays, saved incrementally and
 atomically for readers.
 
-Why zarr: saving the paper's 0.1 m map (73,782 bricks, 144 MiB) took 15.5 s as
-``np.savez_compressed`` (60.5 MiB), 1.0 s as zarr v3 with zstd-1 chunks of 256 bricks
-(58.8 MiB), 1.9 s as HDF5 with lzf (97.8 MiB) and 4.9 s with gzip-1 (63.5 MiB); rewriting 4,096
-bricks took 0.06 s in zarr and 0.12 s in HDF5 (this machine, ``bench``-style script in the issue
-18 note). Beyond speed, a directory of immutable chunk files makes a save atomic for readers
-without locks, where an HDF5 file modified in place is torn by a killed writer.
+Why zarr: it saved the paper's 0.1 m map fastest of the formats tried, and rewrote changed
+bricks fastest (``radarcl bench store``; the README's figures). Beyond speed, a directory of
+immutable chunk files makes a save atomic for readers without locks, where an HDF5 file
+modified in place is torn by a killed writer.
 
 Layout of ``map.rcmap/`` (any directory name):
   zarr.json               the zarr group
@@ -32,7 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
+from radarcl import __version__
 from radarcl.errors import ConfigError, FrameFormatError
+from radarcl.grid import BRICK, GridSpec
+from radarcl.maps.npz import check_trajectory
 
 FORMAT = "radarcl-map-store"
 FORMAT_VERSION = 1
@@ -41,7 +42,7 @@ COMPACT_SEGMENTS = 32
 MANIFEST = "manifest.json"
 
 
-def is_store(path):
+def recognises(path):
     """True when ``path`` is a map store directory."""
     return Path(path, MANIFEST).is_file() or (Path(path).is_dir() and Path(path, "zarr.json").is_file())
 
@@ -91,8 +92,6 @@ def read_manifest(path):
 def read(path):
     """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32, manifest) of the last complete save.
     ``manifest["incomplete"]`` names anything a killed writer left (ignored here)."""
-    from radarcl.grid import BRICK, GridSpec
-
     zarr, _ = _zarr()
     path = Path(path)
     manifest = read_manifest(path)
@@ -126,7 +125,7 @@ class StoreWriter:
     """Saves of one map into a store, each writing only the bricks that changed since the last.
 
     path: the store directory (created; an existing store is continued, anything else refused by
-    the caller's ``outputs.check``); spec: the grid's ``GridSpec``; sensor_toml, config: what
+    the caller's ``maps.disk.check_output``); spec: the grid's ``GridSpec``; sensor_toml, config: what
     made the map (kept in the manifest); inputs: paths whose SHA-256 goes into the provenance.
     """
 
@@ -136,14 +135,12 @@ class StoreWriter:
         if self.path.exists() and not self.path.is_dir():
             raise ConfigError(f"{self.path} exists and is not a map store directory")
         if self.path.exists() and any(self.path.iterdir()):
-            if not is_store(self.path):
+            if not recognises(self.path):
                 raise ConfigError(f"{self.path} is a directory that is not a map store; choose another name")
             if overwrite:
                 shutil.rmtree(self.path)
         self.spec = spec
         self.group = zarr.open_group(str(self.path), mode="a")
-        from radarcl.grid import check_trajectory
-
         self.meta = dict(sensor=sensor_toml, config=config or {},
                          poses=[] if poses is None else check_trajectory(poses).reshape(-1, 16).tolist(),
                          provenance=dict(radarcl=_version(), created=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
@@ -172,8 +169,6 @@ class StoreWriter:
         and the sensor ``poses`` (n, 4, 4) so far when given; returns the number of bricks
         written. Atomic for readers."""
         if poses is not None:
-            from radarcl.grid import check_trajectory
-
             self.meta["poses"] = check_trajectory(poses).reshape(-1, 16).tolist()
         keys = np.ascontiguousarray(keys, np.int32)
         data = np.ascontiguousarray(data, np.int32)
@@ -283,51 +278,15 @@ def _changed_rows(old_keys, old_data, keys, data):
 
 
 def _version():
-    from radarcl import __version__
-
     return __version__
 
 
-class MapSaver:
-    """Saves of one map to ``path``: an ``.npz`` file (rewritten whole, through a temporary
-    file) or, for any other name, a map store (only changed bricks). ``saver(grid)`` saves."""
-
-    def __init__(self, path, sensor_toml="", config=None, inputs=()):
-        self.path = Path(path)
-        self.npz = self.path.suffix == ".npz"
-        self.meta = dict(sensor_toml=sensor_toml, config=config, inputs=inputs)
-        self.writer = None
-
-    def __call__(self, grid, poses=None, **meta):
-        """Save ``grid`` (and the sensor ``poses`` (n, 4, 4) so far, when given); ``meta``
-        (JSON-able values, e.g. a live stream's counts) goes into the manifest or the npz's
-        ``meta`` (``grid.read_meta`` reads either)."""
-        if self.npz:
-            from radarcl.grid import write_npz
-
-            write_npz(self.path, grid.spec, *grid.bricks(), poses=poses, meta=meta or None)
-            return
-        if self.writer is None:
-            self.writer = StoreWriter(self.path, grid.spec, overwrite=True, **self.meta)
-        self.writer.meta.update(meta)
-        self.writer.save(*grid.bricks(), poses=poses)
+def read_poses(path):
+    """The sensor poses (n, 4, 4) the store's manifest keeps, or None."""
+    poses = read_manifest(path).get("poses")
+    return None if not poses else check_trajectory(np.asarray(poses, float).reshape(-1, 4, 4))
 
 
-def convert(source, target):
-    """Copy a map between the npz and store formats (by ``target``'s name: ``.npz`` or a
-    store directory); returns (spec, number of bricks)."""
-    from radarcl.grid import FILE_VERSION, read as read_map
-    from radarcl.outputs import atomic
-
-    spec, keys, data = read_map(source)
-    manifest = read_manifest(source) if is_store(source) else {}
-    target = Path(target)
-    if target.suffix == ".npz":
-        with atomic(target) as tmp, open(tmp, "wb") as f:
-            np.savez_compressed(f, version=FILE_VERSION, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
-                                shape=np.asarray(spec.shape), keys=keys, data=data)
-    else:
-        writer = StoreWriter(target, spec, manifest.get("sensor", ""), manifest.get("config"), inputs=[source],
-                             overwrite=True)
-        writer.save(keys, data)
-    return spec, len(keys)
+def read_meta(path, key):
+    """The ``key`` entry of the store's manifest (what its saver kept), or None."""
+    return read_manifest(path).get(key)

@@ -21,8 +21,8 @@ import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError
-from radarcl.maps import UNKNOWN
-from radarcl.outputs import atomic
+from radarcl.io.files import atomic
+from radarcl.maps.map import UNKNOWN
 
 log = logging.getLogger(__name__)
 CLAMP_NATS = 13.8            # OctoMap keeps log-odds within its clamping thresholds: p in [1e-6, 1 - 1e-6]
@@ -172,6 +172,11 @@ def costmap(m, path, band=None, threshold_nats=1.0):
     if not (grid != UNKNOWN).any():
         log.warning("%s: no column of the band was observed; the costmap is all unknown", pgm)
     return grid.shape
+
+
+def is_bag(path):
+    """True when ``path`` is a ROS 2 bag directory (it holds the bag's metadata.yaml)."""
+    return (Path(path) / "metadata.yaml").is_file()
 
 
 def rosbag(m, path, band=None, threshold_nats=1.0, frame_id="map"):

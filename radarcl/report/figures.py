@@ -9,6 +9,7 @@ and inside the canvas; maps seen from above have x forward up and y left to the 
 import numpy as np
 
 from radarcl import logodds
+from radarcl.io.files import atomic
 
 RC = {"font.size": 10, "axes.titlesize": 11, "axes.labelsize": 10, "xtick.labelsize": 10,
       "ytick.labelsize": 10, "legend.fontsize": 10, "figure.titlesize": 12}
@@ -28,8 +29,6 @@ def _pyplot():
 def save(fig, path, dpi=110):
     """Write ``fig`` as a PNG through a temporary file, then close it; cropped to what is
     drawn (square map panels otherwise leave wide empty margins)."""
-    from radarcl.outputs import atomic
-
     plt = _pyplot()
     with atomic(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png", bbox_inches="tight", pad_inches=0.15)

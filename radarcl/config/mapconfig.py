@@ -20,80 +20,11 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from radarcl import tomlfile
-from radarcl.config import INTERPRETERS, CfarConfig, InterpretConfig, is_power_of_two
+from radarcl.config import sensors, tomlfile
+from radarcl.config.keys import BUILTIN, KEYS, SECTIONS, check_value
+from radarcl.config.stage_config import CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError
-from radarcl.geometry import BEAM_MODELS
-
-CFAR_KINDS = ("ca", "go", "so", "os")
-WINDOWS = ("hann", "rect")
-_N = tomlfile.number
-
-
-def _pow2(v):
-    v = tomlfile.integer(v, 4, 1 << 16)
-    if not is_power_of_two(v):
-        raise ConfigError(f"must be a power of two, got {v}")
-    return v
-
-
-@dataclass(frozen=True)
-class Key:
-    """One configuration key: its check (value -> value, or ConfigError(reason)), unit, help."""
-
-    check: object
-    unit: str
-    help: str
-
-
-KEYS = {
-    "range_fft.n_fft": Key(_pow2, "", "FFT length after zero padding (eq. 11); raw-sample sensors"),
-    "range_fft.window": Key(lambda v: tomlfile.choice(v, WINDOWS), "", "window on the samples (§3.2)"),
-    "cfar.kind": Key(lambda v: tomlfile.choice(v, CFAR_KINDS), "", "CA (the paper's), GO, SO or OS"),
-    "cfar.pfa": Key(lambda v: _N(v, 0, 0.5, lo_open=True), "", "design false-alarm probability"),
-    "cfar.guard_m": Key(lambda v: _N(v, 0, 1e4, unit="m"), "m", "guard band per side"),
-    "cfar.train_m": Key(lambda v: _N(v, 0, 1e4, lo_open=True, unit="m"), "m", "training window per side"),
-    "cfar.os_rank": Key(lambda v: _N(v, 0, 1, lo_open=True), "", "OS-CFAR: rank as a fraction of the training cells"),
-    "cfar.noise_floor": Key(lambda v: _N(v, 1e-37, 1e37), "", "lower bound of the noise estimate [power]"),
-    "interpret.k_occ": Key(lambda v: _N(v, 0, 1e3), "nat/decade", "eq. 12 gain on log10(r/n)"),
-    "interpret.e_high": Key(lambda v: _N(v, -16, 0, unit="nat"), "nat", "E_h: noise before the first wide pulse"),
-    "interpret.e_low": Key(lambda v: _N(v, -16, 0, unit="nat"), "nat", "E_l: noise after it"),
-    "interpret.wide_pulse_m": Key(lambda v: _N(v, 0, 1e4, lo_open=True, unit="m"), "m", "a pulse this wide is wide"),
-    "interpret.range_min_m": Key(lambda v: _N(v, 0, 1e5, unit="m"), "m", "no evidence nearer"),
-    "interpret.range_max_m": Key(lambda v: _N(v, 0, 1e5, lo_open=True, unit="m"), "m", "no evidence farther"),
-    "interpret.max_pulses": Key(lambda v: tomlfile.integer(v, 1, 1 << 16), "", "pulse rows kept per beam"),
-    "interpret.model": Key(lambda v: tomlfile.choice(v, INTERPRETERS), "",
-                           "paper: eq. 12; occlusion: free evidence only up to the first surface"),
-    "interpret.surface_db": Key(lambda v: _N(v, -100, 100, unit="dB"), "dB",
-                                "occlusion: a pulse whose peak r/n reaches this is a surface"),
-    "interpret.e_high_far": Key(lambda v: _N(v, -16, 0, unit="nat"), "nat",
-                                "occlusion: E_h at the far end of the range (e_high at the near end)"),
-    "beam.model": Key(lambda v: tomlfile.choice(v, BEAM_MODELS), "", "beam volume (§3.4, Fig. 7c)"),
-    "grid.voxel_m": Key(lambda v: _N(v, 1e-4, 1e3, unit="m"), "m", "voxel edge"),
-    "grid.origin_m": Key(lambda v: tomlfile.vector(v, unit="m"), "m", "low corner (x, y, z), world frame"),
-    "grid.size_m": Key(lambda v: tomlfile.vector(v, lo=0, lo_open=True, unit="m"), "m", "extent (x, y, z)"),
-}
-SECTIONS = tuple(dict.fromkeys(k.split(".")[0] for k in KEYS))
-
-BUILTIN = {
-    "range_fft.window": "hann", "cfar.kind": "ca", "cfar.pfa": 1e-3, "cfar.os_rank": 0.75,
-    "cfar.noise_floor": 1e-30, "interpret.k_occ": 1.0, "interpret.e_high": -1.0, "interpret.e_low": -0.1,
-    "interpret.max_pulses": 32, "beam.model": "cylindrical-conical", "grid.voxel_m": 0.1,
-    "interpret.model": "paper", "interpret.surface_db": 10.0,
-}
-"""radarcl's own defaults: the paper's CFAR (CA, P_fa 1e-3, Fig. 6), its eq. 12 constants
-(k_occ 1, E_h -1 from Fig. 10; E_l -0.1 ours, the paper gives none), Rohling's OS rank 3/4,
-the paper's beam (Fig. 7c) and voxel (0.1 m)."""
-
-
-def check_value(name, value):
-    """``value`` for key ``name`` ("section.key"), checked; ConfigError names what is allowed."""
-    if name not in KEYS:
-        raise ConfigError(f"unknown configuration key {name!r}; keys: {', '.join(KEYS)}")
-    try:
-        return KEYS[name].check(value)
-    except ConfigError as exc:
-        raise ConfigError(f"{name} {exc}") from None
+from radarcl.grid import GridSpec
 
 
 def read(path):
@@ -191,8 +122,6 @@ class Resolved:
 
     def grid_spec(self):
         """The ``GridSpec`` of [grid]: origin_m, ceil(size_m / voxel_m) voxels."""
-        from radarcl.grid import GridSpec
-
         voxel = self["grid.voxel_m"]
         shape = tuple(max(1, math.ceil(s / voxel - 1e-9)) for s in self["grid.size_m"])
         return GridSpec(self["grid.origin_m"], voxel, shape)
@@ -249,8 +178,6 @@ def resolve(sensor=None, path=None, flags=None, program=None):
     the file's ``sensor = ...`` or the paper's radar) with the file at ``path``, ``flags``
     {"section.key": value} from the command line, and ``program`` {"section.key": value} set
     by the calling program (a job's own choice, below the user's file and flags)."""
-    from radarcl import sensors
-
     from_file = {}
     if path is not None:
         from_file = read(path)
@@ -275,8 +202,6 @@ def resolve(sensor=None, path=None, flags=None, program=None):
 
 def _checked(sensor, values, origins):
     """Fill the grid extent, drop what the sensor does not use, and check the keys together."""
-    from radarcl import sensors
-
     if not sensor.raw:
         values.pop("range_fft.n_fft", None)
         values.pop("range_fft.window", None)

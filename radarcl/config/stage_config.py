@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl import physics
+from radarcl import cfar_theory, physics
 from radarcl.errors import ConfigError
 
 # The paper states 64 m at exactly the Nyquist frequency using c = 3e8 m/s. With the exact
@@ -191,7 +191,7 @@ class CfarConfig:
     Defaults: the paper's cell averaging at P_fa 1e-3, sized for its 512 bins of 0.125 m. The
     guard band must hold half of the widest pulse: a ground echo at -9 deg spans some 35 bins
     at the threshold, and with a narrower guard its own bins raise the noise estimate until it
-    is no longer detected in full (measured on scene.profiles.fig10_ground_beam: guard 4 and
+    is no longer detected in full (measured on scene.echoes.fig10_ground_beam: guard 4 and
     8 lose it or cut it below the wide-pulse width, 16 keeps it wide).
 
     Edge rule "shift": every cell uses exactly 2 x train training cells inside the profile.
@@ -209,8 +209,6 @@ class CfarConfig:
     noise_floor: float = 1e-30
 
     def __post_init__(self):
-        from radarcl import cfar_theory
-
         _require(self.kind in cfar_theory.CFAR_KINDS,
                  f"CFAR kind must be one of {cfar_theory.CFAR_KINDS}, got {self.kind!r}")
         _require(isinstance(self.guard, (int, np.integer)) and not isinstance(self.guard, bool)
@@ -252,8 +250,6 @@ class CfarConfig:
     def alpha(self):
         """Threshold factor on the noise estimate for the design pfa (``cfar_theory.threshold_factor``;
         solved once per config: GO, SO and OS need a bisection)."""
-        from radarcl import cfar_theory
-
         return cfar_theory.threshold_factor(self.kind, float(self.pfa), self.n_train,
                                           int(self.rank) if self.rank is not None else None)
 

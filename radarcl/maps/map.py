@@ -14,7 +14,9 @@ import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
-from radarcl.grid import BRICK, GridSpec, read
+from radarcl.grid import BRICK, GridSpec
+from radarcl.io.files import memory_budget
+from radarcl.maps.disk import read
 
 UNKNOWN = -1          # a 2D cell no beam reached in the band (the ROS map_server convention)
 
@@ -30,7 +32,7 @@ class Map:
 
     @classmethod
     def open(cls, path):
-        """Read a map file or store (``grid.read``)."""
+        """Read a map file or store (``maps.disk.read``)."""
         spec, keys, data = read(path)
         return cls(spec, keys, data)
 
@@ -109,8 +111,6 @@ class Map:
     def dense(self, band=None):
         """Dense int32 (nz, ny, nx) units; ``band`` (z_min, z_max) [m] keeps only those layers.
         Refused beyond the memory budget."""
-        from radarcl.io import memory_budget
-
         z0, z1 = self._band(band)
         nx, ny, _ = self.spec.shape
         nbx, nby, _ = self.spec.brick_shape

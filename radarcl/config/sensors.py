@@ -6,7 +6,7 @@ samples (``input = "samples"``: the range FFT runs first) or range profiles (``"
 they enter at CFAR); its waveform or its range bins; its beams and scan lattice; its mounting;
 how its files are read (``[reader]``); and, optionally, its own choices for the map
 configuration (``[defaults.<section>]``, the sections of a configuration file, see
-``radarcl.mapconfig``). ``extends = "name"`` starts from another profile. Built-in profiles live
+``config.mapconfig``). ``extends = "name"`` starts from another profile. Built-in profiles live
 in ``radarcl/profiles/*.toml``; ``radarcl sensors`` lists them and ``--sensor`` takes a name or
 a path.
 
@@ -30,17 +30,19 @@ from pathlib import Path
 
 import numpy as np
 
-from radarcl import physics, tomlfile
-from radarcl.config import RadarConfig, is_power_of_two
+from radarcl import physics
+from radarcl.config import tomlfile
+from radarcl.config.keys import check_value
+from radarcl.config.stage_config import RadarConfig, is_power_of_two
 from radarcl.errors import ConfigError
-from radarcl.geometry import BeamLattice
+from radarcl.geometry import BeamLattice, beam_model
+from radarcl.io.stream import PROTOCOLS
 
-PROFILE_DIR = Path(__file__).resolve().parent / "profiles"
+PROFILE_DIR = Path(__file__).resolve().parents[1] / "profiles"
 DEFAULT_SENSOR = "paper"
 INPUTS = ("samples", "profiles")
 SAMPLE_TYPES = {"int16": np.int16, "float32": np.float32, "complex64": np.complex64}
 READERS = ("recording", "polar-png", "ti-openradar")
-STREAM_PROTOCOLS = ("beams", "ti")        # radarcl.io.beam_protocol, radarcl.io.ti_uart
 MAINLOBE_CELLS = 4.0       # Hann mainlobe, null to null, in resolution cells (Harris 1978)
 TRAIN_CELLS = 4.0          # training window per side, in resolution cells
 _NEEDS = {"samples": ("waveform", "beams", "range"), "profiles": ("beams", "range")}
@@ -69,7 +71,7 @@ _SCHEMA = {                # section -> key -> check (value -> value, or ConfigE
     "mounting": {"height_m": lambda v: _N(v, 0, lo_open=True, unit="m"),
                  "lowest_elevation_deg": lambda v: _N(v, -89, 0, lo_open=True, unit="deg"),
                  "ground_elevation_deg": lambda v: _N(v, -89, 0, lo_open=True, unit="deg")},
-    "stream": {"protocol": lambda v: tomlfile.choice(v, STREAM_PROTOCOLS),
+    "stream": {"protocol": lambda v: tomlfile.choice(v, PROTOCOLS),
                "range_profile_antennas": lambda v: tomlfile.integer(v, 1, 256),
                "range_profile_q": lambda v: tomlfile.integer(v, 0, 15)},
     "reader": {"format": lambda v: tomlfile.choice(v, READERS),
@@ -186,8 +188,6 @@ class SensorProfile:
 
     def beam_model(self, name, voxel_m):
         """The ``BeamModel`` called ``name`` (``geometry.BEAM_MODELS``) for this sensor."""
-        from radarcl.geometry import beam_model
-
         return beam_model(name, math.radians(self.get("beams", "beamwidth_az_deg")),
                           math.radians(self.get("beams", "beamwidth_el_deg")), self.wavelength_m, voxel_m)
 
@@ -296,8 +296,6 @@ def load(spec=DEFAULT_SENSOR):
         if key not in top:
             raise ConfigError(f"{source.name}: the profile needs a top-level {key} = ...")
     defaults = {}
-    from radarcl.mapconfig import check_value
-
     for section, table in tables.items():
         if section.startswith("defaults."):
             for key, value in table.items():

@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from radarcl import oracle
-from radarcl.config import PAPER_RADAR, PAPER_SENSOR_HEIGHT_M
+from radarcl.config.stage_config import PAPER_RADAR, PAPER_SENSOR_HEIGHT_M
 from radarcl.errors import ConfigError
 from radarcl.scene.fmcw import simulate_beams
 

@@ -8,12 +8,11 @@ exactly (``repr`` of a float round-trips), so no TOML writer is needed as a depe
 
 import math
 import re
+import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 from radarcl.errors import ConfigError
-
-import tomllib
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,44 @@
+"""`radarcl export`: a map written for other tools (``maps.exports``)."""
+
+from radarcl.commands.options import add_output, add_progress, progress
+from radarcl.io import files
+from radarcl.maps import exports
+from radarcl.maps.map import Map
+
+SUMMARY = "write a map for other tools: OctoMap, PLY, VTK, a ROS costmap or bag"
+DESCRIPTION = ("octomap: .bt (occupied/free) or .ot (log-odds) read by OctoMap and octovis; ply: the voxels above "
+               "--threshold with log_odds and probability; mesh: the isosurface at --threshold as a PLY mesh; "
+               "vti: the dense log-odds as VTK image data for ParaView; costmap: a ROS map_server PGM + YAML "
+               "projected over --band; rosbag: a ROS 2 bag with a PointCloud2 and an OccupancyGrid.")
+
+
+def add_arguments(parser):
+    parser.add_argument("map", help="a map (.npz) or map store")
+    parser.add_argument("--to", required=True, choices=["octomap", "ply", "mesh", "vti", "costmap", "rosbag"])
+    add_output(parser, "--out", None, "file to write (a directory for rosbag)")
+    parser.add_argument("--threshold", type=float, default=None,
+                        help="[nat]: occupied above it (default 1; octomap: voxels with |log-odds| >= it, default 0)")
+    parser.add_argument("--band", type=float, nargs=2, default=None, metavar=("Z_MIN", "Z_MAX"),
+                        help="height band [m] for costmap, rosbag's grid, mesh and vti (default: the whole grid)")
+    add_progress(parser)
+
+
+def run(args):
+    directory = ("ROS 2 bag", exports.is_bag) if args.to == "rosbag" else None
+    out = files.check(args.out, args.force, inputs=[args.map], what="export", directory=directory)
+    if args.to == "costmap":
+        files.check(out.with_suffix(".yaml"), args.force, inputs=[args.map], what="costmap YAML")
+    m = Map.open(args.map)
+    fn = exports.FORMATS[args.to]
+    options = {}
+    if args.to in ("mesh", "vti", "costmap", "rosbag"):
+        options["band"] = args.band
+    if args.to == "octomap":
+        options["threshold_nats"] = 0.0 if args.threshold is None else args.threshold
+        options["progress"] = progress(args)
+    elif args.to != "vti":
+        options["threshold_nats"] = 1.0 if args.threshold is None else args.threshold
+    result = fn(m, out, **options)
+    size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) if out.is_dir() else out.stat().st_size
+    print(f"wrote {out} ({args.to}, {size / 2**20:.2f} MiB): {result}")
+    return 0

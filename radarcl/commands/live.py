@@ -1,0 +1,197 @@
+"""`radarcl live`: a radar's stream fused into a map as it arrives (``jobs.live``,
+``livemap``); what `radarcl replay` shares with it (``add_pose_options``, ``make_mapper``,
+``summary``)."""
+
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+
+from radarcl.commands.options import add_config, add_output, positive_float, positive_int, resolve_config, runtime
+from radarcl.errors import ConfigError
+from radarcl.geometry import pose_from_xyz_rpy
+from radarcl.io import files
+from radarcl.io.brick_stream import BrickPublisher, parse_address
+from radarcl.io.poses import read_pose_file
+from radarcl.io.stream import PortReader, StreamRecorder, open_port
+from radarcl.livemap import LiveMapper, PoseSource, Session
+from radarcl.maps import disk
+
+SUMMARY = "fuse a radar's stream from a serial port (or any pyserial URL) as it arrives"
+DESCRIPTION = ("Reads the radar on PORT (/dev/ttyUSB0, socket://host:port, rfc2217://..., a pty from radarcl "
+               "emulate) in its sensor's protocol (the radarcl beam protocol, or TI's mmWave demo UART), fuses "
+               "the beams as they arrive, checkpoints the map every --checkpoint seconds and, with --record, "
+               "keeps the raw bytes for radarcl replay. Ctrl-C saves and ends with a summary.")
+
+
+def add_arguments(parser):
+    p = parser
+    p.add_argument("--port", required=True, help="the radar's port: a device or any pyserial URL")
+    p.add_argument("--baud", type=positive_int, default=921600, help="baud rate (default: %(default)s)")
+    add_output(p, "--out", "live.rcmap", "map to write: a map store (only changed bricks per checkpoint), or .npz")
+    add_config(p)
+    add_pose_options(p)
+    p.add_argument("--checkpoint", type=positive_float, default=5.0, help="seconds between saves (default: %(default)s)")
+    p.add_argument("--record", default=None, metavar="FILE", help="keep the raw byte stream with receive times")
+    p.add_argument("--json-status", default=None, metavar="FILE", help="write the status as JSON every second")
+    p.add_argument("--serve", default=None, metavar="[HOST:]PORT",
+                   help="send changed bricks to viewers (radarcl view --follow HOST:PORT); 0 picks a free port")
+    p.add_argument("--view", action="store_true", help="open the viewer on the growing map (implies --serve 0)")
+    p.add_argument("--retry", type=positive_float, default=None, metavar="S",
+                   help="when the port goes away, try to reopen it every S seconds (default: save and stop)")
+    p.add_argument("--duration", type=positive_float, default=None, help="stop after this many seconds")
+    p.add_argument("--quiet", action="store_true", help="no status line on stderr")
+
+
+def add_pose_options(p):
+    """--poses and --mount: where a frame's pose comes from when the packets carry none."""
+    p.add_argument("--poses", default=None, metavar="FILE",
+                   help="poses 't_s x y z roll pitch yaw' per row, interpolated at each frame's time (when the "
+                        "packets carry none)")
+    p.add_argument("--mount", default=None, metavar="X,Y,Z,ROLL,PITCH,YAW",
+                   help="a fixed sensor pose [m, deg] (when neither the packets nor --poses give one; default: "
+                        "the origin)")
+
+
+def pose_source(args):
+    """The ``livemap.PoseSource`` of --poses and --mount."""
+    mount = None
+    if args.mount:
+        try:
+            values = [float(v) for v in args.mount.split(",")]
+        except ValueError:
+            values = []
+        if len(values) != 6 or not np.isfinite(values).all():
+            raise ConfigError(f"--mount {args.mount!r}: expected X,Y,Z,ROLL,PITCH,YAW (metres, degrees)")
+        mount = pose_from_xyz_rpy(*values[:3], *np.radians(values[3:]))
+    track = read_pose_file(args.poses) if args.poses else None
+    return PoseSource(mount, track)
+
+
+def make_mapper(args, config, out, inputs, on_fused=None):
+    """The ``livemap.LiveMapper`` saving to ``out``."""
+    saver = disk.MapSaver(out, config.sensor.toml(), config.as_dict(), inputs)
+    return LiveMapper(runtime(), config, saver, pose_source(args), on_fused)
+
+
+def run(args):
+    from radarcl.jobs import live
+
+    config = resolve_config(args)
+    out = disk.check_output(args.out, args.force)
+    json_status = files.check(args.json_status, True, what="status file") if args.json_status else None
+    port = open_port(args.port, args.baud)
+    recorder = StreamRecorder(args.record, dict(protocol=config.sensor.protocol, sensor=config.sensor.name,
+                                                baud=args.baud, port=args.port)) if args.record else None
+    session = Session(config.sensor, recorder)
+    view = _ViewServer(args) if (args.serve is not None or args.view) else None
+    mapper = make_mapper(args, config, out, [], view.changed if view else None)
+    mapper.prepare()                                 # compile before the radar streams
+    if view:
+        view.start(mapper)
+    say = None if args.quiet else (lambda line: print("\r" + line, end="", file=sys.stderr, flush=True))
+    started = time.monotonic()
+    stop = threading.Event()
+    reader = PortReader(port, session.feed).start()
+    print(f"radarcl live: reading {args.port} at {args.baud} baud as sensor {config.sensor.name} "
+          f"({config.sensor.protocol} protocol) into {out}; Ctrl-C saves and stops", file=sys.stderr, flush=True)
+    try:
+        while True:
+            watch = threading.Thread(target=_watch, args=(reader, stop, args.duration, started), daemon=True)
+            watch.start()
+            s = live.run(session, mapper, checkpoint_s=args.checkpoint, say=say, json_status=json_status, stop=stop,
+                         after_fuse=view.publish if view else None)
+            if reader.lost is None or args.retry is None or s["interrupted"]:
+                break
+            print(f"\nradarcl: the port {args.port} went away ({reader.lost}); the map is saved ({s['saved_beams']} "
+                  f"beams); reopening every {args.retry:g} s (Ctrl-C stops)", file=sys.stderr)
+            port = _reopen(args, stop)
+            stop.clear()
+            reader = PortReader(port, session.feed).start()
+    finally:
+        reader.stop()
+        if recorder is not None:
+            recorder.close()
+        if view:
+            view.close()
+    if say:
+        print(file=sys.stderr)
+    print(summary(s, out))
+    if reader.lost is not None and not s["interrupted"] and args.retry is None:
+        raise ConfigError(f"the radar's port {args.port} went away ({reader.lost}); the map is saved in {out} "
+                          f"({s['saved_beams']} beams); --retry S waits for it to come back")
+    return 0
+
+
+def _watch(reader, stop, duration, started):
+    """Sets ``stop`` when the port goes away or the duration is up."""
+    while not stop.is_set():
+        if reader.closed.wait(0.2) or (duration is not None and time.monotonic() - started >= duration):
+            stop.set()
+
+
+def _reopen(args, stop):
+    while True:
+        try:
+            return open_port(args.port, args.baud)
+        except ConfigError:
+            time.sleep(args.retry)                   # a person is plugging the radar back in
+
+
+def summary(s, out):
+    """The line a live or replayed stream ends with."""
+    lat = "" if s["latency_p50_ms"] is None else f", latency p50 {s['latency_p50_ms']:.0f} ms p99 {s['latency_p99_ms']:.0f} ms"
+    return (f"{'interrupted: ' if s.get('interrupted') else ''}fused {s['beams']} beams of {s['frames']} frames in "
+            f"{s['wall_s']:.1f} s ({s['beams_per_s']:.0f}/s{lat}); {s['bytes_in']} bytes in, {s['bytes_dropped']} "
+            f"dropped, {s['crc_failures']} CRC failures, {s['sequence_gaps']} packets missing, {s['duplicates']} "
+            f"duplicates; wrote {out}")
+
+
+class _ViewServer:
+    """--serve / --view: a BrickPublisher fed with the bricks each fuse changed (at most 5 times
+    a second), and with --view a `radarcl view --follow` process."""
+
+    def __init__(self, args):
+        self.address = parse_address(args.serve if args.serve is not None else "0")
+        self.open_viewer = args.view
+        self._slots, self._last, self.publisher, self.process = [], 0.0, None, None
+
+    def start(self, mapper):
+        self.mapper = mapper
+
+        def snapshot():
+            grid = mapper.mapping.grid
+            keys, data = grid.bricks()
+            return grid.spec, keys, data, np.array(mapper.trajectory) if mapper.trajectory else None
+
+        self.publisher = BrickPublisher(snapshot, self.address)
+        host, port = self.publisher.address
+        print(f"serving the map to viewers on {host}:{port} (radarcl view --follow {host}:{port})", file=sys.stderr)
+        self.pending_viewer = self.open_viewer
+
+    def changed(self, bricks):
+        self._slots.append(np.asarray(bricks))
+
+    def publish(self):
+        if self.publisher is None or self.mapper.mapping is None:
+            return
+        if self.pending_viewer:                      # the map exists now: the viewer can be given it
+            host, port = self.publisher.address
+            self.process = subprocess.Popen([sys.executable, "-m", "radarcl", "view", "--follow", f"{host}:{port}"])
+            self.pending_viewer = False
+        now = time.monotonic()
+        if now - self._last < 0.2 or not (self._slots or self.publisher.viewers):
+            return
+        self._last = now
+        grid = self.mapper.mapping.grid
+        slots = np.concatenate(self._slots)[:, 3] if self._slots else np.empty(0, np.int64)
+        self._slots = []
+        keys, data = grid.read_slots(slots) if len(slots) else (None, None)
+        poses = np.array(self.mapper.trajectory) if self.mapper.trajectory else None
+        self.publisher.publish(keys, data, poses)
+
+    def close(self):
+        if self.publisher is not None:
+            self.publisher.close()

@@ -1,0 +1,122 @@
+"""What the commands share: argument types, the map configuration's options and its
+resolution, output options, the shared data, the progress bar and the device."""
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from radarcl.config import mapconfig, sensors
+
+DATA_ENV = "RADARCL_DATA"
+
+
+# -- argument types ------------------------------------------------------------------------------------
+def positive_int(text):
+    """argparse type: an integer >= 1."""
+    return bounded_int(1, None)(text)
+
+
+def bounded_int(lo, hi):
+    """argparse type: an integer in [lo, hi] (hi None: no upper bound)."""
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < lo or (hi is not None and value > hi):
+            raise argparse.ArgumentTypeError(f"must lie in [{lo}, {hi if hi is not None else 'inf'}], got {value}")
+        return value
+    return parse
+
+
+def positive_float(text):
+    """argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
+    return value
+
+
+# -- option groups -------------------------------------------------------------------------------------
+def add_output(p, flag, default, what):
+    """``flag`` (an output file; required when ``default`` is None) and --force."""
+    if default is None:
+        p.add_argument(flag, required=True, help=f"{what}; an existing file is kept unless --force")
+    else:
+        p.add_argument(flag, default=default, help=f"{what} (default: %(default)s); an existing file is kept unless "
+                                                   "--force")
+    if not any(a.dest == "force" for a in p._actions):
+        p.add_argument("--force", action="store_true", help="replace existing output files")
+
+
+def add_config(p, sensor_default=None):
+    """--sensor, --config, --set, --voxel: the map configuration (``config.mapconfig``)."""
+    default = sensor_default or sensors.DEFAULT_SENSOR
+    p.add_argument("--sensor", default=None, metavar="NAME|FILE",
+                   help=f"sensor profile: {', '.join(sensors.builtin_names())} or a TOML file "
+                        f"(default: the --config file's sensor, else {default}; `radarcl sensors` lists them)")
+    p.add_argument("--config", default=None, metavar="FILE", help="map configuration file (TOML), e.g. from "
+                                                                  "`radarcl tune --save`")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="set one configuration value, e.g. --set cfar.guard_m=0.6 (repeatable; "
+                        "`radarcl config show` lists the keys)")
+    p.add_argument("--voxel", type=positive_float, default=None, help="voxel edge [m] (= --set grid.voxel_m=...)")
+    p.set_defaults(sensor_default=default)
+
+
+def resolve_config(args, program=None):
+    """The ``mapconfig.Resolved`` the options of ``add_config`` describe."""
+    flags = dict(mapconfig.parse_flag(text) for text in args.set)
+    if args.voxel is not None:
+        flags["grid.voxel_m"] = args.voxel
+    sensor = args.sensor if args.sensor is not None or args.config is not None else args.sensor_default
+    return mapconfig.resolve(sensor, args.config, flags, program)
+
+
+def add_progress(p):
+    """--no-progress."""
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+
+
+# -- what commands use -----------------------------------------------------------------------------------
+def default_data(name):
+    """The shared data set ``name``: under $RADARCL_DATA, else ../shared/data beside the source
+    checkout (never relative to the current directory)."""
+    root = Path(os.environ[DATA_ENV]) if os.environ.get(DATA_ENV) else Path(__file__).resolve().parents[3] / "shared" / "data"
+    return root / name
+
+
+class ProgressBar:
+    """A one-line progress bar on stderr: ``bar(done, total, what)``; a new ``what`` starts a new line."""
+
+    def __init__(self, stream=sys.stderr, width=30):
+        self.stream, self.width, self.what = stream, width, None
+
+    def __call__(self, done, total, what):
+        if not self.stream.isatty() and done < total:
+            return                                # a log file gets the finished line only
+        if what != self.what and self.what is not None:
+            self.stream.write("\n")
+        self.what = what
+        filled = int(self.width * done / max(1, total))
+        self.stream.write(f"\r[{'#' * filled}{'.' * (self.width - filled)}] {done}/{total} {what}")
+        if done >= total:
+            self.stream.write("\n")
+            self.what = None
+        self.stream.flush()
+
+
+def progress(args):
+    """The progress bar a command reports to, or None with --no-progress."""
+    return None if getattr(args, "no_progress", False) else ProgressBar()
+
+
+def runtime():
+    """The OpenCL runtime of the chosen device (RADARCL_DEVICE, else PoCL's CPU)."""
+    from radarcl.cl import Runtime  # pyopencl is loaded only by commands that run kernels
+
+    return Runtime()

@@ -1,0 +1,74 @@
+"""Real data without lidar: how well a map of some scans predicts the CFAR detections of scans it
+did not see (`radarcl bench heldout-scans`, `radarcl calibrate-scans`).
+
+For every held-out range bin inside the interpreter's range window, its CFAR detection by the
+sensor profile's own detector (the same outcomes for every map compared) is the outcome and the
+map's log-odds at the bin's world position (the azimuth's own pose, as the map was fused) the
+prediction:
+
+- ``auc``: ROC area of the log-odds at detected against not-detected bins (ties one half, an
+  unknown voxel 0);
+- ``log_likelihood``: mean log p(outcome) per bin [nat] with p = sigmoid(L) clipped to
+  [1e-4, 1 - 1e-4]; a map that knows nothing scores log(1/2) = -0.693;
+- ``coverage``: the share of held-out bins whose voxel the map holds any evidence for.
+
+``raw_map`` is the raw-intensity baseline fused with the same beams and poses.
+"""
+
+import numpy as np
+
+from radarcl import logodds
+from radarcl.evaluation.baseline import raw_evidence
+from radarcl.evaluation.metrics import roc_auc
+from radarcl.grid import EvidenceGrid
+from radarcl.pipeline import Mapping
+
+P_CLIP = 1e-4
+
+
+def raw_map(runtime, config, spec, scans, per_beam):
+    """The raw-intensity baseline: each bin's power as evidence (``baseline.raw_evidence``),
+    fused with the map's own beams and poses; a dense int32 snapshot of ``spec``."""
+    mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec), per_beam_poses=True)
+    fusion = mapping.fusion
+    for scan, poses in zip(scans, per_beam):
+        evidence = raw_evidence(scan.power().reshape(fusion.evidence_shape))
+        evidence[~np.asarray(scan.valid).reshape(-1)] = 0
+        fusion.upload(evidence).wait()
+        fusion.enqueue(plan=fusion.plan(poses))
+    runtime.queue.finish()
+    return mapping.grid.snapshot()
+
+
+def predictions(runtime, config, spec, grid_int, scans, per_beam):
+    """(log-odds [nat] at each held-out bin, its CFAR detection) over the range window.
+    ``config`` is the outcome detector's configuration (the sensor profile's own, the same for
+    every map compared: the outcomes must not change with the map's CFAR). ``grid_int`` may
+    carry trailing axes (several maps of one grid stacked): the log-odds then have them too, and
+    the scans are detected once for all."""
+    mapping = Mapping.from_config(runtime, config=config, per_beam_poses=True)
+    i = config.interpret_config()
+    ranges = np.arange(scans[0].n_bins) * config.sensor.bin_spacing_m()
+    window = (ranges >= i.range_min_m) & (ranges <= i.range_max_m)
+    axes = config.sensor.lattice().beam_rotations()[:, :, 0]              # (n_az, 3) in the head frame
+    L, y = [], []
+    for scan, poses in zip(scans, per_beam):
+        detected = mapping.detection.cfar(scan.power()).mask.reshape(len(axes), -1)
+        valid = np.asarray(scan.valid).reshape(-1)
+        dirs = np.einsum("aij,aj->ai", poses[:, :3, :3], axes)
+        points = poses[:, None, :3, 3] + ranges[None, window, None] * dirs[:, None, :]
+        idx = spec.world_to_index(points.reshape(-1, 3))
+        inside = spec.contains(idx)
+        values = np.zeros((len(idx),) + np.shape(grid_int)[3:], np.float64)
+        values[inside] = grid_int[idx[inside, 2], idx[inside, 1], idx[inside, 0]] / logodds.SCALE
+        keep = np.repeat(valid, window.sum())
+        L.append(values[keep])
+        y.append(detected[:, window].reshape(-1)[keep])
+    return np.concatenate(L), np.concatenate(y).astype(bool)
+
+
+def score(L, y):
+    """``auc``, ``log_likelihood`` [nat per bin] and ``coverage`` of predictions ``L`` of ``y``."""
+    p = np.clip(1.0 / (1.0 + np.exp(-L)), P_CLIP, 1 - P_CLIP)
+    return dict(auc=roc_auc(L, y), log_likelihood=float(np.mean(np.where(y, np.log(p), np.log1p(-p)))),
+                coverage=float(np.mean(L != 0)), bins=int(len(y)), detected=int(y.sum()))

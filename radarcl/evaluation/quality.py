@@ -1,0 +1,133 @@
+"""Map error against run time on the reference scene: the sweep of `radarcl bench quality`.
+
+One recording of the paper's 3,840 observations (``tuning.EVALUATION_SEED``) is mapped with the
+tuned configuration (``tuning.TUNED``) and with one setting changed at a time: zero padding
+(n_fft 256 = none, 512 = x2, 1024 = x4), the beam model (``geometry.BEAM_MODELS``), the voxel
+size (0.4, 0.2, 0.1 m) and the CFAR kind. Every run is scored on one fixed voxel set per voxel
+size: what the reference configuration's beams reach at that size (``evaluate.instrument``),
+with the visibility truth (``evaluation.visibility``) and ``metrics.radar_scores``; beside the
+three baselines of ``evaluation.baseline`` (prior_only, raw_intensity, octomap) on the same set.
+For each run, measured in this process: ``ms_per_frame`` (the device pipeline, planning
+included), the scores, and ``max_dev_nats``: the largest |kernel - float64 oracle| over the
+voxels that ``ORACLE_BEAMS`` of the middle frame reach, the oracle being ``radarcl.oracle`` end
+to end (range profile, CFAR, eq. 12, ``fusion_at_points``), voxels whose decisions lie within
+``FUSION_DECISION_MARGIN`` of a boundary left out. Runs on the Pareto front within their voxel
+size (no other run both faster and higher in ``auc_detectable``) are marked; ``report.quality``
+prints the table and draws that AUC against ms per frame, and a reliability diagram.
+"""
+
+import numpy as np
+
+from radarcl import logodds, oracle
+from radarcl.cfar_theory import CFAR_KINDS
+from radarcl.evaluation.evaluate import baselines, instrument, map_observations, radar_score
+from radarcl.geometry import BEAM_MODELS
+from radarcl.grid import EvidenceGrid
+from radarcl.pipeline import Mapping
+from radarcl.stages.fusion import Fusion
+
+ORACLE_BEAMS = (0, 85, 170, 255)
+DECISION_MARGIN = 1e-3           # as tests/tolerances.FUSION_DECISION_MARGIN
+VOXELS = (0.4, 0.2, 0.1)
+N_FFTS = (256, 512, 1024)
+
+
+def variants(reference_config, voxels=VOXELS):
+    """(dimension, Resolved) for the reference and each one-setting change of it."""
+    out = [("reference", reference_config)]
+    for n in N_FFTS:
+        out.append(("zero padding", reference_config.replaced(range_fft__n_fft=n)))
+    for b in BEAM_MODELS:
+        out.append(("beam model", reference_config.replaced(beam__model=b)))
+    for v in voxels:
+        out.append(("voxel", reference_config.replaced(grid__voxel_m=v)))
+    for k in CFAR_KINDS:
+        out.append(("cfar", reference_config.replaced(cfar__kind=k)))
+    seen, unique = set(), []
+    for dim, c in out:                   # the reference reappears in each dimension: run it once
+        key = tuple(sorted(c.values.items()))
+        if key not in seen:
+            seen.add(key)
+            unique.append((dim, c))
+    return unique
+
+
+def oracle_deviation(runtime, obs, config, beams=ORACLE_BEAMS):
+    """Max |kernel map - float64 oracle map| [nat] of ``beams`` of the middle frame, the
+    fraction of compared voxels that agree exactly, and how many were compared."""
+    j = len(obs.samples) // 2
+    mapping = Mapping.from_config(runtime, config=config)
+    spec, lattice, model = mapping.grid.spec, mapping.fusion.lattice, mapping.fusion.model
+    mapping.fuse(obs.samples[j], obs.poses[j])
+    runtime.queue.finish()
+    it, fusion = mapping.detection.interpreter, mapping.fusion
+    evidence = it.arrays["evidence"].get(runtime.queue).reshape(lattice.n_beams, it.n_bins)
+    only = np.zeros_like(evidence)
+    only[list(beams)] = evidence[list(beams)]
+    check = EvidenceGrid(runtime, spec)
+    Fusion(runtime, check, lattice, model, it.n_bins, fusion.bin_spacing_m, fusion.first_bin, fusion.last_bin)(
+        only, obs.poses[j])
+    keys, data = check.bricks()
+    index = spec.brick_voxels(keys[(data != 0).reshape(len(keys), -1).any(axis=1)])
+
+    profiles = oracle.range_profile(obs.samples[j].astype(np.float64), config.n_fft, output="power")
+    noise, _, mask = oracle.cfar(profiles, config.cfar_config())
+    ev64 = oracle.interpret(profiles, noise, mask, config.interpret_config(), fusion.bin_spacing_m)[0]
+    sums, _, ambiguous = oracle.fusion_at_points(spec.index_to_world(index), ev64.reshape(lattice.n_beams, -1), lattice,
+                                                 model, obs.poses[j], fusion.bin_spacing_m, fusion.first_bin,
+                                                 fusion.last_bin, margin=DECISION_MARGIN, beams=beams)
+    got = check.snapshot()[index[:, 2], index[:, 1], index[:, 0]].astype(np.int64)
+    err = np.abs(got - sums)[~ambiguous]
+    if not err.size:
+        return 0.0, 1.0, 0
+    return float(err.max()) / logodds.SCALE, float((err == 0).mean()), int(err.size)
+
+
+SCORE_KEYS = ("auc_detectable", "iou_detectable", "auc_obstacles", "iou_obstacles", "auc_weak", "false_free",
+              "shadow_unknown", "ece", "brier", "objects_found", "objects_total")
+BASELINES = ("prior_only", "raw_intensity", "octomap")
+
+
+def pareto(runs, key="auc_detectable"):
+    """Flags: run i is on the front when no run is at least as fast and as good, one strictly."""
+    flags = []
+    for r in runs:
+        dominated = any(o["ms_per_frame"] <= r["ms_per_frame"] and o[key] >= r[key]
+                        and (o["ms_per_frame"] < r["ms_per_frame"] or o[key] > r[key]) for o in runs)
+        flags.append(not dominated)
+    return flags
+
+
+def run(runtime, scene, obs, reference_config, voxels=VOXELS, report=None):
+    """Measure every variant of ``reference_config`` on ``obs`` (simulated from ``scene``), each
+    scored on the fixed voxel set of its voxel size (``evaluate.instrument``: what the reference
+    configuration reaches at that size), beside the three baselines. Returns the --json dict."""
+    say = report or (lambda _: None)
+    instruments, runs, by_voxel = {}, [], {}
+    for dim, config in variants(reference_config, voxels):
+        v = config["grid.voxel_m"]
+        if v not in instruments:
+            say(f"truth and baselines at {v} m ...")
+            inst = instruments[v] = instrument(runtime, scene, obs, reference_config.replaced(grid__voxel_m=v))
+            by_voxel[str(v)] = dict(voxel_set=inst.describe(), classes=inst.truth.counts(), hidden_objects=inst.hidden,
+                                    baselines=baselines(runtime, inst, obs))
+        inst = instruments[v]
+        say(f"{dim}: {config.label(reference_config)} ...")
+        res = map_observations(runtime, obs, config)
+        m = radar_score(inst, res.log_odds)
+        dev, exact, compared = oracle_deviation(runtime, obs, config)
+        label = ("reference: " + config.label()) if config is reference_config else config.label(reference_config)
+        runs.append(dict(dimension=dim, label=label, voxel_m=v, config=config.as_dict(), ms_per_frame=res.ms_per_frame,
+                         **{k: m[k] for k in SCORE_KEYS}, objects=m["objects"], reliability=m["reliability"],
+                         max_dev_nats=dev, exact_fraction=exact, oracle_voxels=compared,
+                         memory_mib=res.memory["sparse_bytes"] / 2 ** 20))
+        del res
+    for v in {r["voxel_m"] for r in runs}:                 # the front within one voxel set
+        same = [r for r in runs if r["voxel_m"] == v]
+        for r, front in zip(same, pareto(same)):
+            r["pareto"] = front
+    ref_v = str(reference_config["grid.voxel_m"])
+    return dict(benchmark="quality", device=runtime.name, frames=len(obs.samples),
+                observations=int(np.prod(obs.samples.shape[:3])), seed=obs.seed, reference_voxel_m=float(ref_v),
+                voxel_set=by_voxel[ref_v]["voxel_set"], runs=runs, baselines=by_voxel[ref_v]["baselines"],
+                by_voxel=by_voxel)

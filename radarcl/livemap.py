@@ -1,0 +1,243 @@
+"""The live map's library half: a radar's beams, parsed from its byte stream, fused as they come.
+
+Bytes -> a protocol parser (``io.beam_protocol`` or ``io.ti_uart``; ``parser_for``) -> ``Beam``s
+in a queue (``Session``, fed by the port's reader thread) -> ``LiveMapper`` (the mapper's
+thread): the beams that arrived since the last fuse are fused at once, each frame's share
+restricted to the azimuths that arrived (``Fusion.restrict``), so the map lags the radar by one
+fuse, not by a frame. A part of a frame fused this way sums to exactly what the whole frame gives
+(integer log-odds). A frame's pose comes from the packets, a pose file or a fixed mount
+(``PoseSource``). The loop that runs them, with checkpoints and status, is ``jobs.live``.
+"""
+
+import queue
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from radarcl.errors import ConfigError
+from radarcl.geometry import interpolate_pose
+from radarcl.io import beam_protocol, ti_uart
+from radarcl.pipeline import Mapping
+
+KEPT_FRAMES = 8          # beams of this many frames back are still taken (and told from duplicates)
+
+
+@dataclass
+class Beam:
+    """One beam as the mapper takes it, from either protocol."""
+
+    frame: int
+    azimuth: int
+    elevation: int
+    timestamp_ns: int          # the radar's clock (beam protocol) or the receive time (TI UART)
+    samples: np.ndarray
+    pose: np.ndarray = None
+    arrived: float = 0.0       # time.perf_counter() when its last byte was parsed
+
+
+def parser_for(sensor, on_beam, clock):
+    """The parser of ``sensor``'s protocol, delivering ``Beam``s to ``on_beam``; ``clock()`` is
+    the receive time [ns] of the chunk being parsed (TI frames carry no usable time)."""
+    if sensor.protocol == "ti":
+        antennas, q_bits = ti_scaling(sensor)
+
+        def ti_frame(frame):
+            values = frame.range_profile
+            if values is None:                     # a frame without the range profile TLV: nothing to map
+                return
+            on_beam(Beam(frame.frame_number, 0, 0, clock(), ti_uart.profile_power(values, antennas, q_bits),
+                         arrived=time.perf_counter()))
+        return ti_uart.TiParser(ti_frame)
+
+    def beam(p):
+        on_beam(Beam(p.frame, p.azimuth, p.elevation, p.timestamp_ns, p.samples, p.pose, time.perf_counter()))
+    return beam_protocol.BeamParser(beam)
+
+
+def ti_scaling(sensor):
+    """(antennas, Q bits) of a TI range profile, from the sensor profile's [stream] keys."""
+    return int(sensor.get("stream", "range_profile_antennas", 1)), int(sensor.get("stream", "range_profile_q", 9))
+
+
+class PoseSource:
+    """Where a frame's pose comes from: the packets' own (first beam of the frame), else a
+    pose file interpolated at the beam's time, else a fixed ``mount`` (4, 4)."""
+
+    def __init__(self, mount=None, track=None):
+        self.mount = np.eye(4) if mount is None else np.asarray(mount, np.float64)
+        self.track = track                     # (times_ns (n,), poses (n, 4, 4)) or None
+
+    def __call__(self, beam):
+        if beam.pose is not None:
+            return beam.pose
+        if self.track is not None:
+            return interpolate_pose(*self.track, beam.timestamp_ns)
+        return self.mount
+
+
+class LiveMapper:
+    """Beams -> the map. Built on the first beam (which must match the sensor: refused with both
+    shapes otherwise, before anything is fused); ``add(beams)`` fuses them, ``save()`` checkpoints.
+
+    runtime: an OpenCL ``Runtime``; config: a ``mapconfig.Resolved``; saver: a ``maps.disk.MapSaver``
+    (or None); poses: a ``PoseSource``; on_fused(bricks): told the bricks each fuse changed,
+    rows (bx, by, bz, pool slot) (the view stream)."""
+
+    def __init__(self, runtime, config, saver=None, poses=None, on_fused=None):
+        self.runtime, self.config, self.saver = runtime, config, saver
+        self.poses = poses or PoseSource()
+        self.on_fused = on_fused
+        self.mapping = None
+        self.stats = dict(beams=0, frames=0, fuses=0, duplicates=0, refused=0, late=0, checkpoints=0,
+                          saved_beams=0)
+        self.latencies = []                     # seconds from a beam's last byte to its evidence in the map
+        self.fused_log = None                   # a list: (frame, azimuth, elevation) of every beam fused
+        self.trajectory = []                    # one pose per frame
+        self._frame_poses = {}
+        self._seen = {}                         # frame id -> the beams of it fused so far
+        self._newest = None
+
+    # -- the pipeline is built before the stream (or on the first beam, when it fixes the bin count)
+    def prepare(self, first=None):
+        """Build the pipeline (compiling its kernels takes a second or two: better before the
+        radar streams). A sensor whose bin count comes from the data waits for ``first``.
+        Returns True when built."""
+        if self.mapping is not None:
+            return True
+        sensor, config = self.config.sensor, self.config
+        if sensor.raw:
+            want = (sensor.radar.n_samples, np.dtype(sensor.sample_dtype))
+        elif sensor.n_bins() is not None:
+            want = (sensor.n_bins(), np.dtype(np.float32))
+        elif first is not None:
+            want = (len(first.samples), np.dtype(np.float32))
+            if first.samples.dtype == np.float32:
+                config = config.for_sensor(sensor.with_bins(len(first.samples)))
+        else:
+            return False
+        if sensor.spinning:
+            raise ConfigError(f"sensor {sensor.name} spins: live fusion takes radars that scan a sector "
+                              "(a turn cannot be fused azimuth range by azimuth range)")
+        self.config, self._want = config, want
+        self.mapping = Mapping.from_config(self.runtime, config=config)
+        self._frame = np.zeros(self.mapping.frame_shape, self.mapping.range_fft.dtype
+                               if self.mapping.range_fft is not None else np.float32)
+        return True
+
+    def _index(self, beam):
+        lat = self.mapping.fusion.lattice
+        if not (0 <= beam.azimuth < lat.n_az and 0 <= beam.elevation < lat.n_el):
+            return None
+        return (beam.azimuth,) if lat.n_el == 1 else (beam.azimuth, beam.elevation)
+
+    # -- fusing ---------------------------------------------------------------------------------------
+    def add(self, beams):
+        """Fuse ``beams`` (arrival order): one fuse per frame they belong to. Returns the number fused."""
+        if not beams:
+            return 0
+        self.prepare(beams[0])
+        first = beams[0]
+        if self.stats["beams"] == 0 and (len(first.samples), first.samples.dtype) != self._want:
+            raise ConfigError(f"the radar sends beams of {len(first.samples)} {first.samples.dtype} samples; sensor "
+                              f"{self.config.sensor.name} expects {self._want[0]} {self._want[1]} (choose the "
+                              "matching --sensor)")
+        groups = {}
+        for b in beams:
+            index = self._index(b) if (len(b.samples), b.samples.dtype) == self._want else None
+            if index is None:
+                self.stats["refused"] += 1
+                continue
+            newest = self._newest
+            if newest is not None and b.frame < newest - KEPT_FRAMES:       # the radar restarted its count
+                self._seen.clear()
+                self._frame_poses.clear()
+                newest = None
+            if b.frame not in self._seen:
+                if newest is not None and b.frame < newest:
+                    self.stats["late"] += 1
+                for old in [f for f in self._seen if f < b.frame - KEPT_FRAMES]:
+                    self._seen.pop(old)
+                    self._frame_poses.pop(old, None)
+            self._newest = b.frame if newest is None else max(newest, b.frame)
+            seen = self._seen.setdefault(b.frame, set())
+            if index in seen:
+                self.stats["duplicates"] += 1
+                continue
+            seen.add(index)
+            groups.setdefault(b.frame, []).append((index, b))
+        fused = sum(self._fuse(frame_id, items) for frame_id, items in groups.items())
+        self.runtime.queue.finish()
+        done = time.perf_counter()
+        for items in groups.values():
+            self.latencies.extend(done - b.arrived for _, b in items)
+        return fused
+
+    def _fuse(self, frame_id, items):
+        if frame_id not in self._frame_poses:
+            pose = self.poses(items[0][1])
+            self._frame_poses[frame_id] = pose
+            self.trajectory.append(pose)
+            self.stats["frames"] += 1
+        frame = self._frame
+        frame[...] = 0
+        for index, b in items:
+            frame[index] = b.samples
+        if self.fused_log is not None:
+            self.fused_log.extend((frame_id, b.azimuth, b.elevation) for _, b in items)
+        azimuths = [b.azimuth for _, b in items]
+        plan = self.mapping.fuse(frame, self._frame_poses[frame_id], azimuths=(min(azimuths), max(azimuths)))
+        self.stats["beams"] += len(items)
+        self.stats["fuses"] += 1
+        if self.on_fused is not None and len(plan.bricks):
+            self.on_fused(plan.bricks)
+        return len(items)
+
+    # -- checkpoints ----------------------------------------------------------------------------------
+    def save(self, extra=None):
+        """Write the map (and the stream's counts) through the saver; returns the beams it holds."""
+        if self.saver is None or self.mapping is None:
+            return self.stats["saved_beams"]
+        self.runtime.queue.finish()
+        stream = dict(self.stats, **(extra or {}))
+        stream["saved_beams"] = self.stats["beams"]
+        self.saver(self.mapping.grid, np.array(self.trajectory) if self.trajectory else None, stream=stream)
+        self.stats["saved_beams"] = self.stats["beams"]
+        self.stats["checkpoints"] += 1
+        return self.stats["saved_beams"]
+
+
+class Session:
+    """Feeds bytes (with their receive time) to a recorder and the sensor's parser; parsed
+    beams wait in ``beams`` (a queue) for the mapper's thread. ``feed`` is what the port's
+    reader thread, a replay or a test calls."""
+
+    def __init__(self, sensor, recorder=None):
+        self.beams = queue.Queue()
+        self.recorder = recorder
+        self._now = 0
+        self.parser = parser_for(sensor, self.beams.put, lambda: self._now)
+        self.parse_s = 0.0
+
+    def feed(self, t_ns, data):
+        if self.recorder is not None:
+            self.recorder(t_ns, data)
+        self._now = t_ns
+        start = time.thread_time()
+        self.parser.data_received(data)
+        self.parse_s += time.thread_time() - start
+
+    def drain(self, wait=0.1):
+        """The beams parsed so far (waits up to ``wait`` seconds for the first)."""
+        out = []
+        try:
+            out.append(self.beams.get(timeout=wait) if wait else self.beams.get_nowait())
+            while True:
+                out.append(self.beams.get_nowait())
+        except queue.Empty:
+            pass
+        return out
+
+    @property
+    def counters(self):
+        return self.parser.counters

@@ -1,0 +1,108 @@
+"""The map as one ``.npz`` file: the grid spec, the allocated bricks, the sensor's poses.
+
+Members: ``version`` (``FILE_VERSION``), ``origin_m``, ``voxel_m``, ``shape`` (the ``GridSpec``),
+``keys`` (n, 3) int32 bricks (bx, by, bz), ``data`` (n, 8, 8, 8) int32 [z, y, x] in
+``radarcl.logodds`` units, optional ``poses`` (m, 4, 4) float64 and ``meta`` (a JSON object).
+Written through a temporary file renamed over the target, so a reader (``radarcl view --live``)
+sees the old map or the new one, never half of one. Read member by member with every size
+checked against its header and the memory budget (``io.files.safe_npz``), never unpickled.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from radarcl.errors import FrameFormatError, ShapeError
+from radarcl.grid import BRICK, GRID_LIMIT, GridSpec
+from radarcl.io.files import atomic, safe_npz
+
+FILE_VERSION = 1
+MAX_POSES = 10000          # a map keeps at most this many sensor poses (evenly subsampled)
+
+
+def recognises(path):
+    """True when ``path`` is a file (an npz map, or something to refuse with a reason)."""
+    return Path(path).is_file()
+
+
+def write(path, spec, keys, data, poses=None, meta=None):
+    """A map file: ``spec``, the bricks (``keys`` (n, 3) int32, ``data`` (n, 8, 8, 8) int32),
+    the sensor's ``poses`` and ``meta`` (a JSON-able dict) when given, written atomically."""
+    extra = {} if poses is None else dict(poses=check_trajectory(poses))
+    if meta:
+        extra["meta"] = np.str_(json.dumps(meta))
+    with atomic(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, version=FILE_VERSION, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
+                            shape=np.asarray(spec.shape), keys=keys, data=data, **extra)
+
+
+def read(path):
+    """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32) of a map file. A file that is not a
+    radarcl map raises ``FrameFormatError`` saying what was wrong; array sizes are checked
+    against their headers and the memory budget before they are read."""
+    if not Path(path).is_file():
+        raise FrameFormatError(f"{path} does not exist (yet)" if not Path(path).exists()
+                               else f"{path} is not a map file or store")
+    with safe_npz(path, what="radarcl map file (an npz radarcl wrote)") as f:
+        missing = {"version", "origin_m", "voxel_m", "shape", "keys", "data"} - set(f.files)
+        if missing:
+            raise FrameFormatError(f"{path} is not a radarcl grid file: it lacks {sorted(missing)} "
+                                   f"(expected an npz radarcl wrote, e.g. radarcl demo's map.npz)")
+        try:
+            version = int(f["version"])
+            if version != FILE_VERSION:
+                raise FrameFormatError(f"{path} has grid file version {version}, this radarcl reads {FILE_VERSION}")
+            spec = GridSpec(tuple(f["origin_m"]), float(f["voxel_m"]), tuple(int(n) for n in f["shape"]))
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, FrameFormatError):
+                raise
+            raise FrameFormatError(f"{path}: a bad grid description ({exc})") from exc
+        n_keys = f.header("keys")[0]
+        n_data = f.header("data")[0]
+        if len(n_keys) != 2 or n_keys[1:] != (3,) or n_data != (n_keys[0], BRICK, BRICK, BRICK):
+            raise FrameFormatError(f"{path}: expected brick keys (n, 3) and bricks (n, 8, 8, 8), got {n_keys} "
+                                   f"and {n_data}")
+        if n_keys[0] > int(np.prod(spec.brick_shape, dtype=np.int64)):
+            raise FrameFormatError(f"{path}: {n_keys[0]} bricks in a grid of only {spec.brick_shape} bricks")
+        keys, data = f["keys"], f["data"]
+    if data.dtype != np.int32:
+        raise FrameFormatError(f"{path}: expected bricks ({len(keys)}, 8, 8, 8) int32, got {data.shape} {data.dtype}")
+    if keys.dtype != np.int32:
+        raise FrameFormatError(f"{path}: expected brick keys (n, 3) int32, got {keys.shape} {keys.dtype}")
+    if len(keys) and ((keys < 0).any() or (keys >= np.asarray(spec.brick_shape)).any()):
+        raise FrameFormatError(f"{path}: brick keys outside the grid's {spec.brick_shape} bricks")
+    if len(np.unique(keys, axis=0)) != len(keys):
+        raise FrameFormatError(f"{path}: a brick key appears more than once")
+    if data.size and (data.max() > GRID_LIMIT or data.min() < -GRID_LIMIT):
+        raise FrameFormatError(f"{path}: values beyond the grid's saturation +-{GRID_LIMIT} units; "
+                               "radarcl never writes them")
+    return spec, keys, data
+
+
+def check_trajectory(poses):
+    """Sensor poses (n, 4, 4) float64 to keep with a map: finite, at most MAX_POSES (evenly
+    subsampled, the last kept)."""
+    P = np.asarray(poses, dtype=np.float64)
+    if P.ndim != 3 or P.shape[1:] != (4, 4) or not np.isfinite(P).all():
+        raise ShapeError(f"poses must be finite (n, 4, 4), got {P.shape}")
+    if len(P) > MAX_POSES:
+        P = P[np.unique(np.r_[np.linspace(0, len(P) - 1, MAX_POSES).astype(int), len(P) - 1])]
+    return P
+
+
+def read_poses(path):
+    """The sensor poses (n, 4, 4) a map file keeps, or None."""
+    with safe_npz(path) as f:
+        return check_trajectory(f["poses"]) if "poses" in f.files else None
+
+
+def read_meta(path, key):
+    """The ``key`` entry of the map file's ``meta``, or None."""
+    with safe_npz(path) as f:
+        if "meta" not in f.files:
+            return None
+        try:
+            return json.loads(str(f["meta"])).get(key)
+        except (ValueError, AttributeError) as exc:
+            raise FrameFormatError(f"{path}: its meta is not a JSON object ({exc})") from exc
