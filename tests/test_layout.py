@@ -1,4 +1,5 @@
-"""House rules: one name, three files; the installed package carries kernels/ and viewer/ (GLSL too)."""
+"""House rules: one name, three files; the installed package carries kernels/ and viewer/ (GLSL too);
+library below applications (``LAYERS``)."""
 
 import os
 import subprocess
@@ -32,7 +33,7 @@ def test_installed_copy_runs_a_kernel(tmp_path):
               "assert str(c.kernels_dir()).startswith(%r), c.kernels_dir()\n"
               "p = RangeFFT(c.Runtime(), (2, 1), 8, 16, dtype=np.float32)(np.ones((2, 1, 8), np.float32)).profiles\n"
               "import radarcl.viewer.renderer as r\n"
-              "from radarcl import sensors\n"
+              "from radarcl.config import sensors\n"
               "assert str(sensors.PROFILE_DIR).startswith(%r) and sensors.load('navtech-cts350x').n_bins() == 3768\n"
               "assert r.__file__.startswith(%r) and 'FRAGMENT_SHADER' in r.shader_source('volume')\n"
               "print(radarcl.__file__, float(p[0, 0, 0]))\n") % (str(target), str(target), str(target))
@@ -40,3 +41,173 @@ def test_installed_copy_runs_a_kernel(tmp_path):
     out = subprocess.run([sys.executable, "-c", script], check=True, cwd=tmp_path, env=env,
                          capture_output=True, text=True).stdout
     assert out.startswith(str(target)) and out.split()[-1] == "1.0"
+
+
+# -- layers: library below applications ------------------------------------------------------------------
+# The one table of the package's layers, top to bottom. A module may import a module of a lower
+# layer, or a sibling in its own folder (no circle); never one of its own layer's other rooms or
+# above. Imports inside functions count: one that only dodges a circle is a circle.
+LAYERS = (
+    ("__main__",),
+    ("cli",),
+    ("bench",),
+    ("commands",),
+    ("jobs",),
+    ("report",),
+    ("evaluation",),
+    ("livemap",),
+    ("pipeline",),
+    ("stages", "scene", "viewer"),
+    ("config", "maps"),
+    ("io",),
+    ("oracle",),
+    ("geometry", "grid"),
+    ("physics", "cfar_theory", "cl", "logodds"),
+    ("errors", "__init__"),
+)
+
+
+def layer_of(module):
+    """(layer index, room) of a dotted module name of the package (radarcl.x.y -> room x)."""
+    parts = module.split(".")
+    room = parts[1] if len(parts) > 1 else "__init__"
+    for depth, rooms in enumerate(LAYERS):
+        if room in rooms:
+            return depth, room
+    raise AssertionError(f"{module}: room {room!r} is in no layer of LAYERS")
+
+
+def _is_module(name):
+    """True when the dotted ``name`` is a module or package of radarcl (viewer/ ships as radarcl.viewer)."""
+    parts = name.split(".")
+    if parts[0] != "radarcl" or len(parts) < 2:
+        return False
+    base = ROOT / "viewer" if parts[1] == "viewer" else ROOT / "radarcl" / parts[1]
+    path = base.joinpath(*parts[2:])
+    return path.with_suffix(".py").is_file() or (path / "__init__.py").is_file()
+
+
+def package_imports():
+    """[(importer, imported, line)] of every internal import of radarcl and viewer (shipped as
+    radarcl.viewer), at module level and inside functions; relative imports resolved."""
+    import ast
+
+    out = []
+    for base, package in ((ROOT / "radarcl", "radarcl"), (ROOT / "viewer", "radarcl.viewer")):
+        for path in sorted(base.rglob("*.py")):
+            rel = path.relative_to(base).with_suffix("").parts
+            name = ".".join((package,) + tuple(p for p in rel if p != "__init__"))
+            pkg = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, ast.Import):
+                    targets = [a.name for a in node.names]
+                elif isinstance(node, ast.ImportFrom):
+                    mod = node.module or ""
+                    if node.level:
+                        mod = ".".join(pkg.split(".")[:len(pkg.split(".")) - node.level + 1] + ([mod] if mod else []))
+                    # `from radarcl.x import y`, y a module: y is what is imported
+                    targets = [f"{mod}.{a.name}" if _is_module(f"{mod}.{a.name}") else mod for a in node.names]
+                else:
+                    continue
+                out += [(name, t, node.lineno) for t in targets if t == "radarcl" or t.startswith("radarcl.")]
+    return out
+
+
+def layer_violations(imports):
+    """Lines naming each import that runs upward or sideways across rooms, and each circle."""
+    bad = []
+    graph = {}
+    for importer, imported, line in imports:
+        (a, room_a), (b, room_b) = layer_of(importer), layer_of(imported)
+        if room_a == room_b:
+            graph.setdefault(importer, set()).add(imported)
+        elif b <= a:
+            bad.append(f"{importer}:{line} imports {imported} ({room_b!r}, layer {b}, is not below {room_a!r}, "
+                       f"layer {a})")
+    # circles inside a room (a folder's modules importing each other)
+    state = {}
+
+    def visit(node, path):
+        state[node] = 1
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                bad.append("circle: " + " -> ".join(path[path.index(nxt):] + [nxt]) if nxt in path else nxt)
+            elif nxt not in state:
+                visit(nxt, path + [nxt])
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [node])
+    return bad
+
+
+def test_imports_run_downward():
+    assert layer_violations(package_imports()) == []
+
+
+def test_the_layer_check_catches_an_upward_import():
+    """A planted import of the CLI from the grid, and a planted circle, are both reported."""
+    planted = package_imports() + [("radarcl.grid", "radarcl.cli", 1), ("radarcl.maps.npz", "radarcl.maps.store", 1),
+                                   ("radarcl.maps.store", "radarcl.maps.npz", 1)]
+    found = layer_violations(planted)
+    assert any(v.startswith("radarcl.grid:1 imports radarcl.cli") for v in found), found
+    assert any(v.startswith("circle:") and "radarcl.maps.store" in v for v in found), found
+
+
+def layers_line():
+    """The README's one-line picture of LAYERS."""
+    named = ([r for r in rooms if r not in ("__main__", "__init__")] for rooms in LAYERS)
+    return " -> ".join(", ".join(rooms) for rooms in named if rooms)
+
+
+def test_readme_layout_follows_the_layer_table():
+    text = (ROOT / "README.md").read_text()
+    section = text.split("\n## Layout\n", 1)[1].split("\n## ", 1)[0]
+    assert f"`{layers_line()}`" in section.replace("\n", " ").replace("  ", " "), layers_line()
+    for rooms in LAYERS:
+        for room in rooms:
+            if room not in ("__main__", "__init__"):
+                assert f"  {room}" in section, f"README's layout leaves out {room}"
+
+
+def resolves(dotted):
+    """True when ``dotted`` (radarcl.module[.attribute...]) names something that exists."""
+    import importlib
+
+    parts = dotted.split(".")
+    for cut in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:cut]))
+        except ImportError:
+            continue
+        for name in parts[cut:]:
+            if not hasattr(obj, name):
+                return False
+            obj = getattr(obj, name)
+        return True
+    return False
+
+
+def test_every_name_the_code_and_the_readme_cite_exists():
+    """Kernel headers say which oracle they equal, docstrings and the README point to modules:
+    every ``radarcl.x.y`` they name must import (a renamed module leaves no stale pointer)."""
+    import re
+
+    pattern = re.compile(r"\bradarcl(?:\.[A-Za-z_]\w*)+")
+    sources = [*(ROOT / "kernels").glob("*.cl"), *(ROOT / "radarcl").rglob("*.py"), *(ROOT / "viewer").rglob("*.py"),
+               ROOT / "README.md"]
+    stale = sorted({f"{path.relative_to(ROOT)}: {name}" for path in sources
+                    for name in pattern.findall(path.read_text()) if not resolves(name.rstrip("."))})
+    assert stale == []
+
+
+def test_every_file_the_code_and_the_readme_cite_exists():
+    import re
+
+    pattern = re.compile(r"\b(?:radarcl|viewer|kernels|tests|docs)/[\w/.-]*\w\.(?:py|cl|h|toml|glsl|png|md)\b")
+    sources = [*(ROOT / "kernels").glob("*.cl"), *(ROOT / "radarcl").rglob("*.py"), *(ROOT / "viewer").rglob("*.py"),
+               *(ROOT / "tests").glob("*.py"), ROOT / "README.md", ROOT / "Makefile", ROOT / "pyproject.toml"]
+    missing = sorted({f"{path.relative_to(ROOT)}: {name}" for path in sources for name in pattern.findall(path.read_text())
+                      if "*" not in name and not (ROOT / name).exists()})
+    assert missing == []
