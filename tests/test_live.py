@@ -15,6 +15,7 @@ from radarcl.grid import assemble
 from radarcl.io import emulator
 from radarcl.io.inputs import open_input
 from radarcl.io.stream import PortReader, StreamRecorder, open_port
+from radarcl import livemap
 from radarcl.jobs import live
 from radarcl.maps.disk import MapSaver, read, read_meta
 from radarcl.pipeline import Mapping
@@ -74,7 +75,7 @@ def test_a_frame_fused_in_azimuth_ranges_equals_the_whole_frame(runtime, scene):
 
 def test_a_spinning_radar_is_not_fused_by_azimuth_ranges(runtime):
     config = mapconfig.resolve("navtech-cts350x", program={"grid.voxel_m": 1.0})
-    mapper = live.LiveMapper(runtime, config.for_sensor(config.sensor.with_bins(3768)))
+    mapper = livemap.LiveMapper(runtime, config.for_sensor(config.sensor.with_bins(3768)))
     with pytest.raises(ConfigError, match="spins"):
         mapper.prepare()
 
@@ -102,7 +103,7 @@ def test_ti_demo_frames_over_a_pty(runtime, tmp_path):
     chirps = np.stack([src.frames[j] for j in range(24)]).reshape(24, -1)
     power = np.abs(np.fft.fft(chirps * np.hanning(chirps.shape[1]), axis=1)) ** 2
     config = mapconfig.resolve("ti-xwr18xx-uart")
-    antennas, q_bits = live.ti_scaling(config.sensor)
+    antennas, q_bits = livemap.ti_scaling(config.sensor)
     q9 = emulator.q9_of_power(power, antennas, q_bits)
     assert q9.max() < 65535                                    # the demo's scaling holds the capture
     mapper, s, _, _ = over_pty(runtime, config, emulator.ti_packets(q9), baud=None)
@@ -132,20 +133,20 @@ def test_record_then_replay_gives_the_same_map(runtime, scene, tmp_path):
     mapper, s, _, _ = over_pty(runtime, config, packets, emulator.Faults(noise=0.05, ber=1e-5, seed=7),
                                recorder=recorder)
     recorder.close()
-    replayed, s2, header = live.replay(rec, lambda h: (config.sensor, live.LiveMapper(runtime, config)))
+    replayed, s2, header = live.replay(rec, lambda h: (config.sensor, livemap.LiveMapper(runtime, config)))
     assert header["sensor"] == "paper" and s2["beams"] == s["beams"] > 0
     assert np.array_equal(replayed.mapping.snapshot(), mapper.mapping.snapshot())
     with pytest.raises(ConfigError, match="exists"):
         StreamRecorder(rec, {})                               # a stream is never overwritten
     torn = tmp_path / "torn.rcs"
     torn.write_bytes(rec.read_bytes()[:-100])                 # the writer was killed mid-record
-    again, s3, _ = live.replay(torn, lambda h: (config.sensor, live.LiveMapper(runtime, config)))
+    again, s3, _ = live.replay(torn, lambda h: (config.sensor, livemap.LiveMapper(runtime, config)))
     assert 0 < s3["beams"] <= s["beams"]
 
 
 def test_a_radar_of_another_shape_is_refused_before_anything_is_fused(runtime):
-    mapper = live.LiveMapper(runtime, paper_config())
-    beam = live.Beam(0, 0, 0, 0, np.zeros(128, np.complex64))
+    mapper = livemap.LiveMapper(runtime, paper_config())
+    beam = livemap.Beam(0, 0, 0, 0, np.zeros(128, np.complex64))
     with pytest.raises(ConfigError, match="128 complex64 samples; sensor paper expects 256 int16"):
         mapper.add([beam])
     assert mapper.stats["beams"] == 0
@@ -154,16 +155,16 @@ def test_a_radar_of_another_shape_is_refused_before_anything_is_fused(runtime):
 def test_ctrl_c_finishes_the_fuse_saves_and_reports(runtime, scene, tmp_path, monkeypatch):
     frames, poses = scene
     config = paper_config()
-    session = live.Session(config.sensor)
+    session = livemap.Session(config.sensor)
     session.feed(0, b"".join(emulator.beam_packets(frames[:1], poses[:1])))
-    mapper = live.LiveMapper(runtime, config, MapSaver(tmp_path / "m.rcmap"))
+    mapper = livemap.LiveMapper(runtime, config, MapSaver(tmp_path / "m.rcmap"))
     calls = []
 
     def drain(wait=0.1):
         calls.append(wait)
         if len(calls) == 2:
             raise KeyboardInterrupt
-        return live.Session.drain(session, wait)
+        return livemap.Session.drain(session, wait)
 
     monkeypatch.setattr(session, "drain", drain)
     s = live.run(session, mapper)

@@ -82,7 +82,7 @@ def test_newer_or_foreign_stores_are_refused(tmp_path):
 
 WRITER = """
 import sys, numpy as np
-from radarcl import store
+from radarcl.maps import store
 from radarcl.grid import GridSpec
 spec = GridSpec((-2.0, -3.0, -1.0), 0.25, (160, 120, 80))
 rng = np.random.default_rng(0)

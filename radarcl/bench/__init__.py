@@ -37,12 +37,12 @@ def add_arguments(parser):
         b = benches.add_parser(name, help=summary, description=summary[0].upper() + summary[1:] + ".")
         b.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
         module.add_arguments(b)
-        b.set_defaults(module=module)
+        b.set_defaults(bench_module=module)
 
 
 def run(args):
     say = (lambda line: None) if args.json else (lambda line: print(line, file=sys.stderr))
     say(f"measuring {args.bench} ...")
-    result, lines = args.module.command(args, runtime, say)
+    result, lines = args.bench_module.command(args, runtime, say)
     print(json.dumps(result) if args.json else "\n".join(lines))
     return 0

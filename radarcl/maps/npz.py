@@ -44,7 +44,7 @@ def read(path):
     if not Path(path).is_file():
         raise FrameFormatError(f"{path} does not exist (yet)" if not Path(path).exists()
                                else f"{path} is not a map file or store")
-    with safe_npz(path, what="radarcl map file (an npz radarcl wrote)") as f:
+    with safe_npz(path, what="radarcl grid file (an npz radarcl wrote)") as f:
         missing = {"version", "origin_m", "voxel_m", "shape", "keys", "data"} - set(f.files)
         if missing:
             raise FrameFormatError(f"{path} is not a radarcl grid file: it lacks {sorted(missing)} "
