@@ -1,10 +1,12 @@
 """Every export read back by the tool it is for: OctoMap, plyfile, VTK, a PGM/YAML parser as
 map_server reads it, rosbags; an empty map gives valid empty files."""
 
+
 import numpy as np
 import pytest
 
 from radarcl.cli import main
+from radarcl.errors import ConfigError
 from radarcl.grid import GridSpec, assemble
 from radarcl.maps import exports
 from radarcl.maps.map import Map
@@ -32,44 +34,85 @@ def m():
     return Map(SPEC, np.array(keys, np.int32), np.array(data, np.int32))
 
 
-def test_octomap_bt_and_ot_load_in_octomap(m, tmp_path):
+def octomap_leaves(tree):
+    """{(x, y, z) voxel centre rounded to 1e-6 m: log-odds} of an OcTree's leaves."""
+    out = {}
+    for leaf in tree.begin_leafs():
+        out[tuple(np.round(leaf.getCoordinate(), 6))] = leaf.getValue()          # log-odds
+    return out
+
+
+def test_octomap_files_hold_the_occupied_and_free_voxels_where_the_ply_has_them(m, tmp_path):
+    """OctoMap reads both files back; their leaves are the map's occupied and free voxels,
+    voxel for voxel at the PLY's coordinates (the map's origin lies on OctoMap's lattice), with
+    the .ot's log-odds and the .bt's classes; undecided voxels (between the thresholds) and
+    unseen ones are not in the tree."""
     import octomap
+    import plyfile
+
+    exports.ply_points(m, tmp_path / "p.ply", 1.0)
+    ply = plyfile.PlyData.read(str(tmp_path / "p.ply"))["vertex"]
+    ply_centres = {tuple(np.round(c, 6)) for c in np.stack([ply["x"], ply["y"], ply["z"]], 1).astype(np.float64)}
+    idx, units = m.voxels()
+    centres = SPEC.index_to_world(idx)
+    want_occ = {tuple(np.round(c, 6)) for c in centres[units > 1024]}
+    want_free = {tuple(np.round(c, 6)) for c in centres[units < -1024]}
+    assert want_occ == ply_centres and want_free and want_occ
     for name in ("m.bt", "m.ot"):
-        n = exports.octomap(m, tmp_path / name)
-        idx, units = m.voxels()
-        assert n == len(idx)
-        tree = octomap.OcTree(0.1)
+        out = exports.octomap(m, tmp_path / name, occupied_nats=1.0, free_nats=-1.0)
+        assert out["occupied_voxels"] == len(want_occ) and out["free_voxels"] == len(want_free)
         if name.endswith(".bt"):
+            tree = octomap.OcTree(0.1)
             assert tree.readBinary(str(tmp_path / name).encode())
         else:
             tree = octomap.OcTree.read(str(tmp_path / name).encode())
         assert abs(tree.getResolution() - SPEC.voxel_m) < 1e-12
-        centres = SPEC.index_to_world(idx)
-        occupied = np.array([tree.isNodeOccupied(tree.search(c)) for c in centres])
-        assert np.array_equal(occupied, units > 0)             # occupancy threshold 0 nat
+        leaves = octomap_leaves(tree)
+        occupied = {c for c, v in leaves.items() if v > 0}
+        assert occupied == want_occ and set(leaves) - occupied == want_free
         if name.endswith(".ot"):
-            got = np.array([tree.search(c).getLogOdds() for c in centres])
-            want = np.clip(units / 1024, -exports.CLAMP_NATS, exports.CLAMP_NATS)
-            assert np.allclose(got, want, atol=1e-3)           # float32 in the tree
-        leaves = sum(1 for _ in tree.begin_leafs())
-        assert leaves <= len(idx)                              # pruning may merge equal siblings
+            got = np.array([leaves[tuple(np.round(c, 6))] for c in centres[np.abs(units) > 1024]])
+            want = np.clip(units[np.abs(units) > 1024] / 1024, -exports.CLAMP_NATS, exports.CLAMP_NATS)
+            assert np.allclose(got, want, atol=1e-6)                       # float32 in the tree
+
+
+def test_an_origin_off_octomaps_lattice_is_refused_with_the_shift_or_resampled(tmp_path):
+    """Half a voxel off in y: refused, naming the 0.125 m the map would move; with resample each
+    lattice voxel takes the mean of the two voxels it straddles."""
+    import octomap
+
+    spec = GridSpec((0.0, 0.125, 0.0), 0.25, (8, 8, 8))
+    data = np.full((1, 8, 8, 8), 2048, np.int32)              # +2 nat everywhere ...
+    data[0, :, 4:, :] = -2048                                 # ... but -2 from y index 4 up
+    half = Map(spec, np.zeros((1, 3), np.int32), data)
+    with pytest.raises(ConfigError, match=r"would move by \[0.0, 0.125, 0.0\] m; pass --resample"):
+        exports.octomap(half, tmp_path / "h.ot")
+    out = exports.octomap(half, tmp_path / "h.ot", occupied_nats=0.5, free_nats=-0.5, resample=True)
+    leaves = octomap_leaves(octomap.OcTree.read(str(tmp_path / "h.ot").encode()))
+    # lattice voxel j (y from 0.25 j) mixes our voxels j - 1 and j half and half: 0 nat at the step
+    ys = sorted({c[1] for c in leaves})
+    by_y = {y: np.mean([v for c, v in leaves.items() if c[1] == y]) for y in ys}
+    assert by_y[0.125] == pytest.approx(2.0) and by_y[0.875] == pytest.approx(2.0) and by_y[2.125] == pytest.approx(-2.0)
+    assert 1.125 not in by_y                                  # the step's voxel is 0 nat: undecided, left out
+    assert out["occupied_voxels"] and out["free_voxels"] and out["lattice"] == "resampled onto OctoMap's lattice"
 
 
 def test_ply_points_and_mesh_read_back_with_plyfile(m, tmp_path):
     import plyfile
-    n = exports.ply_points(m, tmp_path / "p.ply", threshold_nats=1.0)
+    n = exports.ply_points(m, tmp_path / "p.ply", 1.0)["points"]
     ply = plyfile.PlyData.read(str(tmp_path / "p.ply"))
     v = ply["vertex"]
     centres, nats = m.occupied(1.0)
     assert n == len(v) == len(centres)
+    assert {"red", "green", "blue"} <= set(v.data.dtype.names) and np.ptp(v["red"].astype(int)) > 100
     order = np.lexsort((v["z"], v["y"], v["x"]))
     want = np.lexsort(centres.T[::-1])
     assert np.allclose(np.stack([v["x"], v["y"], v["z"]], 1)[order], centres[want], atol=1e-5)
     assert np.allclose(v["log_odds"][order], nats[want], atol=1e-4)
     assert np.allclose(v["probability"], 1 / (1 + np.exp(-v["log_odds"])), atol=1e-6)
-    nv, nf = exports.ply_mesh(m, tmp_path / "mesh.ply", threshold_nats=1.0)
+    out = exports.ply_mesh(m, tmp_path / "mesh.ply", 1.0)
     mesh = plyfile.PlyData.read(str(tmp_path / "mesh.ply"))
-    assert nv == len(mesh["vertex"]) > 0 and nf == len(mesh["face"]) > 0
+    assert out["vertices"] == len(mesh["vertex"]) > 0 and out["faces"] == len(mesh["face"]) > 0
     xs = mesh["vertex"]["x"]
     # the wall's surface lies within a voxel of x = 1 m (the voxel of index 12 spans 1.0-1.25 m)
     assert np.mean(np.abs(xs - 1.125) < 0.3) > 0.5
@@ -87,49 +130,80 @@ def test_vti_reads_back_in_vtk_with_the_same_values_and_spacing(m, tmp_path):
     assert image.GetDimensions() == SPEC.shape and np.allclose(image.GetSpacing(), (0.25,) * 3)
     assert np.allclose(image.GetOrigin(), np.asarray(SPEC.origin_m) + 0.125)
     values = vtk_to_numpy(image.GetPointData().GetArray("log_odds")).reshape(SPEC.array_shape)
-    assert np.array_equal(values, (assemble(SPEC, m.keys, m.data) / 1024).astype(np.float32))
+    dense = assemble(SPEC, m.keys, m.data)
+    assert np.array_equal(values, (dense / 1024).astype(np.float32))
+    observed = vtk_to_numpy(image.GetPointData().GetArray("observed")).reshape(SPEC.array_shape)
+    assert np.array_equal(observed, (dense != 0).astype(np.uint8))
 
 
 def test_costmap_follows_map_server(m, tmp_path):
-    exports.costmap(m, tmp_path / "c.pgm", band=(-0.5, 2.0), threshold_nats=1.0)
+    """The PGM is map_server's trinary image of the projection: occupied where some voxel of the
+    column is occupied, free where none is and some is free, unknown elsewhere; the YAML beside."""
+    out = exports.costmap(m, tmp_path / "c.pgm", band=(-0.5, 2.0), occupied_nats=1.0, free_nats=-1.0)
+    assert out["files"] == [tmp_path / "c.pgm", tmp_path / "c.yaml"]
     raw = (tmp_path / "c.pgm").read_bytes()
     lines = raw.split(b"\n", 4)
     assert lines[0] == b"P5" and lines[2] == b"24 16" and lines[3] == b"255"
     pixels = np.frombuffer(lines[4], np.uint8).reshape(16, 24)[::-1]     # row 0 = lowest y, as the origin
-    grid = m.projection((-0.5, 2.0), 1.0)
+    grid = m.projection((-0.5, 2.0), 1.0, -1.0)
+    assert set(np.unique(grid)) == {0, 100, -1}
     assert np.array_equal(pixels == 0, grid == 100) and np.array_equal(pixels == 254, grid == 0)
-    assert (pixels[grid == -1] == 205).all()
+    assert np.array_equal(pixels == 205, grid == -1)
+    assert (out["occupied_cells"], out["free_cells"], out["unknown_cells"]) == tuple(
+        int((grid == v).sum()) for v in (100, 0, -1))
     meta = dict(line.split(": ", 1) for line in (tmp_path / "c.yaml").read_text().splitlines())
     assert meta["image"] == "c.pgm" and float(meta["resolution"]) == 0.25 and meta["mode"] == "trinary"
     assert meta["origin"] == "[-2.0, -3.0, 0.0]"
+    # map_server's trinary reading: p = (255 - pixel) / 255 against the YAML's thresholds
+    p = (255 - pixels.astype(float)) / 255
+    read = np.where(p > float(meta["occupied_thresh"]), 100, np.where(p < float(meta["free_thresh"]), 0, -1))
+    assert np.array_equal(read, grid)
     assert (grid == 100)[6, 5] and (grid == 100)[8, 12] and (grid == 0)[8, 15] and (grid == -1)[0, 0]
 
 
-def test_rosbag_reads_back_with_rosbags(m, tmp_path):
+def test_rosbag_reads_back_with_rosbags_as_ros2_would(m, tmp_path):
+    """The bag is named as a bag (its data file after it, no temporary name), stamped with the
+    map's own time, in the frame asked for; /map is the same trinary grid as the costmap and is
+    offered transient-local (latched); /map/points holds the occupied voxels."""
+    from rosbags.interfaces import QosDurability, QosReliability
     from rosbags.rosbag2 import Reader
     from rosbags.typesys import Stores, get_typestore
 
-    exports.rosbag(m, tmp_path / "bag", band=(-0.5, 2.0))
+    stamp = 1_700_000_000_123_456_789
+    out = exports.rosbag(m, tmp_path / "bag", band=(-0.5, 2.0), frame_id="odom", stamp_ns=stamp)
+    names = sorted(p.name for p in (tmp_path / "bag").iterdir())
+    assert names == ["bag.db3", "metadata.yaml"] and not list(tmp_path.glob(".*"))
+    assert "relative_file_paths:\n  - bag.db3" in (tmp_path / "bag" / "metadata.yaml").read_text()
+    assert sorted(out["files"]) == sorted((tmp_path / "bag").iterdir())
     ts = get_typestore(Stores.ROS2_HUMBLE)
     with Reader(tmp_path / "bag") as reader:
-        msgs = {c.topic: ts.deserialize_cdr(raw, c.msgtype) for c, _, raw in reader.messages()}
-    cloud = msgs["/map/points"]
-    points = np.frombuffer(cloud.data.tobytes(), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("l", "<f4")])
+        assert reader.message_count == 2 and reader.start_time == stamp
+        conns = {c.topic: c for c in reader.connections}
+        msgs = {c.topic: (t, ts.deserialize_cdr(raw, c.msgtype)) for c, t, raw in reader.messages()}
+    qos = conns["/map"].ext.offered_qos_profiles
+    assert [q.durability for q in qos] == [QosDurability.TRANSIENT_LOCAL]
+    assert [q.reliability for q in qos] == [QosReliability.RELIABLE] and qos[0].depth == 1
+    t, grid = msgs["/map"]
+    assert t == stamp and (grid.header.stamp.sec, grid.header.stamp.nanosec) == (1_700_000_000, 123_456_789)
+    assert grid.header.frame_id == "odom" and (grid.info.width, grid.info.height) == (24, 16)
+    assert abs(grid.info.resolution - 0.25) < 1e-9
+    assert np.array_equal(np.asarray(grid.data).reshape(16, 24), m.projection((-0.5, 2.0), 1.0, -1.0))
+    _, cloud = msgs["/map/points"]
+    names = [f.name for f in cloud.fields]
+    points = np.frombuffer(cloud.data.tobytes(), dtype=[(n, "<f4") for n in names])
     centres, nats = m.occupied(1.0)
-    assert cloud.width == len(centres) and cloud.header.frame_id == "map"
-    assert np.allclose(np.sort(points["l"]), np.sort(nats), atol=1e-4)
-    grid = msgs["/map/grid"]
-    assert (grid.info.width, grid.info.height) == (24, 16) and abs(grid.info.resolution - 0.25) < 1e-9
-    assert np.array_equal(np.asarray(grid.data).reshape(16, 24), m.projection((-0.5, 2.0), 1.0))
+    assert cloud.width == len(centres) and cloud.header.frame_id == "odom" and "probability" in names
+    assert np.allclose(np.sort(points["log_odds"]), np.sort(nats), atol=1e-4)
 
 
 def test_an_empty_map_exports_valid_empty_files(tmp_path, caplog):
     import plyfile
 
     empty = Map(SPEC, np.zeros((0, 3), np.int32), np.zeros((0, 8, 8, 8), np.int32))
-    assert exports.ply_points(empty, tmp_path / "e.ply") == 0
-    assert exports.ply_mesh(empty, tmp_path / "e_mesh.ply") == (0, 0)
-    assert exports.costmap(empty, tmp_path / "e.pgm") == (16, 24)
+    assert exports.ply_points(empty, tmp_path / "e.ply")["points"] == 0
+    assert exports.ply_mesh(empty, tmp_path / "e_mesh.ply")["vertices"] == 0
+    assert exports.costmap(empty, tmp_path / "e.pgm")["unknown_cells"] == 16 * 24
+    assert exports.octomap(empty, tmp_path / "e.bt")["nodes"] == 0
     assert len(plyfile.PlyData.read(str(tmp_path / "e.ply"))["vertex"]) == 0
     assert "wrote a valid empty file" in caplog.text
 
@@ -141,6 +215,17 @@ def test_cli_export(m, tmp_path, capsys):
                             shape=np.asarray(SPEC.shape), keys=m.keys, data=m.data)
     assert main(["export", str(path), "--to", "ply", "--out", str(tmp_path / "o.ply")]) == 0
     assert "wrote" in capsys.readouterr().out
+    assert main(["export", str(path), "--to", "costmap", "--out", str(tmp_path / "c.pgm"), "--band", "-0.5", "2"]) == 0
+    said = capsys.readouterr().out
+    assert f"{tmp_path / 'c.pgm'} (" in said and f"{tmp_path / 'c.yaml'} (" in said       # every file named
+    assert "occupied cells" in said and "free cells" in said and "free below -1 nat" in said
+    for to, wrong, right in (("mesh", "x.obj", ".ply"), ("vti", "x.vtk", ".vti"), ("costmap", "x.png", ".pgm"),
+                             ("octomap", "x.octomap", ".bt"), ("rosbag", "bag.db3", "without an extension")):
+        assert main(["export", str(path), "--to", to, "--out", str(tmp_path / wrong)]) == 2
+        assert right in capsys.readouterr().err and not (tmp_path / wrong).exists()
+    assert main(["export", str(path), "--to", "costmap", "--out", str(tmp_path / "d.pgm"),
+                 "--occupied-threshold", "-1", "--free-threshold", "1"]) == 2
+    assert "free <= 0 <= occupied" in capsys.readouterr().err
     assert main(["export", str(path), "--to", "costmap", "--out", str(tmp_path / "o.pgm"), "--band", "3", "1"]) == 2
     assert "height band must be two finite numbers z_min < z_max" in capsys.readouterr().err
     assert main(["export", str(path), "--to", "ply", "--out", str(tmp_path / "o.ply")]) == 2

@@ -147,10 +147,11 @@ def test_point_queries_agree_with_the_dense_map(tmp_path):
     back = SPEC.world_to_index(centres)
     assert np.array_equal(np.sort(dense[dense > 1024]), np.sort(np.rint(nats * 1024).astype(np.int32)))
     assert (dense[back[:, 2], back[:, 1], back[:, 0]] > 1024).all()
-    grid = m.projection((-1.0, 4.0), 1.0)
-    assert grid.shape == (30, 40) and set(np.unique(grid)) <= {0, 50, 100, UNKNOWN}
+    grid = m.projection((-1.0, 4.0), 1.0, -1.0)
+    assert grid.shape == (30, 40) and set(np.unique(grid)) <= {0, 100, UNKNOWN}
     col = dense.max(axis=0) > 1024
     assert np.array_equal(grid == 100, col)
+    assert np.array_equal(grid == 0, ~col & (dense.min(axis=0) < -1024))
     assert np.allclose(m.slice(0.1), dense[int((0.1 + 1.0) / 0.25)] / 1024)
     with pytest.raises(ConfigError, match="holds no voxel centre"):
         m.projection((50.0, 60.0))

@@ -64,6 +64,13 @@ def read_meta(path, key):
     return FORMATS["store" if Path(path).is_dir() else "npz"].read_meta(path, key)
 
 
+def saved_ns(path):
+    """When the map at ``path`` was last saved [ns since the epoch]: the time its file (an npz)
+    or its manifest (a store, written last by every save) was written."""
+    path = Path(path)
+    return (path / store.MANIFEST if format_of(path) == "store" else path).stat().st_mtime_ns
+
+
 class MapSaver:
     """Saves of one map to ``path``: an ``.npz`` file (rewritten whole, through a temporary
     file) or, for any other name, a map store (only changed bricks). ``saver(grid)`` saves."""

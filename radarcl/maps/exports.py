@@ -2,19 +2,24 @@
 
 | format | file | read back by | holds |
 |---|---|---|---|
-| ``octomap`` | ``.bt`` / ``.ot`` | OctoMap (``octomap.OcTree``, octovis) | every observed voxel at its log-odds (clamped to OctoMap's +-CLAMP_NATS); ``.bt`` keeps occupied/free only |
-| ``ply`` | ``.ply`` | plyfile, MeshLab, CloudCompare | the voxels above the threshold: x, y, z [m], log_odds [nat], probability |
-| ``mesh`` | ``.ply`` | plyfile, MeshLab | the isosurface at the threshold (marching cubes, PyMCubes), vertices in metres |
-| ``vti`` | ``.vti`` | VTK, ParaView, pyvista | the dense log-odds [nat] as zlib-compressed VTK image data, origin and spacing of the grid |
-| ``costmap`` | ``.pgm`` + ``.yaml`` | ROS map_server / Nav2 | the projection over ``band``: 0 free, 100 occupied, -1 unknown |
-| ``rosbag`` | a ROS 2 bag directory | rosbags, ros2 bag | ``/map/points`` PointCloud2 of the occupied voxels and ``/map/grid`` OccupancyGrid |
+| ``octomap`` | ``.bt`` / ``.ot`` | OctoMap (``octomap.OcTree``, octovis) | the occupied and the free voxels on OctoMap's lattice: ``.bt`` their class, ``.ot`` their log-odds (clamped to +-CLAMP_NATS) |
+| ``ply`` | ``.ply`` | plyfile, MeshLab, CloudCompare, Open3D | the occupied voxels: x, y, z [m], red, green, blue (by log-odds or height), log_odds [nat], probability |
+| ``mesh`` | ``.ply`` | plyfile, MeshLab, Open3D | the isosurface at the occupancy threshold (marching cubes, PyMCubes), vertices in metres |
+| ``vti`` | ``.vti`` | VTK, ParaView, pyvista | the dense log-odds [nat] and an ``observed`` mask as zlib-compressed VTK image data |
+| ``costmap`` | ``.pgm`` + ``.yaml`` | ROS map_server / Nav2 | the projection over ``band``: occupied, free, unknown (``maps.ros``) |
+| ``rosbag`` | a ROS 2 bag directory | rosbags, ros2 bag | ``/map`` OccupancyGrid (latched) and ``/map/points`` PointCloud2 (``maps.ros``) |
 
-Every exporter takes a ``maps.Map``; an empty map gives a valid empty file and a warning.
-Coordinates are the map's world frame (x forward, y left, z up, REP-103).
+Every export says what the map says: occupied above the occupancy threshold, free below the
+free threshold, unknown otherwise (``maps.map``), the same thresholds in every format. Every
+exporter takes a ``maps.Map`` and returns a dict with the files it wrote and its counts by
+class; an empty map gives valid empty files. Coordinates are the map's world frame (x forward,
+y left, z up, REP-103).
 """
 
+import base64
+import importlib
 import logging
-import math
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -22,75 +27,161 @@ import numpy as np
 from radarcl import logodds
 from radarcl.errors import ConfigError
 from radarcl.io.files import atomic
-from radarcl.maps.map import UNKNOWN
+from radarcl.maps import octree, ros
+from radarcl.maps.map import FREE, FREE_NATS, OCCUPIED, OCCUPIED_NATS, check_thresholds, classes
 
 log = logging.getLogger(__name__)
 CLAMP_NATS = 13.8            # OctoMap keeps log-odds within its clamping thresholds: p in [1e-6, 1 - 1e-6]
+LATTICE_TOLERANCE = 1e-6     # of a voxel: an origin closer than this to OctoMap's lattice lies on it
+SUFFIXES = {"octomap": (".bt", ".ot"), "ply": (".ply",), "mesh": (".ply",), "vti": (".vti",), "costmap": (".pgm",),
+            "rosbag": ("",)}
+COLOURS = ("log-odds", "height")
 
 
 def _need(module, extra="export"):
-    import importlib
-
     try:
         return importlib.import_module(module)
     except ImportError as exc:
         raise ConfigError(f"this export needs {module.split('.')[0]} (pip install 'radarcl[{extra}]'): {exc}") from None
 
 
-def _warn_empty(m, what, n):
+def check_suffix(fmt, path):
+    """ConfigError when ``path``'s extension names another format than ``fmt`` (``SUFFIXES``)."""
+    if fmt not in SUFFIXES:
+        raise ConfigError(f"unknown export format {fmt!r}; formats: {', '.join(SUFFIXES)}")
+    suffix = Path(path).suffix.lower()
+    allowed = SUFFIXES[fmt]
+    if suffix in allowed:
+        return
+    if allowed == ("",):
+        raise ConfigError(f"--to {fmt} writes a directory; give --out a name without an extension, not {path}")
+    owner = next((f for f, s in SUFFIXES.items() if suffix and suffix in s), None)
+    named = f" (a {owner} file)" if owner else ""
+    raise ConfigError(f"--to {fmt} writes {' or '.join(allowed)} files; {path} names a {suffix or 'file without an'} "
+                      f"extension{named}: give --out a name ending in {allowed[0]}")
+
+
+def _warn_empty(path, n):
     if n == 0:
-        log.warning("%s: the map has no %s; wrote a valid empty file", what, "voxel to export")
+        log.warning("%s: the map has no voxel to export; wrote a valid empty file", path)
 
 
-def octomap(m, path, threshold_nats=0.0, binary=None, progress=None):
-    """Every observed voxel (``|log-odds| >= threshold_nats``) as an OctoMap of the map's voxel
-    size; ``.bt`` (binary: occupied/free at the occupancy threshold 0 nat) or ``.ot`` (full:
-    log-odds). Returns the voxel count."""
-    octo = _need("octomap")
+def lattice_shift(spec):
+    """How far (x, y, z) [m] the map's voxels would move if taken as OctoMap's, whose lattice
+    starts at 0: a voxel centre c lands in OctoMap's voxel floor(c / r), centred half a voxel up."""
+    v = spec.voxel_m
+    centre = np.asarray(spec.origin_m) + 0.5 * v
+    return (np.floor(centre / v) + 0.5) * v - centre + 0.0
+
+
+def resample_to_lattice(m, units):
+    """OctoMap voxel indices (n, 3) and log-odds [nat] of ``m``'s observed voxels (``units``
+    their values) interpolated onto OctoMap's lattice: each lattice voxel takes the trilinear
+    mean of the observed voxel centres around its own, weights renormalised over the observed
+    ones (an unobserved neighbour is not evidence of 0)."""
+    idx, _ = m.voxels()
+    cells = np.asarray(m.spec.origin_m) / m.spec.voxel_m
+    base = np.floor(cells).astype(np.int64)
+    f = cells - base                                 # our voxel i overlaps lattice voxels i + base, i + base + 1
+    nats = units.astype(np.float64) / logodds.SCALE
+    targets, weights = [], []
+    for corner in range(8):
+        d = np.array([(corner >> a) & 1 for a in range(3)])
+        w = np.prod(np.where(d == 1, f, 1.0 - f))
+        if w <= 0:
+            continue
+        targets.append(idx + base + d)
+        weights.append(np.full(len(idx), w))
+    t = np.concatenate(targets)
+    w = np.concatenate(weights)
+    v = np.concatenate([nats] * len(targets))
+    keys, inverse = np.unique(t, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    total = np.bincount(inverse, weights=w, minlength=len(keys))
+    value = np.bincount(inverse, weights=w * v, minlength=len(keys)) / total
+    return keys, value
+
+
+def octomap(m, path, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS, binary=None, resample=False):
+    """The occupied and the free voxels as an OctoMap of the map's voxel size (``maps.octree``):
+    ``.bt`` (occupied/free) or ``.ot`` (their log-odds). OctoMap's lattice starts at 0: a map
+    whose origin is off it by more than ``LATTICE_TOLERANCE`` of a voxel is refused with the
+    shift, unless ``resample`` (``resample_to_lattice``). Returns the files and counts."""
+    occ, free = check_thresholds(occupied_nats, free_nats)
     path = Path(path)
     binary = path.suffix == ".bt" if binary is None else binary
-    tree = octo.OcTree(m.spec.voxel_m)
-    p = 1.0 / (1.0 + math.exp(CLAMP_NATS))
-    tree.setClampingThresMin(p)
-    tree.setClampingThresMax(1.0 - p)
-    tree.setOccupancyThres(0.5)
+    res = m.spec.voxel_m
+    shift = lattice_shift(m.spec)
     idx, units = m.voxels()
-    keep = np.abs(units) >= threshold_nats * logodds.SCALE
-    centres, values = m.spec.index_to_world(idx[keep]), np.clip(logodds.to_nats(units[keep]), -CLAMP_NATS, CLAMP_NATS)
-    for k, (c, v) in enumerate(zip(centres, values.tolist())):
-        tree.updateNode(c, v, True)                 # lazy: inner nodes once, below
-        if progress is not None and (k + 1) % 200000 == 0:
-            progress(k + 1, len(values), "voxels")
-    tree.updateInnerOccupancy()
-    _warn_empty(m, path, len(values))
-    with atomic(path) as tmp:
-        ok = tree.writeBinary(str(tmp).encode()) if binary else tree.write(str(tmp).encode())
-        if ok is False:
-            raise ConfigError(f"OctoMap could not write {path}")
-    return len(values)
+    off = np.any(np.abs(shift) > LATTICE_TOLERANCE * res)
+    if resample and off:
+        keys, nats = resample_to_lattice(m, units)
+        keys = keys + octree.CENTRE_KEY
+        note = "resampled onto OctoMap's lattice"
+    elif off:
+        raise ConfigError(f"the map's grid origin {list(m.spec.origin_m)} m is not on OctoMap's lattice of {res:g} m "
+                          f"voxels (which starts at 0): as OctoMap voxels the map would move by "
+                          f"{[round(float(v), 6) + 0.0 for v in shift]} m; pass --resample to interpolate it onto the "
+                          "lattice, or fuse with a grid.origin_m that is a multiple of grid.voxel_m")
+    else:
+        try:
+            keys = octree.keys_of(m.spec.index_to_world(idx), res)
+        except ValueError as exc:
+            raise ConfigError(f"the map does not fit OctoMap's tree: {exc}") from None
+        nats = units.astype(np.float64) / logodds.SCALE
+        note = "on OctoMap's lattice"
+    if len(keys) and (keys.min() < 0 or keys.max() >= 2 * octree.CENTRE_KEY):
+        raise ConfigError(f"the map does not fit OctoMap's tree of {2 * octree.CENTRE_KEY} voxels per axis")
+    c = classes(np.rint(nats * logodds.SCALE).astype(np.int64), occ, free)
+    keep = (c == OCCUPIED) | (c == FREE)
+    values = np.clip(nats[keep], -CLAMP_NATS, CLAMP_NATS).astype(np.float32)
+    with atomic(path) as tmp, open(tmp, "wb") as f:
+        nodes = octree.write(f, keys[keep], values, res, binary)
+    _warn_empty(path, int(keep.sum()))
+    return dict(files=[path], occupied_voxels=int((c == OCCUPIED).sum()), free_voxels=int((c == FREE).sum()),
+                nodes=nodes, lattice=note)
 
 
-def ply_points(m, path, threshold_nats=1.0):
-    """The voxels above ``threshold_nats`` as a PLY point cloud with log_odds and probability."""
+def _colours(values, scheme):
+    """(n, 3) uint8 colours of ``values`` on a perceptual colormap over their 1st-99th percentile."""
+    import matplotlib
+
+    if not len(values):
+        return np.zeros((0, 3), np.uint8)
+    lo, hi = np.percentile(values, [1, 99]) if len(values) > 1 else (values[0], values[0] + 1)
+    t = np.clip((values - lo) / max(hi - lo, 1e-9), 0, 1)
+    cmap = matplotlib.colormaps["inferno" if scheme == "log-odds" else "viridis"]
+    return (cmap(t)[:, :3] * 255 + 0.5).astype(np.uint8)
+
+
+def ply_points(m, path, occupied_nats=OCCUPIED_NATS, colour="log-odds"):
+    """The occupied voxels as a PLY point cloud: x, y, z [m], red, green, blue (``colour`` by
+    log-odds or height), log_odds [nat], probability."""
     plyfile = _need("plyfile")
-    centres, nats = m.occupied(threshold_nats)
-    v = np.empty(len(centres), dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("log_odds", "f4"), ("probability", "f4")])
+    if colour not in COLOURS:
+        raise ConfigError(f"colour must be one of {', '.join(COLOURS)}, got {colour!r}")
+    centres, nats = m.occupied(occupied_nats)
+    v = np.empty(len(centres), dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("red", "u1"), ("green", "u1"),
+                                      ("blue", "u1"), ("log_odds", "f4"), ("probability", "f4")])
     v["x"], v["y"], v["z"] = centres.T
+    rgb = _colours(nats if colour == "log-odds" else centres[:, 2], colour)
+    v["red"], v["green"], v["blue"] = rgb.T
     v["log_odds"], v["probability"] = nats, 1.0 / (1.0 + np.exp(-nats))
-    _warn_empty(m, path, len(v))
+    _warn_empty(path, len(v))
     with atomic(path) as tmp:
         plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")], text=False).write(str(tmp))
-    return len(v)
+    return dict(files=[Path(path)], points=len(v))
 
 
-def ply_mesh(m, path, threshold_nats=1.0, band=None):
-    """The isosurface at ``threshold_nats`` (marching cubes over the dense log-odds, unseen = 0)
-    as a PLY mesh in metres. Returns (vertices, faces)."""
+def ply_mesh(m, path, occupied_nats=OCCUPIED_NATS, band=None):
+    """The isosurface at ``occupied_nats`` (marching cubes over the dense log-odds, unseen = 0)
+    as a PLY mesh in metres."""
     plyfile = _need("plyfile")
     mcubes = _need("mcubes")
+    occ, _ = check_thresholds(occupied_nats, 0.0)
     d = m.dense(band)
     z0 = 0 if band is None else m._band(band)[0]
-    above = np.argwhere(d >= threshold_nats * logodds.SCALE)          # (z, y, x)
+    above = np.argwhere(d >= occ * logodds.SCALE)                    # (z, y, x)
     verts, faces = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
     if len(above):
         lo = np.maximum(above.min(axis=0) - 1, 0)
@@ -98,9 +189,9 @@ def ply_mesh(m, path, threshold_nats=1.0, band=None):
         sub = d[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
         # float32 nats in (x, y, z) order (what marching cubes wants), padded with "free" so the
         # surface closes at the box: one allocation beside the dense copy
-        volume = np.full(np.asarray(sub.shape[::-1]) + 2, min(-1.0, threshold_nats - 1.0), np.float32)
+        volume = np.full(np.asarray(sub.shape[::-1]) + 2, min(-1.0, occ - 1.0), np.float32)
         volume[1:-1, 1:-1, 1:-1] = sub.transpose(2, 1, 0) * np.float32(1.0 / logodds.SCALE)
-        verts, faces = mcubes.marching_cubes(volume, float(threshold_nats))
+        verts, faces = mcubes.marching_cubes(volume, float(occ))
         first = np.array([lo[2], lo[1], lo[0] + z0]) - 1                # voxel index of volume[0, 0, 0]
         verts = np.asarray(m.spec.origin_m) + (verts + first + 0.5) * m.spec.voxel_m
     vertex = np.empty(len(verts), dtype=[("x", "f4"), ("y", "f4"), ("z", "f4")])
@@ -108,70 +199,51 @@ def ply_mesh(m, path, threshold_nats=1.0, band=None):
         vertex["x"], vertex["y"], vertex["z"] = np.asarray(verts).T
     face = np.empty(len(faces), dtype=[("vertex_indices", "i4", (3,))])
     face["vertex_indices"] = faces
-    _warn_empty(m, path, len(vertex))
+    _warn_empty(path, len(vertex))
     with atomic(path) as tmp:
         plyfile.PlyData([plyfile.PlyElement.describe(vertex, "vertex"), plyfile.PlyElement.describe(face, "face")],
                         text=False).write(str(tmp))
-    return len(vertex), len(face)
+    return dict(files=[Path(path)], vertices=len(vertex), faces=len(face))
 
 
 VTI_BLOCK = 1 << 20            # bytes per zlib block of the .vti data
 
 
-def vti(m, path, band=None):
-    """Dense log-odds [nat] (float32) as VTK XML image data, zlib-compressed in blocks (VTK's
-    vtkZLibDataCompressor layout): origin at the first voxel centre, spacing the voxel size, x
-    fastest (VTK's point order). Returns the point count."""
-    import base64
-    import zlib
+def _vti_array(name, vtk_type, values):
+    """One binary DataArray of VTK's XML image data, zlib-compressed in blocks
+    (vtkZLibDataCompressor's layout, UInt64 headers)."""
+    raw = values.reshape(-1).tobytes()
+    blocks = [zlib.compress(raw[i:i + VTI_BLOCK], 1) for i in range(0, len(raw), VTI_BLOCK)]
+    last = len(raw) % VTI_BLOCK or (VTI_BLOCK if raw else 0)
+    header = np.array([len(blocks), VTI_BLOCK, last] + [len(b) for b in blocks], "<u8")
+    payload = base64.b64encode(header.tobytes()).decode() + base64.b64encode(b"".join(blocks)).decode()
+    return f'        <DataArray type="{vtk_type}" Name="{name}" format="binary">\n{payload}\n        </DataArray>\n'
 
+
+def vti(m, path, band=None):
+    """Dense log-odds [nat] (float32) and an ``observed`` mask (uint8: some beam reached the
+    voxel) as VTK XML image data: origin at the first voxel centre, spacing the voxel size, x
+    fastest (VTK's point order)."""
     d = m.dense(band)
     z0 = 0 if band is None else m._band(band)[0]
     nz, ny, nx = d.shape
-    n_values = d.size
-    per_block = VTI_BLOCK // 4
-    blocks = []
-    for start in range(0, n_values, per_block):
-        chunk = (d.reshape(-1)[start:start + per_block] * np.float32(1.0 / logodds.SCALE)).astype("<f4")
-        blocks.append(zlib.compress(chunk.tobytes(), 1))
-    last = (n_values * 4) % VTI_BLOCK or (VTI_BLOCK if n_values else 0)
-    header = np.array([len(blocks), VTI_BLOCK, last] + [len(b) for b in blocks], "<u8")
-    payload = base64.b64encode(header.tobytes()).decode() + base64.b64encode(b"".join(blocks)).decode()
+    nats = (d * np.float32(1.0 / logodds.SCALE)).astype("<f4")
+    observed = (d != 0).astype(np.uint8)
     origin = np.asarray(m.spec.origin_m) + 0.5 * m.spec.voxel_m + np.array([0, 0, z0 * m.spec.voxel_m])
     s = m.spec.voxel_m
+    extent = f"0 {nx - 1} 0 {ny - 1} 0 {nz - 1}"
     xml = (f'<?xml version="1.0"?>\n'
            f'<VTKFile type="ImageData" version="1.0" byte_order="LittleEndian" header_type="UInt64" '
            f'compressor="vtkZLibDataCompressor">\n'
-           f'  <ImageData WholeExtent="0 {nx - 1} 0 {ny - 1} 0 {nz - 1}" '
+           f'  <ImageData WholeExtent="{extent}" '
            f'Origin="{float(origin[0])!r} {float(origin[1])!r} {float(origin[2])!r}" Spacing="{s!r} {s!r} {s!r}">\n'
-           f'    <Piece Extent="0 {nx - 1} 0 {ny - 1} 0 {nz - 1}">\n'
+           f'    <Piece Extent="{extent}">\n'
            f'      <PointData Scalars="log_odds">\n'
-           f'        <DataArray type="Float32" Name="log_odds" format="binary">\n{payload}\n        </DataArray>\n'
-           f'      </PointData>\n    </Piece>\n  </ImageData>\n</VTKFile>\n')
+           + _vti_array("log_odds", "Float32", nats) + _vti_array("observed", "UInt8", observed) +
+           '      </PointData>\n    </Piece>\n  </ImageData>\n</VTKFile>\n')
     with atomic(path) as tmp:
         Path(tmp).write_text(xml)
-    return n_values
-
-
-def costmap(m, path, band=None, threshold_nats=1.0):
-    """The 2D projection over ``band`` as a ROS map_server map: ``path`` (.pgm) and ``.yaml``
-    beside it (trinary mode, resolution, origin of the lower-left cell). Returns (ny, nx)."""
-    grid = m.projection(band, threshold_nats)
-    # map_server's trinary PGM: 0 (black) occupied, 254 free, 205 unknown; rows from the top (max y)
-    pixels = np.where(grid == 100, 0, np.where(grid == 0, 254, 205)).astype(np.uint8)[::-1]
-    pgm = Path(path)
-    yaml_path = pgm.with_suffix(".yaml")
-    header = f"P5\n# radarcl costmap\n{pixels.shape[1]} {pixels.shape[0]}\n255\n".encode()
-    with atomic(pgm) as tmp:
-        Path(tmp).write_bytes(header + pixels.tobytes())
-    x0, y0, _ = m.spec.origin_m
-    text = (f"image: {pgm.name}\nmode: trinary\nresolution: {m.spec.voxel_m!r}\norigin: [{x0!r}, {y0!r}, 0.0]\n"
-            f"negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
-    with atomic(yaml_path) as tmp:
-        Path(tmp).write_text(text)
-    if not (grid != UNKNOWN).any():
-        log.warning("%s: no column of the band was observed; the costmap is all unknown", pgm)
-    return grid.shape
+    return dict(files=[Path(path)], voxels=int(d.size), observed_voxels=int(observed.sum()))
 
 
 def is_bag(path):
@@ -179,47 +251,18 @@ def is_bag(path):
     return (Path(path) / "metadata.yaml").is_file()
 
 
-def rosbag(m, path, band=None, threshold_nats=1.0, frame_id="map"):
-    """A ROS 2 bag (sqlite3, rosbags, no ROS install) with ``/map/points`` (PointCloud2 of the
-    voxels above the threshold: x, y, z, log_odds float32) and ``/map/grid`` (OccupancyGrid of
-    the projection over ``band``). Returns (points, cells)."""
+def costmap(m, path, band=None, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
+    """``maps.ros.costmap``, with a warning when no cell of the band is known."""
+    out = ros.costmap(m, path, band, occupied_nats, free_nats)
+    if out["occupied_cells"] + out["free_cells"] == 0:
+        log.warning("%s: no column of the band is occupied or free; the costmap is all unknown", path)
+    return out
+
+
+def rosbag(m, path, band=None, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS, frame_id="map", stamp_ns=None):
+    """``maps.ros.rosbag`` (rosbags must be installed)."""
     _need("rosbags")
-    import time
-
-    from rosbags.rosbag2 import Writer
-    from rosbags.typesys import Stores, get_typestore
-
-    ts = get_typestore(Stores.ROS2_HUMBLE)
-    T = ts.types
-    stamp_ns = time.time_ns()
-    header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=stamp_ns // 10 ** 9,
-                                                                            nanosec=stamp_ns % 10 ** 9),
-                                      frame_id=frame_id)
-    centres, nats = m.occupied(threshold_nats)
-    cloud = np.empty(len(centres), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("log_odds", "<f4")])
-    cloud["x"], cloud["y"], cloud["z"] = centres.T
-    cloud["log_odds"] = nats
-    fields = [T["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)        # 7 = FLOAT32
-              for i, n in enumerate(("x", "y", "z", "log_odds"))]
-    points = T["sensor_msgs/msg/PointCloud2"](header=header, height=1, width=len(cloud), fields=fields,
-                                              is_bigendian=False, point_step=16, row_step=16 * len(cloud),
-                                              data=np.frombuffer(cloud.tobytes(), np.uint8), is_dense=True)
-    grid = m.projection(band, threshold_nats)
-    x0, y0, _ = m.spec.origin_m
-    pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=float(x0), y=float(y0), z=0.0),
-                                       orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
-    info = T["nav_msgs/msg/MapMetaData"](map_load_time=header.stamp, resolution=float(m.spec.voxel_m),
-                                         width=grid.shape[1], height=grid.shape[0], origin=pose)
-    occupancy = T["nav_msgs/msg/OccupancyGrid"](header=header, info=info, data=grid.reshape(-1).astype(np.int8))
-    path = Path(path)
-    with atomic(path) as tmp:                         # the bag is a directory: written whole, then renamed
-        with Writer(tmp, version=8) as writer:
-            c1 = writer.add_connection("/map/points", "sensor_msgs/msg/PointCloud2", typestore=ts)
-            c2 = writer.add_connection("/map/grid", "nav_msgs/msg/OccupancyGrid", typestore=ts)
-            writer.write(c1, stamp_ns, ts.serialize_cdr(points, "sensor_msgs/msg/PointCloud2"))
-            writer.write(c2, stamp_ns, ts.serialize_cdr(occupancy, "nav_msgs/msg/OccupancyGrid"))
-    _warn_empty(m, path, len(cloud))
-    return len(cloud), grid.size
+    return ros.rosbag(m, path, band, occupied_nats, free_nats, frame_id, stamp_ns)
 
 
 FORMATS = {"octomap": octomap, "ply": ply_points, "mesh": ply_mesh, "vti": vti, "costmap": costmap, "rosbag": rosbag}

@@ -6,6 +6,12 @@ and probability at world points, the occupied voxels as an (N, 3) array, a horiz
 
 Values are the grid's exact int32 sums in ``radarcl.logodds`` units; the views convert to
 nats or probabilities. A voxel no beam reached holds 0 (unknown: probability 0.5).
+
+What a map says, in every view and export alike (``classes``): a voxel is OCCUPIED above the
+occupancy threshold (``OCCUPIED_NATS``), FREE below the free threshold (``FREE_NATS``) and
+UNDECIDED between them; a voxel no beam reached is UNOBSERVED. A 2D cell of a projection is
+occupied when some voxel of its column in the band is occupied, free when none is and some is
+free, and unknown otherwise (octomap_server's projected map does the same).
 """
 
 from dataclasses import dataclass
@@ -18,7 +24,35 @@ from radarcl.grid import BRICK, GridSpec
 from radarcl.io.files import memory_budget
 from radarcl.maps.disk import read
 
-UNKNOWN = -1          # a 2D cell no beam reached in the band (the ROS map_server convention)
+UNKNOWN = -1          # a 2D cell that is neither occupied nor free (the ROS OccupancyGrid convention)
+OCCUPIED_NATS = 1.0   # occupied above this log-odds (p 0.73)
+FREE_NATS = -1.0      # free below this (p 0.27)
+UNOBSERVED, FREE, UNDECIDED, OCCUPIED = -1, 0, 1, 2       # voxel classes (``classes``)
+
+
+def check_thresholds(occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
+    """(occupied, free) as floats, or ConfigError unless both are finite and free <= 0 <= occupied
+    (a voxel no beam reached holds 0: neither)."""
+    try:
+        occ, free = float(occupied_nats), float(free_nats)
+    except (TypeError, ValueError):
+        raise ConfigError(f"thresholds must be numbers [nat], got {occupied_nats!r} and {free_nats!r}") from None
+    if not (np.isfinite(occ) and np.isfinite(free) and free <= 0 <= occ):
+        raise ConfigError(f"the occupied threshold ({occupied_nats}) and the free threshold ({free_nats}) must be "
+                          "finite numbers [nat] with free <= 0 <= occupied")
+    return occ, free
+
+
+def classes(units, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
+    """int8 classes of int32 ``units`` (logodds units): OCCUPIED, FREE, UNDECIDED, or UNOBSERVED
+    where no beam reached (0)."""
+    occ, free = check_thresholds(occupied_nats, free_nats)
+    u = np.asarray(units)
+    out = np.full(u.shape, UNDECIDED, np.int8)
+    out[u > occ * logodds.SCALE] = OCCUPIED
+    out[u < free * logodds.SCALE] = FREE
+    out[u == 0] = UNOBSERVED
+    return out
 
 
 @dataclass
@@ -103,7 +137,7 @@ class Map:
         inside = self.spec.contains(idx)
         return idx[inside], self.data[b, z, y, x][inside]
 
-    def occupied(self, threshold_nats=1.0):
+    def occupied(self, threshold_nats=OCCUPIED_NATS):
         """(centres (N, 3) [m], log-odds (N,) [nat]) of the voxels above ``threshold_nats``."""
         idx, units = self.voxels(lo_nats=threshold_nats)
         return self.spec.index_to_world(idx), logodds.to_nats(units)
@@ -148,11 +182,9 @@ class Map:
         top = self.spec.origin_m[2] + (k + 0.5) * self.spec.voxel_m
         return logodds.to_nats(self.dense((top - 0.25 * self.spec.voxel_m, top + 0.25 * self.spec.voxel_m))[0])
 
-    def column_extremes(self):
-        """Log-odds [nat] (ny, nx) of each column's most telling observed voxel, seen from
-        above: its largest value when that is positive (something occupied somewhere above the
-        cell), else its smallest (how free the column is); 0 where no voxel of the column was
-        observed. Brick by brick: never the dense volume."""
+    def _column_hi_lo(self):
+        """int64 (ny, nx) largest and smallest value of each column's voxels (0 for unobserved
+        ones), brick by brick: never the dense volume."""
         ny, nx = self.spec.shape[1], self.spec.shape[0]
         nby, nbx = -(-ny // BRICK), -(-nx // BRICK)
         hi = np.zeros((nby, nbx, BRICK, BRICK), np.int64)
@@ -162,20 +194,36 @@ class Map:
             d = np.where(inside[:, :, None, None], self.data, 0).astype(np.int64)
             np.maximum.at(hi, (self.keys[:, 1], self.keys[:, 0]), d.max(axis=1))
             np.minimum.at(lo, (self.keys[:, 1], self.keys[:, 0]), d.min(axis=1))
-        best = np.where(hi > 0, hi, lo).transpose(0, 2, 1, 3).reshape(nby * BRICK, nbx * BRICK)[:ny, :nx]
-        return logodds.to_nats(best)
+        flat = [a.transpose(0, 2, 1, 3).reshape(nby * BRICK, nbx * BRICK)[:ny, :nx] for a in (hi, lo)]
+        return flat[0], flat[1]
 
-    def projection(self, band=None, threshold_nats=1.0):
-        """A 2D occupancy grid over a height band, int8 (ny, nx) in the ROS map_server
-        convention: 100 occupied (some observed voxel of the column above ``threshold_nats``), 0
-        free (every observed voxel of the column below -``threshold_nats``), 50 between, -1
-        unknown (no voxel of the column observed)."""
-        d = self.dense(band)
-        seen = (d != 0).any(axis=0)
-        top = np.where(d != 0, d, np.iinfo(np.int32).min).max(axis=0)     # over observed voxels only
-        t = int(round(threshold_nats * logodds.SCALE))
-        out = np.full(top.shape, 50, np.int8)
-        out[top > t] = 100
-        out[seen & (top < -t)] = 0
-        out[~seen] = UNKNOWN
+    def column_extremes(self):
+        """Log-odds [nat] (ny, nx) of each column's most telling observed voxel, seen from
+        above: its largest value when that is positive (something occupied somewhere above the
+        cell), else its smallest (how free the column is); 0 where no voxel of the column was
+        observed. Brick by brick: never the dense volume."""
+        hi, lo = self._column_hi_lo()
+        return logodds.to_nats(np.where(hi > 0, hi, lo))
+
+    def counts(self, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
+        """Voxels of the grid by class: {"occupied", "free", "undecided", "unobserved"}."""
+        _, units = self.voxels()
+        c = classes(units, occupied_nats, free_nats)
+        seen = {"occupied": int((c == OCCUPIED).sum()), "free": int((c == FREE).sum()),
+                "undecided": int((c == UNDECIDED).sum())}
+        return dict(seen, unobserved=self.spec.n_voxels - sum(seen.values()))
+
+    def projection(self, band=None, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
+        """A 2D occupancy grid over a height band, int8 (ny, nx) in the ROS OccupancyGrid
+        convention: 100 occupied (some voxel of the column in the band above ``occupied_nats``),
+        0 free (none occupied, some below ``free_nats``), -1 unknown (neither)."""
+        occ, free = check_thresholds(occupied_nats, free_nats)
+        if band is None:                                # the whole height: brick by brick
+            hi, lo = self._column_hi_lo()
+        else:
+            d = self.dense(band)
+            hi, lo = d.max(axis=0), d.min(axis=0)
+        out = np.full(hi.shape, UNKNOWN, np.int8)
+        out[lo < free * logodds.SCALE] = 0
+        out[hi > occ * logodds.SCALE] = 100
         return out
