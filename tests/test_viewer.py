@@ -363,3 +363,42 @@ def test_the_fast_float16_compare_equals_numpy(lo):
     values = values.astype(np.float16)
     assert np.array_equal(V.above(values, lo), values > np.float16(lo))
     assert np.array_equal(V.above(values, lo, inclusive=True), values >= np.float16(lo))
+
+
+def test_the_default_clamp_spans_what_the_map_holds():
+    """The colours run from the threshold to the 90th percentile of the values above it, so
+    most occupied voxels get distinct colours (at the 99.9th nearly all of them were dark)."""
+    rng = np.random.default_rng(3)
+    nats = _nats(0.0)
+    values = rng.exponential(1.0, nats.size) + 1.0
+    nats.reshape(-1)[:] = np.where(rng.random(nats.size) < 0.3, values, 0.0)
+    volume = V.from_nats(SPEC, nats)
+    lo, hi = Settings().clamp_range(volume)
+    stored = volume.values[volume.values > 1.0].astype(np.float64)
+    assert lo == 1.0 and hi == pytest.approx(np.percentile(stored, 90), rel=1e-6)
+    assert np.mean(stored <= hi) == pytest.approx(0.9, abs=0.01)
+
+
+def test_a_planar_map_is_coloured_by_log_odds_and_the_free_mode_shows_free_space(ctx):
+    """One layer (a spinning radar's map): height says nothing, so the isosurface takes its colours
+    from the log-odds and the legend says so; the free mode draws free voxels as a blue haze."""
+    from radarcl.viewer.headless import legend
+
+    flat = GridSpec((0.0, 0.0, -0.125), 0.25, (40, 40, 1))
+    nats = np.zeros(flat.array_shape)
+    nats[0, 10:30, 10:14] = 2.0                       # a weak wall ...
+    nats[0, 10:30, 26:30] = 9.0                       # ... and a strong one
+    nats[0, 5:35, 15:25] = -3.0                       # free between them
+    renderer = Renderer(ctx, V.from_nats(flat, nats))
+    assert not renderer.colours_by_height(1.0)
+    camera = Camera.fit(flat, "top")
+    img = renderer.image(camera, "iso", Settings(), (200, 200))
+    walls = [img[camera.project(np.array([[x, 5.0, 0.0]]), 200, 200)[0, 1].astype(int),
+                 camera.project(np.array([[x, 5.0, 0.0]]), 200, 200)[0, 0].astype(int)] for x in (3.0, 7.0)]
+    assert np.abs(walls[0].astype(int) - walls[1].astype(int)).sum() > 60     # two values, two colours
+    bar = legend(renderer, "iso", Settings(), 1.0, 9.0, height=120)
+    assert bar.shape[0] > 0
+    free = renderer.image(camera, "free", Settings(density=2.0), (200, 200))
+    px = camera.project(np.array([[5.0, 5.0, 0.0]]), 200, 200)[0].astype(int)
+    r, g, b = free[px[1], px[0]].astype(int)
+    assert b > r + 15 and b > np.asarray(_background_u8())[2] + 15                  # blue over the background

@@ -5,7 +5,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from radarcl.viewer.camera import Camera
 from radarcl.viewer.modes import Settings
 from radarcl.viewer.renderer import Renderer, create_context, read_rgb
@@ -47,10 +46,10 @@ def legend(renderer, mode_name, settings, lo, hi, height):
     """The colour bar of a mode: log-odds, or for the isosurface the heights its colours span."""
     from radarcl.viewer.overlay import colour_bar
 
-    if mode_name == "iso":
+    if mode_name == "iso" and renderer.colours_by_height(settings.threshold):
         z_lo, z_hi = renderer.height_range(settings.threshold)
         return colour_bar(settings.colormap, z_lo, z_hi, 1.0, label="height [m]", height=height)
-    label = "log-odds [nat]" if mode_name != "free" else "log-odds [nat]; blue: free"
+    label = "log-odds [nat]" if mode_name != "free" else f"log-odds [nat]; blue: free (below {settings.free_threshold:g})"
     return colour_bar(settings.colormap, 0.0 if mode_name == "spheres" else lo, hi, settings.gamma, label=label,
                       height=height)
 

@@ -7,9 +7,11 @@ clamp -> normalise -> gamma -> colormap:  x = clamp((v - lo) / (hi - lo), 0, 1) 
   length, ``density``) and colormap(x) as colour; early exit at alpha > 0.99.
 - ``mip``: maximum-evidence projection, colormap of the largest v along the ray.
 - ``iso``: the isosurface v = ``threshold`` (the occupancy threshold), refined by bisection and
-  lit by its gradient; coloured by height.
-- ``free``: where can I drive: occupancy as above, and free space (v below -``lo``) as a blue
-  haze of the same clamp on -v. Never skips (the coarse maxima say nothing of free space).
+  lit by its gradient; coloured by height, or by log-odds where the map is too flat for height
+  to tell anything (a planar map: a spinning radar's one layer).
+- ``free``: where can I drive: occupancy as above, and free space (v below ``free_threshold``)
+  as a blue haze, its own clamp on -v (from the free threshold to the map's 90th percentile of
+  the free values). Never skips (the coarse maxima say nothing of free space).
 - ``spheres``: the paper's Fig. 11, one instanced sphere per cell with positive log-odds,
   radius proportional to v (half a voxel at ``hi``), coloured by x.
 
@@ -45,18 +47,22 @@ MODES = {m.name: m for m in (
 )}
 
 COLORMAPS = ("inferno", "viridis", "magma", "turbo", "gray")
+HI_PERCENTILE = 90              # the clamp's top: most of what the map holds gets distinct colours
 
 
 @dataclass(frozen=True)
 class Settings:
     """Transfer function and march: ``threshold`` [nat] (isosurface; also ``lo`` unless given),
-    ``lo``/``hi`` the clamp [nat] (None: ``threshold`` and the map's 99.9th percentile of
-    values above it), ``gamma``, ``colormap``, ``density`` (opacity per voxel of length at
+    ``lo``/``hi`` the clamp [nat] (None: ``threshold`` and the map's ``HI_PERCENTILE``-th
+    percentile of the values above it: the colours span what the map holds),
+    ``free_threshold`` [nat] (the free mode's haze starts below it), ``gamma``, ``colormap``,
+    ``density`` (opacity per voxel of length at
     x = 1), ``step`` [voxels] between samples, ``skip`` empty-space skipping on/off,
     ``clip`` ((x0, x1), (y0, y1), (z0, z1)) fractions of the grid kept (axis-aligned slices),
     ``background`` RGB in [0, 1]."""
 
     threshold: float = 1.0
+    free_threshold: float = -1.0
     lo: float = None
     hi: float = None
     gamma: float = 1.0
@@ -70,7 +76,7 @@ class Settings:
     def __post_init__(self):
         import math
 
-        for name in ("threshold", "lo", "hi", "gamma", "density", "step"):
+        for name in ("threshold", "free_threshold", "lo", "hi", "gamma", "density", "step"):
             v = getattr(self, name)
             if v is None and name in ("lo", "hi"):
                 continue
@@ -78,6 +84,8 @@ class Settings:
                 raise ConfigError(f"{name} must be a finite number, got {v!r}")
         if abs(self.threshold) > 1e6 or any(v is not None and abs(v) > 1e6 for v in (self.lo, self.hi)):
             raise ConfigError(f"threshold, lo and hi are log-odds [nat]; got {self.threshold}, {self.lo}, {self.hi}")
+        if not self.free_threshold < 0:
+            raise ConfigError(f"the free threshold is a negative log-odds [nat], got {self.free_threshold}")
         if self.colormap not in COLORMAPS:
             raise ConfigError(f"unknown colormap {self.colormap!r}; expected one of {COLORMAPS}")
         if not 0.05 <= self.step <= 8:
@@ -97,9 +105,16 @@ class Settings:
         lo = self.threshold if self.lo is None else self.lo
         hi = self.hi
         if hi is None:
-            hi = volume.percentile_above(lo)
+            hi = volume.percentile_above(lo, HI_PERCENTILE)
             hi = lo + 1.0 if hi is None else hi
         return lo, max(hi, lo + 1e-3)
+
+    def free_clamp(self, volume):
+        """(lo, hi) [nat] of the free haze, on -v: from -``free_threshold`` to the map's
+        ``HI_PERCENTILE``-th percentile of -v over its free voxels."""
+        lo = -self.free_threshold
+        hi = volume.percentile_below(self.free_threshold, HI_PERCENTILE)
+        return lo, max(lo + 1.0 if hi is None else -hi, lo + 1e-3)
 
 
 def mode(name):

@@ -14,11 +14,11 @@ from functools import lru_cache
 from importlib import resources
 
 import numpy as np
-
-from radarcl.errors import ConfigError, RadarclError
 from radarcl.viewer.camera import box
 from radarcl.viewer.modes import Settings, mode
 from radarcl.viewer.volume import above, active_box, coarser_max
+
+from radarcl.errors import ConfigError, RadarclError
 
 log = logging.getLogger(__name__)
 MAX_SPHERES = 2_000_000          # Fig. 11 instances drawn at most; the largest values are kept
@@ -193,6 +193,7 @@ class Renderer:
         width, height = size or ctx.fbo.size
         spec = self.volume.spec
         lo, hi = settings.clamp_range(self.volume)
+        free_lo, free_hi = settings.free_clamp(self.volume) if m.name == "free" else (1.0, 2.0)
         ctx.clear(*settings.background, 1.0, depth=1.0)
         mvp = camera.mvp(width, height).astype("f4").T.tobytes()     # column-major for GL
         dims = np.asarray(spec.shape, float)
@@ -215,7 +216,9 @@ class Renderer:
         values = dict(mvp=mvp, origin=spec.origin_m, voxel=spec.voxel_m, dims=tuple(dims),
                       camera_u=tuple((camera.eye - np.asarray(spec.origin_m)) / spec.voxel_m),
                       clip_lo=tuple(clip_lo), clip_hi=tuple(clip_hi), active_lo=tuple(active_lo),
-                      active_hi=tuple(active_hi), lo=lo, hi=hi, gamma=settings.gamma, density=settings.density,
+                      active_hi=tuple(active_hi), lo=lo, hi=hi, free_lo=free_lo, free_hi=free_hi,
+                      by_height=int(self.colours_by_height(settings.threshold)), gamma=settings.gamma,
+                      density=settings.density,
                       threshold=settings.threshold, step_u=settings.step, background=settings.background,
                       height_range=tuple((np.asarray(self.height_range(settings.threshold)) - spec.origin_m[2])
                                          / spec.voxel_m),
@@ -235,6 +238,12 @@ class Renderer:
         ctx.cull_face = "back"
         ctx.disable(self.moderngl.CULL_FACE)
         return lo, hi
+
+    def colours_by_height(self, threshold):
+        """Whether the isosurface is coloured by height: not where its surface spans less than
+        two voxels of height (a planar map), where height says nothing and log-odds does."""
+        z_lo, z_hi = self.height_range(threshold)
+        return z_hi - z_lo >= 2 * self.volume.spec.voxel_m
 
     def height_range(self, threshold):
         """(z_lo, z_hi) [m] the isosurface's colours span: the heights of the surface seen from

@@ -61,6 +61,16 @@ class Volume:
             self._percentiles[key] = float(np.percentile(above, q)) if above.size else None
         return self._percentiles[key]
 
+    def percentile_below(self, hi, q=99.9):
+        """The ``q``-th percentile, counted from the most negative, of the values below ``hi``
+        (a negative log-odds [nat]), or None when there are none; remembered like
+        ``percentile_above``."""
+        key = ("below", float(hi), float(q))
+        if key not in self._percentiles:
+            below = self.values[self.values < hi].astype(np.float32)
+            self._percentiles[key] = float(np.percentile(below, 100 - q)) if below.size else None
+        return self._percentiles[key]
+
     def content_box(self, lo, keep=0.98):
         """World box (lo, hi) [m] around the voxels holding values above ``lo`` (what a view at
         that clamp shows), leaving out the ``1 - keep`` most outlying of them along each axis

@@ -22,9 +22,11 @@ def add_view_options(p, follow=False):
                    help="pixels, 1-16384 (default: %(default)s)")
     p.add_argument("--threshold", type=float, default=1.0,
                    help="occupancy threshold [nat]: the isosurface and the low end of the colours (default: %(default)s)")
+    p.add_argument("--free-threshold", type=float, default=-1.0,
+                   help="free mode: free space below this log-odds [nat] shows as a blue haze (default: %(default)s)")
     p.add_argument("--lo", type=float, default=None, help="low end of the transfer function [nat] (default: --threshold)")
     p.add_argument("--hi", type=float, default=None,
-                   help="high end [nat] (default: the 99.9th percentile of the values above --lo)")
+                   help="high end [nat] (default: the 90th percentile of the map's values above --lo)")
     p.add_argument("--gamma", type=positive_float, default=1.0, help="transfer-function gamma (default: %(default)s)")
     p.add_argument("--colormap", choices=COLORMAPS, default="inferno", help="(default: %(default)s)")
     p.add_argument("--step", type=positive_float, default=1.0, help="ray-march step [voxels] (default: %(default)s)")
@@ -32,8 +34,8 @@ def add_view_options(p, follow=False):
 
 def settings(args):
     """The viewer's ``Settings`` of the transfer-function options."""
-    return Settings(threshold=args.threshold, lo=args.lo, hi=args.hi, gamma=args.gamma, colormap=args.colormap,
-                    step=args.step)
+    return Settings(threshold=args.threshold, free_threshold=args.free_threshold, lo=args.lo, hi=args.hi,
+                    gamma=args.gamma, colormap=args.colormap, step=args.step)
 
 
 def add_arguments(parser):

@@ -37,6 +37,9 @@ uniform vec3 clip_hi;
 uniform vec3 active_lo;      // the part of the clip box where this mode can see anything [voxels]
 uniform vec3 active_hi;
 uniform float lo;            // clamp [nat]
+uniform float free_lo;       // the free haze's clamp on -v [nat]
+uniform float free_hi;
+uniform bool by_height;      // iso: colour by height (else by log-odds: a planar map)
 uniform float hi;
 uniform float gamma;
 uniform float density;       // opacity per voxel of length at x = 1
@@ -128,8 +131,8 @@ void main() {
         alpha += (1.0 - alpha) * a;
         if (alpha > OPAQUE) break;
 #elif defined MODE_FREE
-        // occupied (v > lo) as in occupancy; free (v < -lo) as a blue haze of the same clamp on -v
-        float x = transfer(v), xf = transfer(-v);
+        // occupied (v > lo) as in occupancy; free (v < -free_lo) as a blue haze of its own clamp on -v
+        float x = transfer(v), xf = pow(clamp((-v - free_lo) / (free_hi - free_lo), 0.0, 1.0), gamma);
         float a = 1.0 - pow(1.0 - min(max(x * density, xf * density * FREE_DENSITY), 0.999), step_u);
         acc += (1.0 - alpha) * a * (x > 0.0 ? color_of(x) : FREE_COLOUR);
         alpha += (1.0 - alpha) * a;
@@ -165,7 +168,8 @@ void main() {
                       sample_at(u + vec3(0, 0, 1)) - sample_at(u - vec3(0, 0, 1)));
         float lit = length(g) > 0.0 ? abs(dot(normalize(g), dir)) : 1.0;   // headlight, both sides
         float h = (u.z - height_range.x) / max(height_range.y - height_range.x, 1e-3);
-        f_color = vec4(color_of(clamp(h, 0.0, 1.0)) * (0.3 + 0.7 * lit), 1.0);
+        float c = by_height ? clamp(h, 0.0, 1.0) : transfer(sample_at(u + 0.5 * dir));
+        f_color = vec4(color_of(c) * (0.3 + 0.7 * lit), 1.0);
     }
 #endif
 }
