@@ -177,7 +177,7 @@ def _live(args, name):
     import subprocess
     import sys
 
-    proc = subprocess.Popen([sys.executable, "-m", "radarcl", "live", "--port", name, *args], stdout=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, "-m", "radarcl", "live", name, *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     lines = []
     while not lines or "radarcl live: reading" not in lines[-1]:

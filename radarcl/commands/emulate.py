@@ -57,7 +57,7 @@ def run(args):
         master, name, slave = emulator.open_pty(args.link)
         write, close = (lambda b: os.write(master, b)), (lambda: emulator.close_pty(master, slave))
         print(f"emulating on {name}" + (f" (link {args.link})" if args.link else "") + f": {len(chunks)} packets, "
-              f"{sum(map(len, damaged))} bytes at {args.baud} baud; radarcl live --port {args.link or name}", flush=True)
+              f"{sum(map(len, damaged))} bytes at {args.baud} baud; radarcl live {args.link or name}", flush=True)
     else:
         port = open_port(args.port, baud or 921600)
         write, close = port.write, port.close

@@ -24,8 +24,8 @@ DESCRIPTION = ("Reads INPUT as the sensor's reader says (a radarcl recording; a 
 
 def add_arguments(parser):
     parser.add_argument("input", help="a recording (.npz), a directory of polar scans, or a TI capture")
-    add_output(parser, "--out", "map.npz", "map to write: an .npz file, or any other name for a map store directory "
-                                           "(zarr; --every then writes only the changed bricks)")
+    add_output(parser, "--out", "map.rcmap", "map to write: a map store directory (zarr; saved fast, --every then "
+                                             "writes only the changed bricks), or an .npz file")
     add_config(parser)
     parser.add_argument("--odometry", default=None, help="polar scans: the radar_odometry.csv (default: found beside them)")
     parser.add_argument("--every", type=positive_int, default=None, help="rewrite the map file every N frames")

@@ -11,7 +11,7 @@ DESCRIPTION = ("Fuses each input on a Dask worker (a LocalCluster by default, an
 
 def add_arguments(parser):
     parser.add_argument("inputs", nargs="+", help="recordings (or anything fuse reads) of one sensor")
-    add_output(parser, "--out", "map.rcmap", "map to write (.npz, or a map store)")
+    add_output(parser, "--out", "map.rcmap", "map to write: a map store, or an .npz file")
     add_config(parser)
     parser.add_argument("--scheduler", default=None, help="a Dask scheduler address (default: a local cluster)")
     parser.add_argument("--workers", type=positive_int, default=2, help="local cluster workers (default: %(default)s)")

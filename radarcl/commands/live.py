@@ -2,6 +2,7 @@
 ``livemap``); what `radarcl replay` shares with it (``add_pose_options``, ``make_mapper``,
 ``summary``)."""
 
+import argparse
 import subprocess
 import sys
 import threading
@@ -28,7 +29,8 @@ DESCRIPTION = ("Reads the radar on PORT (/dev/ttyUSB0, socket://host:port, rfc22
 
 def add_arguments(parser):
     p = parser
-    p.add_argument("--port", required=True, help="the radar's port: a device or any pyserial URL")
+    p.add_argument("port", nargs="?", default=None, help="the radar's port: a device (/dev/ttyUSB0) or any pyserial URL")
+    p.add_argument("--port", dest="port_option", default=None, metavar="PORT", help=argparse.SUPPRESS)   # the old spelling
     p.add_argument("--baud", type=positive_int, default=921600, help="baud rate (default: %(default)s)")
     add_output(p, "--out", "live.rcmap", "map to write: a map store (only changed bricks per checkpoint), or .npz")
     add_config(p)
@@ -79,6 +81,10 @@ def make_mapper(args, config, out, inputs, on_fused=None):
 def run(args):
     from radarcl.jobs import live
 
+    if (args.port is None) == (args.port_option is None):
+        raise ConfigError("give the radar's PORT once: radarcl live /dev/ttyUSB0 (or any pyserial URL, or the pty "
+                          "radarcl emulate printed)")
+    args.port = args.port or args.port_option
     config = resolve_config(args)
     out = disk.check_output(args.out, args.force)
     json_status = files.check(args.json_status, True, what="status file") if args.json_status else None
