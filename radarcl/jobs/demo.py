@@ -36,8 +36,11 @@ from radarcl.geometry import BeamLattice
 from radarcl.io import recording
 from radarcl.jobs import demo_fig9
 from radarcl.maps.disk import save_grid
+from radarcl.maps.map import Map
 from radarcl.report import figures
+from radarcl.report import html as page
 from radarcl.report.quality import METRICS_TEXT, chart, format_table, sweep_table
+from radarcl.report.summary import map_summary
 from radarcl.scene.observe import load_observations, observe
 from radarcl.scene.outdoor import OCCUPIED, PAPER_TILTS_DEG, paper_scene
 
@@ -123,15 +126,14 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
         report(line)
     summary["quality"] = q
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    _write_report(out, summary, maps, base, q)
+    _write_report(out, summary, maps, base, q, Map.of_grid(res.grid))
     report(f"wrote {', '.join(p.name for p in sorted(out.iterdir()))} in {out}")
     return summary
 
 
-def _write_report(out, summary, maps, base, q):
-    """report.html: the run's configuration, its metrics, every figure and the viewer's render."""
-    from radarcl.report import html as page
-
+def _write_report(out, summary, maps, base, q, shown_map):
+    """report.html: what the map says and which map is best, then the run's configuration, its
+    metrics, every figure and the viewer's render."""
     headers = ["map"] + list(METRIC_NAMES) + ["objects", "ms/frame"]
     rows = [[name] + [m[k] for k in METRIC_KEYS] + [f"{m['objects_found']}/{m['objects_total']}", r.ms_per_frame]
             for name, (_, r, m) in maps.items()]
@@ -146,7 +148,15 @@ def _write_report(out, summary, maps, base, q):
                ("quality.png", "Error against run time (bench quality at 0.4 m)"),
                ("reliability.png", "Reliability of the 0.4 m reference map and the baselines"),
                ("view.png", f"The {shown} map's isosurface at 1 nat, rendered by the viewer")]
+    best = max(maps, key=lambda name: maps[name][2]["auc_detectable"])
+    raw = base.get("raw_intensity", {})
+    verdict = (f"Best on this scene by AUC detectable (detectable surfaces ranked above free air, on the fixed voxel "
+               f"set): the {best} map, {maps[best][2]['auc_detectable']:.3f}"
+               + (f" (raw intensity {raw['auc_detectable']:.3f})" if "auc_detectable" in raw else "")
+               + f"; its ECE is {maps[best][2]['ece']:.3f}. The map written, drawn and summed up below is the {shown} "
+               "one (radarcl demo --show chooses).")
     sections = [
+        ("Summary", [page.Text(verdict)] + map_summary(shown_map, out / "map.npz", band_hint=(-0.5, 2.0))),
         ("Run", [page.Pairs({"device": summary["device"], "recording": summary["recording"],
                              "observations": summary["observations"], "seed": summary["seed"],
                              "voxel [m]": QUICK_VOXEL_M if summary["quick"] else 0.1,

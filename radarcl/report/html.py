@@ -14,6 +14,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from radarcl import __version__
 from radarcl.io.files import atomic
 
 STYLE = """
@@ -110,7 +111,7 @@ def render(title, sections, subtitle=""):
     stamp = time.strftime("%Y-%m-%d %H:%M")
     return (f'<!doctype html>\n<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
             f"<style>{STYLE}</style></head><body><h1>{html.escape(title)}</h1>"
-            f'<p class="meta">{html.escape(subtitle)} Written by radarcl on {stamp}.</p>'
+            f'<p class="meta">{html.escape(subtitle)} Written by radarcl {__version__} on {stamp}.</p>'
             + "".join(parts) + f"<script>{SCRIPT}</script></body></html>\n")
 
 
