@@ -112,10 +112,9 @@ def octomap(m, path, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS, binary=No
     binary = path.suffix == ".bt" if binary is None else binary
     res = m.spec.voxel_m
     shift = lattice_shift(m.spec)
-    idx, units = m.voxels()
     off = np.any(np.abs(shift) > LATTICE_TOLERANCE * res)
     if resample and off:
-        keys, nats = resample_to_lattice(m, units)
+        keys, nats = resample_to_lattice(m, m.voxels()[1])
         keys = keys + octree.CENTRE_KEY
         note = "resampled onto OctoMap's lattice"
     elif off:
@@ -124,10 +123,9 @@ def octomap(m, path, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS, binary=No
                           f"{[round(float(v), 6) + 0.0 for v in shift]} m; pass --resample to interpolate it onto the "
                           "lattice, or fuse with a grid.origin_m that is a multiple of grid.voxel_m")
     else:
-        try:
-            keys = octree.keys_of(m.spec.index_to_world(idx), res)
-        except ValueError as exc:
-            raise ConfigError(f"the map does not fit OctoMap's tree: {exc}") from None
+        idx, units = m.decided(occ, free)              # the undecided voxels never leave the bricks
+        # on the lattice: OctoMap's key of voxel i is i plus the origin's whole voxels
+        keys = idx + (np.round(np.asarray(m.spec.origin_m) / res).astype(np.int64) + octree.CENTRE_KEY)
         nats = units.astype(np.float64) / logodds.SCALE
         note = "on OctoMap's lattice"
     if len(keys) and (keys.min() < 0 or keys.max() >= 2 * octree.CENTRE_KEY):

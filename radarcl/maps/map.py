@@ -137,6 +137,17 @@ class Map:
         inside = self.spec.contains(idx)
         return idx[inside], self.data[b, z, y, x][inside]
 
+    def decided(self, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
+        """(indices (N, 3) int64 (x, y, z), units (N,) int32) of the occupied and the free voxels
+        (``classes``), found brick by brick without listing the undecided ones."""
+        occ, free = check_thresholds(occupied_nats, free_nats)
+        if not len(self.keys):
+            return np.zeros((0, 3), np.int64), np.zeros(0, np.int32)
+        b, z, y, x = np.nonzero((self.data > occ * logodds.SCALE) | (self.data < free * logodds.SCALE))
+        idx = self.keys[b].astype(np.int64) * BRICK + np.stack([x, y, z], axis=1)
+        inside = self.spec.contains(idx)
+        return idx[inside], self.data[b, z, y, x][inside]
+
     def occupied(self, threshold_nats=OCCUPIED_NATS):
         """(centres (N, 3) [m], log-odds (N,) [nat]) of the voxels above ``threshold_nats``."""
         idx, units = self.voxels(lo_nats=threshold_nats)

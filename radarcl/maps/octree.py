@@ -30,14 +30,18 @@ def keys_of(points, resolution):
     return keys
 
 
+def _spread(v):
+    """The bits of 16-bit ``v`` (uint64) moved to every third position (bit i -> bit 3i)."""
+    v = v & np.uint64(0xFFFF)
+    for shift, mask in ((16, 0x0000FF0000FF), (8, 0x00F00F00F00F), (4, 0x0C30C30C30C3), (2, 0x249249249249)):
+        v = (v | (v << np.uint64(shift))) & np.uint64(mask)
+    return v
+
+
 def _morton(keys):
     """(n,) uint64: the keys' bits interleaved, child index of depth 0 in the top three bits."""
     k = np.asarray(keys, np.uint64)
-    code = np.zeros(len(k), np.uint64)
-    for bit in range(DEPTH):
-        for axis in range(3):
-            code |= ((k[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
-    return code
+    return _spread(k[:, 0]) | (_spread(k[:, 1]) << np.uint64(1)) | (_spread(k[:, 2]) << np.uint64(2))
 
 
 def _levels(keys, values):
@@ -53,11 +57,10 @@ def _levels(keys, values):
     for d in range(DEPTH - 1, -1, -1):
         child_code, _, child_value = levels[d + 1]
         parent = child_code >> np.uint64(3)
-        starts = np.flatnonzero(np.r_[True, parent[1:] != parent[:-1]])
-        mask = np.zeros(len(starts), np.uint8)
-        np.bitwise_or.at(mask, np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, len(parent)])),
-                         (np.uint8(1) << (child_code & np.uint64(7)).astype(np.uint8)))
-        value = np.maximum.reduceat(child_value, starts) if len(starts) else child_value[:0]
+        starts = np.flatnonzero(np.r_[True, parent[1:] != parent[:-1]])     # children are sorted: groups
+        bit = np.left_shift(np.uint8(1), (child_code & np.uint64(7)).astype(np.uint8))
+        mask = np.bitwise_or.reduceat(bit, starts)
+        value = np.maximum.reduceat(child_value, starts)
         levels[d] = (parent[starts], mask, value)
     return levels
 
@@ -101,14 +104,13 @@ def _binary_stream(levels, depth, index):
     inner = depth < DEPTH
     out = np.zeros((int(inner.sum()), 2), np.uint8)
     for d in range(DEPTH):
-        code, mask, _ = levels[d]
         child_code, child_mask, child_value = levels[d + 1]
-        # each child's two bits: 11 inner, 10 occupied (> 0), 01 free
+        # each child's pair of bits: 3 inner, 2 occupied (> 0), 1 free
         state = np.where(child_mask > 0, 3, np.where(child_value > 0, 2, 1)).astype(np.uint16)
         slot = (child_code & np.uint64(7)).astype(np.uint16)
-        parent = np.searchsorted(code, child_code >> np.uint64(3))
-        word = np.zeros(len(code), np.uint16)
-        np.bitwise_or.at(word, parent, state << (2 * slot))
+        parent = child_code >> np.uint64(3)
+        starts = np.flatnonzero(np.r_[True, parent[1:] != parent[:-1]])     # one group per node of depth d
+        word = np.bitwise_or.reduceat(state << (2 * slot), starts)
         rows = np.flatnonzero(depth[inner] == d)
         out[rows, 0] = (word[index[inner][rows]] & 0xFF).astype(np.uint8)
         out[rows, 1] = (word[index[inner][rows]] >> 8).astype(np.uint8)
