@@ -230,3 +230,25 @@ def test_cli_export(m, tmp_path, capsys):
     assert "height band must be two finite numbers z_min < z_max" in capsys.readouterr().err
     assert main(["export", str(path), "--to", "ply", "--out", str(tmp_path / "o.ply")]) == 2
     assert "exists" in capsys.readouterr().err
+
+
+def test_every_format_counts_the_same_voxels_at_the_thresholds(tmp_path):
+    """A voxel exactly at a threshold is undecided in every format (occupied means strictly
+    above, free strictly below): the PLY, the OctoMap file and the bag's cloud hold the same
+    occupied voxels, and the costmap the same classes as the map's own query."""
+    import plyfile
+
+    spec = GridSpec((0.0, 0.0, 0.0), 0.25, (8, 8, 8))
+    data = np.zeros((1, 8, 8, 8), np.int32)
+    data[0, 0, 0, :4] = [1024, 1025, -1024, -1025]                  # at and just beyond each threshold
+    data[0, 1, 1, :2] = [2048, -2048]
+    m = Map(spec, np.zeros((1, 3), np.int32), data)
+    occupied = {1025, 2048}
+    ply = exports.ply_points(m, tmp_path / "p.ply", 1.0)
+    tree = exports.octomap(m, tmp_path / "o.ot", 1.0, -1.0)
+    bag = exports.rosbag(m, tmp_path / "bag", occupied_nats=1.0, free_nats=-1.0)
+    assert ply["points"] == tree["occupied_voxels"] == bag["points"] == len(occupied)
+    assert tree["free_voxels"] == 2
+    got = np.rint(plyfile.PlyData.read(str(tmp_path / "p.ply"))["vertex"]["log_odds"] * 1024).astype(int)
+    assert set(got.tolist()) == occupied
+    assert m.counts(1.0, -1.0) == dict(occupied=2, free=2, undecided=2, unobserved=spec.n_voxels - 6)

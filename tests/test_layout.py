@@ -211,3 +211,19 @@ def test_every_file_the_code_and_the_readme_cite_exists():
     missing = sorted({f"{path.relative_to(ROOT)}: {name}" for path in sources for name in pattern.findall(path.read_text())
                       if "*" not in name and not (ROOT / name).exists()})
     assert missing == []
+
+
+def test_the_readme_lists_every_command_and_every_built_in_profile():
+    """The README's first section after set-up lists every subcommand, one line each, and its
+    profile table every built-in sensor profile."""
+    from radarcl.cli import COMMANDS
+    from radarcl.config import sensors
+
+    text = (ROOT / "README.md").read_text()
+    block = text.split("\n## Commands\n", 1)[1].split("```sh\n", 1)[1].split("```", 1)[0]
+    listed = {line.split()[1] for line in block.splitlines() if line.startswith("radarcl ")}
+    assert listed == set(COMMANDS), set(COMMANDS) ^ listed
+    assert text.index("\n## Commands\n") < text.index("\n## What exists today\n")
+    table = text.split("\n## Sensors and configuration", 1)[1].split("\n\n| profile |", 1)[1].split("\n\n", 1)[0]
+    rows = {line.split("`")[1] for line in table.splitlines() if line.startswith("| `")}
+    assert rows == set(sensors.builtin_names()), set(sensors.builtin_names()) ^ rows

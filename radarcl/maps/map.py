@@ -149,9 +149,11 @@ class Map:
         return idx[inside], self.data[b, z, y, x][inside]
 
     def occupied(self, threshold_nats=OCCUPIED_NATS):
-        """(centres (N, 3) [m], log-odds (N,) [nat]) of the voxels above ``threshold_nats``."""
+        """(centres (N, 3) [m], log-odds (N,) [nat]) of the occupied voxels: strictly above
+        ``threshold_nats``, as ``classes`` counts them."""
         idx, units = self.voxels(lo_nats=threshold_nats)
-        return self.spec.index_to_world(idx), logodds.to_nats(units)
+        above = units > threshold_nats * logodds.SCALE
+        return self.spec.index_to_world(idx[above]), logodds.to_nats(units[above])
 
     def dense(self, band=None):
         """Dense int32 (nz, ny, nx) units; ``band`` (z_min, z_max) [m] keeps only those layers.
