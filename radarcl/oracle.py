@@ -199,6 +199,17 @@ def cfar(profiles, config):
     return noise, ratio, mask
 
 
+def profile_flags(profiles):
+    """uint8 (...) per-beam flags of power profiles (..., n_bins): FLAG_BAD_PROFILE where a bin is
+    NaN, Inf, negative or beyond PROFILE_LIMIT (the CFAR's sums would overflow float32 there),
+    FLAG_SILENT where every bin is 0."""
+    r = np.asarray(profiles, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.isfinite(r) & (r >= 0) & (r <= PROFILE_LIMIT)).all(axis=-1)
+    silent = ~(r != 0).any(axis=-1)
+    return (np.where(bad, FLAG_BAD_PROFILE, 0) | np.where(silent, FLAG_SILENT, 0)).astype(np.uint8)
+
+
 def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
     """The down-range interpreter, eq. 12 (or, with ``config.model == "occlusion"``, radarcl's
     occlusion-aware variant: ``InterpretConfig``), on (..., n_bins) arrays, plainly, beam by beam.
@@ -228,14 +239,9 @@ def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
     evidence = np.zeros(r.shape, np.int32)
     pulses = np.full((*batch, config.max_pulses, 4), -1, np.int32)
     n_pulses = np.zeros(batch, np.int32)
-    flags_out = flags_in.copy()
+    flags_out = flags_in | profile_flags(r)
     for beam in np.ndindex(*batch):
         rb, nb, mb = r[beam], n[beam], m[beam]
-        with np.errstate(invalid="ignore"):
-            if not (np.isfinite(rb).all() and (rb >= 0).all() and (rb <= PROFILE_LIMIT).all()):
-                flags_out[beam] |= FLAG_BAD_PROFILE
-        if not (rb != 0).any():
-            flags_out[beam] |= FLAG_SILENT
         if flags_out[beam] & NO_EVIDENCE_FLAGS:
             continue
         after_wide = False              # the paper: after the first wide pulse; occlusion: the first surface

@@ -179,3 +179,19 @@ def test_refuses_bad_input(runtime):
 
     with pytest.raises(ShapeError, match=r"expected power profiles of shape \(4, 64\) float32 on the device"):
         plan.enqueue(cla.to_device(runtime.queue, np.zeros(8, np.float32)))     # once 1,470 "targets"
+
+
+def test_the_stage_alone_flags_beams_it_cannot_judge(runtime):
+    """Above PROFILE_LIMIT the training sums overflow float32 and the noise is infinite: the
+    target there is missed. The stage used on its own says which beams (as the interpreter does
+    in a pipeline); the others are judged as usual."""
+    from radarcl import oracle
+
+    profiles = np.ones((3, 256), np.float32)
+    profiles[:, 100] = 1e3                                  # a target in every beam
+    profiles[1, 40:60] = 3e37                               # beam 1: bins beyond PROFILE_LIMIT
+    profiles[2] = 0.0                                       # beam 2: the receiver measured nothing
+    result = Cfar(runtime, (3,), 256, CfarConfig(guard=2, train=8))(profiles)
+    assert result.flags.tolist() == [0, oracle.FLAG_BAD_PROFILE, oracle.FLAG_SILENT]
+    assert result.mask[0, 100] and not np.isfinite(result.noise[1]).all()
+    assert np.array_equal(result.flags, oracle.profile_flags(profiles))

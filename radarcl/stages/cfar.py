@@ -6,10 +6,12 @@ config)`` (edge rule "shift", see ``CfarConfig``): noise estimates and ratios wi
 ``DECISION_MARGIN`` of the threshold (see tests/test_cfar.py).
 """
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
+from radarcl import oracle
 from radarcl.config.stage_config import CfarConfig
 from radarcl.errors import ConfigError
 from radarcl.stages import Port, Stage, beam_batch, build, count, work_group_size
@@ -25,11 +27,13 @@ VECTOR_WIDTHS = (1, 2, 4, 8, 16)
 
 @dataclass(frozen=True)
 class CfarResult:
-    """Per-bin CFAR outputs, each of shape (*batch, n_bins)."""
+    """Per-bin CFAR outputs, each of shape (*batch, n_bins), and per-beam flags (*batch,)."""
 
     noise: np.ndarray   # float32 n_i, floored
     ratio: np.ndarray   # float32 r_i / n_i, saturated at the largest float32
     mask: np.ndarray    # bool, r_i > alpha n_i
+    flags: np.ndarray = None  # uint8 oracle.FLAG_BAD_PROFILE / FLAG_SILENT (``Cfar.__call__``): trust no
+    #                           noise, ratio or detection of a flagged beam
 
 
 class Cfar(Stage):
@@ -96,6 +100,9 @@ class Cfar(Stage):
         return CfarResult(noise, ratio, mask.astype(bool))
 
     def __call__(self, profiles):
-        """Process one frame of profiles (*batch, n_bins) float32 -> CfarResult (blocking)."""
+        """Process one frame of profiles (*batch, n_bins) float32 -> CfarResult (blocking), with
+        the beams whose profiles the CFAR cannot judge flagged (``oracle.profile_flags``: in a
+        ``Detection`` the interpreter flags them on the device)."""
         copy = self.upload(profiles)
-        return self.download(wait_for=[self.enqueue(wait_for=[copy])])
+        result = self.download(wait_for=[self.enqueue(wait_for=[copy])])
+        return dataclasses.replace(result, flags=oracle.profile_flags(profiles))
