@@ -70,8 +70,12 @@ def open_input(sensor, path, odometry=None, poses=None, poses_format=None, clock
 def _check_frame(sensor, shape, dtype, what):
     expected = sensor.frame_shape()
     if tuple(shape) != tuple(expected) or np.dtype(dtype) != sensor.sample_dtype:
+        hint = ""
+        if not sensor.raw and tuple(shape[:-1]) == tuple(expected[:-1]) and shape[-1] != expected[-1]:
+            hint = (f" ([range] n_bins = {expected[-1]}: leave it out to read the count from the data, and check "
+                    "bin_spacing_m and [reader] meta_columns)")
         raise FrameFormatError(f"{what}: frames are {tuple(shape)} {np.dtype(dtype)}; sensor {sensor.name} "
-                               f"expects {tuple(expected)} {sensor.sample_dtype}")
+                               f"expects {tuple(expected)} {sensor.sample_dtype}{hint}")
 
 
 def _recording(sensor, path):

@@ -116,9 +116,9 @@ def find_beside(scans):
 
 # -- numeric tables ---------------------------------------------------------------------------------------
 def _rows(path, columns, what):
-    """(rows (n, columns) float64, line numbers) of a numeric table; FrameFormatError with the
-    file and line of the first bad row."""
-    out, lines = [], []
+    """(rows (n, columns) float64, line numbers, the first column's times [ns], exact) of a
+    numeric table; FrameFormatError with the file and line of the first bad row."""
+    out, lines, times = [], [], []
     try:
         with open(path, errors="strict") as f:
             for number, line in enumerate(f, 1):
@@ -135,11 +135,12 @@ def _rows(path, columns, what):
                                            f"{text[:80]!r}")
                 out.append(values)
                 lines.append(number)
+                times.append(seconds_ns(parts[0]))
     except (OSError, UnicodeDecodeError) as exc:
         raise FrameFormatError(f"{path}: cannot read ({exc})") from exc
     if not out:
         raise FrameFormatError(f"{path}: no poses ({what})")
-    return np.array(out), np.array(lines)
+    return np.array(out), np.array(lines), np.array(times, np.int64)
 
 
 def _increasing(path, times_ns, lines):
@@ -150,13 +151,19 @@ def _increasing(path, times_ns, lines):
                                f"follows t = {times_ns[i] / 1e9:.6f} s on line {lines[i]}")
 
 
-def _seconds_ns(column):
-    return np.rint(np.asarray(column, np.float64) * 1e9).astype(np.int64)
+def seconds_ns(text):
+    """A time in seconds written in decimal ("1547131014.351772") as exact int ns: a float64 of
+    1.5e9 s keeps only ~0.2 us (an exponent falls back to float)."""
+    text = text.strip()
+    whole, _, fraction = text.partition(".")
+    if whole.lstrip("-").isdigit() and (fraction.isdigit() or not fraction) and len(fraction) <= 9:
+        sign = -1 if whole.startswith("-") else 1
+        return sign * (abs(int(whole)) * 10 ** 9 + int(fraction.ljust(9, "0") or 0))
+    return int(round(float(text) * 1e9))
 
 
 def _tum(path):
-    rows, lines = _rows(path, 8, "t tx ty tz qx qy qz qw")
-    t = _seconds_ns(rows[:, 0])
+    rows, lines, t = _rows(path, 8, "t tx ty tz qx qy qz qw")
     _increasing(path, t, lines)
     q = rows[:, [7, 4, 5, 6]]                              # (w, x, y, z)
     norm = np.linalg.norm(q, axis=1)
@@ -170,23 +177,21 @@ def _tum(path):
 
 
 def _xyzrpy(path):
-    rows, lines = _rows(path, 7, "t_s x y z roll pitch yaw")
-    t = _seconds_ns(rows[:, 0])
+    rows, lines, t = _rows(path, 7, "t_s x y z roll pitch yaw")
     _increasing(path, t, lines)
     poses = np.stack([pose_from_xyz_rpy(*(float(v) for v in r[1:])) for r in rows])
     return Trajectory(t, poses, f"{path}")
 
 
 def _kitti(path, times):
-    rows, lines = _rows(path, 12, "the 3x4 [R|t] of a pose, row-major")
+    rows, lines, _ = _rows(path, 12, "the 3x4 [R|t] of a pose, row-major")
     times = Path(times) if times else path.parent / "times.txt"
     if not times.is_file():
         raise FrameFormatError(f"{path}: KITTI poses carry no times; put times.txt (one time [s] a line) beside it "
                                "or give --poses-times FILE")
-    t_rows, t_lines = _rows(times, 1, "one time [s] per pose")
+    t_rows, t_lines, t = _rows(times, 1, "one time [s] per pose")
     if len(t_rows) != len(rows):
         raise FrameFormatError(f"{times}: {len(t_rows)} times for the {len(rows)} poses of {path}")
-    t = _seconds_ns(t_rows[:, 0])
     _increasing(times, t, t_lines)
     poses = np.tile(np.eye(4), (len(rows), 1, 1))
     poses[:, :3, :] = rows.reshape(-1, 3, 4)

@@ -319,7 +319,7 @@ def read_annotations(path):
     try:
         for obj in objects:
             for index, box in enumerate(obj["bboxes"]):
-                if box is None:
+                if not box:                             # null, or [] in some files: no box in that frame
                     continue
                 boxes.append(Box(int(obj["id"]), str(obj["class_name"]), index + 1,
                                  box_corners(box["position"], box["rotation"])))
