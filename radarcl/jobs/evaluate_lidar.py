@@ -130,7 +130,7 @@ def run(runtime, models, data, voxel_m=0.3, bands=L.BANDS_M, poses=None, poses_f
                   reach_m=[float(r) for r in truth.reach_m], occupied=int(truth.occupied.sum()),
                   free=int(truth.free.sum()), bands=rows, boxes=boxes, goal=goal(rows))
     arrays = dict(truth=truth, maps=maps, raw=raw, count=count, spec=spec, per_beam=per_beam,
-                  boxes=placed)
+                  boxes=placed, trajectory=track)
     return result, arrays
 
 

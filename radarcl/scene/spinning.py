@@ -19,6 +19,8 @@ import math
 import numpy as np
 
 from radarcl.errors import ConfigError
+from radarcl.scene.outdoor import METAL, ROCK, Scene, SceneObject
+from radarcl.scene.shapes import Box, Ground
 
 PULSE_DB = {0: 0.0, 1: -6.0, 2: -20.0}      # a Hann-windowed point target's pulse, bins off its peak
 
@@ -65,3 +67,17 @@ def polar_scan(scene, poses, n_bins, bin_spacing_m, rng, noise_db=20.0, echo_db=
                 ok = np.isfinite(j) & (j >= 0) & (j < n_bins)
                 power[np.flatnonzero(ok), j[ok].astype(int)] += echo * 10 ** (db / 10)
     return np.clip(np.rint(10 * np.log10(power)), 0, 255).astype(np.uint8)
+
+
+def street(height_m=1.8):
+    """A street to drive along +x with the sensor ``height_m`` above the road (z = 0 the road):
+    a long wall on the left (y 6-6.5 m, 3.5 m high), a building on the right (y -12 to -9 m,
+    x 4-16 m), a parked car (y -4.1 to -2.3 m, x 20-24.5 m, 1.6 m high), two posts. Faces lie off
+    the 0.1 m lattices, so no truth depends on how a face on a cell boundary rounds."""
+    objects = [SceneObject("road", Ground(0.0), ROCK),
+               SceneObject("wall", Box((-30.03, 6.03, 0.0), (40.03, 6.53, 3.5)), ROCK),
+               SceneObject("building", Box((4.03, -12.03, 0.0), (16.03, -9.03, 8.0)), ROCK),
+               SceneObject("car", Box((20.03, -4.13, 0.0), (24.53, -2.33, 1.6)), METAL),
+               SceneObject("post 1", Box((-5.03, -5.03, 0.0), (-4.73, -4.73, 3.2)), METAL),
+               SceneObject("post 2", Box((30.03, -6.03, 0.0), (30.33, -5.73, 3.2)), METAL)]
+    return Scene(tuple(objects), (), (0.0, 0.0, height_m))
