@@ -14,6 +14,7 @@ from PIL import Image
 
 from radarcl.evaluation import lidar as L
 from radarcl.geometry import pose_from_xyz_rpy
+from radarcl.io import radiate
 from radarcl.io.trajectory import Trajectory
 from radarcl.jobs import evaluate_lidar as job
 from radarcl.scene import spinning
@@ -40,10 +41,10 @@ def _write_recording(root, n_scans=6):
     (root / "Navtech_Polar").mkdir(parents=True)
     stamps = []
     for k in range(n_scans):
-        stamp = T0 + 500_000_000 + k * PERIOD                 # RADIATE: the time of arrival (the last azimuth)
-        stamps.append(f"Frame: {k + 1:06d} Time: {_ns_text(stamp)}")
+        stamp = T0 + 500_000_000 + k * PERIOD                 # RADIATE: the time of arrival, 0.25 s after the
+        stamps.append(f"Frame: {k + 1:06d} Time: {_ns_text(stamp)}")     # middle azimuth (the profile's reading)
         column = np.arange(N_AZ)
-        times = stamp + ((column - (N_AZ - 1)) * PERIOD) // N_AZ
+        times = stamp - 250_000_000 + ((column - (N_AZ // 2 - 1)) * PERIOD) // N_AZ
         angle = np.radians(-(column + 0.5) * 0.9)             # column c at (c + 0.5) x 0.9 deg clockwise
         turn = np.stack([pose_from_xyz_rpy(yaw=a) for a in angle])
         poses = raised @ track.at(times) @ turn
@@ -53,7 +54,7 @@ def _write_recording(root, n_scans=6):
     (root / "velo_lidar").mkdir()
     lines, lidar = [], []
     for j, lt in enumerate(range(T0 + 300_000_000, T0 + 2_100_000_000, 100_000_000)):
-        pose = raised @ track.at([lt])[0]
+        pose = raised @ track.at([lt])[0] @ radiate.lidar_mount()       # where RADIATE's lidar sits
         p = spinning.lidar_points(scene, pose, RINGS_DEG, 720, FOG_M)
         rows = np.column_stack([-p[:, 1], p[:, 0], p[:, 2], np.ones(len(p)), np.zeros(len(p))])   # x right, y fwd
         np.savetxt(root / "velo_lidar" / f"{j + 1:06d}.csv", rows, delimiter=",", fmt="%.5f")
@@ -66,7 +67,7 @@ def _write_recording(root, n_scans=6):
         x_f = float(track.at([stamp - PERIOD // 2])[0][0, 3])
         for _ in range(3):
             column = int(math.degrees(-math.atan2(-3.23, 22.28 - x_f)) / 0.9 - 0.5) % N_AZ
-            x_f = float(track.at([stamp + ((column - (N_AZ - 1)) * PERIOD) // N_AZ])[0][0, 3])
+            x_f = float(track.at([stamp - 250_000_000 + ((column - (N_AZ // 2 - 1)) * PERIOD) // N_AZ])[0][0, 3])
         u0, u1 = 576 + 2.33 / BIN_M, 576 + 4.13 / BIN_M       # x right = -y
         v0, v1 = 576 - (24.53 - x_f) / BIN_M, 576 - (20.03 - x_f) / BIN_M
         boxes.append({"position": [u0, v0, u1 - u0, v1 - v0], "rotation": 0.0})

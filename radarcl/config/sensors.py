@@ -86,6 +86,7 @@ _SCHEMA = {                # section -> key -> check (value -> value, or ConfigE
                "timestamp_file": tomlfile.text,
                "file_name_unit": lambda v: tomlfile.choice(v, ("auto", *FILE_NAME_UNITS)),
                "timestamp_at": lambda v: tomlfile.choice(v, TIMESTAMP_AT),
+               "timestamp_offset_s": lambda v: _N(v, -3600, 3600, unit="s"),
                "scan_period_s": lambda v: _N(v, 0, 3600, lo_open=True, unit="s"),
                "azimuth_start_deg": lambda v: _N(v, -360, 360, unit="deg"),
                "range_offset_m": lambda v: _N(v, -1e3, 1e3, unit="m"),

@@ -8,8 +8,9 @@ Truth (``lidar_truth``), in the radar's plane (one cell per map column):
   percentile of its heights within ``GROUND_RANGE_M`` (the lower rings hit the road);
 - a cell holds a hit when a point lies in it between ``CLEARANCE_M`` and ``TOP_M`` above that
   ground (an obstacle a vehicle's radar plane can meet); a ray passes a cell when the segment
-  from the lidar to any point (ground hits too) crosses it before the point's own cell, at a
-  height within that band (a ray over a low car does not make the car's cells free);
+  from the lidar to any point (ground hits too) crosses it before the point's own cell, between
+  ``CLEARANCE_M`` and ``FREE_TOP_M`` above the ground: lower than any vehicle, so that rays over
+  a parked car's roof do not make its cells free;
 - the frame reaches only as far as its points do: ``REACH_PERCENTILE`` % of its points lie
   within its reach, and nothing beyond it counts (in fog: 10-15 m; no point does not mean free);
 - over frames a cell is OCCUPIED when at least as many frames saw a hit in it as saw rays pass
@@ -44,6 +45,7 @@ from radarcl.pipeline import Mapping
 EGO_RADIUS_M = 3.0           # nearer the lidar: the vehicle that carries it (a car reaches ~2.5 m from its roof)
 CLEARANCE_M = 0.3            # above the ground: kerbs and the road's own roughness are not obstacles
 TOP_M = 3.0                  # a vehicle's radar plane meets nothing higher (eaves, tree crowns)
+FREE_TOP_M = 1.0             # rays mark cells free only this low: under a car's roof, a person's waist
 GROUND_RANGE_M = 20.0
 REACH_PERCENTILE = 99.0
 STEPS_PER_CELL = 4           # ray samples per cell edge
@@ -130,7 +132,7 @@ def frame_cells(spec, pose, points):
     sx, sy, s_in = _cells(spec, samples[:, :2])
     before = (sx != ex[first][ray]) | (sy != ey[first][ray])
     h = _sample_height(samples, pose, ground)
-    keep = s_in & before & (h >= CLEARANCE_M) & (h <= TOP_M)
+    keep = s_in & before & (h >= CLEARANCE_M) & (h <= FREE_TOP_M)
     passed[sy[keep], sx[keep]] = True
     return hit, passed & ~hit, reach
 
@@ -169,6 +171,31 @@ def count_map(runtime, config, spec, scans, per_beam):
     return mapping.grid.snapshot()
 
 
+def radar_visible(truth, per_beam, range_min_m, range_max_m):
+    """(ny, nx) bool: cells some radar beam reaches no later than the first cell the lidar calls
+    occupied along it (the beam's axis from each azimuth's pose, sampled ``STEPS_PER_CELL`` times
+    per cell): what the radar could see if the lidar's truth were the world. Occupied cells in
+    every beam's shadow and the free cells behind them are left out."""
+    spec, occ = truth.spec, truth.occupied
+    ny, nx = occ.shape
+    seen = np.zeros_like(occ)
+    r = np.arange(range_min_m, range_max_m, spec.voxel_m / STEPS_PER_CELL)
+    origin = np.asarray(spec.origin_m[:2])
+    for poses in per_beam:
+        n_az = len(poses)
+        az = np.arange(n_az) * (2 * math.pi / n_az)      # the spinning lattice's azimuth i, turned by its pose
+        dirs = np.einsum("aij,aj->ai", poses[:, :2, :2], np.stack([np.cos(az), np.sin(az)], axis=1))
+        pts = poses[:, None, :2, 3] + r[None, :, None] * dirs[:, None, :]
+        ij = np.floor((pts - origin) / spec.voxel_m).astype(np.int64)
+        inside = (ij[..., 0] >= 0) & (ij[..., 0] < nx) & (ij[..., 1] >= 0) & (ij[..., 1] < ny)
+        ij = np.where(inside[..., None], ij, 0)
+        hit = occ[ij[..., 1], ij[..., 0]] & inside
+        first = np.where(hit.any(axis=1), hit.argmax(axis=1), len(r) - 1)
+        keep = (np.arange(len(r))[None, :] <= first[:, None]) & inside
+        seen[ij[..., 1][keep], ij[..., 0][keep]] = True
+    return seen
+
+
 # -- scores --------------------------------------------------------------------------------------------------
 def range_from_path(spec, positions):
     """(ny, nx) distance [m] of each cell centre to the nearest of ``positions`` (n, >= 2)."""
@@ -182,12 +209,14 @@ def range_from_path(spec, positions):
     return d.reshape(ny, nx)
 
 
-def band_scores(truth, distance, maps, baselines, bands=BANDS_M):
+def band_scores(truth, distance, maps, baselines, bands=BANDS_M, mask=None):
     """Rows per band [{band, occupied, free, auc: {name: AUC}, iou: {name: IoU}}]: ``maps`` and
     ``baselines`` are {name: (ny, nx) score, higher = more occupied}; maps also get an IoU at
-    log-odds 0. Bands where the lidar knows fewer than ``MIN_CELLS`` of either class are left
-    out."""
+    log-odds 0. Only cells of ``mask`` count (default all). Bands where the lidar knows fewer
+    than ``MIN_CELLS`` of either class are left out."""
     occ, free = truth.occupied, truth.free
+    if mask is not None:
+        occ, free = occ & mask, free & mask
     rows = []
     for lo, hi in zip(bands[:-1], bands[1:]):
         band = (distance >= lo) & (distance < hi)

@@ -23,7 +23,9 @@ Keys (all optional; the defaults are Oxford's):
   file_name_unit     unit of a time in a file name: "auto" (by its digits: 10 s, 13 ms, 16 us,
                      19 ns, as pyboreas' get_time_from_filename), "s", "ms", "us", "ns"
   timestamp_at       which azimuth a scan's one time names: "start" (the first), "middle"
-                     (azimuth n/2 - 1: Boreas), "end" (the last: RADIATE's time of arrival)
+                     (azimuth n/2 - 1: Boreas), "end" (the last)
+  timestamp_offset_s added to a scan's one time (from a side file or its name) to get that
+                     azimuth's: a time of arrival comes after the scan (RADIATE: -0.25 s)
   scan_period_s      one turn [s] when the scans' own times cannot tell (a single scan)
   azimuth_start_deg  bearing of the first azimuth from straight ahead, turning as ``clockwise``
                      says; with an encoder column, added to every encoder angle
@@ -38,6 +40,7 @@ A layout that does not match the files is refused with both shapes and the key t
 """
 
 import math
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,6 +68,7 @@ class PolarLayout:
     timestamp_file: str = None
     file_name_unit: str = "auto"
     timestamp_at: str = "start"
+    timestamp_offset_s: float = 0.0
     scan_period_s: float = 0.25
     azimuth_start_deg: float = 0.0
     clockwise: bool = True
@@ -104,6 +108,8 @@ class PolarLayout:
         if self.timestamps == "side-file" and not self.timestamp_file:
             raise ConfigError("[reader] timestamps = 'side-file' needs timestamp_file = \"...\" (relative to the "
                               "scans' directory)")
+        if not math.isfinite(self.timestamp_offset_s):
+            raise ConfigError(f"[reader] timestamp_offset_s must be a finite number of seconds")
         if not (math.isfinite(self.scan_period_s) and self.scan_period_s > 0):
             raise ConfigError(f"[reader] scan_period_s must be a positive number of seconds, got {self.scan_period_s}")
 
@@ -196,14 +202,16 @@ def read_side_file(path):
 
 
 def scan_times_ns(paths, layout, directory):
-    """Each scan's one UNIX time [ns] (the azimuth ``timestamp_at`` names) from the side file
-    or the file names, or None for a scan whose time the layout cannot give (metadata layouts:
-    the times are in the images)."""
+    """Each scan's one UNIX time [ns] (the azimuth ``timestamp_at`` names, ``timestamp_offset_s``
+    applied) from the side file or the file names, or None for a scan whose time the layout
+    cannot give (metadata layouts: the times are in the images)."""
+    offset = int(round(layout.timestamp_offset_s * 1e9))
     if layout.timestamps == "metadata":
         return [None] * len(paths)
     if layout.timestamps == "file-name":
-        return [file_name_time_ns(p, layout.file_name_unit) for p in paths]
-    side = (Path(directory) / layout.timestamp_file).resolve()
+        times = [file_name_time_ns(p, layout.file_name_unit) for p in paths]
+        return [None if t is None else t + offset for t in times]
+    side = Path(os.path.normpath(Path(directory) / layout.timestamp_file))     # lexical: ".." of the path given
     if not side.is_file():
         raise FrameFormatError(f"{side}: no such side file of scan times ([reader] timestamp_file = "
                                f"{layout.timestamp_file!r}, relative to {directory})")
@@ -213,5 +221,5 @@ def scan_times_ns(paths, layout, directory):
         t = times.get(Path(p).stem)
         if t is None:
             raise FrameFormatError(f"{side}: no time for scan {Path(p).name} (frame {Path(p).stem!r})")
-        out.append(t)
+        out.append(t + offset)
     return out

@@ -98,18 +98,19 @@ def levels_to_power(levels, db_per_level=1.0):
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
-def verify_png(path):
+def verify_png(path, raw=None):
     """Check a PNG's signature and every chunk's CRC-32 before decoding: PIL stops reading the
     image data once it has its pixels, so a damaged final deflate block (whose Adler-32 it
     never reads) would otherwise decode into wrong pixels without a word (found by the fuzz
-    suite). Returns the (width, height) of its IHDR."""
+    suite). ``raw``: the file's bytes when already read. Returns the (width, height) of its IHDR."""
     import struct
     import zlib
 
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise FrameFormatError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    if raw is None:
+        try:
+            raw = Path(path).read_bytes()
+        except OSError as exc:
+            raise FrameFormatError(f"{path}: cannot read ({exc.strerror or exc})") from exc
     if not raw.startswith(PNG_SIGNATURE):
         raise FrameFormatError(f"{path}: not a PNG file (no PNG signature)")
     i, size, ended = len(PNG_SIGNATURE), None, False
@@ -139,14 +140,20 @@ def load_scan(path, layout=PolarLayout(), time_ns=None, period_ns=None):
     and the azimuths spread evenly over ``period_ns`` (default: ``layout.scan_period_s``)."""
     from PIL import Image
 
+    import io
+
     path = Path(path)
-    width, height = verify_png(path)
+    try:
+        data = path.read_bytes()          # read once: checked, then decoded from memory
+    except OSError as exc:
+        raise FrameFormatError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    width, height = verify_png(path, data)
     if width * height > MAX_PIXELS:
         raise FrameFormatError(f"{path}: declares {width} x {height} pixels, more than the {MAX_PIXELS} a scan "
                                "may have; refused before decoding")
     layout.check_shape(path, height, width)
     try:
-        with Image.open(path) as image:
+        with Image.open(io.BytesIO(data)) as image:
             if image.mode != "L":
                 raise FrameFormatError(f"{path}: expected an 8-bit greyscale image ({layout.orientation}), got "
                                        f"mode {image.mode} of {height} x {width}")
@@ -168,6 +175,8 @@ def load_scan(path, layout=PolarLayout(), time_ns=None, period_ns=None):
     else:
         if time_ns is None:
             time_ns = file_name_time_ns(path, layout.file_name_unit)
+            if time_ns is not None:
+                time_ns += int(round(layout.timestamp_offset_s * 1e9))
         if time_ns is None:
             time_ns, timed = 0, False
         period = int(period_ns if period_ns is not None else round(layout.scan_period_s * 1e9))

@@ -22,8 +22,13 @@ plane, the GPS altitude jumps by 0.6 m within a second here, and there is no usa
 
 Velodyne (``velo_lidar/NNNNNN.csv``): x, y, z, intensity, ring per line, no header (the SDK's
 ``read_lidar`` reads the first point as a header and drops it); x right, y forward, z up
-(measured: the car drives along +y, its right turn is a negative yaw rate about +z). The points
-are taken to be in the radar's frame (SDK README.md:233), turned here into REP-103.
+(measured: the car drives along +y, its right turn is a negative yaw rate about +z), turned
+here into REP-103. The points are in the lidar's own frame (SDK README.md:86; its README.md:233
+says "relative to the radar", the data says otherwise): the lidar sits at ``LIDAR_IN_RADAR_M``
+in the radar's frame, the SDK's lidar-to-radar calibration (README.md:141-144, rotation ~0),
+read in the radar's x right, y forward, z up. Measured (``radarcl evaluate-lidar``): without it
+every radar map and the raw intensity agree best with the lidar's truth shifted 0.6 m to the
+right; with it, unshifted.
 
 Annotations (``annotations/annotations.json``): per object and radar frame a box in pixels of
 RADIATE's 1152 x 1152 Cartesian radar image (0.173611 m per pixel, the radar at pixel corner
@@ -42,6 +47,7 @@ from radarcl.errors import FrameFormatError
 from radarcl.io.polar_layout import read_side_file
 from radarcl.io.trajectory import Trajectory
 
+LIDAR_IN_RADAR_M = (0.6003, -0.120102, 0.250012)   # x right, y forward, z up (see the module)
 EARTH_RADIUS_M = 6378137.0          # WGS-84 equatorial radius: the local plane around the first fix
 CARTESIAN_PIXELS, CARTESIAN_M_PER_PIXEL = 1152, 0.173611
 TRACK_WINDOW_M = 1.0                # the track's heading from positions at least this far apart
@@ -230,6 +236,14 @@ def read_lidar_frame(path):
 def lidar_to_rep103(points):
     """(n, 3) REP-103 points (x forward, y left, z up) of RADIATE lidar rows (x right, y forward)."""
     return np.stack([points[:, 1], -points[:, 0], points[:, 2]], axis=1)
+
+
+def lidar_mount():
+    """The lidar's pose (4x4) in the radar's REP-103 frame (``LIDAR_IN_RADAR_M``, no rotation)."""
+    right, forward, up = LIDAR_IN_RADAR_M
+    mount = np.eye(4)
+    mount[:3, 3] = (forward, -right, up)
+    return mount
 
 
 def lidar_frames(path):

@@ -19,7 +19,7 @@ from radarcl.config import mapconfig
 from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.evaluation import calibration, heldout, tuning
 from radarcl.evaluation import lidar as L
-from radarcl.grid import EvidenceGrid
+from radarcl.grid import EvidenceGrid, GridSpec
 from radarcl.io import radiate
 from radarcl.io.inputs import open_input
 from radarcl.pipeline import Mapping
@@ -28,7 +28,6 @@ from radarcl.report import figures
 MODELS = {"paper": ("paper constants", {}), "tuned": ("tuned", tuning.TUNED),
           "calibrated": ("calibrated (occlusion-aware)", calibration.CALIBRATED)}
 RAW, COUNT, RANGE = "raw intensity", "no radar: -1 per sample", "no radar: range (better sign)"
-PER_SAMPLE = "/ sample"          # a map's log-odds divided by the updates the cell took: its mean evidence
 
 
 def resolve_models(sensor, names, flags=None, force_sensor=False):
@@ -47,13 +46,15 @@ def resolve_models(sensor, names, flags=None, force_sensor=False):
     return out
 
 
-def lidar_frames(root, track, report=print):
+def lidar_frames(root, track, report=print, mount=None):
     """[(time_ns, pose, REP-103 points)] of the recording's lidar frames that the trajectory
-    covers (the others named in one line)."""
+    covers (the others named in one line); the lidar's pose is the radar's times ``mount``
+    (default: RADIATE's lidar-to-radar calibration, ``radiate.lidar_mount``)."""
+    mount = radiate.lidar_mount() if mount is None else np.asarray(mount, float)
     out, left = [], []
     for name, t, path in radiate.lidar_frames(root):
         try:
-            pose = track.at([t])[0]
+            pose = track.at([t])[0] @ mount
         except FrameFormatError:
             left.append(name)
             continue
@@ -114,12 +115,13 @@ def run(runtime, models, data, voxel_m=0.3, bands=L.BANDS_M, poses=None, poses_f
     count = L.nats_of(L.count_map(runtime, base, spec, scans, per_beam))
     if progress is not None:
         progress(len(models) + 2, len(models) + 2, "maps fused")
-    samples = -count                                 # beam-weighted updates per cell
-    with np.errstate(divide="ignore", invalid="ignore"):
-        per_sample = {f"{label} {PER_SAMPLE}": np.where(samples > 0, nats / samples, 0.0) for label, nats in maps.items()}
     distance = L.range_from_path(spec, per_beam[..., :3, 3].reshape(-1, 3))
-    rows = L.band_scores(truth, distance, {**maps, **per_sample}, {RAW: raw, COUNT: count, RANGE: distance})
-    for row in rows:                                 # the range control with whichever sign ranks better
+    window = (base["interpret.range_min_m"], min(base["interpret.range_max_m"], bands[-1]))
+    visible = L.radar_visible(truth, per_beam, *window)
+    scored = maps, {RAW: raw, COUNT: count, RANGE: distance}
+    rows = L.band_scores(truth, distance, *scored, bands)
+    rows_visible = L.band_scores(truth, distance, *scored, bands, mask=visible)
+    for row in rows + rows_visible:                  # the range control with whichever sign ranks better
         row["auc"][RANGE] = max(row["auc"][RANGE], 1 - row["auc"][RANGE])
     placed, boxes = [], []
     if (root / "annotations" / "annotations.json").is_file():
@@ -128,7 +130,9 @@ def run(runtime, models, data, voxel_m=0.3, bands=L.BANDS_M, poses=None, poses_f
     result = dict(data=str(data), sensor=sensor.name, scans=len(scans), lidar_frames=len(frames), voxel_m=voxel_m,
                   models={label: c.as_dict() for label, c in models}, notes=list(source.notes),
                   reach_m=[float(r) for r in truth.reach_m], occupied=int(truth.occupied.sum()),
-                  free=int(truth.free.sum()), bands=rows, boxes=boxes, goal=goal(rows))
+                  free=int(truth.free.sum()), visible_occupied=int((truth.occupied & visible).sum()),
+                  visible_free=int((truth.free & visible).sum()), bands=rows, bands_visible=rows_visible,
+                  boxes=boxes, goal=goal(rows))
     arrays = dict(truth=truth, maps=maps, raw=raw, count=count, spec=spec, per_beam=per_beam,
                   boxes=placed, trajectory=track)
     return result, arrays
@@ -146,23 +150,30 @@ def goal(rows, margin=0.10):
     return out
 
 
-def table(result):
-    """Lines: the per-band table (AUC of every map and baseline, IoU of every map) and the boxes."""
-    rows = result["bands"]
-    if not rows:
-        return ["no range band holds enough cells the lidar knows"]
-    names = list(rows[0]["auc"])
-    maps = list(rows[0]["iou"])
-    head = "| band | occupied / free | " + " | ".join(f"AUC {n}" for n in names) + " | " + \
-        " | ".join(f"IoU {n}" for n in maps) + " |"
-    lines = [head, "|" + "---|" * (2 + len(names) + len(maps))]
+def _band_table(rows):
+    names, maps = list(rows[0]["auc"]), list(rows[0]["iou"])
+    lines = ["| band | occupied / free | " + " | ".join(f"AUC {n}" for n in names) + " | "
+             + " | ".join(f"IoU {n}" for n in maps) + " |", "|" + "---|" * (2 + len(names) + len(maps))]
     for row in rows:
         lines.append(f"| {row['band'][0]:g}-{row['band'][1]:g} m | {row['occupied']} / {row['free']} | "
                      + " | ".join(f"{row['auc'][n]:.3f}" for n in names) + " | "
                      + " | ".join(f"{row['iou'][n]:.3f}" for n in maps) + " |")
+    return lines
+
+
+def table(result):
+    """Lines: the per-band tables (AUC of every map and baseline, IoU of every map; over all the
+    cells the lidar knows, then over those the radar could see) and the boxes."""
+    rows = result["bands"]
+    if not rows:
+        return ["no range band holds enough cells the lidar knows"]
+    lines = [f"every cell the lidar knows ({result['occupied']} occupied, {result['free']} free):"] + _band_table(rows)
     for band, (best, a, met) in result["goal"].items():
         lines.append(f"goal {band}: best map {best} AUC {a:.3f}: {'met' if met else 'not met'} (>= controls + 0.10 "
                      "and > raw intensity)")
+    if result.get("bands_visible"):
+        lines += ["", f"cells the radar could see, the lidar's truth taken as the world ({result['visible_occupied']} "
+                      f"occupied, {result['visible_free']} free):"] + _band_table(result["bands_visible"])
     if result["boxes"]:
         lines.append("")
         lines.append("| object | class | frame | range [m] | cells | lidar hits | " +
@@ -172,28 +183,47 @@ def table(result):
             lines.append(f"| {b['object']} | {b['cls']} | {b['frame']} | {b['range_m']:.1f} | {b['cells']} | "
                          f"{b['lidar_hits']} | " + " | ".join(
                              f"{'yes' if o else 'no'} ({p:.1f}, {c:.2f})" for o, p, c in b["maps"].values()) + " |")
+        for name in result["boxes"][0]["maps"]:
+            found = sum(b["maps"][name][0] for b in result["boxes"])
+            lines.append(f"{name}: {found} of {len(result['boxes'])} boxes occupied")
     return lines
 
 
-def plot(arrays, out_dir, best):
-    """Two top-down PNGs in ``out_dir``: the lidar truth and the map ``best`` with the boxes;
-    returns their paths."""
-    out_dir = Path(out_dir)
+def _crop(arrays, margin_m=5.0):
+    """(slice y, slice x, GridSpec) of the plane grid around what the lidar knows and the boxes."""
     spec, truth = arrays["spec"], arrays["truth"]
+    iy, ix = np.nonzero(truth.known)
+    pts = [np.column_stack([spec.origin_m[0] + (ix + 0.5) * spec.voxel_m, spec.origin_m[1] + (iy + 0.5) * spec.voxel_m])]
+    pts += [b[3] for b in arrays["boxes"]]
+    pts = np.vstack(pts)
+    lo = np.floor((pts.min(axis=0) - margin_m - spec.origin_m[:2]) / spec.voxel_m).astype(int)
+    hi = np.ceil((pts.max(axis=0) + margin_m - spec.origin_m[:2]) / spec.voxel_m).astype(int)
+    lo, hi = np.maximum(lo, 0), np.minimum(hi, spec.shape[:2])
+    cropped = GridSpec((spec.origin_m[0] + lo[0] * spec.voxel_m, spec.origin_m[1] + lo[1] * spec.voxel_m,
+                        spec.origin_m[2]), spec.voxel_m, (int(hi[0] - lo[0]), int(hi[1] - lo[1]), 1))
+    return slice(lo[1], hi[1]), slice(lo[0], hi[0]), cropped
+
+
+def plot(arrays, out_dir, best):
+    """Two top-down PNGs in ``out_dir`` around what the lidar knows: the lidar truth and the map
+    ``best`` with the annotated boxes; returns their paths."""
+    out_dir = Path(out_dir)
+    truth = arrays["truth"]
+    ys, xs, spec = _crop(arrays)
     path = arrays["per_beam"][:, arrays["per_beam"].shape[1] // 2]
-    t = np.where(truth.occupied, 1.0, np.where(truth.free, -1.0, 0.0))
+    t = np.where(truth.occupied, 1.0, np.where(truth.free, -1.0, 0.0))[ys, xs]
     fig = figures.plane_map_figure(t, spec, path, "lidar truth: red occupied, blue free", "radar path",
                                    "lidar truth (+1 occupied, -1 free)")
     truth_png = out_dir / "lidar_truth.png"
-    figures.save(fig, truth_png)
-    fig = figures.plane_map_figure(arrays["maps"][best], spec, path, f"{best}, annotated vehicles in green",
+    figures.save(fig, truth_png, dpi=80)
+    fig = figures.plane_map_figure(arrays["maps"][best][ys, xs], spec, path, f"{best}, annotated vehicles in green",
                                    "radar path")
     ax = fig.axes[0]
     for _, _, _, corners, _ in arrays["boxes"]:
         c = np.vstack([corners, corners[:1]])
         ax.plot(c[:, 1], c[:, 0], "-", color="tab:green", lw=1.2)
     map_png = out_dir / "lidar_map.png"
-    figures.save(fig, map_png)
+    figures.save(fig, map_png, dpi=80)
     return truth_png, map_png
 
 
