@@ -22,8 +22,8 @@ def _layout(name):
 
 def test_radiate_scans_read_with_the_builtin_profile(shared_data):
     """576 range rows x 400 azimuth columns, no metadata: 400 azimuths of 576 bins, column k at
-    (k + 0.5) x 0.9 deg clockwise from ahead, times from Navtech_Polar.txt (the last azimuth at
-    the scan's time of arrival), the levels the PNG's own."""
+    (k + 0.5) x 0.9 deg clockwise from ahead, times from Navtech_Polar.txt (a time of arrival:
+    the middle azimuth 0.25 s before it), the levels the PNG's own."""
     root = shared_data / "radiate_fog"
     seq = polar_png.read_sequence(root, _layout("radiate-cts350x"), odometry=False)
     assert seq.directory == root / "Navtech_Polar" and len(seq.scans) == 12 and seq.timed
@@ -35,8 +35,8 @@ def test_radiate_scans_read_with_the_builtin_profile(shared_data):
             k = scan.acquired[row]
             assert np.array_equal(scan.levels[row], png[:, k])
             assert math.isclose(scan.angles_rad[row], math.radians(-(k + 0.5) * 0.9) % (2 * math.pi), abs_tol=1e-9)
-        last = int(np.argmax(scan.acquired))
-        assert scan.timestamps_ns[last] == stamps[scan.path.stem]
+        middle = int(np.flatnonzero(scan.acquired == 199)[0])
+        assert scan.timestamps_ns[middle] == stamps[scan.path.stem] - 250_000_000
         period = scan.timestamps_ns.max() - scan.timestamps_ns.min()
         assert 0.23e9 < period < 0.26e9                                  # a turn of ~0.25 s
     # the whole recording through open_input: the profile's 576 bins, poses found beside it

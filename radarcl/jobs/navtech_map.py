@@ -79,6 +79,8 @@ def load(config, data_dir, poses=None, poses_format=None, clock_offset_s=None, r
     frame; odometry: the Oxford rows when that is what the poses are, else None."""
     data_dir = Path(data_dir)
     layout = polar_png.PolarLayout.of(config.sensor)
+    if layout.scan_directory is None and (data_dir / "radar").is_dir() and not any(data_dir.glob("*.png")):
+        data_dir = data_dir / "radar"                  # Oxford's recording layout, whatever the profile
     sequence = polar_png.read_sequence(data_dir, layout, odometry=False)
     found = (Path(poses), poses_format) if poses else pose_files.find_beside(sequence.directory)
     if found is None:
