@@ -166,3 +166,12 @@ def test_a_range_beyond_the_last_bin_is_clipped_with_a_note(shared_data, tmp_pat
     assert learnt.range_interval_m[1] == round(575 * 0.0432, 6)
     assert clipped["interpret.range_max_m"] == learnt.range_interval_m[1]
     assert any("clipped" in n for n in clipped.notes)
+
+
+def test_power_from_a_table_is_the_formula():
+    """Levels become power through a 256-entry table: exactly 10^(level x dB / 10) in float64,
+    rounded to float32, for every level and both dB scales."""
+    levels = np.arange(256, dtype=np.uint8).reshape(16, 16)
+    for db in (1.0, 0.5):
+        expected = (10.0 ** (levels.astype(np.float64) * (db / 10.0))).astype(np.float32)
+        assert np.array_equal(polar_png.levels_to_power(levels, db), expected)
