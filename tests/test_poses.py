@@ -208,3 +208,34 @@ def test_the_poses_command_summarises_and_writes_tum(tmp_path, capsys, shared_da
     assert np.array_equal(again.times_ns, first.times_ns) and np.abs(again.poses - first.poses).max() < 1e-5
     assert main(["poses", str(src), "--out", str(out)]) == 2       # exists: kept
     assert "exists" in capsys.readouterr().err
+
+
+def test_live_reads_every_pose_format(tmp_path):
+    """`radarcl live --poses` goes through the same reader: a TUM file becomes the PoseSource's
+    track, interpolated at a beam's time."""
+    import argparse
+
+    from radarcl.commands import live
+
+    t, p = _track(n=5)
+    path = tmp_path / "traj.tum"
+    path.write_text(Trajectory(t, p, "test").tum_text())
+    parser = argparse.ArgumentParser()
+    live.add_pose_options(parser)
+    source = live.pose_source(parser.parse_args(["--poses", str(path)]))
+    times, poses = source.track
+    assert np.array_equal(times, t) and np.abs(poses - p).max() < 1e-6
+
+
+def test_evaluate_lidar_takes_any_configuration_file(tmp_path):
+    """A model is a name or any configuration file (a new sensor model needs no code change)."""
+    from radarcl.config import mapconfig
+    from radarcl.errors import ConfigError
+    from radarcl.jobs import evaluate_lidar as job
+
+    path = tmp_path / "my-model.toml"
+    mapconfig.resolve("radiate-cts350x", flags={"interpret.k_occ": 0.3}).save(path)
+    (label, config), = job.resolve_models("radiate-cts350x", [str(path)])
+    assert label == "my-model" and config["interpret.k_occ"] == 0.3
+    with pytest.raises(ConfigError, match="neither a model"):
+        job.resolve_models("radiate-cts350x", ["nosuch"])
