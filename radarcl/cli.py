@@ -21,6 +21,7 @@ from radarcl.commands import (
     convert,
     demo,
     emulate,
+    evaluate_lidar,
     export,
     fuse,
     fuse_many,
@@ -28,6 +29,7 @@ from radarcl.commands import (
     live,
     navtech,
     navtech_map,
+    poses,
     render,
     replay,
     sensors,
@@ -39,7 +41,7 @@ from radarcl.errors import RadarclError
 COMMANDS = {
     "info": info, "sensors": sensors, "config": config, "demo": demo, "tune": tune, "calibrate": calibrate,
     "calibrate-scans": calibrate_scans, "fuse": fuse, "fuse-many": fuse_many, "convert": convert, "export": export,
-    "navtech": navtech, "navtech-map": navtech_map, "live": live, "emulate": emulate, "replay": replay,
+    "navtech": navtech, "navtech-map": navtech_map, "poses": poses, "evaluate-lidar": evaluate_lidar, "live": live, "emulate": emulate, "replay": replay,
     "render": render, "view": view, "bench": bench,
 }
 

@@ -52,7 +52,8 @@ def test_bad_files_are_refused(tmp_path):
     from PIL import Image
 
     Image.fromarray(np.zeros((4, 8), np.uint8)).save(tmp_path / "2.png")
-    with pytest.raises(FrameFormatError, match=r"expected an 8-bit greyscale image of shape \(azimuths, 11 \+ bins\)"):
+    with pytest.raises(FrameFormatError, match=r"the image is 4 x 8 \(rows x columns\); the layout reads n azimuth rows x "
+                                                 r"\(11 metadata \+ bins\) columns: no range bins"):
         navtech.load_scan(tmp_path / "2.png")
     with pytest.raises(FrameFormatError, match="not a directory of polar PNG scans"):
         navtech.scan_paths(tmp_path / "empty")

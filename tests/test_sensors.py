@@ -59,8 +59,9 @@ def test_windows_are_physical_whatever_the_bin_spacing(tmp_path):
     ('name = "x"\ninput = "profiles"\n', "needs a \\[beams\\] table"),
     ('name = "x"\ninput = "samples"\nextends = "polar-png"\n', "needs a \\[waveform\\] table"),
     ('name = "x"\ninput = "profiles"\nextends = "x.toml"\n', "extend each other in a circle"),
-    ('name = "x"\ninput = "profiles"\nextends = "polar-png"\n[range]\nn_bins = 100\n',
-     "range_max_m = 100.0 m lies beyond the last of 100 bins"),
+    # a range beyond the last bin is clipped with a note, not refused (tests/test_polar_layout.py)
+    ('name = "x"\ninput = "profiles"\nextends = "polar-png"\n[reader]\nmeta_columns = 0\n',
+     r"\[reader\] timestamp_column = 0 needs 8 columns inside the 0 metadata columns"),
     ('name = "x"\ninput = "profiles"\nextends = "polar-png"\n[range]\nrange_max_m = inf\n', "must be a finite number"),
     ('name = "x"\ninput = "profiles"\nextends = "polar-png"\n[defaults.cfar]\nguard = 16\n',
      r"x.toml:5: \[defaults.cfar\] guard unknown configuration key 'cfar.guard'"),
@@ -76,7 +77,7 @@ def test_bad_profiles_name_file_line_key_and_what_is_allowed(tmp_path, monkeypat
 
 
 def test_unknown_sensor_lists_the_builtins():
-    with pytest.raises(ConfigError, match="no sensor profile 'radar9000': not a built-in \\(navtech-cts350x"):
+    with pytest.raises(ConfigError, match="no sensor profile 'radar9000': not a built-in \\(boreas-cir204, mulran, navtech-cts350x"):
         sensors.load("radar9000")
 
 

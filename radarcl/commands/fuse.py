@@ -1,15 +1,18 @@
 """`radarcl fuse`: any sensor's frames fused into a map (``jobs.fuse``)."""
 
+import sys
 from pathlib import Path
 
 from radarcl.commands.options import (
     add_config,
     add_output,
     add_progress,
+    add_trajectory_options,
     positive_int,
     progress,
     resolve_config,
     runtime,
+    say_notes,
 )
 from radarcl.errors import ConfigError
 from radarcl.io import files
@@ -17,9 +20,11 @@ from radarcl.io.inputs import open_input
 from radarcl.maps import disk
 
 SUMMARY = "fuse any sensor's frames into a map file (rewritten every --every frames for radarcl view --live)"
-DESCRIPTION = ("Reads INPUT as the sensor's reader says (a radarcl recording; a directory of polar PNG scans, "
-               "with radar_odometry.csv beside them or in ../gt; a TI capture .npy/.txt), fuses every frame with "
-               "the map configuration and writes the map file.")
+DESCRIPTION = ("Reads INPUT as the sensor's reader says (a radarcl recording; a directory of polar PNG scans in "
+               "the sensor's layout, or a recording's directory holding them, with their poses from --poses or "
+               "found beside them: Oxford's radar_odometry.csv, RADIATE's GPS/IMU, Boreas' applanix poses; a TI "
+               "capture .npy/.txt), fuses every frame with the map configuration and writes the map file. Input "
+               "without poses is fused only with --still (every frame at the origin).")
 
 
 def add_arguments(parser):
@@ -27,7 +32,11 @@ def add_arguments(parser):
     add_output(parser, "--out", "map.rcmap", "map to write: a map store directory (zarr; saved fast, --every then "
                                              "writes only the changed bricks), or an .npz file")
     add_config(parser)
-    parser.add_argument("--odometry", default=None, help="polar scans: the radar_odometry.csv (default: found beside them)")
+    parser.add_argument("--odometry", default=None, help="polar scans: an Oxford radar_odometry.csv (= --poses FILE "
+                                                          "--poses-format oxford)")
+    add_trajectory_options(parser)
+    parser.add_argument("--still", action="store_true",
+                        help="fuse input that has no poses with every frame at the origin (a radar that does not move)")
     parser.add_argument("--every", type=positive_int, default=None, help="rewrite the map file every N frames")
     parser.add_argument("--report", default=None, metavar="FILE",
                         help="the run's HTML page: numbers, the map from above, the viewer's render, the configuration "
@@ -45,8 +54,18 @@ def run(args):
                                                     inputs=[args.input, args.config, out], what="report")
     if page is not None and Path(page).resolve() == Path(out).resolve():
         raise ConfigError(f"the report and the map would both be {out}; give --report another name")
-    source = open_input(config.sensor, args.input, args.odometry)
+    if args.odometry and args.poses:
+        raise ConfigError("give --odometry or --poses, not both")
+    source = open_input(config.sensor, args.input, args.odometry, args.poses, args.poses_format, args.clock_offset,
+                        args.max_speed, args.poses_times, report=lambda line: print(f"radarcl: {line}", file=sys.stderr))
+    if not source.posed and not args.still:
+        raise ConfigError(f"{args.input}: no poses for these frames ({source.summary}); give --poses FILE "
+                          "(--poses-format: oxford, tum, kitti, xyzrpy, radiate, boreas), put them beside the scans, "
+                          "or pass --still to fuse every frame at the origin (a radar that does not move)")
+    said = config.notes + source.notes
+    say_notes(source.notes, config.notes)
     if source.sensor is not config.sensor:                   # the reader learnt the bin count
         config = config.for_sensor(source.sensor)
+        say_notes(config.notes, said)
     fuse.run(runtime(), source, config, out, every=args.every, progress=progress(args), inputs=[args.input], page=page)
     return 0

@@ -10,12 +10,20 @@ import time
 
 import numpy as np
 
-from radarcl.commands.options import add_config, add_output, positive_float, positive_int, resolve_config, runtime
+from radarcl.commands.options import (
+    add_config,
+    add_output,
+    add_trajectory_options,
+    positive_float,
+    positive_int,
+    read_trajectory,
+    resolve_config,
+    runtime,
+)
 from radarcl.errors import ConfigError
 from radarcl.geometry import pose_from_xyz_rpy
 from radarcl.io import files
 from radarcl.io.brick_stream import BrickPublisher, parse_address
-from radarcl.io.poses import read_pose_file
 from radarcl.io.stream import PortReader, StreamRecorder, open_port
 from radarcl.livemap import LiveMapper, PoseSource, Session
 from radarcl.maps import disk
@@ -48,10 +56,9 @@ def add_arguments(parser):
 
 
 def add_pose_options(p):
-    """--poses and --mount: where a frame's pose comes from when the packets carry none."""
-    p.add_argument("--poses", default=None, metavar="FILE",
-                   help="poses 't_s x y z roll pitch yaw' per row, interpolated at each frame's time (when the "
-                        "packets carry none)")
+    """--poses (``options.add_trajectory_options``) and --mount: where a frame's pose comes from
+    when the packets carry none."""
+    add_trajectory_options(p, "the frames, when the packets carry none")
     p.add_argument("--mount", default=None, metavar="X,Y,Z,ROLL,PITCH,YAW",
                    help="a fixed sensor pose [m, deg] (when neither the packets nor --poses give one; default: "
                         "the origin)")
@@ -68,8 +75,8 @@ def pose_source(args):
         if len(values) != 6 or not np.isfinite(values).all():
             raise ConfigError(f"--mount {args.mount!r}: expected X,Y,Z,ROLL,PITCH,YAW (metres, degrees)")
         mount = pose_from_xyz_rpy(*values[:3], *np.radians(values[3:]))
-    track = read_pose_file(args.poses) if args.poses else None
-    return PoseSource(mount, track)
+    track = read_trajectory(args)
+    return PoseSource(mount, None if track is None else (track.times_ns, track.poses))
 
 
 def make_mapper(args, config, out, inputs, on_fused=None):

@@ -9,6 +9,7 @@ from radarcl.commands.options import (
     add_config,
     add_output,
     add_progress,
+    add_trajectory_options,
     default_data,
     progress,
     resolve_config,
@@ -27,12 +28,14 @@ DESCRIPTION = ("Fuses the first and second half of the scans into two maps and p
 
 def add_arguments(parser):
     parser.add_argument("data", nargs="?", default=None,
-                        help=f"directory with radar/*.png and gt/radar_odometry.csv (default: the Oxford scans in "
-                             f"${DATA_ENV} or ../shared/data beside the source)")
+                        help=f"a recording's directory: its scans in the sensor's layout (Oxford: radar/*.png), their "
+                             f"poses found beside them or given with --poses (default: the Oxford scans in ${DATA_ENV} "
+                             f"or ../shared/data beside the source)")
     add_output(parser, "--out", "navtech_map.png", "PNG to write")
     parser.add_argument("--map", default=None, help="also write the fused map file (npz)")
     parser.add_argument("--json", default=None, help="also write the numbers to this JSON file")
     add_config(parser, "navtech-cts350x")
+    add_trajectory_options(parser)
     add_progress(parser)
 
 
@@ -41,13 +44,15 @@ def run(args):
 
     data = Path(args.data) if args.data else default_data("navtech_oxford")
     if not data.is_dir():
-        raise ConfigError(f"no data directory {data}; give DATA (radar/*.png and gt/radar_odometry.csv) or set "
-                          f"{DATA_ENV}")
+        raise ConfigError(f"no data directory {data}; give DATA (a recording's directory: its scans and poses) or "
+                          f"set {DATA_ENV}")
     out = files.check(args.out, args.force, what="figure")
     map_out = files.check(args.map, args.force, what="map file") if args.map else None
     json_out = files.check(args.json, args.force, what="JSON file") if args.json else None
     config = resolve_config(args)
-    results, grid, poses, pulses = navtech_map.run(runtime(), config, data, report=print, progress=progress(args))
+    results, grid, poses, pulses = navtech_map.run(runtime(), config, data, report=print, progress=progress(args),
+                                                   poses=args.poses, poses_format=args.poses_format,
+                                                   clock_offset_s=args.clock_offset, max_speed_m_s=args.max_speed)
     print(f"detector: {pulses['cfar']['kind'].upper()}-CFAR guard {pulses['cfar']['guard_bins']} train "
           f"{pulses['cfar']['train_bins']} bins; {pulses['detections_per_scan']:.0f} detections and "
           f"{pulses['pulses_per_scan']:.0f} pulses per scan, pulse width median {pulses['pulse_width_median_m']:.3f} m "

@@ -65,16 +65,63 @@ def add_config(p, sensor_default=None):
                    help="set one configuration value, e.g. --set cfar.guard_m=0.6 (repeatable; "
                         "`radarcl config show` lists the keys)")
     p.add_argument("--voxel", type=positive_float, default=None, help="voxel edge [m] (= --set grid.voxel_m=...)")
+    p.add_argument("--force-sensor", action="store_true",
+                   help="use a --config made for another sensor: keep its constants, derive its windows, range and "
+                        "grid for this sensor (with a warning)")
     p.set_defaults(sensor_default=default)
 
 
 def resolve_config(args, program=None):
-    """The ``mapconfig.Resolved`` the options of ``add_config`` describe."""
+    """The ``mapconfig.Resolved`` the options of ``add_config`` describe; its notes (a forced
+    sensor, a clipped range) go to stderr."""
     flags = dict(mapconfig.parse_flag(text) for text in args.set)
     if args.voxel is not None:
         flags["grid.voxel_m"] = args.voxel
     sensor = args.sensor if args.sensor is not None or args.config is not None else args.sensor_default
-    return mapconfig.resolve(sensor, args.config, flags, program)
+    config = mapconfig.resolve(sensor, args.config, flags, program, force_sensor=getattr(args, "force_sensor", False))
+    say_notes(config.notes)
+    return config
+
+
+def say_notes(notes, said=()):
+    """Print each note (not in ``said``) to stderr as a warning line."""
+    for note in notes:
+        if note not in said:
+            print(f"radarcl: note: {note}", file=sys.stderr)
+
+
+def add_trajectory_options(p, what="the scans"):
+    """--poses, --poses-format, --poses-times, --clock-offset, --max-speed: one trajectory reader
+    (``io.poses``) for every command that places a radar."""
+    from radarcl.io.poses import FORMATS
+    from radarcl.io.trajectory import DEFAULT_MAX_SPEED_M_S
+
+    p.add_argument("--poses", default=None, metavar="FILE",
+                   help=f"the sensor's trajectory for {what} (default: the poses found beside them); interpolated at "
+                        "each azimuth's time")
+    p.add_argument("--poses-format", default=None, choices=FORMATS,
+                   help="the pose file's format (default: told from its name and first line): Oxford radar "
+                        "odometry, TUM, KITTI, 't x y z roll pitch yaw', RADIATE GPS/IMU, Boreas applanix CSV")
+    p.add_argument("--poses-times", default=None, metavar="FILE", help="KITTI: the poses' times, one [s] per line "
+                                                                       "(default: times.txt beside them)")
+    p.add_argument("--clock-offset", type=float, default=None, metavar="S",
+                   help="seconds the pose file's clock runs ahead of the radar's (RADIATE GPS/IMU: found from the "
+                        "lidar when not given)")
+    p.add_argument("--max-speed", type=positive_float, default=DEFAULT_MAX_SPEED_M_S, metavar="M_S",
+                   help="a trajectory faster than this between two poses is refused as a jump (default: %(default)s)")
+
+
+def read_trajectory(args):
+    """The ``Trajectory`` of --poses (None without it), its notes said on stderr."""
+    if not args.poses:
+        return None
+    from radarcl.io.poses import read_trajectory as read
+
+    track = read(args.poses, args.poses_format, args.clock_offset, args.poses_times,
+                 report=lambda line: print(f"radarcl: {line}", file=sys.stderr))
+    track.check_motion(args.max_speed)
+    say_notes(track.notes)
+    return track
 
 
 def add_progress(p):

@@ -11,7 +11,13 @@ A configuration file (TOML) has five tables; every key is optional:
 ``resolve(sensor, file, flags)`` fills each key from, in increasing priority: radarcl's default
 (``BUILTIN``), the sensor's geometry (``sensors.derived_defaults``), the sensor profile's own
 ``[defaults.*]`` tables, the file, and command-line flags; it remembers where each value came
-from (``radarcl config show`` prints it). The result, a ``Resolved``, is the only way a pipeline
+from (``radarcl config show`` prints it).
+
+A saved configuration records the sensor it was made for (``sensor = "NAME"``). Used with
+another sensor it is refused, naming both; with ``force_sensor`` it is used with a note, its
+constants kept and its metre-valued keys that follow from a sensor's bins and range
+(``SENSOR_KEYS``: CFAR guard and training windows, wide pulse, range interval, grid extent)
+derived again for the new sensor, each change listed in the notes. The result, a ``Resolved``, is the only way a pipeline
 is built (``pipeline.Mapping.from_config``): it converts the windows in metres to bins of the
 sensor at hand, saying how it rounded.
 """
@@ -25,6 +31,12 @@ from radarcl.config.keys import BUILTIN, KEYS, SECTIONS, check_value
 from radarcl.config.stage_config import CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError
 from radarcl.grid import GridSpec
+
+# Metre-valued keys that follow from the sensor a configuration was made for (its resolution,
+# range and field of view): derived again when a configuration is forced onto another sensor.
+# grid.voxel_m is the map's resolution, a choice of the user, and is kept.
+SENSOR_KEYS = ("cfar.guard_m", "cfar.train_m", "interpret.wide_pulse_m", "interpret.range_min_m",
+               "interpret.range_max_m", "grid.origin_m", "grid.size_m")
 
 
 def read(path):
@@ -70,6 +82,7 @@ class Resolved:
     sensor: object
     values: dict
     origins: dict
+    notes: tuple = ()      # sentences about what was adjusted (a forced sensor, a clipped range)
 
     def __getitem__(self, name):
         return self.values[name]
@@ -85,12 +98,25 @@ class Resolved:
             name = key.replace("__", ".")
             values[name] = check_value(name, value)
             origins[name] = "set by the program"
-        return _checked(self.sensor, values, origins)
+        return _checked(self.sensor, values, origins, self.notes)
 
     def for_sensor(self, sensor):
         """The same values for a variant of the sensor (e.g. with its bin count learnt from the
-        data), checked again."""
-        return _checked(sensor, dict(self.values), dict(self.origins))
+        data), checked again; a range beyond the variant's (its last bin) is clipped with a note,
+        and a field-of-view grid follows it."""
+        values, origins = dict(self.values), dict(self.origins)
+        notes = self.notes + tuple(n for n in getattr(sensor, "notes", ()) if n not in self.notes)
+        hi = sensor.range_interval_m[1]
+        if values["interpret.range_max_m"] > hi + 1e-9:
+            notes += (f"interpret.range_max_m = {values['interpret.range_max_m']:g} m (from "
+                      f"{origins['interpret.range_max_m']}) lies beyond sensor {sensor.name}'s last bin; "
+                      f"clipped to {hi:g} m",)
+            values["interpret.range_max_m"] = hi
+            origins["interpret.range_max_m"] += f", clipped to the last bin"
+            for name in ("grid.origin_m", "grid.size_m"):
+                if origins[name].endswith("field of view"):
+                    del values[name], origins[name]
+        return _checked(sensor, values, origins, notes)
 
     @property
     def n_fft(self):
@@ -173,18 +199,30 @@ def _short(v):
     return f"{v:g}" if isinstance(v, float) else str(list(v) if isinstance(v, tuple) else v)
 
 
-def resolve(sensor=None, path=None, flags=None, program=None):
+def resolve(sensor=None, path=None, flags=None, program=None, force_sensor=False):
     """The ``Resolved`` configuration of ``sensor`` (a SensorProfile, a name or a path; default
     the file's ``sensor = ...`` or the paper's radar) with the file at ``path``, ``flags``
     {"section.key": value} from the command line, and ``program`` {"section.key": value} set
-    by the calling program (a job's own choice, below the user's file and flags)."""
-    from_file = {}
+    by the calling program (a job's own choice, below the user's file and flags). A file made
+    for another sensor is refused, or with ``force_sensor`` used with its ``SENSOR_KEYS``
+    derived again (see the module)."""
+    from_file, notes = {}, ()
     if path is not None:
         from_file = read(path)
         file_sensor = from_file.pop("sensor", (None, None))[0]
         if sensor is None and file_sensor is not None:
             sensor = file_sensor
     sensor = sensors.load(sensor if sensor is not None else sensors.DEFAULT_SENSOR)
+    if path is not None and file_sensor is not None and file_sensor != sensor.name:
+        if not force_sensor:
+            raise ConfigError(f"{path} is a configuration for sensor {file_sensor!r}, not {sensor.name!r}: its "
+                              f"windows, range and grid follow that sensor's bins; use a configuration made for "
+                              f"{sensor.name!r} (radarcl config save --sensor {sensor.name}), or --force-sensor to "
+                              f"keep its constants and derive the rest for {sensor.name!r}")
+        dropped = {k: from_file.pop(k)[0] for k in SENSOR_KEYS if k in from_file}
+        notes += (f"{path} was made for sensor {file_sensor!r}; used with {sensor.name!r} (--force-sensor): its "
+                  f"constants are kept, its {', '.join(dropped) or 'no sensor-derived keys'} derived again for "
+                  f"{sensor.name!r}",)
     values = dict(BUILTIN)
     origins = {k: "radarcl default" for k in BUILTIN}
     for name, (value, why) in sensors.derived_defaults(sensor).items():
@@ -197,10 +235,17 @@ def resolve(sensor=None, path=None, flags=None, program=None):
         values[name], origins[name] = value, where
     for name, value in (flags or {}).items():
         values[name], origins[name] = check_value(name, value), "flag"
-    return _checked(sensor, values, origins)
+    resolved = _checked(sensor, values, origins, notes + tuple(getattr(sensor, "notes", ())))
+    if path is not None and file_sensor is not None and file_sensor != sensor.name:
+        changes = [f"{k} {_short(dropped[k])} -> {_short(resolved.values[k])}" for k in dropped
+                   if k in resolved.values and resolved.values[k] != dropped[k]]
+        if changes:
+            resolved = Resolved(resolved.sensor, resolved.values, resolved.origins,
+                                resolved.notes + (f"re-derived for {sensor.name!r}: {'; '.join(changes)}",))
+    return resolved
 
 
-def _checked(sensor, values, origins):
+def _checked(sensor, values, origins, notes=()):
     """Fill the grid extent, drop what the sensor does not use, and check the keys together."""
     if not sensor.raw:
         values.pop("range_fft.n_fft", None)
@@ -213,7 +258,7 @@ def _checked(sensor, values, origins):
             values["grid.size_m"], origins["grid.size_m"] = size, f"sensor {sensor.name}: field of view"
     order = {k: i for i, k in enumerate(KEYS)}
     values = dict(sorted(values.items(), key=lambda kv: order[kv[0]]))
-    resolved = Resolved(sensor, values, origins)
+    resolved = Resolved(sensor, values, origins, tuple(notes))
 
     def fail(keys, reason):
         raise ConfigError("; ".join(f"{k} = {_short(values[k])} (from {origins[k]})" for k in keys) + f": {reason}")
@@ -252,4 +297,5 @@ def show(resolved):
         unit = KEYS[name].unit
         lines.append(f"  {name:<{width}} = {_short(value):<24} {unit:<10} {resolved.origins[name]}")
     lines += ["  " + r for r in resolved.rounding()]
+    lines += [f"  note: {n}" for n in resolved.notes]
     return lines

@@ -36,6 +36,7 @@ from radarcl.config.keys import check_value
 from radarcl.config.stage_config import RadarConfig, is_power_of_two
 from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, beam_model
+from radarcl.io.polar_layout import FILE_NAME_UNITS, ORIENTATIONS, TIMESTAMP_AT, TIMESTAMPS, PolarLayout
 from radarcl.io.stream import PROTOCOLS
 
 PROFILE_DIR = Path(__file__).resolve().parents[1] / "profiles"
@@ -75,11 +76,21 @@ _SCHEMA = {                # section -> key -> check (value -> value, or ConfigE
                "range_profile_antennas": lambda v: tomlfile.integer(v, 1, 256),
                "range_profile_q": lambda v: tomlfile.integer(v, 0, 15)},
     "reader": {"format": lambda v: tomlfile.choice(v, READERS),
+               "orientation": lambda v: tomlfile.choice(v, ORIENTATIONS),
                "meta_columns": lambda v: tomlfile.integer(v, 0, 1 << 16),
-               "timestamp_column": lambda v: tomlfile.integer(v, 0, 1 << 16),
-               "encoder_column": lambda v: tomlfile.integer(v, 0, 1 << 16),
+               "timestamp_column": lambda v: tomlfile.integer(v, -1, 1 << 16),
+               "encoder_column": lambda v: tomlfile.integer(v, -1, 1 << 16),
                "encoder_counts": lambda v: tomlfile.integer(v, 1, 1 << 31),
                "valid_column": lambda v: tomlfile.integer(v, -1, 1 << 16),
+               "timestamps": lambda v: tomlfile.choice(v, TIMESTAMPS),
+               "timestamp_file": tomlfile.text,
+               "file_name_unit": lambda v: tomlfile.choice(v, ("auto", *FILE_NAME_UNITS)),
+               "timestamp_at": lambda v: tomlfile.choice(v, TIMESTAMP_AT),
+               "timestamp_offset_s": lambda v: _N(v, -3600, 3600, unit="s"),
+               "scan_period_s": lambda v: _N(v, 0, 3600, lo_open=True, unit="s"),
+               "azimuth_start_deg": lambda v: _N(v, -360, 360, unit="deg"),
+               "range_offset_m": lambda v: _N(v, -1e3, 1e3, unit="m"),
+               "scan_directory": tomlfile.text,
                "db_per_level": lambda v: _N(v, 0, 1.4, lo_open=True, unit="dB"),
                "clockwise": tomlfile.boolean},
 }
@@ -96,6 +107,7 @@ class SensorProfile:
     tables: dict = field(repr=False)     # the merged TOML tables (after ``extends``)
     defaults: dict = field(repr=False)   # {"section.key": value} from [defaults.*]
     radar: RadarConfig = None            # input = "samples": waveform, beams and range as a RadarConfig
+    notes: tuple = ()                    # what was adjusted when the profile was read (a clipped range)
 
     def __post_init__(self):
         self._validate()
@@ -170,10 +182,13 @@ class SensorProfile:
         return (*self.lattice().batch, self.n_bins(n_fft))
 
     def with_bins(self, n_bins):
-        """This profile with ``n_bins`` range bins (a reader that learns them from the data)."""
+        """This profile with ``n_bins`` range bins (a reader that learns them from the data); a
+        range beyond the last bin is clipped to it, with a note (``notes``)."""
         tables = {k: dict(v) for k, v in self.tables.items()}
         tables.setdefault("range", {})["n_bins"] = int(n_bins)
-        return SensorProfile(self.name, self.description, self.input, self.source, tables, self.defaults, self.radar)
+        tables, notes = clip_range(tables, self.source)
+        return SensorProfile(self.name, self.description, self.input, self.source, tables, self.defaults, self.radar,
+                             self.notes + notes)
 
     def lattice(self):
         """The frame's ``BeamLattice`` in the head frame (x forward, y left, z up): a full
@@ -221,11 +236,11 @@ class SensorProfile:
         lo, hi = self.range_interval_m
         if lo >= hi:
             raise ConfigError(f"{where}: need range_min_m < range_max_m, got {lo} and {hi}")
-        if not self.raw:
-            n = self.n_bins()
-            if n is not None and hi > (n - 1) * self.bin_spacing_m() * (1 + 1e-9) + self.bin_spacing_m():
-                raise ConfigError(f"{where}: range_max_m = {hi} m lies beyond the last of {n} bins of "
-                                  f"{self.bin_spacing_m()} m ({(n - 1) * self.bin_spacing_m():.2f} m)")
+        if self.get("reader", "format") == "polar-png":
+            try:
+                PolarLayout.of(self)
+            except ConfigError as exc:
+                raise ConfigError(f"{where}: {exc}") from None
         if self.spinning and self.get("beams", "azimuth_step_deg") is not None:
             step = self.get("beams", "azimuth_step_deg")
             if abs(step * self.n_azimuth - 360.0) > 1e-6 * 360:
@@ -238,6 +253,22 @@ class SensorProfile:
 
 
 # -- loading -----------------------------------------------------------------------------------------------------
+def clip_range(tables, source):
+    """(tables, notes): a profile's range_max_m beyond its last range bin clipped to that bin
+    (a generic profile's 100 m on RADIATE's 576 bins of 0.173611 m: 99.83 m), with a note."""
+    rng = tables.get("range", {})
+    n, spacing, hi = rng.get("n_bins"), rng.get("bin_spacing_m"), rng.get("range_max_m")
+    if n is None or spacing is None or hi is None:
+        return tables, ()
+    last = round((n - 1) * spacing, 6)
+    if hi <= last * (1 + 1e-9):
+        return tables, ()
+    tables = {k: dict(v) for k, v in tables.items()}
+    tables["range"]["range_max_m"] = last
+    return tables, (f"{source}: range_max_m = {hi:g} m lies beyond the last of {n} bins of {spacing:g} m; "
+                    f"clipped to {last:g} m",)
+
+
 def builtin_names():
     """Names of the built-in profiles."""
     return sorted(p.stem for p in PROFILE_DIR.glob("*.toml"))
@@ -323,7 +354,8 @@ def load(spec=DEFAULT_SENSOR):
         except (ConfigError, TypeError) as exc:
             raise ConfigError(f"{source.name}: {exc}") from None
     label = source.name if Path(str(spec)).exists() else f"built-in {top['name']}"
-    return SensorProfile(top["name"], top.get("description", ""), top["input"], label, tables, defaults, radar)
+    tables, notes = clip_range(tables, label) if top["input"] == "profiles" else (tables, ())
+    return SensorProfile(top["name"], top.get("description", ""), top["input"], label, tables, defaults, radar, notes)
 
 
 # -- defaults that follow from the sensor ------------------------------------------------------------------------

@@ -1,11 +1,18 @@
 """What a sensor's reader opens, as frames with their poses: ``open_input(sensor, path)``.
 
 It opens whatever the sensor profile's reader reads (its [reader] ``format``): a radarcl
-recording (``recording``), a directory of polar PNG scans with their odometry (``polar-png``),
-a TI raw ADC capture (``ti-openradar``). It returns a ``FrameSource``: the sensor (with its bin
-count filled from the data where the profile leaves it out), the frames, one pose (or one per
-beam) and optional flags per frame, and a line saying what was read. Every size is checked
-against the sensor before a frame reaches a device. No pyopencl imports here.
+recording (``recording``), a directory of polar PNG scans in any of the published layouts
+(``polar-png``, ``io.polar_layout``), a TI raw ADC capture (``ti-openradar``). It returns a
+``FrameSource``: the sensor (with its bin count filled from the data where the profile leaves
+it out), the frames, one pose (or one per beam) and optional flags per frame, whether the
+poses came from somewhere (``posed``: a caller refuses to fuse a moving radar at the origin),
+notes, and a line saying what was read. Every size is checked against the sensor before a
+frame reaches a device. No pyopencl imports here.
+
+Poses of polar scans: the trajectory given (``poses``, any ``io.poses`` format), else the one
+found beside the scans (``io.poses.find_beside``: Oxford odometry, RADIATE's GPS/IMU, Boreas'
+applanix poses), put in the first scan's frame, checked for jumps and for covering every
+azimuth's time, and interpolated per azimuth (the radar moves during its turn).
 """
 
 from dataclasses import dataclass
@@ -14,28 +21,40 @@ from pathlib import Path
 import numpy as np
 
 from radarcl.errors import FrameFormatError
+from radarcl.io import poses as pose_files
 from radarcl.io import polar_png, recording
 from radarcl.io.ti_adc import load_capture
+from radarcl.io.trajectory import DEFAULT_MAX_SPEED_M_S
 from radarcl.oracle import FLAG_SILENT
 
 
 @dataclass
 class FrameSource:
     """What ``open_input`` read: ``frames[i]`` with ``poses[i]`` ((4, 4) or (n_beams, 4, 4))
-    and ``flags[i]`` (or None), for ``sensor``; ``summary`` says what was read."""
+    and ``flags[i]`` (or None), for ``sensor``; ``summary`` says what was read, ``posed``
+    whether the poses came from the data (False: every frame at the origin), ``notes`` what
+    the readers repaired or assumed, ``trajectory`` the ``Trajectory`` the poses came from."""
 
     sensor: object
     frames: object
     poses: object
     flags: object
     summary: str
+    posed: bool = True
+    notes: tuple = ()
+    trajectory: object = None
 
     def __len__(self):
         return len(self.frames)
 
 
-def open_input(sensor, path, odometry=None):
-    """A ``FrameSource`` for ``path`` read as ``sensor``'s [reader] format says."""
+def open_input(sensor, path, odometry=None, poses=None, poses_format=None, clock_offset_s=None,
+               max_speed_m_s=DEFAULT_MAX_SPEED_M_S, poses_times=None, report=None):
+    """A ``FrameSource`` for ``path`` read as ``sensor``'s [reader] format says. Polar scans:
+    their poses from ``poses`` (a file in ``poses_format``, see ``io.poses``; ``odometry`` is
+    the older name for an Oxford odometry file), else found beside them; ``clock_offset_s``:
+    how far the pose file's clock runs ahead of the radar's; a trajectory faster than
+    ``max_speed_m_s`` is refused with the jump named."""
     fmt = sensor.get("reader", "format", "recording")
     path = Path(path)
     if not path.exists():
@@ -44,14 +63,19 @@ def open_input(sensor, path, odometry=None):
         return _recording(sensor, path)
     if fmt == "ti-openradar":
         return _ti_capture(sensor, path)
-    return _polar(sensor, path, odometry)
+    return _polar(sensor, path, poses or odometry, poses_format or ("oxford" if odometry and not poses else None),
+                  clock_offset_s, max_speed_m_s, poses_times, report)
 
 
 def _check_frame(sensor, shape, dtype, what):
     expected = sensor.frame_shape()
     if tuple(shape) != tuple(expected) or np.dtype(dtype) != sensor.sample_dtype:
+        hint = ""
+        if not sensor.raw and tuple(shape[:-1]) == tuple(expected[:-1]) and shape[-1] != expected[-1]:
+            hint = (f" ([range] n_bins = {expected[-1]}: leave it out to read the count from the data, and check "
+                    "bin_spacing_m and [reader] meta_columns)")
         raise FrameFormatError(f"{what}: frames are {tuple(shape)} {np.dtype(dtype)}; sensor {sensor.name} "
-                               f"expects {tuple(expected)} {sensor.sample_dtype}")
+                               f"expects {tuple(expected)} {sensor.sample_dtype}{hint}")
 
 
 def _recording(sensor, path):
@@ -77,20 +101,37 @@ def _ti_capture(sensor, path):
     _check_frame(sensor, frames.shape[1:], frames.dtype, str(path))
     poses = np.broadcast_to(np.eye(4), (len(frames), 4, 4))
     return FrameSource(sensor, frames, poses, [None] * len(frames),
-                       f"{len(frames)} chirps of {path} (one per frame, the sensor still at the origin)")
+                       f"{len(frames)} chirps of {path} (one per frame, the sensor still at the origin)", posed=False)
 
 
-def _polar(sensor, path, odometry):
-    sequence = polar_png.read_sequence(path, polar_png.PolarLayout.of(sensor), odometry)
+def _polar(sensor, path, poses, poses_format, clock_offset_s, max_speed_m_s, poses_times, report):
+    layout = polar_png.PolarLayout.of(sensor)
+    sequence = polar_png.read_sequence(path, layout, odometry=False)
     scans = sequence.scans
+    notes = ()
     if sensor.n_bins() is None:
         sensor = sensor.with_bins(scans[0].n_bins)
+        notes += sensor.notes
     for s in scans:
         _check_frame(sensor, s.levels.shape, np.float32, str(s.path))
-    how = (f"poses from {sequence.odometry_path}" if sequence.odometry is not None
-           else "no odometry: a still radar at the origin")
-    per_beam = polar_png.beam_poses(scans, sequence.poses(), sensor.n_azimuth)
-    return polar_source(sensor, scans, per_beam, f"{len(scans)} polar scans of {path} ({how})")
+    found = (Path(poses), poses_format) if poses else pose_files.find_beside(sequence.directory)
+    track = None
+    if found is not None:
+        if not sequence.timed:
+            raise FrameFormatError(f"{sequence.directory}: the scans have no times ([reader] timestamps = "
+                                   f"{layout.timestamps!r} gave none), so no trajectory can place them; set "
+                                   "[reader] timestamps, or fuse them with --still")
+        track = pose_files.read_trajectory(found[0], found[1], clock_offset_s, poses_times, report)
+        track.check_motion(max_speed_m_s)
+        notes += track.notes
+        track = track.relative_to(scans[0].start_ns)
+        how = f"poses from {track.source}, in the first scan's frame"
+    else:
+        how = "no poses: a still radar at the origin"
+    per_beam = polar_png.beam_poses(scans, track, sensor.n_azimuth)
+    source = polar_source(sensor, scans, per_beam, f"{len(scans)} polar scans of {sequence.directory} ({how})")
+    source.posed, source.notes, source.trajectory = track is not None, notes, track
+    return source
 
 
 def polar_source(sensor, scans, per_beam, summary):

@@ -1,8 +1,10 @@
-"""Spinning-radar scans as polar PNG images (the Oxford Radar RobotCar layout, Barnes et al.,
-ICRA 2020), for any unit: the layout comes from the sensor profile's [reader] table.
+"""Spinning-radar scans as polar PNG images, for any unit and any of the published layouts: the
+layout comes from the sensor profile's [reader] table (``io.polar_layout.PolarLayout``: azimuths
+as rows with metadata columns, as Oxford and Boreas write them, or range bins as rows with no
+metadata, as RADIATE and MulRan do; times from the metadata, a side file or the file names).
 
-One scan is an 8-bit greyscale PNG of shape (n_azimuths, meta_columns + n_bins). In the Oxford
-layout (the built-in ``polar-png`` and ``navtech-cts350x`` profiles):
+In the Oxford layout (the built-in ``polar-png`` and ``navtech-cts350x`` profiles) a scan is
+(n_azimuths, meta_columns + n_bins):
   columns 0-7   int64 little-endian UNIX timestamp [us] of the azimuth (``timestamp_column``)
   columns 8-9   uint16 little-endian encoder count; angle = count / encoder_counts x 2 pi
   column 10     valid flag (255: measured, else interpolated) (``valid_column``; -1: none)
@@ -11,17 +13,18 @@ layout (the built-in ``polar-png`` and ``navtech-cts350x`` profiles):
 Power scaling. The levels are decibels of power, ``db_per_level`` per level (1 for Navtech):
 P = 10^(level x db_per_level / 10). Evidence from the Oxford data: the lowest levels that occur
 are 0, 6, 9, 12, 14, 15, 17, 18, which are 20 log10(k) for amplitudes k = 1 .. 8 to within a
-unit of rounding: the sensor quantises an integer amplitude and writes its power in dB.
+unit of rounding: the sensor quantises an integer amplitude and writes its power in dB. The
+conversion is a 256-entry table: it costs a gather, not an exponential per bin.
 
-Coordinates. radarcl uses x forward, y left, z up (ROS REP-103) everywhere. The Oxford data
-uses x forward, y right, z down, and its azimuths turn clockwise seen from above (from x
-towards its y). This reader converts, and nothing else in radarcl knows the Oxford frame:
-angles are returned counter-clockwise from x towards the left (``clockwise = true`` negates
-them and puts the rows in counter-clockwise order) and odometry rows (x, y, yaw) become
-(x, -y, -yaw).
+Coordinates. radarcl uses x forward, y left, z up (ROS REP-103) everywhere. Navtech azimuths
+turn clockwise seen from above (from x towards the right). This reader converts, and nothing
+else in radarcl knows the sensor's own sense: angles are returned counter-clockwise from x
+towards the left (``clockwise = true`` negates them and puts the rows in counter-clockwise
+order) and Oxford odometry rows (x, y, yaw) become (x, -y, -yaw).
 
 Sizes are checked before anything is decoded: a PNG declares its size in a few header bytes,
-so a small file that declares 120 Mpixel is refused without allocating them.
+so a small file that declares 120 Mpixel is refused without allocating them; an image whose
+shape does not fit the layout is refused with both shapes and the key to change.
 """
 
 import math
@@ -31,37 +34,11 @@ from pathlib import Path
 import numpy as np
 
 from radarcl.errors import ConfigError, FrameFormatError
-from radarcl.geometry import interpolate_se2, se2_pose
+from radarcl.geometry import se2_pose
+from radarcl.io.polar_layout import PolarLayout, file_name_time_ns, scan_times_ns
+from radarcl.io.trajectory import Trajectory
 
 MAX_PIXELS = 64 * 2 ** 20          # a scan larger than this is refused before decoding
-
-
-@dataclass(frozen=True)
-class PolarLayout:
-    """The columns of a polar PNG scan (the sensor profile's [reader] table)."""
-
-    meta_columns: int = 11
-    timestamp_column: int = 0
-    encoder_column: int = 8
-    encoder_counts: int = 5600
-    valid_column: int = 10
-    db_per_level: float = 1.0
-    clockwise: bool = True
-
-    @classmethod
-    def of(cls, sensor):
-        """The layout a sensor profile's [reader] table gives (defaults: Oxford)."""
-        reader = dict(sensor.tables.get("reader", {}))
-        if reader.pop("format", "polar-png") != "polar-png":
-            raise ConfigError(f"sensor {sensor.name} is not read as polar PNG scans")
-        return cls(**reader)
-
-    def __post_init__(self):
-        for name, width in (("timestamp_column", 8), ("encoder_column", 2), ("valid_column", 1)):
-            col = getattr(self, name)
-            if col >= 0 and col + width > self.meta_columns:
-                raise ConfigError(f"[reader] {name} = {col} needs {width} columns inside the {self.meta_columns} "
-                                  "metadata columns")
 
 
 @dataclass(frozen=True)
@@ -69,46 +46,71 @@ class PolarScan:
     """One decoded scan; arrays are indexed by azimuth. Angles are REP-103 (counter-clockwise)."""
 
     path: Path
-    timestamps_us: np.ndarray   # int64 (n_az,); from the file name when the layout has none
+    timestamps_ns: np.ndarray   # int64 (n_az,): each azimuth's UNIX time [ns]
     angles_rad: np.ndarray      # float64 (n_az,) in [0, 2 pi), counter-clockwise from x
     valid: np.ndarray           # bool (n_az,)
     levels: np.ndarray          # uint8 (n_az, n_bins), log power
     db_per_level: float = 1.0
     acquired: np.ndarray = None  # int (n_az,): row i was the acquired[i]-th azimuth of the turn
+    timed: bool = True          # False: the layout gave no time for this scan (a still radar only)
+
+    @property
+    def timestamps_us(self):
+        """Each azimuth's UNIX time [us] (int64)."""
+        return self.timestamps_ns // 1000
 
     @property
     def n_bins(self):
         """Range bins per azimuth."""
         return self.levels.shape[1]
 
+    @property
+    def start_ns(self):
+        """UNIX time [ns] of the scan's first azimuth in acquisition order."""
+        first = 0 if self.acquired is None else int(np.argmin(self.acquired))
+        return int(self.timestamps_ns[first])
+
     def power(self):
         """Linear power (n_az, n_bins) float32: 10^(level x db_per_level / 10)."""
         return levels_to_power(self.levels, self.db_per_level)
 
 
+_POWER_TABLES = {}
+
+
 def levels_to_power(levels, db_per_level=1.0):
-    """Log-scaled levels -> linear power, float32 (level 255 at 1 dB/level is 3.2e25)."""
+    """Log-scaled levels -> linear power, float32 (level 255 at 1 dB/level is 3.2e25): a
+    256-entry table, the same floats as 10^(level x db_per_level / 10) in float64."""
     if not (np.isfinite(db_per_level) and 0 < db_per_level <= 1.4):
         raise FrameFormatError(f"db_per_level must be in (0, 1.4] so that 255 levels fit float32, "
                                f"got {db_per_level!r}")
-    return (10.0 ** (np.asarray(levels, np.float64) * (db_per_level / 10.0))).astype(np.float32)
+    table = _POWER_TABLES.get(db_per_level)
+    if table is None:
+        table = _POWER_TABLES[db_per_level] = (10.0 ** (np.arange(256) * (db_per_level / 10.0))).astype(np.float32)
+    levels = np.asarray(levels)
+    if levels.dtype != np.uint8:
+        if levels.size and (levels.min() < 0 or levels.max() > 255 or not np.all(levels == np.round(levels))):
+            return (10.0 ** (np.asarray(levels, np.float64) * (db_per_level / 10.0))).astype(np.float32)
+        levels = levels.astype(np.uint8)
+    return table[levels]
 
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
-def verify_png(path):
+def verify_png(path, raw=None):
     """Check a PNG's signature and every chunk's CRC-32 before decoding: PIL stops reading the
     image data once it has its pixels, so a damaged final deflate block (whose Adler-32 it
     never reads) would otherwise decode into wrong pixels without a word (found by the fuzz
-    suite). Returns the (width, height) of its IHDR."""
+    suite). ``raw``: the file's bytes when already read. Returns the (width, height) of its IHDR."""
     import struct
     import zlib
 
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise FrameFormatError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    if raw is None:
+        try:
+            raw = Path(path).read_bytes()
+        except OSError as exc:
+            raise FrameFormatError(f"{path}: cannot read ({exc.strerror or exc})") from exc
     if not raw.startswith(PNG_SIGNATURE):
         raise FrameFormatError(f"{path}: not a PNG file (no PNG signature)")
     i, size, ended = len(PNG_SIGNATURE), None, False
@@ -129,62 +131,84 @@ def verify_png(path):
     return size
 
 
-def load_scan(path, layout=PolarLayout()):
-    """Decode one scan; raises FrameFormatError naming what is wrong."""
+def load_scan(path, layout=PolarLayout(), time_ns=None, period_ns=None):
+    """Decode one scan; raises FrameFormatError naming what is wrong (for a shape that does not
+    fit the layout: both shapes and the key to change).
+
+    Each azimuth's time comes from the timestamp column; without one, from ``time_ns`` (the
+    scan's one time: the azimuth ``layout.timestamp_at`` names; default: the file name's time)
+    and the azimuths spread evenly over ``period_ns`` (default: ``layout.scan_period_s``)."""
     from PIL import Image
 
+    import io
+
     path = Path(path)
-    width, height = verify_png(path)
+    try:
+        data = path.read_bytes()          # read once: checked, then decoded from memory
+    except OSError as exc:
+        raise FrameFormatError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    width, height = verify_png(path, data)
     if width * height > MAX_PIXELS:
         raise FrameFormatError(f"{path}: declares {width} x {height} pixels, more than the {MAX_PIXELS} a scan "
                                "may have; refused before decoding")
+    layout.check_shape(path, height, width)
     try:
-        with Image.open(path) as image:
-            width, height = image.size
-            if width * height > MAX_PIXELS:
-                raise FrameFormatError(f"{path}: declares {width} x {height} pixels, more than the "
-                                       f"{MAX_PIXELS} a scan may have; refused before decoding")
+        with Image.open(io.BytesIO(data)) as image:
             if image.mode != "L":
-                raise FrameFormatError(f"{path}: expected an 8-bit greyscale image of shape (azimuths, "
-                                       f"{layout.meta_columns} + bins), got mode {image.mode} of {height} x {width}")
+                raise FrameFormatError(f"{path}: expected an 8-bit greyscale image ({layout.orientation}), got "
+                                       f"mode {image.mode} of {height} x {width}")
             raw = np.asarray(image)
     except FrameFormatError:
         raise
     except Exception as exc:            # noqa: BLE001 - PIL raises OSError, SyntaxError, zlib.error...
         raise FrameFormatError(f"{path}: not a readable PNG ({type(exc).__name__}: {exc})") from exc
-    if raw.dtype != np.uint8 or raw.ndim != 2 or raw.shape[1] <= layout.meta_columns or raw.shape[0] < 1:
-        raise FrameFormatError(f"{path}: expected an 8-bit greyscale image of shape (azimuths, "
-                               f"{layout.meta_columns} + bins), got {raw.shape} {raw.dtype}")
-    raw = np.ascontiguousarray(raw)
+    if raw.dtype != np.uint8 or raw.ndim != 2 or raw.shape != (height, width):
+        raise FrameFormatError(f"{path}: expected an 8-bit greyscale image of {height} x {width}, got "
+                               f"{raw.shape} {raw.dtype}")
+    if layout.orientation == "range-rows":
+        raw = raw.T                     # (azimuths, bins): a view; the row order below copies it
     n_az = raw.shape[0]
+    timed = True
     if layout.timestamp_column >= 0:
         c = layout.timestamp_column
-        timestamps = raw[:, c:c + 8].copy().view("<i8")[:, 0].astype(np.int64)
+        timestamps = np.ascontiguousarray(raw[:, c:c + 8]).view("<i8")[:, 0].astype(np.int64) * 1000
     else:
-        try:
-            start = int(path.stem)
-        except ValueError:
-            start = 0
-        timestamps = np.full(n_az, start, np.int64)
+        if time_ns is None:
+            time_ns = file_name_time_ns(path, layout.file_name_unit)
+            if time_ns is not None:
+                time_ns += int(round(layout.timestamp_offset_s * 1e9))
+        if time_ns is None:
+            time_ns, timed = 0, False
+        period = int(period_ns if period_ns is not None else round(layout.scan_period_s * 1e9))
+        k = np.arange(n_az, dtype=np.int64) - layout.anchor(n_az)
+        timestamps = np.int64(time_ns) + (k * period) // n_az
     if layout.encoder_column >= 0:
         c = layout.encoder_column
-        counts = raw[:, c:c + 2].copy().view("<u2")[:, 0]
+        counts = np.ascontiguousarray(raw[:, c:c + 2]).view("<u2")[:, 0]
         if (counts >= layout.encoder_counts).any():
-            raise FrameFormatError(f"{path}: encoder counts must be below {layout.encoder_counts}, found {counts.max()}")
+            raise FrameFormatError(f"{path}: encoder counts must be below {layout.encoder_counts}, found "
+                                   f"{counts.max()}: check [reader] meta_columns and encoder_column (-1: none)")
         angles = counts / layout.encoder_counts * 2 * np.pi
     else:
         angles = np.arange(n_az) * (2 * np.pi / n_az)
+    angles = angles + math.radians(layout.azimuth_start_deg)
     valid = raw[:, layout.valid_column] == 255 if layout.valid_column >= 0 else np.ones(n_az, bool)
     levels = raw[:, layout.meta_columns:]
+    shift = layout.bin_shift()
+    if shift > 0:
+        levels = levels[:, shift:]
+    elif shift < 0:
+        levels = np.concatenate([np.zeros((n_az, -shift), np.uint8), levels], axis=1)
     order = np.arange(n_az)
     if layout.clockwise:
         # REP-103 angles, and the rows in counter-clockwise order (the first kept), so that row
         # i points near the spinning lattice's azimuth i: the per-azimuth poses then turn each
         # row by a little only.
-        angles = np.mod(-angles, 2 * np.pi)
+        angles = -angles
         order = (-order) % n_az
         timestamps, angles, valid, levels = timestamps[order], angles[order], valid[order], levels[order]
-    return PolarScan(path, timestamps, angles, valid, np.ascontiguousarray(levels), layout.db_per_level, order)
+    angles = np.mod(angles, 2 * np.pi)
+    return PolarScan(path, timestamps, angles, valid, np.ascontiguousarray(levels), layout.db_per_level, order, timed)
 
 
 def scan_paths(directory):
@@ -236,20 +260,27 @@ def scan_poses(stamps, odometry, invert=False):
 
 @dataclass
 class PolarSequence:
-    """The scans of one recording in time order with their odometry (``load_odometry`` rows, or
-    None) and the file it came from."""
+    """The scans of one recording in time order, with their odometry (``load_odometry`` rows)
+    or trajectory when one was given or found, and the file it came from."""
 
     scans: list
     odometry: dict = None
     odometry_path: Path = None
+    directory: Path = None
 
     @property
     def stamps(self):
-        """The scans' UNIX times [us], from their names (``<unix_us>.png``)."""
+        """The scans' UNIX times [us] from their names (``<unix_us>.png``): the keys of Oxford
+        odometry rows."""
         try:
             return [int(s.path.stem) for s in self.scans]
         except ValueError:
             raise FrameFormatError("odometry needs scans named by their UNIX time in us (<stamp>.png)") from None
+
+    @property
+    def timed(self):
+        """True when the layout gave every scan a time."""
+        return all(s.timed for s in self.scans)
 
     def poses(self, invert=False):
         """(n_scans, 4, 4) scan poses in the first scan's frame (``scan_poses``); the origin for
@@ -258,44 +289,93 @@ class PolarSequence:
             return np.broadcast_to(np.eye(4), (len(self.scans), 4, 4))
         return scan_poses(self.stamps, self.odometry, invert=invert)
 
+    def trajectory(self, invert=False):
+        """The Oxford odometry as a ``Trajectory``: each scan's pose at its first azimuth's time."""
+        return Trajectory(np.array([s.start_ns for s in self.scans], np.int64), self.poses(invert),
+                          str(self.odometry_path or "odometry"))
+
+
+def scan_directory(path, layout):
+    """The directory that holds the scans: ``path``, or its ``layout.scan_directory`` (a
+    recording's root given, e.g. RADIATE's sequence directory holding ``Navtech_Polar/``)."""
+    path = Path(path)
+    if path.is_dir() and layout.scan_directory and not any(path.glob("*.png")):
+        inner = path / layout.scan_directory
+        if inner.is_dir():
+            return inner
+    return path
+
 
 def read_sequence(path, layout, odometry=None):
-    """A ``PolarSequence`` of one scan file or a directory of scans read with ``layout``; its
-    odometry from ``odometry``, else ``radar_odometry.csv`` beside the scans or in ``../gt``."""
-    path = Path(path)
+    """A ``PolarSequence`` of one scan file or a directory of scans read with ``layout`` (or a
+    recording's directory holding ``layout.scan_directory``), each azimuth timed as the layout
+    says; its Oxford odometry from ``odometry``, else ``radar_odometry.csv`` beside the scans or
+    in ``../gt`` (``odometry=False``: none; ``io.inputs`` reads every trajectory format)."""
+    path = scan_directory(path, layout)
     paths = [path] if path.is_file() else scan_paths(path)
-    scans = [load_scan(p, layout) for p in paths]
+    directory = path.parent if path.is_file() else path
+    times = scan_times_ns(paths, layout, directory)
+    period = None
+    known = [t for t in times if t is not None]
+    if len(known) == len(times) and len(known) > 1:
+        steps = np.diff(np.array(known, np.int64))
+        if (steps <= 0).any():
+            i = int(np.flatnonzero(steps <= 0)[0])
+            raise FrameFormatError(f"{directory}: scan {paths[i + 1].name} is timed at or before scan "
+                                   f"{paths[i].name} ({known[i + 1] / 1e9:.3f} <= {known[i] / 1e9:.3f} s)")
+        period = int(np.median(steps))
+    scans = [load_scan(p, layout, t, period) for p, t in zip(paths, times)]
     if odometry is None and path.is_dir():
         odometry = next((c for c in (path / "radar_odometry.csv", path.parent / "gt" / "radar_odometry.csv")
                          if c.is_file()), None)
-    return PolarSequence(scans, None if odometry is None else load_odometry(odometry), odometry)
+    return PolarSequence(scans, load_odometry(odometry) if odometry else None, odometry or None, directory)
+
+
+def azimuth_times(scan):
+    """UNIX times [ns] (n_az,) of a scan's azimuths on a line fitted to its (bursty) stamps, in
+    acquisition order (float64 ns)."""
+    ts = scan.timestamps_ns.astype(np.float64)
+    n = len(ts)
+    order = np.arange(n, dtype=np.float64) if scan.acquired is None else scan.acquired.astype(np.float64)
+    if np.ptp(ts) <= 0:
+        return ts
+    return np.polyval(np.polyfit(order, ts - ts.min(), 1), order) + ts.min()
 
 
 def beam_poses(scans, poses, n_az, azimuth_sign=1.0, motion=True):
     """(n_scans, n_az, 4, 4) per-azimuth poses for a spinning lattice of ``n_az`` azimuths: the
-    scan poses interpolated at each azimuth's time (a line fitted to its bursty timestamps),
-    times the rotation of its encoder angle (times ``azimuth_sign``) less the lattice's
-    i x 2 pi / n_az. motion=False puts every azimuth at its scan's pose (no motion within a
-    scan; a consistency check). One scan alone, or scans without odometry, keep their pose."""
-    stamps = np.array([s.timestamps_us[0] for s in scans], np.float64)
-    out = []
-    for k, scan in enumerate(scans):
+    trajectory at each azimuth's time (motion compensation: the radar moves during its turn),
+    times the rotation of its measured angle (times ``azimuth_sign``) less the lattice's
+    i x 2 pi / n_az. ``poses`` is a ``Trajectory``, or (n_scans, 4, 4) scan poses at each
+    scan's first azimuth (interpolated between scans, extended past the last one).
+    motion=False puts every azimuth at its scan's start pose (a consistency check). Without a
+    trajectory (None) every scan stays at the origin (a still radar)."""
+    for scan in scans:
         if scan.levels.shape[0] != n_az:
             raise FrameFormatError(f"{scan.path}: expected {n_az} azimuths, got {scan.levels.shape[0]}")
-        i = np.arange(n_az)
-        ts = scan.timestamps_us.astype(np.float64)
-        order = i if scan.acquired is None else scan.acquired.astype(np.float64)   # of acquisition
-        t = np.polyval(np.polyfit(order, ts, 1), order) if np.ptp(ts) > 0 else ts
-        if not motion or len(scans) == 1 or stamps[-1] == stamps[0]:
-            a = b = poses[k]
-            frac = np.zeros(n_az)
-        elif k + 1 < len(scans):
-            a, b, t0, t1 = poses[k], poses[k + 1], stamps[k], stamps[k + 1]
-            frac = (t - t0) / (t1 - t0)
-        else:                                   # the last scan: extend the motion into it
-            a, b, t0, t1 = poses[k - 1], poses[k], stamps[k - 1], stamps[k]
-            frac = 1 + (t - stamps[k]) / (t1 - t0)
-        moved = interpolate_se2(a, b, frac)
+    fixed = None                        # one pose per scan, no motion within it
+    if poses is None:
+        fixed = np.broadcast_to(np.eye(4), (len(scans), 4, 4))
+    elif not isinstance(poses, Trajectory):
+        poses = np.asarray(poses)[:len(scans)]
+        starts = np.array([s.start_ns for s in scans], np.int64)
+        if len(scans) == 1 or not all(s.timed for s in scans) or (np.diff(starts) <= 0).any():
+            fixed = poses               # untimed scans stay at their own poses
+        else:
+            poses = Trajectory(starts, poses, "scan poses")
+    if fixed is None and not motion:
+        fixed = poses.at([s.start_ns for s in scans])
+    i = np.arange(n_az)
+    out = []
+    for k, scan in enumerate(scans):
+        if fixed is not None:
+            moved = np.broadcast_to(fixed[k], (n_az, 4, 4))
+        else:
+            moved = poses.at(np.rint(azimuth_times(scan)).astype(np.int64))
         turn = azimuth_sign * scan.angles_rad - i * (2 * math.pi / n_az)
-        out.append(moved @ np.stack([se2_pose(0.0, 0.0, float(r)) for r in turn]))
+        c, s = np.cos(turn), np.sin(turn)
+        rot = np.zeros((n_az, 4, 4))
+        rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
+        rot[:, 2, 2] = rot[:, 3, 3] = 1.0
+        out.append(moved @ rot)
     return np.stack(out)

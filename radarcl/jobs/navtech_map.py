@@ -25,7 +25,9 @@ from radarcl.errors import FrameFormatError
 from radarcl.geometry import se2_pose
 from radarcl.grid import EvidenceGrid, GridSpec
 from radarcl.io import polar_png
+from radarcl.io import poses as pose_files
 from radarcl.io.inputs import polar_source
+from radarcl.io.trajectory import DEFAULT_MAX_SPEED_M_S
 from radarcl.pipeline import Detection, Mapping
 from radarcl.report import figures
 
@@ -69,23 +71,47 @@ def _moved(poses, dx=0.0, dy=0.0, dyaw=0.0):
     return delta @ poses
 
 
-def load(config, data_dir):
-    """(scans, scan poses, timestamps, odometry) of ``data_dir`` (radar/*.png and
-    gt/radar_odometry.csv) read as ``config``'s sensor."""
+def load(config, data_dir, poses=None, poses_format=None, clock_offset_s=None, report=None,
+         max_speed_m_s=DEFAULT_MAX_SPEED_M_S):
+    """(scans, scan poses, timestamps, odometry) of ``data_dir`` read as ``config``'s sensor: the
+    scans of its layout (``radar/*.png`` for Oxford), the trajectory from ``poses`` or found
+    beside them (``io.poses``); scan poses at each scan's first azimuth in the first scan's
+    frame; odometry: the Oxford rows when that is what the poses are, else None."""
     data_dir = Path(data_dir)
-    sequence = polar_png.read_sequence(data_dir / "radar", polar_png.PolarLayout.of(config.sensor),
-                                       data_dir / "gt" / "radar_odometry.csv")
+    layout = polar_png.PolarLayout.of(config.sensor)
+    if layout.scan_directory is None and (data_dir / "radar").is_dir() and not any(data_dir.glob("*.png")):
+        data_dir = data_dir / "radar"                  # Oxford's recording layout, whatever the profile
+    sequence = polar_png.read_sequence(data_dir, layout, odometry=False)
+    found = (Path(poses), poses_format) if poses else pose_files.find_beside(sequence.directory)
+    if found is None:
+        raise FrameFormatError(f"{data_dir}: no poses beside the scans; give --poses FILE")
     if len(sequence.scans) < 4:
-        raise FrameFormatError(f"{data_dir / 'radar'}: the half-map check needs at least 4 scans, found "
+        raise FrameFormatError(f"{sequence.directory}: the half-map check needs at least 4 scans, found "
                                f"{len(sequence.scans)}")
-    return sequence.scans, sequence.poses(), sequence.stamps, sequence.odometry
+    odometry = polar_png.load_odometry(found[0]) if (found[1] or pose_files.detect_format(found[0])) == "oxford" \
+        else None
+    track = pose_files.read_trajectory(found[0], found[1], clock_offset_s, report=report)
+    track.check_motion(max_speed_m_s)
+    starts = [s.start_ns for s in sequence.scans]
+    track = track.relative_to(starts[0])
+    stamps = sequence.stamps if odometry is not None else starts
+    return sequence.scans, track.at(starts), stamps, odometry
 
 
-def run(runtime, config, data_dir, report=print, progress=None):
+def _inverted(poses):
+    """Scan poses whose every step between scans is inverted (the odometry read backwards)."""
+    out = [poses[0]]
+    for a, b in zip(poses[:-1], poses[1:]):
+        out.append(out[-1] @ np.linalg.inv(np.linalg.inv(a) @ b))
+    return np.stack(out)
+
+
+def run(runtime, config, data_dir, report=print, progress=None, poses=None, poses_format=None, clock_offset_s=None,
+        max_speed_m_s=DEFAULT_MAX_SPEED_M_S):
     """Build the half maps under the true and the altered geometries; returns a dict of
     ``consistency`` results by case, the full-map grid (true poses, all scans), the scan
     poses and the pulse statistics of the detector."""
-    scans, poses, stamps, odometry = load(config, data_dir)
+    scans, poses, stamps, odometry = load(config, data_dir, poses, poses_format, clock_offset_s, report, max_speed_m_s)
     if config.sensor.n_bins() is None:                      # a generic profile: bins from the data
         config = config.for_sensor(config.sensor.with_bins(scans[0].n_bins))
     n_az = config.sensor.n_azimuth
@@ -109,8 +135,7 @@ def run(runtime, config, data_dir, report=print, progress=None):
         "second half turned -2 deg": (_moved(true_beams, dyaw=math.radians(-2)), False),
         "one pose per scan (no motion within a scan)": (polar_png.beam_poses(scans, poses, n_az, motion=False), False),
         "azimuths reversed": (polar_png.beam_poses(scans, poses, n_az, azimuth_sign=-1.0), True),
-        "odometry inverted": (polar_png.beam_poses(scans, polar_png.scan_poses(stamps, odometry, invert=True), n_az),
-                              True),
+        "odometry inverted": (polar_png.beam_poses(scans, _inverted(poses), n_az), True),
     }
     results = {}
     for k, (name, (per_beam, both_halves)) in enumerate(cases.items()):

@@ -1,0 +1,76 @@
+"""`radarcl evaluate-lidar`: radar maps scored against the lidar of the same recording
+(``jobs.evaluate_lidar``)."""
+
+from pathlib import Path
+
+from radarcl.commands.options import (
+    DATA_ENV,
+    add_progress,
+    add_trajectory_options,
+    default_data,
+    positive_float,
+    progress,
+    runtime,
+    say_notes,
+)
+from radarcl.config import mapconfig
+from radarcl.errors import ConfigError
+from radarcl.io import files
+
+SUMMARY = "score radar maps against the lidar of the same recording, per range band, beside no-radar controls"
+DESCRIPTION = ("Fuses the recording's scans with each --model (paper, tuned, calibrated, or any configuration "
+               "file) on one plane grid, builds the truth from its lidar frames ray-cast with the same poses "
+               "(occupied at hits above the ground, free along the rays, unknown elsewhere and beyond the range "
+               "each frame reaches), and prints per band of range from the radar's path the ROC area of every "
+               "map, of the raw intensity and of two controls that use no radar data (samples counted, range), "
+               "the IoU of every map at log-odds 0, and whether each annotated vehicle box is occupied.")
+
+
+def add_arguments(parser):
+    parser.add_argument("data", nargs="?", default=None,
+                        help=f"a recording with radar scans, lidar and poses (default: RADIATE's fog sequence in "
+                             f"${DATA_ENV} or ../shared/data)")
+    parser.add_argument("--sensor", default="radiate-cts350x", metavar="NAME|FILE",
+                        help="sensor profile of the scans (default: %(default)s)")
+    parser.add_argument("--model", action="append", default=None, metavar="NAME|FILE",
+                        help="a map to score: paper, tuned, calibrated, or a configuration file (repeatable; "
+                             "default: paper and calibrated)")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                        help="set one configuration value for every model")
+    parser.add_argument("--force-sensor", action="store_true", help="use configuration files made for another sensor")
+    parser.add_argument("--voxel", type=positive_float, default=0.3, help="cell edge of the plane grid [m] "
+                                                                         "(default: %(default)s)")
+    add_trajectory_options(parser)
+    parser.add_argument("--out", default=None, metavar="DIR", help="write lidar_truth.png, lidar_map.png and "
+                                                                  "evaluate_lidar.json there")
+    parser.add_argument("--force", action="store_true", help="replace existing files in --out")
+    add_progress(parser)
+
+
+def run(args):
+    from radarcl.jobs import evaluate_lidar as job
+
+    data = Path(args.data) if args.data else default_data("radiate_fog")
+    if not data.is_dir():
+        raise ConfigError(f"no recording directory {data}; give DATA or set {DATA_ENV}")
+    outputs = None
+    if args.out:
+        outputs = [files.check(Path(args.out) / name, args.force, inputs=[data], what="output")
+                   for name in ("lidar_truth.png", "lidar_map.png", "evaluate_lidar.json")]
+    flags = dict(mapconfig.parse_flag(text) for text in args.set)
+    models = job.resolve_models(args.sensor, args.model or ["paper", "calibrated"], flags, args.force_sensor)
+    for _, c in models:
+        say_notes(c.notes)
+    result, arrays = job.run(runtime(), models, data, voxel_m=args.voxel, poses=args.poses,
+                             poses_format=args.poses_format, clock_offset_s=args.clock_offset, report=print,
+                             progress=progress(args))
+    say_notes(result["notes"])
+    print("\n".join(job.table(result)))
+    if outputs:
+        best = max(arrays["maps"], key=lambda m: sum(r["auc"][m] for r in result["bands"]))
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        job.plot(arrays, args.out, best)
+        with files.atomic(outputs[2]) as tmp:
+            job.write_json(result, tmp)
+        print(f"wrote {', '.join(str(o) for o in outputs)}")
+    return 0
