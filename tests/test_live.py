@@ -257,7 +257,8 @@ def test_radarcl_live_serves_viewers_records_and_survives_kill_9(tmp_path, scene
 
 def test_radarcl_emulate_plays_a_recording_onto_a_pty(tmp_path, scene):
     """The emulator as a command: a recording in, beam packets out on a new pty whose path it
-    prints, with the faults asked for; the parser reads every intact packet."""
+    prints, with the faults asked for, once the reader says it is ready (--wait-for: no head
+    start to guess); the parser reads every intact packet."""
     import subprocess
     import sys
 
@@ -267,14 +268,15 @@ def test_radarcl_emulate_plays_a_recording_onto_a_pty(tmp_path, scene):
     frames, poses = scene
     rec = tmp_path / "rec.npz"
     recording.save(rec, recording.Recording(frames, poses, "paper"))
-    link = tmp_path / "radar"
+    link, ready = tmp_path / "radar", tmp_path / "reading"
     proc = subprocess.Popen([sys.executable, "-m", "radarcl", "emulate", str(rec), "--pty", "--link", str(link),
-                             "--baud", "max", "--frames", "1", "--faults", "noise=0.05,seed=3", "--delay", "2"],
+                             "--baud", "max", "--frames", "1", "--faults", "noise=0.05,seed=3", "--wait-for", str(ready)],
                             stdout=subprocess.PIPE, text=True)
     first = proc.stdout.readline()
     assert "emulating on /dev/pts/" in first and "256 packets" in first, first
     parser = BeamParser()
     reader = PortReader(open_port(str(link)), lambda t, d: parser.data_received(d)).start()
+    ready.touch()                                   # the port is open (and flushed): go
     try:
         out, _ = proc.communicate(timeout=60)
         reader.closed.wait(10)
