@@ -211,14 +211,19 @@ def _free_port():
         return s.getsockname()[1]
 
 
-def test_radarcl_live_serves_viewers_records_and_survives_kill_9(tmp_path, scene):
+def test_radarcl_live_serves_viewers_records_and_survives_kill_9(runtime, tmp_path, scene):
     """`radarcl live` in its own process on a pty: a viewer following it sees the map grow, the
-    status file and the recording appear, and kill -9 leaves a readable map holding at most the
-    beams of its last checkpoint, never more than arrived."""
+    status file and the recording appear, and kill -9 loses at most the beams since the last
+    checkpoint: the map holds a checkpoint's beams (exactly the offline map of the first
+    ``saved_beams`` that arrived, at least those of the checkpoint seen before the kill) and no
+    temporary file anywhere but one a save under way left, which the next writer removes."""
     import json
     import signal
     import time
 
+    from radarcl.io.beam_protocol import BeamParser
+    from radarcl.io.files import check
+    from radarcl.maps.store import StoreWriter
     from radarcl.viewer.app import follow_engine
 
     frames, poses = scene
@@ -240,7 +245,7 @@ def test_radarcl_live_serves_viewers_records_and_survives_kill_9(tmp_path, scene
                 break
             emu.done.wait(0.1)
         seen = json.loads(status.read_text())
-        assert seen["checkpoints"] >= 2 and seen["beams"] > 0
+        assert seen["checkpoints"] >= 2 and seen["beams"] > 0 and seen["saved_beams"] > 0
         proc.send_signal(signal.SIGKILL)
         proc.wait(30)
     finally:
@@ -249,10 +254,26 @@ def test_radarcl_live_serves_viewers_records_and_survives_kill_9(tmp_path, scene
         proc.kill()
         os.close(master)
         os.close(slave)
-    stream = read_meta(out, "stream")
-    assert 0 < stream["saved_beams"] <= emu.packets_sent
-    assert (assemble(*read(out)) != 0).any()
-    assert rec.stat().st_size > 1000 and not list(tmp_path.glob("*.tmp"))
+    saved = read_meta(out, "stream")["saved_beams"]
+    assert seen["saved_beams"] <= saved <= emu.packets_sent
+    # a checkpoint's count: the map is the offline map of the first `saved` beams sent
+    parser = BeamParser()
+    for packet in emulator.beam_packets(frames, poses):
+        parser.data_received(packet)
+    keep = np.zeros((len(frames), 64, 4), bool)
+    for b in parser.take()[:saved]:
+        keep[b.frame, b.azimuth, b.elevation] = True
+    spec, keys, data = read(out)
+    assert keep.sum() == saved and np.array_equal(assemble(spec, keys, data), offline(runtime, paper_config(), frames,
+                                                                                    poses, keep))
+    # temporary files, at any depth: only those of a write the kill cut short, named for its
+    # process; the next writers of the status file and the map remove them
+    temporary = [p for p in tmp_path.rglob("*") if ".tmp" in p.name]
+    assert all(p.name.endswith(f".{proc.pid}.tmp") for p in temporary), temporary
+    check(status, force=True)
+    StoreWriter(out, spec).save(keys, data)
+    assert not [p for p in tmp_path.rglob("*") if ".tmp" in p.name]
+    assert rec.stat().st_size > 1000
 
 
 def test_radarcl_emulate_plays_a_recording_onto_a_pty(tmp_path, scene):
