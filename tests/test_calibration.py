@@ -93,7 +93,8 @@ def test_calibrate_saves_a_configuration_that_fuse_reads(runtime, tmp_path, caps
     spec, keys, data = read(tmp_path / "m.npz")
     fused = assemble(spec, keys, data)
     maps = {}
-    for name, config in (("fitted", fitted), ("defaults", mapconfig.resolve("paper", flags={"grid.voxel_m": spec.voxel_m}))):
+    defaults = mapconfig.resolve("paper", flags={"grid.voxel_m": spec.voxel_m})
+    for name, config in (("fitted", fitted), ("defaults", defaults)):
         m = Mapping.from_config(runtime, "paper", config)
         m.fuse(obs.samples[0], obs.poses[0])
         maps[name] = m.snapshot()

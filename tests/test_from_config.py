@@ -183,9 +183,9 @@ def test_the_paper_profile_rebuilds_the_pre_profile_pipeline_bit_for_bit(runtime
 
     voxel = 0.4
     obs = observe(paper_scene(), (-9.2, -5.2), seed=1)
-    then = Mapping(runtime, EvidenceGrid(runtime, GridSpec((-8.0, -35.0, -10.0), voxel,
-                                                          tuple(math.ceil(n / voxel - 1e-9) for n in (80.0, 70.0, 20.0)))),
-                   BeamLattice.from_radar(PAPER_RADAR), BeamModel.from_radar(PAPER_RADAR, near_field=True, gaussian=True),
+    paper_grid = GridSpec((-8.0, -35.0, -10.0), voxel, tuple(math.ceil(n / voxel - 1e-9) for n in (80.0, 70.0, 20.0)))
+    then = Mapping(runtime, EvidenceGrid(runtime, paper_grid), BeamLattice.from_radar(PAPER_RADAR),
+                   BeamModel.from_radar(PAPER_RADAR, near_field=True, gaussian=True),
                    radar=PAPER_RADAR, n_fft=1024, dtype=np.int16,
                    cfar_config=CfarConfig(kind="ca", guard=16, train=16, pfa=1e-3, rank=None, noise_floor=1e-30),
                    interpret_config=InterpretConfig(k_occ=1.0, e_high=-1.0, e_low=-0.1, range_min_m=1.0,

@@ -300,7 +300,8 @@ def test_radarcl_emulate_plays_a_recording_onto_a_pty(tmp_path, scene):
     recording.save(rec, recording.Recording(frames, poses, "paper"))
     link, ready = tmp_path / "radar", tmp_path / "reading"
     proc = subprocess.Popen([sys.executable, "-m", "radarcl", "emulate", str(rec), "--pty", "--link", str(link),
-                             "--baud", "max", "--frames", "1", "--faults", "noise=0.05,seed=3", "--wait-for", str(ready)],
+                             "--baud", "max", "--frames", "1", "--faults", "noise=0.05,seed=3",
+                             "--wait-for", str(ready)],
                             stdout=subprocess.PIPE, text=True)
     first = proc.stdout.readline()
     assert "emulating on /dev/pts/" in first and "256 packets" in first, first

@@ -52,7 +52,8 @@ def dirichlet(u, n):
     u = np.asarray(u, np.float64)
     s = np.sin(np.pi * u)
     safe = np.abs(s) > 1e-12
-    ratio = np.where(safe, np.sin(np.pi * u * n) / np.where(safe, s, 1.0), n * np.cos(np.pi * u * n) / np.cos(np.pi * u))
+    limit = n * np.cos(np.pi * u * n) / np.cos(np.pi * u)                 # at integer u
+    ratio = np.where(safe, np.sin(np.pi * u * n) / np.where(safe, s, 1.0), limit)
     return np.exp(-1j * np.pi * u * (n - 1)) * ratio
 
 
