@@ -20,8 +20,8 @@ from radarcl.stages import build
 WINDOW_SLACK = 1e-4
 # [m] added on the device to every brick's bounding radius (its trans_margin): float32 puts a
 # brick's range and angles within ~1e-5 m and ~1e-6 rad of float64's, so with this the device's
-# windows hold the float64 oracle's (1e-3 m is >= 1.5e-5 rad out to 64 m) and its plan lists
-# every brick the oracle lists; it may list a few more, never fewer (tests/test_fusion_plan.py).
+# windows hold the float64 oracle's (1e-3 m subtends >= 5e-6 rad out to 200 m) and its plan
+# lists every brick the oracle lists; it may list a few more, never fewer (tests/test_fusion_plan.py).
 DEVICE_REACH_M = 1e-3
 BLOCK_BITS = 2
 BLOCK = 1 << BLOCK_BITS     # bricks per block edge: the coarse pass's unit
