@@ -3,9 +3,11 @@
  *
  * The same bounds as radarcl.stages.fusion_plan.candidate_windows (its docstring derives them; it is
  * this kernel's float64 oracle), in float32: every angle bound carries WINDOW_SLACK, far more
- * than float32's rounding of angles up to 2 pi (~1e-6 rad), so a window may differ from the
- * oracle's by one beam only where the oracle's own bound lies within the slack of a beam: never
- * a beam that can reach the brick. An empty window is (0, -1, 0, -1).
+ * than float32's rounding of angles up to 2 pi (~1e-6 rad), so no beam that can reach a brick
+ * is left out of its window. The wrapper adds DEVICE_REACH_M to trans_margin, which widens
+ * every bound beyond float32's rounding of ranges and angles: a window holds the oracle's, and
+ * is wider by one beam only where the oracle's bound lies within that of a beam. An empty
+ * window is (0, -1, 0, -1).
  *
  * Work mapping: work-item g handles bricks g * PVEC .. g * PVEC + PVEC - 1 of the list (brick
  * n = block * BLOCK^3 + its place in the block, x fastest, then y, then z), one per SIMD lane

@@ -77,7 +77,9 @@ def threshold_factor(kind, pfa, n_train, rank=None):
 
     Closed form for CA; bisection in float64 to 1e-15 relative for GO, SO and OS, whose
     P_fa falls monotonically with the factor. Raises ConfigError when no factor reaches
-    ``pfa`` (an SO or OS CFAR cannot exceed the P_fa it has at factor 0)."""
+    ``pfa``: at factor 0 every detector alarms on every cell (P_fa = 1), but SO's series sums a
+    few ulp below 1 in float64, and a pfa in that gap is refused; so is one below what the
+    largest finite factor gives."""
     _check_kind(kind, n_train, rank)
     if not (isinstance(pfa, (int, float)) and 0.0 < pfa < 1.0):
         raise ConfigError(f"pfa must lie strictly between 0 and 1, got {pfa!r}")

@@ -62,9 +62,15 @@ def test_features_times_constants_are_the_occlusion_interpreters_evidence():
     assert np.abs(merged - oracle.interpret(x, noise, mask, paper, 0.125)[0] / logodds.SCALE).max() <= 1.0 / logodds.SCALE
 
 
-def test_calibrate_saves_a_configuration_that_fuse_reads(tmp_path, capsys):
+def test_calibrate_saves_a_configuration_that_fuse_reads(runtime, tmp_path, capsys):
+    """`calibrate --save` writes the fitted constants; `fuse --config` makes its map with them:
+    the same integers as a pipeline built from the file's values, not those of the defaults."""
     from radarcl.cli import main
+    from radarcl.config import mapconfig
+    from radarcl.grid import assemble
     from radarcl.io import recording
+    from radarcl.maps.disk import read
+    from radarcl.pipeline import Mapping
     from radarcl.scene.observe import observe
     from radarcl.scene.outdoor import paper_scene
 
@@ -76,8 +82,21 @@ def test_calibrate_saves_a_configuration_that_fuse_reads(tmp_path, capsys):
     text = saved.read_text()
     assert 'model = "occlusion"' in text and "e_low = 0.0" in text
     rec = tmp_path / "rec.npz"
-    recording.save(rec, observe(paper_scene(), (-9.2,), seed=1))
+    obs = observe(paper_scene(), (-9.2,), seed=1)
+    recording.save(rec, obs)
     assert main(["fuse", str(rec), "--config", str(saved), "--out", str(tmp_path / "m.npz"), "--no-progress",
                  "--no-report"]) == 0
     assert main(["config", "show", "--config", str(saved)]) == 0
     assert "occlusion" in capsys.readouterr().out
+    fitted = mapconfig.resolve(None, saved)
+    assert fitted["interpret.model"] == "occlusion" and fitted.origins["interpret.k_occ"].startswith(f"file {saved}")
+    spec, keys, data = read(tmp_path / "m.npz")
+    fused = assemble(spec, keys, data)
+    maps = {}
+    defaults = mapconfig.resolve("paper", flags={"grid.voxel_m": spec.voxel_m})
+    for name, config in (("fitted", fitted), ("defaults", defaults)):
+        m = Mapping.from_config(runtime, "paper", config)
+        m.fuse(obs.samples[0], obs.poses[0])
+        maps[name] = m.snapshot()
+    assert maps["fitted"].shape == fused.shape and np.array_equal(fused, maps["fitted"]) and (fused > 0).any()
+    assert not np.array_equal(fused, maps["defaults"])

@@ -104,6 +104,9 @@ def test_exact_on_integer_valued_profiles(runtime):
     got = Cfar(runtime, (32,), 128, config)(x)
     noise, ratio, mask = oracle.cfar(x, config)
     assert np.array_equal(got.noise, noise.astype(np.float32))
+    # r / n of exact float32 operands, correctly rounded once: the float64 quotient rounded to float32
+    assert np.array_equal(got.ratio, ratio.astype(np.float32))
+    assert np.array_equal(got.mask, mask) and 0 < mask.sum() < mask.size
 
 
 # -- numerical stability: defined, finite, documented results that agree with the oracle ------

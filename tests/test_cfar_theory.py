@@ -15,13 +15,24 @@ from radarcl.errors import ConfigError
 @pytest.mark.parametrize("pfa", [1e-1, 1e-3, 1e-6])
 @pytest.mark.parametrize("n", [2, 16, 32])
 def test_threshold_factor_inverts_pfa(kind, pfa, n):
+    """Every detector reaches every pfa in (0, 1): at factor 0 it alarms on every cell (P_fa = 1)."""
     rank = cfar_theory.default_rank(n) if kind == "os" else None
-    try:
-        alpha = cfar_theory.threshold_factor(kind, pfa, n, rank)
-    except ConfigError as exc:     # SO/OS with few cells cannot reach a large pfa: said so
-        assert "cannot reach" in str(exc) and kind in ("so", "os")
-        return
+    alpha = cfar_theory.threshold_factor(kind, pfa, n, rank)
+    assert alpha > 0
     assert math.isclose(cfar_theory.false_alarm_probability(kind, alpha, n, rank), pfa, rel_tol=1e-9)
+
+
+def test_a_pfa_no_factor_reaches_is_refused():
+    """P_fa at factor 0 is 1 in exact arithmetic; SO's series sums a few ulp below 1 in float64
+    (22 cells a side: 1 - 3.2e-15), and a pfa in that gap is refused, not answered with a factor
+    whose P_fa is another. Beyond the far end, a pfa no finite factor reaches is refused too."""
+    at_zero = cfar_theory.false_alarm_probability("so", 0.0, 44)
+    assert 1 - 1e-13 < at_zero < 1.0
+    with pytest.raises(ConfigError, match=r"cannot reach pfa = 0\.99999"):
+        cfar_theory.threshold_factor("so", 0.5 * (at_zero + 1.0), 44)
+    assert cfar_theory.threshold_factor("so", at_zero * (1 - 1e-9), 44) > 0
+    with pytest.raises(ConfigError, match="no finite threshold factor reaches pfa = 1e-300"):
+        cfar_theory.threshold_factor("os", 1e-300, 2, 1)     # P_fa = 2 / (2 + a) >= 2e-300 for a <= 1e300
 
 
 def test_ca_closed_form_and_textbook_pd():

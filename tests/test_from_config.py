@@ -4,6 +4,7 @@ a sensor that does not match its input is refused with both shapes and nothing w
 
 import numpy as np
 import pytest
+from tolerances import CFAR_RTOL, DECISION_MARGIN, EVIDENCE_UNITS_TOL, RANGE_FFT_RTOL
 
 from radarcl import logodds, oracle
 from radarcl.cli import main
@@ -52,11 +53,27 @@ def test_ti_capture_maps_its_reflector(runtime, shared_data):
         m.fuse(frame, pose)
     nats = _axis_nats(m.grid, [[1.975, 0.0, 0.0], [1.0, 0.0, 0.0]])
     assert nats[0] > 50 and nats[1] < -50
-    # the kernel chain against the float64 oracle for the first chirp
-    c = m.config
-    power = oracle.range_profile(source.frames[0].astype(np.complex128), c.n_fft, output="power")
-    noise, _, mask = oracle.cfar(power.reshape(1, -1), c.cfar_config())
-    assert mask.any()
+    # the kernel chain (range FFT -> CFAR -> eq. 12) of the last chirp fused, against the
+    # float64 chain on the same samples
+    c, q = m.config, runtime.queue
+    last = source.frames[-1]
+    power = oracle.range_profile(last.astype(np.complex128), c.n_fft, window=c["range_fft.window"],
+                                 output="power").reshape(1, -1)
+    noise, _, mask = oracle.cfar(power, c.cfar_config())
+    evidence = oracle.interpret(power, noise, mask, c.interpret_config(), c.bin_spacing_m,
+                                oracle.beam_flags(last).reshape(1))[0]
+    got_power = m.range_fft.arrays["profiles"].get(q).reshape(1, -1)
+    got_noise = m.detection.cfar.arrays["noise"].get(q).reshape(1, -1)
+    got_mask = m.detection.cfar.arrays["mask"].get(q).reshape(1, -1).astype(bool)
+    got_evidence = m.detection.interpreter.arrays["evidence"].get(q).reshape(1, -1)
+    assert np.abs(got_power - power).max() <= 2 * RANGE_FFT_RTOL * power.max()      # power: twice the magnitude's
+    with np.errstate(divide="ignore", invalid="ignore"):
+        close = np.abs(power / (c.cfar_config().alpha * noise) - 1) < DECISION_MARGIN
+    assert close.sum() <= 2 and mask.sum() >= 3, (close.sum(), mask.sum())
+    assert np.array_equal(got_mask[~close], mask[~close])
+    np.testing.assert_allclose(got_noise, noise, rtol=CFAR_RTOL)
+    assert np.abs(got_evidence.astype(np.int64) - evidence)[~close].max() <= EVIDENCE_UNITS_TOL
+    assert (evidence > 0).any() and (evidence < 0).any()
 
 
 def test_oxford_navtech_scan(runtime, shared_data):
@@ -119,11 +136,16 @@ def test_tune_save_feeds_fuse_config(runtime, tmp_path, capsys):
     obs = load_observations(rec)
     for frame, pose in zip(obs.samples, obs.poses):
         m.fuse(frame, pose)
-    spec, keys, data = read(out)
-    assert spec == m.grid.spec and np.array_equal(m.snapshot(), m.grid.snapshot())
     from radarcl.grid import assemble
 
-    assert np.array_equal(assemble(spec, keys, data), m.snapshot())
+    spec, keys, data = read(out)
+    fused = assemble(spec, keys, data)
+    assert spec == m.grid.spec and np.array_equal(fused, m.snapshot()) and (fused > 0).any()
+    # ... and not the map of the defaults the file overrides (the comparison can tell them apart)
+    plain = Mapping.from_config(runtime, "paper", mapconfig.resolve("paper", flags={"grid.voxel_m": 0.8}))
+    for frame, pose in zip(obs.samples, obs.poses):
+        plain.fuse(frame, pose)
+    assert plain.grid.spec == spec and not np.array_equal(plain.snapshot(), fused)
 
 
 def test_a_sensor_that_does_not_match_its_input_is_refused(tmp_path, capsys):
@@ -140,3 +162,38 @@ def test_a_sensor_that_does_not_match_its_input_is_refused(tmp_path, capsys):
     assert "is not a readable .npz file" in capsys.readouterr().err
     with pytest.raises(FrameFormatError, match="not a readable .npz"):
         open_input(mapconfig.resolve("paper").sensor, tmp_path / "x.npy")
+
+
+def test_the_paper_profile_rebuilds_the_pre_profile_pipeline_bit_for_bit(runtime):
+    """README ("Sensors and configuration"): the paper's profile derives the paper's constants
+    from its geometry alone, so `radarcl demo`'s maps are bit-identical to those made before
+    profiles existed. The pipeline of then, with its constants written out as they stood in
+    commit d49131d (the last before sensor profiles; ``evaluation/evaluate.py``'s ``MapConfig``
+    and ``make_mapping``, ``config.py``'s ``CfarConfig`` and ``InterpretConfig`` defaults,
+    ``scene/outdoor.py``'s ``paper_grid``), and the demo's pipeline of now (``presets.paper_config``
+    through ``Mapping.from_config``), on the same two frames: the same integers."""
+    import math
+
+    from radarcl.config.presets import paper_config
+    from radarcl.config.stage_config import PAPER_RADAR, PAPER_WIDE_PULSE_M, CfarConfig, InterpretConfig
+    from radarcl.geometry import BeamLattice, BeamModel
+    from radarcl.grid import EvidenceGrid, GridSpec
+    from radarcl.scene.observe import observe
+    from radarcl.scene.outdoor import paper_scene
+
+    voxel = 0.4
+    obs = observe(paper_scene(), (-9.2, -5.2), seed=1)
+    paper_grid = GridSpec((-8.0, -35.0, -10.0), voxel, tuple(math.ceil(n / voxel - 1e-9) for n in (80.0, 70.0, 20.0)))
+    then = Mapping(runtime, EvidenceGrid(runtime, paper_grid), BeamLattice.from_radar(PAPER_RADAR),
+                   BeamModel.from_radar(PAPER_RADAR, near_field=True, gaussian=True),
+                   radar=PAPER_RADAR, n_fft=1024, dtype=np.int16,
+                   cfar_config=CfarConfig(kind="ca", guard=16, train=16, pfa=1e-3, rank=None, noise_floor=1e-30),
+                   interpret_config=InterpretConfig(k_occ=1.0, e_high=-1.0, e_low=-0.1, range_min_m=1.0,
+                                                    range_max_m=64.0, wide_pulse_m=PAPER_WIDE_PULSE_M, max_pulses=32))
+    now = Mapping.from_config(runtime, "paper", paper_config(voxel))
+    assert now.grid.spec == then.grid.spec
+    for frame, pose in zip(obs.samples, obs.poses):
+        then.fuse(frame, pose)
+        now.fuse(frame, pose)
+    got = now.snapshot()
+    assert np.array_equal(got, then.snapshot()) and (got > 0).sum() > 1000 and (got < 0).sum() > 10000

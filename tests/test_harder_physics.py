@@ -53,12 +53,19 @@ def test_multipath_puts_a_ghost_at_the_mirror_images_range():
     ghost_amp, ghost_r = amp1[:, k:], r1[:, k:]
     on_box = amp0 > 0
     assert ghost_amp.any()
-    # each ghost: a quarter of its direct echo's amplitude, at the distance of the hit's image below z = 0
-    hit = np.flatnonzero((ghost_amp > 0).ravel())[:5]
+    # Every ghost: a quarter of its direct echo's amplitude, at the distance of the hit's image
+    # below z = 0. The hit p lies on the box, 1 to 2 m up; the sensor at height h = 1.5 m; the
+    # image (x, y, -z) is at r_g^2 = r_d^2 + 4 z h from it: sqrt(r_d^2 + 6) <= r_g <= sqrt(r_d^2 + 12),
+    # a window 0.15 m wide at 20 m (the range resolution is 0.5 m).
+    hit = np.flatnonzero((ghost_amp > 0).ravel())
     direct_r = r0.ravel()[hit]
+    assert len(hit) > 20 and on_box.ravel()[hit].all() and (np.abs(direct_r - 20.3) < 0.4).all()
     assert np.allclose(ghost_amp.ravel()[hit], amp0.ravel()[hit] * ob.GROUND_BOUNCE ** 2)
-    assert np.all(ghost_r.ravel()[hit] > direct_r) and np.all(ghost_r.ravel()[hit] < direct_r + 2 * 3.5)
-    assert on_box.any()
+    h = SENSOR[2]
+    lo, hi = np.sqrt(direct_r ** 2 + 4 * 1.0 * h), np.sqrt(direct_r ** 2 + 4 * 2.0 * h)
+    assert np.all(ghost_r.ravel()[hit] >= lo - 1e-9) and np.all(ghost_r.ravel()[hit] <= hi + 1e-9)
+    # and a ghost only where there is a direct echo
+    assert not ghost_amp.ravel()[~on_box.ravel()].any()
 
 
 def test_multipath_makes_a_smooth_wall_seen_obliquely_vanish():

@@ -187,11 +187,15 @@ def _live(args, name):
 
 
 def test_the_cli_saves_and_says_so_when_the_port_goes_away(tmp_path, scene):
+    """`radarcl live` whose port goes away mid-frame saves what it fused and says how to go on;
+    `radarcl replay` of its --record gives the same map, bit for bit (README, "Live radar")."""
+    from radarcl.cli import main
+
     frames, poses = scene
     master, name, slave = emulator.open_pty()
-    out = tmp_path / "m.rcmap"
-    proc, _ = _live(["--voxel", str(VOXEL), "--out", str(out), "--quiet", "--checkpoint", "0.2", "--duration", "60"],
-                    name)
+    out, rec = tmp_path / "m.rcmap", tmp_path / "run.rcs"
+    proc, _ = _live(["--voxel", str(VOXEL), "--out", str(out), "--quiet", "--checkpoint", "0.2", "--duration", "60",
+                     "--record", str(rec)], name)
     emu = emulator.Emulator(emulator.beam_packets(frames[:1], poses[:1]), lambda b: os.write(master, b), None,
                             emulator.Faults(disconnect=100), close=lambda: (os.close(master), os.close(slave))).start()
     try:
@@ -203,6 +207,11 @@ def test_the_cli_saves_and_says_so_when_the_port_goes_away(tmp_path, scene):
     assert "Traceback" not in err and "fused" in stdout
     saved = read_meta(out, "stream")["saved_beams"]
     assert 0 < saved <= 100
+    again = tmp_path / "again.rcmap"
+    assert main(["replay", str(rec), "--out", str(again), "--voxel", str(VOXEL)]) == 0
+    live_map, replayed = read(out), read(again)
+    assert read_meta(again, "stream")["saved_beams"] == saved and live_map[0] == replayed[0]
+    assert np.array_equal(assemble(*live_map), assemble(*replayed)) and (assemble(*replayed) != 0).any()
 
 
 def _free_port():
@@ -211,14 +220,19 @@ def _free_port():
         return s.getsockname()[1]
 
 
-def test_radarcl_live_serves_viewers_records_and_survives_kill_9(tmp_path, scene):
+def test_radarcl_live_serves_viewers_records_and_survives_kill_9(runtime, tmp_path, scene):
     """`radarcl live` in its own process on a pty: a viewer following it sees the map grow, the
-    status file and the recording appear, and kill -9 leaves a readable map holding at most the
-    beams of its last checkpoint, never more than arrived."""
+    status file and the recording appear, and kill -9 loses at most the beams since the last
+    checkpoint: the map holds a checkpoint's beams (exactly the offline map of the first
+    ``saved_beams`` that arrived, at least those of the checkpoint seen before the kill) and no
+    temporary file anywhere but one a save under way left, which the next writer removes."""
     import json
     import signal
     import time
 
+    from radarcl.io.beam_protocol import BeamParser
+    from radarcl.io.files import check
+    from radarcl.maps.store import StoreWriter
     from radarcl.viewer.app import follow_engine
 
     frames, poses = scene
@@ -240,7 +254,7 @@ def test_radarcl_live_serves_viewers_records_and_survives_kill_9(tmp_path, scene
                 break
             emu.done.wait(0.1)
         seen = json.loads(status.read_text())
-        assert seen["checkpoints"] >= 2 and seen["beams"] > 0
+        assert seen["checkpoints"] >= 2 and seen["beams"] > 0 and seen["saved_beams"] > 0
         proc.send_signal(signal.SIGKILL)
         proc.wait(30)
     finally:
@@ -249,15 +263,32 @@ def test_radarcl_live_serves_viewers_records_and_survives_kill_9(tmp_path, scene
         proc.kill()
         os.close(master)
         os.close(slave)
-    stream = read_meta(out, "stream")
-    assert 0 < stream["saved_beams"] <= emu.packets_sent
-    assert (assemble(*read(out)) != 0).any()
-    assert rec.stat().st_size > 1000 and not list(tmp_path.glob("*.tmp"))
+    saved = read_meta(out, "stream")["saved_beams"]
+    assert seen["saved_beams"] <= saved <= emu.packets_sent
+    # a checkpoint's count: the map is the offline map of the first `saved` beams sent
+    parser = BeamParser()
+    for packet in emulator.beam_packets(frames, poses):
+        parser.data_received(packet)
+    keep = np.zeros((len(frames), 64, 4), bool)
+    for b in parser.take()[:saved]:
+        keep[b.frame, b.azimuth, b.elevation] = True
+    spec, keys, data = read(out)
+    assert keep.sum() == saved and np.array_equal(assemble(spec, keys, data), offline(runtime, paper_config(), frames,
+                                                                                    poses, keep))
+    # temporary files, at any depth: only those of a write the kill cut short, named for its
+    # process; the next writers of the status file and the map remove them
+    temporary = [p for p in tmp_path.rglob("*") if ".tmp" in p.name]
+    assert all(p.name.endswith(f".{proc.pid}.tmp") for p in temporary), temporary
+    check(status, force=True)
+    StoreWriter(out, spec).save(keys, data)
+    assert not [p for p in tmp_path.rglob("*") if ".tmp" in p.name]
+    assert rec.stat().st_size > 1000
 
 
 def test_radarcl_emulate_plays_a_recording_onto_a_pty(tmp_path, scene):
     """The emulator as a command: a recording in, beam packets out on a new pty whose path it
-    prints, with the faults asked for; the parser reads every intact packet."""
+    prints, with the faults asked for, once the reader says it is ready (--wait-for: no head
+    start to guess); the parser reads every intact packet."""
     import subprocess
     import sys
 
@@ -267,14 +298,16 @@ def test_radarcl_emulate_plays_a_recording_onto_a_pty(tmp_path, scene):
     frames, poses = scene
     rec = tmp_path / "rec.npz"
     recording.save(rec, recording.Recording(frames, poses, "paper"))
-    link = tmp_path / "radar"
+    link, ready = tmp_path / "radar", tmp_path / "reading"
     proc = subprocess.Popen([sys.executable, "-m", "radarcl", "emulate", str(rec), "--pty", "--link", str(link),
-                             "--baud", "max", "--frames", "1", "--faults", "noise=0.05,seed=3", "--delay", "2"],
+                             "--baud", "max", "--frames", "1", "--faults", "noise=0.05,seed=3",
+                             "--wait-for", str(ready)],
                             stdout=subprocess.PIPE, text=True)
     first = proc.stdout.readline()
     assert "emulating on /dev/pts/" in first and "256 packets" in first, first
     parser = BeamParser()
     reader = PortReader(open_port(str(link)), lambda t, d: parser.data_received(d)).start()
+    ready.touch()                                   # the port is open (and flushed): go
     try:
         out, _ = proc.communicate(timeout=60)
         reader.closed.wait(10)

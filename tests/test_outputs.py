@@ -1,6 +1,7 @@
 """Outputs are never destructive by surprise and never half-written (radarcl.io.files)."""
 
 import os
+import shutil
 import subprocess
 import sys
 
@@ -29,14 +30,44 @@ def test_refusals(tmp_path):
     assert existing.read_bytes() == b"the user's file"
     deep = outputs.check(tmp_path / "a" / "b" / "m.npz")
     assert deep.parent.is_dir()
-    (tmp_path / "ro").mkdir()
-    (tmp_path / "ro").chmod(0o500)
-    if os.geteuid() != 0:                        # root writes anywhere
-        with pytest.raises(ConfigError, match="is not a writable directory"):
-            outputs.check(tmp_path / "ro" / "m.npz")
     (tmp_path / "file").write_text("x")
     with pytest.raises(ConfigError, match="cannot create the directory"):
         outputs.check(tmp_path / "file" / "m.npz")
+
+
+CHECK = """
+import sys
+from radarcl.errors import ConfigError
+from radarcl.io import files
+try:
+    files.check(sys.argv[1])
+except ConfigError as exc:
+    print(exc)
+    sys.exit(3)
+print("accepted")
+"""
+
+
+def test_an_unwritable_directory_is_refused(tmp_path):
+    """A directory the user may not write is refused before any work. Root writes through mode
+    bits (CI runs as root): there the check runs in a child that is root without the capability
+    to override them (setpriv drops CAP_DAC_OVERRIDE from its bounding set), which is refused
+    just as an ordinary user is in this process."""
+    (tmp_path / "ro").mkdir(mode=0o555)
+    (tmp_path / "rw").mkdir()
+    if os.geteuid() != 0:
+        with pytest.raises(ConfigError, match="is not a writable directory"):
+            outputs.check(tmp_path / "ro" / "m.npz")
+        assert outputs.check(tmp_path / "rw" / "m.npz") == tmp_path / "rw" / "m.npz"
+        return
+    setpriv = shutil.which("setpriv")
+    assert setpriv, "running as root, this test needs util-linux's setpriv to take away root's write-anywhere"
+    runs = {name: subprocess.run([setpriv, "--bounding-set=-dac_override,-dac_read_search", sys.executable, "-c",
+                                  CHECK, str(tmp_path / name / "m.npz")], capture_output=True, text=True, timeout=120)
+            for name in ("ro", "rw")}
+    ro, rw = runs["ro"], runs["rw"]
+    assert ro.returncode == 3 and "is not a writable directory" in ro.stdout, (ro.stdout, ro.stderr)
+    assert rw.returncode == 0 and "accepted" in rw.stdout, (rw.stdout, rw.stderr)   # the child can write where allowed
 
 
 def test_atomic_writes_all_or_nothing_and_cleans_stale_files(tmp_path):

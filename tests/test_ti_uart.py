@@ -4,6 +4,7 @@ cut short, other SDK majors, damage, and the range profile's conversion to power
 import struct
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -107,3 +108,45 @@ def test_profile_power_inverts_the_emulators_q9():
         back = tu.profile_power(q9, antennas)
         assert np.allclose(back, power, rtol=np.log(2) / (256 * antennas) * 1.01)   # half a Q9 step
     assert np.isfinite(tu.profile_power(np.array([65535], np.uint16), 1)).all()       # no float32 overflow
+
+
+def test_range_profile_scaling_follows_tis_documentation():
+    """The ti-xwr18xx-uart profile's scaling against what TI documents, not against our emulator.
+
+    - The mmw demo (SDK 3.x, xWR18xx/68xx) sends as its range profile TLV (type 2, Range FFT size
+      x uint16) the 0th Doppler bin of its detection matrix (mss_main.c: ``detMatrix[i *
+      numDopplerBins]``).
+    - The Doppler DPU's documentation (ti/datapath/dpu/dopplerproc/dopplerproc.h, "Summation")
+      defines that matrix: the HWA's log2|X| in Q11, summed over the N virtual antennas by an
+      FFT whose output is 1/N' of the sum (N' = 2^ceil(log2 N)), 8 bits dropped: Q8, so a value
+      is 2^8 / N' x sum_a log2|X_a|; and its worked threshold: TdB dB above the noise is
+      T = 256 x TdB / 6 x N / N' units.
+    - TI's mmWave Demo Visualizer 3.6.0 (app/input_validations.js) turns a value into dB as
+      value x log2linScale x 20 log10(2), log2linScale = (1 / 256) x N' / N from SDK 3.2 on
+      (1 / 512 x N' / N before), 1 / (256 N) on xWR16xx with SDK 1.x/2.x (a Q8 sum), 1 / 512 on
+      xWR14xx (a Q9 mean). (The demo's doxygen still says "sum of log2 magnitudes ... in Q9
+      format": SDK 2.x's words.)
+    The profile's demo: SDK 3.5, 1 TX x 4 RX, so N = N' = 4."""
+    from radarcl.config import sensors
+    from radarcl.livemap import ti_scaling
+
+    antennas, q_bits = ti_scaling(sensors.load("ti-xwr18xx-uart"))
+    n = n_pow2 = 4
+    log2lin = (1 / 256) * n_pow2 / n                                   # the visualizer, SDK >= 3.2
+    # one antenna magnitude 2^10 on each of the 4: the value is 2^8 / 4 x 4 x 10 = 2560, and the
+    # power of one antenna 2^20 (profile_power's promise: the mean power of one antenna)
+    value = round(2 ** 8 / n_pow2 * n * 10)
+    assert value == 2560 and tu.profile_power(np.array([value], np.uint16), antennas, q_bits)[0] == 2.0 ** 20
+    # TI's worked threshold: 15 dB above the noise is 256 x 15 / 6 x N / N' = 640 units; in power
+    # the profile says 640 x log2lin x 20 log10(2) = 15.05 dB (TI's 6 is 20 log10(2) = 6.02, rounded)
+    t = round(256 * 15 / 6 * n / n_pow2)
+    v = np.array([3000, 3000 + t], np.uint16)
+    p = tu.profile_power(v, antennas, q_bits).astype(np.float64)
+    step_db = 10 * np.log10(p[1] / p[0])
+    assert t == 640 and step_db == pytest.approx(t * log2lin * 20 * np.log10(2), rel=1e-6)
+    assert step_db == pytest.approx(15.0, rel=0.004)
+    # and the visualizer's dB of any value, up to its constant FFT-scaling offset (to 2^8 x 62,
+    # past any log2 |X| of the HWA's 32-bit magnitudes; beyond, float32 power saturates at 2^126)
+    values = np.arange(0, 256 * 62, 97, dtype=np.uint16)
+    db = 10 * np.log10(tu.profile_power(values, antennas, q_bits).astype(np.float64))
+    np.testing.assert_allclose(db - db[0], (values - values[0]) * log2lin * 20 * np.log10(2), rtol=1e-6, atol=1e-4)

@@ -2,6 +2,7 @@
 send it, with faults (``io.emulator``)."""
 
 import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +46,9 @@ def add_arguments(parser):
     p.add_argument("--delay", type=float, default=0.0, help="seconds to wait before the first byte (time to start "
                                                           "radarcl live: bytes sent before a reader opens the port "
                                                           "are dropped when it does)")
+    p.add_argument("--wait-for", default=None, metavar="PATH",
+                   help="send nothing until PATH exists: the reader says it is ready (radarcl live's --json-status "
+                        "file appears once it reads the port; or touch PATH after opening it), where --delay guesses")
     p.add_argument("--frame-period", type=positive_float, default=0.1, help="seconds between frame timestamps")
 
 
@@ -64,6 +68,8 @@ def run(args):
         print(f"emulating on {args.port}: {len(chunks)} packets", flush=True)
     if not 0 <= args.delay < 3600:
         raise ConfigError(f"--delay must lie in [0, 3600) seconds, got {args.delay}")
+    if args.wait_for is not None:
+        _wait_for(Path(args.wait_for))
     emu = emulator.Emulator(damaged, write, baud, faults, close, loop=args.loop, due_s=due, delay_s=args.delay).start()
     try:
         while not emu.done.wait(0.5):
@@ -73,6 +79,14 @@ def run(args):
     print(f"sent {emu.sent} bytes in {emu.packets_sent} packets ({sum(intact)} intact)"
           + ("; disconnected as asked" if emu.disconnected.is_set() else ""))
     return 0
+
+
+def _wait_for(path, poll_s=0.02):
+    """Return once ``path`` exists (Ctrl-C stops the wait as it stops the emulator)."""
+    if not path.parent.is_dir():
+        raise ConfigError(f"--wait-for {path}: its directory {path.parent} does not exist, so it never will")
+    while not path.exists():
+        time.sleep(poll_s)
 
 
 def _baud(text):

@@ -11,9 +11,10 @@ Layout (little-endian), as the SDK's ``mmw_output.h`` declares it:
 Supported header layouts: SDK 1.x (xWR14xx, 36 bytes with the magic word) and SDK 2.x / 3.x
 (xWR14xx/16xx/18xx/64xx/68xx, 40 bytes); ``version`` is major << 24 | minor << 16 | ..., and
 frames of other majors are skipped whole and counted (``unsupported``). TLV type 2 is the range
-profile: one uint16 per range bin at zero Doppler, the sum over the receive antennas of log2 of
-the FFT magnitude in Q9 (Q8 on xWR16xx). It enters the pipeline at CFAR as power
-(``profile_power``); other TLV types are kept as bytes and ignored.
+profile: one uint16 per range bin at zero Doppler, a fixed-point sum of log2 of the FFT
+magnitude over the virtual antennas whose scale depends on the device and SDK (see
+``profile_power``). It enters the pipeline at CFAR as power; other TLV types are kept as bytes
+and ignored.
 
 The protocol has no checksum: a bit flipped inside a payload cannot be seen. The parser checks
 what it can (the sizes add up, the TLVs fit, no magic word inside the frame, which means the
@@ -67,12 +68,15 @@ class TiFrame:
 
 
 def profile_power(values, antennas, q_bits=9):
-    """The range profile (uint16: the sum over ``antennas`` of log2 |X| in Q``q_bits``) as the
-    mean power of one antenna, float32: 2 ** (2 v / (2^q_bits antennas)). CFAR's thresholds
-    assume square-law power of one channel; the sum of logs is the log of a product, so dividing
-    by the antenna count gives the geometric mean magnitude. (TI documents Q9 sums for most
-    demos, Q8 sums for xWR16xx and Q9 averages, antennas = 1, for xWR14xx: the sensor profile's
-    [stream] keys say which.)"""
+    """The range profile (uint16: ``antennas`` x the mean log2 |X| over the virtual antennas, in
+    Q``q_bits``) as the mean power of one antenna, float32: 2 ** (2 v / (2^q_bits antennas)).
+    CFAR's thresholds assume square-law power of one channel; the sum of logs is the log of a
+    product, so the mean gives the geometric mean magnitude. TI's scales (its Doppler DPU docs
+    and its visualizer's log2linScale), for N virtual antennas, N' = 2^ceil(log2 N): xWR14xx a
+    Q9 mean (antennas 1, Q9); xWR16xx with SDK 1.x/2.x a Q8 sum (antennas N, Q8); xWR18xx/68xx
+    with SDK 3.0/3.1 2^9 / N' x the sum, from 3.2 on 2^8 / N' x the sum (N a power of two:
+    antennas 1, Q9 or Q8; N = 12: 192 x the mean, antennas 3, Q6). The sensor profile's [stream]
+    keys say which (tests/test_ti_uart.py checks them against TI's worked values)."""
     exponent = np.asarray(values, np.float64) * (2.0 / ((1 << q_bits) * antennas))
     return np.exp2(np.minimum(exponent, 126.0)).astype(np.float32)      # float32 holds up to 2^128
 

@@ -18,6 +18,11 @@ from radarcl.stages import build
 # [rad] added to every angle bound, by the oracle and the kernel alike: it covers float32's
 # rounding of angles up to 2 pi (~1e-6 rad) a hundred times over.
 WINDOW_SLACK = 1e-4
+# [m] added on the device to every brick's bounding radius (its trans_margin): float32 puts a
+# brick's range and angles within ~1e-5 m and ~1e-6 rad of float64's, so with this the device's
+# windows hold the float64 oracle's (1e-3 m subtends >= 5e-6 rad out to 200 m) and its plan
+# lists every brick the oracle lists; it may list a few more, never fewer (tests/test_fusion_plan.py).
+DEVICE_REACH_M = 1e-3
 BLOCK_BITS = 2
 BLOCK = 1 << BLOCK_BITS     # bricks per block edge: the coarse pass's unit
 PVEC_CPU = 8                # bricks per work-item on a CPU, one per SIMD lane
@@ -142,7 +147,8 @@ class FusionPlanner:
         local = 64
         event = self._kernel(q, (-(-n // local) * local,), (local,), blocks=self._blocks, n_blocks=len(blocks),
                              grid_bx=int(grid_bricks[0]), grid_by=int(grid_bricks[1]), grid_bz=int(grid_bricks[2]),
-                             brick_m=float(brick_m), head=self._head, trans_margin=float(frame.trans_margin),
+                             brick_m=float(brick_m), head=self._head,
+                             trans_margin=float(frame.trans_margin) + DEVICE_REACH_M,
                              margin=margin, cos_margin=math.cos(margin), sin_margin=math.sin(margin),
                              r_lo=self.r_lo, r_hi=self.r_hi,
                              az0=float(lat.az0_rad), az_step=float(lat.az_step_rad), el0=float(lat.el0_rad),
