@@ -1,6 +1,9 @@
 """`radarcl export`: a map written for other tools (``maps.exports``)."""
 
-from radarcl.commands.options import add_output, add_progress, progress
+import math
+
+from radarcl.commands.options import add_output, add_progress, add_salvage, progress, say_lost
+from radarcl.errors import ConfigError
 from radarcl.io import files
 from radarcl.maps import exports
 from radarcl.maps.map import Map
@@ -21,14 +24,25 @@ def add_arguments(parser):
     parser.add_argument("--band", type=float, nargs=2, default=None, metavar=("Z_MIN", "Z_MAX"),
                         help="height band [m] for costmap, rosbag's grid, mesh and vti (default: the whole grid)")
     add_progress(parser)
+    add_salvage(parser)
 
 
 def run(args):
     directory = ("ROS 2 bag", exports.is_bag) if args.to == "rosbag" else None
     out = files.check(args.out, args.force, inputs=[args.map], what="export", directory=directory)
     if args.to == "costmap":
+        # the exporter writes the PGM to --out and its YAML beside it, named by the suffix:
+        # --out cm.yaml would write the PGM, then the YAML over it
+        if out.suffix.lower() in (".yaml", ".yml"):
+            raise ConfigError(f"a costmap is a PGM image and a YAML file beside it: give --out "
+                              f"{out.with_suffix('.pgm')} (its YAML {out.with_suffix('.yaml')} is written beside it)")
         files.check(out.with_suffix(".yaml"), args.force, inputs=[args.map], what="costmap YAML")
-    m = Map.open(args.map)
+    if args.threshold is not None and not math.isfinite(args.threshold):
+        raise ConfigError(f"--threshold must be a finite number of nats, got {args.threshold}")
+    if args.band is not None and not all(math.isfinite(b) for b in args.band):
+        raise ConfigError(f"--band must be two finite heights [m], got {args.band}")
+    m = Map.open(args.map, salvage=args.salvage)
+    say_lost(m.lost or [])
     fn = exports.FORMATS[args.to]
     options = {}
     if args.to in ("mesh", "vti", "costmap", "rosbag"):
