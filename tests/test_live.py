@@ -36,18 +36,12 @@ def paper_config():
     return mapconfig.resolve("paper", program={"grid.voxel_m": VOXEL})
 
 
-def f32(pose):
-    """A pose as the beam protocol carries it (float32)."""
-    out = np.eye(4)
-    out[:3, :4] = np.asarray(pose)[:3, :4].astype(np.float32)
-    return out
-
-
 def offline(runtime, config, frames, poses, keep):
-    """The map of the beams ``keep`` (n_frames, n_az, n_el) bool, fused a whole frame at a time."""
+    """The map of the beams ``keep`` (n_frames, n_az, n_el) bool, fused a whole frame at a time
+    (the beam protocol carries the poses in float64: the same poses)."""
     m = Mapping.from_config(runtime, config=config)
     for frame, pose, k in zip(frames, poses, keep):
-        m.fuse(np.where(k[..., None], frame, 0).astype(frame.dtype), f32(pose))
+        m.fuse(np.where(k[..., None], frame, 0).astype(frame.dtype), pose)
     return m.snapshot()
 
 

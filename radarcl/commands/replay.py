@@ -3,7 +3,7 @@
 
 import sys
 
-from radarcl.commands.live import add_pose_options, make_mapper, summary
+from radarcl.commands.live import counts_text, add_pose_options, make_mapper, summary
 from radarcl.commands.options import add_config, add_output, resolve_config
 from radarcl.errors import ConfigError
 from radarcl.maps import disk
@@ -28,12 +28,14 @@ def run(args):
 
     def factory(header):
         if args.sensor is None and args.config is None:
-            if not isinstance(header.get("sensor"), str):
+            if not isinstance(header.get("sensor"), str) or not header["sensor"]:
                 raise ConfigError(f"{args.stream} does not name its sensor; give --sensor")
             args.sensor = header["sensor"]
         config = resolve_config(args)
         return config.sensor, make_mapper(args, config, out, [args.stream])
 
     _, s, header = live.replay(args.stream, factory, args.speed, say=lambda line: print(line, file=sys.stderr))
+    if not s["beams"]:
+        raise ConfigError(f"no beam of {args.stream} could be fused ({counts_text(s)}); {out} was not written")
     print(summary(s, out))
     return 0
