@@ -284,6 +284,10 @@ def check_poses(poses, n_beams):
 
 def pose_from_xyz_rpy(x=0.0, y=0.0, z=0.0, roll=0.0, pitch=0.0, yaw=0.0):
     """4x4 pose from a translation [m] and roll, pitch, yaw [rad] (R = Rz(yaw) Ry(pitch) Rx(roll))."""
+    values = real_array([x, y, z, roll, pitch, yaw], "a pose's x, y, z, roll, pitch, yaw")
+    if not np.isfinite(values).all():
+        raise ConfigError(f"a pose's x, y, z, roll, pitch, yaw must be finite, got {values.tolist()}")
+    x, y, z, roll, pitch, yaw = (float(v) for v in values)
     cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
                               math.cos(yaw), math.sin(yaw))
     T = np.eye(4)

@@ -178,6 +178,11 @@ def resolve(sensor=None, path=None, flags=None, program=None):
     the file's ``sensor = ...`` or the paper's radar) with the file at ``path``, ``flags``
     {"section.key": value} from the command line, and ``program`` {"section.key": value} set
     by the calling program (a job's own choice, below the user's file and flags)."""
+    if path is not None and not isinstance(path, (str, Path)):
+        raise ConfigError(f"a configuration file is a path, got {path!r}")
+    for what, given in (("flags", flags), ("program", program)):
+        if given is not None and not isinstance(given, dict):
+            raise ConfigError(f"{what} must be a dict {{'section.key': value}}, got {given!r}")
     from_file = {}
     if path is not None:
         from_file = read(path)

@@ -14,6 +14,8 @@ fusion itself scales with the workers until the inputs run out.
 """
 
 import os
+import shutil
+import tempfile
 import time
 
 import numpy as np
@@ -21,6 +23,8 @@ import numpy as np
 from radarcl.errors import ConfigError
 from radarcl.grid import GRID_LIMIT
 from radarcl.io.inputs import open_input
+
+SCHEDULER_TIMEOUT_S = 10
 
 
 def fuse_one(config_values, sensor_toml, path, spec_tuple):
@@ -98,7 +102,7 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
     spec = config.grid_spec()
     report(f"fusing {len(paths)} inputs ({sum(n for _, n in shapes.values())} frames) of sensor {config.sensor.name} "
            f"into a {' x '.join(map(str, spec.shape))} grid of {spec.voxel_m:g} m")
-    own = None
+    own, scratch = None, None
     if client is None:
         import logging
 
@@ -110,9 +114,18 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
         os.environ["POCL_MAX_PTHREAD_COUNT"] = "1"          # the workers inherit it
         os.environ["POCL_AFFINITY"] = "0"                   # and each its one thread unpinned
         if scheduler:
-            client = own = Client(scheduler)
+            try:
+                client = own = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+            except (ValueError, OSError, TimeoutError, TypeError) as exc:
+                raise ConfigError(f"cannot reach the Dask scheduler {scheduler!r} ({exc}); give its address as "
+                                  "tcp://HOST:PORT, or leave --scheduler out for a local cluster") from None
         else:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+            scratch = tempfile.mkdtemp(prefix="radarcl-dask-")        # dask's scratch space, not the user's cwd
+            import dask
+
+            dask.config.set({"temporary-directory": scratch})
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   local_directory=scratch)
             client = own = Client(cluster)
     try:
         start = time.perf_counter()
@@ -129,6 +142,8 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
             own.close()
             if cluster is not None:
                 cluster.close()
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
 
     class _Snapshot:                                        # what MapSaver reads of a grid
         def __init__(self):
