@@ -8,6 +8,7 @@ No pyopencl imports here.
 """
 
 import contextlib
+import math
 import os
 import threading
 import time
@@ -41,18 +42,19 @@ class Faults:
     def __post_init__(self):
         for f in fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) \
-                    or not np.isfinite(v) or v < 0:
-                raise ConfigError(f"fault {f.name} must be a finite number >= 0, got {v!r}")
-            if f.type in (int, "int") and v != int(v):
-                raise ConfigError(f"fault {f.name} must be a whole number, got {v!r}")
+            whole = f.type in (int, "int")
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer) if whole else
+                                                                  (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(float(v) if abs(v) < 1e300 else math.inf) or v < 0:
+                raise ConfigError(f"fault {f.name} must be a finite {'whole ' if whole else ''}number >= 0, got {v!r}")
         for name in ("ber", "drop", "dup", "truncate", "noise"):
             if getattr(self, name) > 1:
                 raise ConfigError(f"fault rate {name} is a probability in [0, 1], got {getattr(self, name)}")
         if self.pause > self.MAX_PAUSE_S:
             raise ConfigError(f"fault pause is at most {self.MAX_PAUSE_S:g} s, got {self.pause!r}")
-        if self.seed >= 1 << 64:
-            raise ConfigError(f"fault seed must lie in [0, 2^64), got {self.seed!r}")
+        for name in ("seed", "pause_every", "disconnect"):
+            if getattr(self, name) >= 1 << 63:
+                raise ConfigError(f"fault {name} must lie in [0, 2^63), got {getattr(self, name)!r}")
 
     @classmethod
     def parse(cls, text):

@@ -18,6 +18,7 @@ import time
 from dataclasses import asdict, dataclass
 
 from radarcl.errors import ConfigError, FrameFormatError
+from radarcl.io.files import check_readable
 
 log = logging.getLogger(__name__)
 
@@ -282,6 +283,7 @@ def read_stream(path):
     """(header dict, iterator of (time_ns, bytes)) of a ``StreamRecorder`` file. A file that is
     not one is refused; a torn last record (the writer was killed) ends the iteration, and the
     iterator's ``torn`` attribute says how many bytes were left over."""
+    check_readable(path, "radarcl stream recording")
     f = open(path, "rb")
     try:
         if f.read(len(STREAM_MAGIC)) != STREAM_MAGIC:
@@ -291,7 +293,7 @@ def read_stream(path):
             header = json.loads(line)
             if not isinstance(header, dict):
                 raise ValueError("not an object")
-        except ValueError as exc:
+        except (ValueError, RecursionError) as exc:
             raise FrameFormatError(f"{path}: the stream header is not a JSON object ({exc})") from exc
     except BaseException:
         f.close()

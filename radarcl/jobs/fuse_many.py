@@ -13,8 +13,8 @@ Cost model of the merge: the coordinator adds every worker's bricks, O(bricks x 
 fusion itself scales with the workers until the inputs run out.
 """
 
+import contextlib
 import os
-import shutil
 import tempfile
 import time
 
@@ -22,6 +22,7 @@ import numpy as np
 
 from radarcl.errors import ConfigError
 from radarcl.grid import GRID_LIMIT
+from radarcl.io.files import scratch
 from radarcl.io.inputs import open_input
 
 SCHEDULER_TIMEOUT_S = 10
@@ -102,7 +103,7 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
     spec = config.grid_spec()
     report(f"fusing {len(paths)} inputs ({sum(n for _, n in shapes.values())} frames) of sensor {config.sensor.name} "
            f"into a {' x '.join(map(str, spec.shape))} grid of {spec.voxel_m:g} m")
-    own, scratch = None, None
+    own, spill = None, contextlib.ExitStack()
     if client is None:
         import logging
 
@@ -120,12 +121,12 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
                 raise ConfigError(f"cannot reach the Dask scheduler {scheduler!r} ({exc}); give its address as "
                                   "tcp://HOST:PORT, or leave --scheduler out for a local cluster") from None
         else:
-            scratch = tempfile.mkdtemp(prefix="radarcl-dask-")        # dask's scratch space, not the user's cwd
             import dask
 
-            dask.config.set({"temporary-directory": scratch})
+            directory = str(spill.enter_context(scratch(out)))        # dask's scratch space, not the user's cwd
+            dask.config.set({"temporary-directory": directory})
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                                   local_directory=scratch)
+                                   local_directory=directory)
             client = own = Client(cluster)
     try:
         start = time.perf_counter()
@@ -142,8 +143,7 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
             own.close()
             if cluster is not None:
                 cluster.close()
-        if scratch is not None:
-            shutil.rmtree(scratch, ignore_errors=True)
+        spill.close()
 
     class _Snapshot:                                        # what MapSaver reads of a grid
         def __init__(self):

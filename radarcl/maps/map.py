@@ -14,7 +14,7 @@ import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
-from radarcl.grid import BRICK, GridSpec
+from radarcl.grid import BRICK, GRID_LIMIT, GridSpec
 from radarcl.io.files import memory_budget
 from radarcl.maps.disk import read_salvaged
 
@@ -187,7 +187,7 @@ class Map:
         d = self.dense(band)
         seen = (d != 0).any(axis=0)
         top = np.where(d != 0, d, np.iinfo(np.int32).min).max(axis=0)     # over observed voxels only
-        t = int(round(threshold_nats * logodds.SCALE))
+        t = int(np.clip(round(threshold_nats * logodds.SCALE), -GRID_LIMIT, GRID_LIMIT))   # beyond: all or nothing
         out = np.full(top.shape, 50, np.int8)
         out[top > t] = 100
         out[seen & (top < -t)] = 0
