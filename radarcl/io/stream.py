@@ -199,14 +199,13 @@ class PortReader:
         return data
 
     def _run(self):
-        import serial
-
         try:
             while not self._stop.is_set():
                 data = self._read()
                 if data:
                     self.sink(time.time_ns(), data)
-        except (serial.SerialException, OSError, TypeError, ValueError) as exc:
+        except Exception as exc:                          # noqa: BLE001 - a port that went away, in any form
+            # (pyserial's socket port closed under a read raises AttributeError): said, not a traceback
             if not self._stop.is_set():                   # not our own close
                 reason = str(exc) or type(exc).__name__
                 eio = getattr(exc, "errno", None) == errno.EIO or f"[Errno {errno.EIO}]" in reason
