@@ -89,8 +89,10 @@ def run(args):
     poses = pose_source(args)                        # every argument checked before a file is made
     view = _ViewServer(args) if (args.serve is not None or args.view) else None
     port = open_port(args.port, args.baud)
+    # the header keeps what made the map, so that a replay makes the same one without being told
     recorder = StreamRecorder(args.record, dict(protocol=config.sensor.protocol, sensor=config.sensor.name,
-                                                baud=args.baud, port=args.port)) if args.record else None
+                                                baud=args.baud, port=args.port, config=config.as_dict(),
+                                                mount=args.mount, poses=args.poses)) if args.record else None
     reader = None
     try:
         session = Session(config.sensor, recorder)

@@ -209,7 +209,8 @@ class PortReader:
             if not self._stop.is_set():                   # not our own close
                 reason = str(exc) or type(exc).__name__
                 eio = getattr(exc, "errno", None) == errno.EIO or f"[Errno {errno.EIO}]" in reason
-                if self._socket and "disconnected" in reason or self._pty and eio:
+                hangup = eio or "returned no data" in reason        # a pty's far end closed: EIO, or an empty read
+                if self._socket and "disconnected" in reason or self._pty and hangup:
                     self.ended = reason
                 else:
                     self.lost = reason
