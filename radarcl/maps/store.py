@@ -184,8 +184,9 @@ def read(path, salvage=False):
         raise FrameFormatError(f"{path}: a damaged map store: {lost.summary(len(index))}; radarcl refuses it "
                                "(--salvage reads the rest and lists the lost bricks)")
     keep = ~lost.mask
+    previous = manifest.get("previous")                 # only guides the next writer's clean-up
     named = {manifest["index"]} | {f"segment_{s}" for s in manifest["segments"]} | \
-        {p for p in manifest.get("previous", []) if isinstance(p, str)}
+        {p for p in (previous if isinstance(previous, list) else []) if isinstance(p, str)}
     stray = sorted(p.name for p in path.iterdir() if p.is_dir() and p.name not in named
                    and p.name.startswith(("segment_", "index_")))
     manifest["incomplete"], manifest["lost"] = stray, lost.entries
