@@ -304,3 +304,32 @@ def test_the_status_latency_is_windowed(runtime):
     s = live.status(m, dict(bytes_in=0, bytes_dropped=0, crc_failures=0, header_failures=0, sequence_gaps=0,
                             packets=0, duplicates=0), 1.0, 0.0)
     assert s["latency_window_s"] == m.LATENCY_WINDOW_S
+
+
+def test_float32_poses_differ_from_the_offline_map_within_the_stated_bound(runtime):
+    """A radar that sends its poses in float32 (flags bit 0): the voxels whose centre lies within
+    the poses' rounding of a beam's edge or a bin's border take or miss one update, at most
+    ``EVIDENCE_LIMIT`` units each (README, "Live radar"); float64 poses give the offline map."""
+    from radarcl import logodds
+    from radarcl.livemap import Session
+    from radarcl.pipeline import Mapping
+
+    obs = observe(paper_scene(), (-9.2, -5.2), seed=1)
+    config = mapconfig.resolve("paper", program={"grid.voxel_m": float(VOXEL)})
+    offline = Mapping.from_config(runtime, config=config)
+    for frame, pose in zip(obs.samples, obs.poses):
+        offline.fuse(frame, pose)
+    want = offline.snapshot().astype(np.int64)
+    for bits in (64, 32):
+        session = Session(config.sensor)
+        session.feed(0, b"".join(beam_protocol.encode(j * 256 + i * 4 + k, j, i, k, 0, f[i, k], p, pose_bits=bits)
+                                 for j, (f, p) in enumerate(zip(obs.samples, obs.poses))
+                                 for i in range(64) for k in range(4)))
+        m = LiveMapper(runtime, config)
+        m.add(session.drain(wait=0))
+        m.flush()
+        diff = np.abs(m.mapping.snapshot().astype(np.int64) - want)
+        if bits == 64:
+            assert not diff.any()
+        else:
+            assert 0 < (diff > 0).sum() <= 1e-3 * (want != 0).sum() and diff.max() <= logodds.EVIDENCE_LIMIT
