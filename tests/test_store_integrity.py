@@ -35,11 +35,15 @@ def saved(tmp_path):
     return path, keys, data
 
 
-def edit(path, fn):
-    """``fn(group, manifest)`` on the store; the manifest is written back."""
+def edit(path, fn, sealed=False):
+    """``fn(group, manifest)`` on the store; the manifest is written back, its checksum left as it
+    was (damage, or a hand edit) or made to match (``sealed``: a writer with a bug, which only
+    the structural checks can catch)."""
     group = zarr.open_group(str(path), mode="a")
     manifest = json.loads((path / "manifest.json").read_text())
     fn(group, manifest)
+    if sealed:
+        manifest["crc32"] = store.seal(manifest)
     (path / "manifest.json").write_text(json.dumps(manifest))
 
 
@@ -52,29 +56,35 @@ def chunk_file(path, segment=0, chunk=1):
     return path / f"segment_{segment}" / "c" / str(chunk) / "0" / "0" / "0"
 
 
+CHECKSUM = "manifest.json does not match its checksum"
 DAMAGE = {
     "a deleted chunk": (lambda p: chunk_file(p).unlink(), "segment_0 chunk 1 does not match its checksum"),
-    "segments []": (lambda p: edit(p, lambda g, m: m.update(segments=[])),
-                    "a segment the manifest does not list"),
+    "segments []": (lambda p: edit(p, lambda g, m: m.update(segments=[])), CHECKSUM),
+    "segments [] by a writer": (lambda p: edit(p, lambda g, m: m.update(segments=[]), sealed=True),
+                                "a segment the manifest does not list"),
     "a duplicate key": (lambda p: edit(p, lambda g, m: _index(g, m, lambda a: a.__setitem__((1, slice(0, 3)), a[0, :3]),
-                                                              crc=True)), "a key listed more than once"),
+                                                              crc=True), sealed=True), "a key listed more than once"),
     "a key outside the grid": (lambda p: edit(p, lambda g, m: _index(g, m, lambda a: a.__setitem__((0, 0), 10000),
-                                                                     crc=True)), "a key outside the grid"),
-    "a negative key": (lambda p: edit(p, lambda g, m: _index(g, m, lambda a: a.__setitem__((0, 1), -3), crc=True)),
-                       "a key outside the grid"),
-    "an unlisted segment": (lambda p: edit(p, lambda g, m: _index(g, m, lambda a: a.__setitem__((5, 3), 7), crc=True)),
-                            "a segment the manifest does not list"),
+                                                                     crc=True), sealed=True), "a key outside the grid"),
+    "a negative key": (lambda p: edit(p, lambda g, m: _index(g, m, lambda a: a.__setitem__((0, 1), -3), crc=True),
+                                      sealed=True), "a key outside the grid"),
+    "an unlisted segment": (lambda p: edit(p, lambda g, m: _index(g, m, lambda a: a.__setitem__((5, 3), 7), crc=True),
+                                           sealed=True), "a segment the manifest does not list"),
     "saturated values": (lambda p: edit(p, lambda g, m: _segment(g, m, lambda a: a.__setitem__((3, 0, 0, 0), 2**31 - 1),
-                                                                 crc=True)), "beyond the grid's saturation"),
+                                                                 crc=True), sealed=True), "beyond the grid's saturation"),
     "a float32 segment": (lambda p: edit(p, lambda g, m: rewrite(g, "segment_0", g["segment_0"][:].astype("float32"))),
                           r"float32, not \(n, 8, 8, 8\) int32 bricks"),
-    "a shape smaller than the index": (lambda p: edit(p, lambda g, m: m["grid"].update(shape=[8, 8, 8])),
-                                       "a key outside the grid"),
+    "a shape smaller than the index": (lambda p: edit(p, lambda g, m: m["grid"].update(shape=[8, 8, 8])), CHECKSUM),
+    "a shape smaller than the index, by a writer": (lambda p: edit(p, lambda g, m: m["grid"].update(shape=[8, 8, 8]),
+                                                                  sealed=True), "a key outside the grid"),
+    "a grid moved": (lambda p: edit(p, lambda g, m: m["grid"].update(origin_m=[8, 8, 8])), CHECKSUM),
     "a zeroed chunk": (lambda p: edit(p, lambda g, m: _segment(g, m, lambda a: a.__setitem__(slice(256, 400), 0))),
                        "segment_0 chunk 1 does not match its checksum"),
     "an index that lies about its rows": (lambda p: edit(p, lambda g, m: _index(g, m, lambda a: a.__setitem__((5, 4), 9999))),
                                           "does not match its checksum"),
-    "the manifest's brick count": (lambda p: edit(p, lambda g, m: m.update(bricks=5)), "lists 400 bricks, the manifest 5"),
+    "the manifest's brick count": (lambda p: edit(p, lambda g, m: m.update(bricks=5)), CHECKSUM),
+    "the brick count, by a writer": (lambda p: edit(p, lambda g, m: m.update(bricks=5), sealed=True),
+                                     "lists 400 bricks, the manifest 5"),
     "a missing segment": (lambda p: shutil.rmtree(p / "segment_0"), "segment_0 is missing"),
 }
 
@@ -125,7 +135,7 @@ def test_no_segment_reads_as_no_bricks_never_as_heap_memory(tmp_path):
     keys, data = bricks(3)
     path = tmp_path / "m.rcmap"
     store.StoreWriter(path, SPEC).save(keys, np.full_like(data, 1000))
-    edit(path, lambda g, m: m.update(segments=[]))
+    edit(path, lambda g, m: m.update(segments=[]), sealed=True)
     with pytest.raises(FrameFormatError, match="3 of 3 bricks cannot be read"):
         disk.read(path)
     _, k, d, lost = disk.read_salvaged(path)
@@ -170,6 +180,7 @@ def test_format_1_stores_are_still_read_and_continued(saved):
     path, keys, data = saved
     manifest = json.loads((path / "manifest.json").read_text())
     manifest.pop("checksums")
+    manifest.pop("crc32")
     manifest["format_version"] = 1
     (path / "manifest.json").write_text(json.dumps(manifest))
     assert np.array_equal(assemble(*disk.read(path)), assemble(SPEC, keys, data))

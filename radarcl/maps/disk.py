@@ -65,7 +65,7 @@ def read_salvaged(path, salvage=True):
 def lost_lines(lost):
     """What ``read_salvaged`` lost, one line per reason with every brick key (bx, by, bz)."""
     return [f"lost {len(e['keys'])} brick(s) ({e['reason']}): " + " ".join(f"({x},{y},{z})" for x, y, z in e["keys"])
-            for e in lost]
+            if e["keys"] else e["reason"] for e in lost]
 
 
 def read_poses(path):

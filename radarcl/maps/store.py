@@ -47,6 +47,7 @@ from radarcl.errors import ConfigError, FrameFormatError, RadarclError
 from radarcl.grid import BRICK, GRID_LIMIT, GridSpec
 from radarcl.maps.npz import check_trajectory
 
+log = logging.getLogger(__name__)
 FORMAT = "radarcl-map-store"
 FORMAT_VERSION = 2          # 2: a CRC-32 per chunk of every segment and of the index; 1 is still read
 CHUNK_BRICKS = 256
@@ -120,8 +121,20 @@ def read_manifest(path):
     if version > FORMAT_VERSION:
         raise FrameFormatError(f"{path} was written in store format {version}; this radarcl reads formats 1 to "
                                f"{FORMAT_VERSION}: update radarcl")
+    manifest["sealed"] = version < 2 or manifest.get("crc32") == seal(manifest)
     check_manifest(path, manifest)
     return manifest
+
+
+UNSEALED = "the manifest does not match its checksum: its grid and array names were believed as they read"
+
+
+def seal(manifest):
+    """The CRC-32 of a manifest's entries (all but ``crc32`` itself and what a reader adds),
+    kept in format 2 so that an edited or damaged manifest (a grid moved, a segment dropped) is
+    found, not believed."""
+    kept = {k: v for k, v in manifest.items() if k not in ("crc32", "sealed", "spec", "incomplete", "lost")}
+    return zlib.crc32(json.dumps(kept, sort_keys=True, separators=(",", ":")).encode())
 
 
 def check_manifest(path, m):
@@ -167,6 +180,12 @@ def read(path, salvage=False):
     zarr, _ = _zarr()
     path = Path(path)
     manifest = read_manifest(path)
+    if not manifest["sealed"]:
+        if not salvage:
+            raise FrameFormatError(f"{path}/{MANIFEST} does not match its checksum: edited or damaged, it may name "
+                                   "another grid or other bricks; radarcl refuses it (--salvage reads it as it says, "
+                                   "every brick still checked)")
+        log.warning("%s/%s does not match its checksum; read as it says (--salvage)", path, MANIFEST)
     spec = manifest["spec"]
     try:
         group = zarr.open_group(str(path), mode="r")
@@ -189,7 +208,8 @@ def read(path, salvage=False):
         {p for p in (previous if isinstance(previous, list) else []) if isinstance(p, str)}
     stray = sorted(p.name for p in path.iterdir() if p.is_dir() and p.name not in named
                    and p.name.startswith(("segment_", "index_")))
-    manifest["incomplete"], manifest["lost"] = stray, lost.entries
+    unsealed = [] if manifest["sealed"] else [dict(reason=UNSEALED, keys=[])]
+    manifest["incomplete"], manifest["lost"] = stray, unsealed + lost.entries
     return spec, np.ascontiguousarray(index[keep, :3], dtype=np.int32), data[keep], manifest
 
 
@@ -380,6 +400,7 @@ class StoreWriter:
                                        segments={str(s): dict(rows=self.segment_rows[s], crc32=self.crcs[s])
                                                  for s in segments}),
                         **self.meta)
+        manifest["crc32"] = seal(manifest)
         tmp = self.path / f".{MANIFEST}.{os.getpid()}.tmp"
         tmp.write_text(json.dumps(manifest, indent=1))
         with open(tmp, "rb") as f:
