@@ -111,6 +111,10 @@ def test_the_map_does_not_depend_on_how_the_stream_was_cut(runtime):
     assert lost.stats["beams"] == 4
     lost.flush()
     assert lost.stats["beams"] == 5 and lost.missing() == 251
+    last = LiveMapper(runtime, config)                        # 3,839 of 3,840 beams: "0 packets missing" before
+    last.add(beams[:-1])
+    last.flush()
+    assert last.stats["beams"] == 255 and last.missing() == 1
 
 
 def test_the_emulator_stops_on_ctrl_c_at_once_and_removes_its_link(scene, tmp_path):

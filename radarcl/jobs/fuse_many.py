@@ -123,6 +123,10 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
         else:
             import dask
 
+            from radarcl.cl import choose_device
+
+            choose_device()               # the device check once, here, not in every worker at once
+
             directory = str(spill.enter_context(scratch(out)))        # dask's scratch space, not the user's cwd
             dask.config.set({"temporary-directory": directory})
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
