@@ -196,3 +196,18 @@ def test_a_report_killed_mid_way_is_cleaned_by_the_next_run(rec, tmp_path):
     assert work, "the report's figure never appeared while the report was written"
     assert main(["fuse", str(rec), "--out", str(out), "--voxel", "0.4", "--no-progress", "--force"]) == 0
     assert not list(tmp_path.glob(".*.tmp")) and not list((tmp_path / "tmp").iterdir())
+
+
+def test_force_replaces_a_bag_only_when_it_holds_nothing_else(small_map, tmp_path, capsys):
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    (bag / "NOTES.txt").write_text("keep me")
+    sentence(capsys, ["export", small_map, "--to", "rosbag", "--out", bag, "--force"])
+    assert (bag / "NOTES.txt").read_text() == "keep me"
+
+
+@pytest.mark.parametrize("to", ["costmap", "rosbag"])
+def test_a_threshold_beyond_any_value_is_not_a_bug(small_map, tmp_path, capsys, to):
+    out = tmp_path / ("cm.pgm" if to == "costmap" else "bag")
+    sentence(capsys, ["export", small_map, "--to", to, "--out", out, "--threshold", "1e308"], status=0)

@@ -225,7 +225,7 @@ def test_replay_at_the_recorded_pace_cuts_a_clock_that_jumps(scene, tmp_path, ca
     start = time.monotonic()
     assert main(["replay", str(tmp_path / "s.rcs"), "--out", str(tmp_path / "m.npz"), "--voxel", VOXEL,
                  "--speed", "recorded"]) == 0
-    assert time.monotonic() - start < 3 * live.MAX_GAP_S + 30
+    assert time.monotonic() - start < 30                       # 1.5e9 s of jumps, skipped
     assert "clock jumps 3 time(s)" in capsys.readouterr().err
 
 

@@ -196,3 +196,10 @@ def test_a_newer_store_names_both_versions(saved):
     with pytest.raises(FrameFormatError, match=f"written in store format {store.FORMAT_VERSION + 1}; this radarcl "
                                                f"reads formats 1 to {store.FORMAT_VERSION}"):
         disk.read(path)
+
+
+def test_the_group_metadata_is_not_needed(saved):
+    """zarr.json of the group holds nothing the manifest does not: reading without it is exact."""
+    path, keys, data = saved
+    (path / "zarr.json").unlink()
+    assert np.array_equal(assemble(*disk.read(path)), assemble(SPEC, keys, data))

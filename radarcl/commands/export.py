@@ -1,6 +1,7 @@
 """`radarcl export`: a map written for other tools (``maps.exports``)."""
 
 import math
+from pathlib import Path
 
 from radarcl.commands.options import add_output, add_progress, add_salvage, progress, say_lost
 from radarcl.errors import ConfigError
@@ -28,7 +29,7 @@ def add_arguments(parser):
 
 
 def run(args):
-    directory = ("ROS 2 bag", exports.is_bag) if args.to == "rosbag" else None
+    directory = ("ROS 2 bag", _only_a_bag) if args.to == "rosbag" else None
     out = files.check(args.out, args.force, inputs=[args.map], what="export", directory=directory)
     if args.to == "costmap":
         # the exporter writes the PGM to --out and its YAML beside it, named by the suffix:
@@ -56,3 +57,13 @@ def run(args):
     size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) if out.is_dir() else out.stat().st_size
     print(f"wrote {out} ({args.to}, {size / 2**20:.2f} MiB): {result}")
     return 0
+
+
+BAG_FILES = (".db3", ".mcap", ".db3-shm", ".db3-wal", ".db3-journal")
+
+
+def _only_a_bag(path):
+    """A directory --force may replace with a bag: a ROS 2 bag (``exports.is_bag``) holding
+    nothing but a bag's files; notes or data of anyone else's beside them keep it."""
+    return exports.is_bag(path) and all(p.is_file() and (p.name == "metadata.yaml" or p.name.endswith(BAG_FILES))
+                                        for p in Path(path).iterdir())

@@ -138,13 +138,15 @@ def ti_packets(profiles_q9, first_frame=0, version=0x03050004):
     return out
 
 
-MAX_GAP_S = 10.0     # a longer silence in a recorded stream is played as this long
+MAX_GAP_S = 10.0     # a longer silence in a recorded stream is a clock that jumped: skipped
 
 
 def due_times(times_ns, max_gap_s=MAX_GAP_S):
-    """Seconds from the start at which recorded chunks go out: the recorded gaps, each cut to
-    ``max_gap_s`` (a clock that jumps must not hold the stream for years) and none negative."""
-    gaps = np.clip(np.diff(np.asarray(times_ns, np.float64)) / 1e9, 0.0, max_gap_s)
+    """Seconds from the start at which recorded chunks go out: the recorded gaps, none negative,
+    and a gap longer than ``max_gap_s`` skipped (a clock that jumps must not hold the stream
+    for years)."""
+    gaps = np.diff(np.asarray(times_ns, np.float64)) / 1e9
+    gaps = np.where(gaps > max_gap_s, 0.0, np.maximum(gaps, 0.0))
     return np.concatenate([[0.0], np.cumsum(gaps)]).tolist() if len(times_ns) else None
 
 

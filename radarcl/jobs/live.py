@@ -132,13 +132,13 @@ def run(session, mapper, *, until=None, checkpoint_s=5.0, status_every_s=1.0, sa
     return s
 
 
-MAX_GAP_S = emulator.MAX_GAP_S     # --speed recorded: a longer silence in a recording is played as this long
+MAX_GAP_S = emulator.MAX_GAP_S     # --speed recorded: a longer silence in a recording is skipped
 
 
 def replay(path, mapper_factory, speed="max", say=None):
     """Feed a ``--record`` stream file through the same parser and mapper: at the recorded pace
-    (``speed`` "recorded"; a silence longer than ``MAX_GAP_S``, or a clock that jumps, is cut
-    to that and said) or as fast as it parses ("max"). Returns (mapper, status, header); a
+    (``speed`` "recorded"; a silence longer than ``MAX_GAP_S`` is a clock that jumped: skipped,
+    and said) or as fast as it parses ("max"). Returns (mapper, status, header); a
     recording damaged part way raises ``FrameFormatError`` after the beams before the damage
     are fused and saved."""
     header, records = read_stream(path)
@@ -157,7 +157,7 @@ def replay(path, mapper_factory, speed="max", say=None):
                     gap = (t_ns - last_t) / 1e9
                     if gap > MAX_GAP_S:
                         cut.append(gap)
-                    due += min(max(gap, 0.0), MAX_GAP_S)          # a clock that runs back: no wait
+                    due += 0.0 if gap > MAX_GAP_S else max(gap, 0.0)     # a clock that runs back: no wait
                     wait = due - time.perf_counter()
                     if wait > 0 and stopped.wait(wait):
                         return
@@ -177,8 +177,8 @@ def replay(path, mapper_factory, speed="max", say=None):
 
     s = run(session, mapper, until=done.is_set, say=say, stop_feeding=stop_feeding)
     if cut and say is not None:
-        say(f"the recording's clock jumps {len(cut)} time(s) by up to {max(cut):.3g} s; each jump was played as "
-            f"{MAX_GAP_S:g} s")
+        say(f"the recording's clock jumps {len(cut)} time(s) by up to {max(cut):.3g} s; each jump (a silence over "
+            f"{MAX_GAP_S:g} s) was skipped")
     if records.torn and say is not None:
         say(f"the recording ends in a torn record ({records.torn} bytes left over: the writer was stopped mid-write)")
     if failure:

@@ -187,7 +187,7 @@ class Map:
         d = self.dense(band)
         seen = (d != 0).any(axis=0)
         top = np.where(d != 0, d, np.iinfo(np.int32).min).max(axis=0)     # over observed voxels only
-        t = int(np.clip(round(threshold_nats * logodds.SCALE), -GRID_LIMIT, GRID_LIMIT))   # beyond: all or nothing
+        t = int(np.rint(np.clip(threshold_nats * logodds.SCALE, -GRID_LIMIT, GRID_LIMIT)))   # beyond: all or nothing
         out = np.full(top.shape, 50, np.int8)
         out[top > t] = 100
         out[seen & (top < -t)] = 0

@@ -187,10 +187,7 @@ def read(path, salvage=False):
                                    "every brick still checked)")
         log.warning("%s/%s does not match its checksum; read as it says (--salvage)", path, MANIFEST)
     spec = manifest["spec"]
-    try:
-        group = zarr.open_group(str(path), mode="r")
-    except Exception as exc:                        # zarr raises its own types for damaged stores
-        raise FrameFormatError(f"{path}: a damaged map store ({type(exc).__name__}: {exc})") from exc
+    group = _Arrays(zarr, path)                     # each array by its own path: the group's metadata is not needed
     index = _read_index(group, path, manifest)
     lost = _Lost(index[:, :3])
     _check_index(index, spec, manifest, lost)
@@ -211,6 +208,17 @@ def read(path, salvage=False):
     unsealed = [] if manifest["sealed"] else [dict(reason=UNSEALED, keys=[])]
     manifest["incomplete"], manifest["lost"] = stray, unsealed + lost.entries
     return spec, np.ascontiguousarray(index[keep, :3], dtype=np.int32), data[keep], manifest
+
+
+class _Arrays:
+    """The store's arrays by name, each opened from its own directory (``group[name]`` would need
+    the group's zarr.json, which holds nothing the manifest does not)."""
+
+    def __init__(self, zarr, path):
+        self.zarr, self.path = zarr, path
+
+    def __getitem__(self, name):
+        return self.zarr.open_array(str(self.path / name), mode="r")
 
 
 class _Lost:
@@ -332,7 +340,7 @@ class StoreWriter:
             self.group.attrs["radarcl"] = FORMAT          # marks the directory ours before any save lands
         self.meta = dict(sensor=sensor_toml, config=config or {},
                          poses=[] if poses is None else check_trajectory(poses).reshape(-1, 16).tolist(),
-                         provenance=dict(radarcl=_version(), created=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                         provenance=dict(radarcl=__version__, created=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                                          inputs=[dict(path=str(p), sha256=file_digest(p)) for p in inputs]))
         self.version, self.segments, self.keys, self.data = 0, [], None, None
         self.index = np.zeros((0, 5), np.int32)
@@ -477,10 +485,6 @@ def _changed_rows(old_keys, old_data, keys, data):
     if len(idx):
         changed[idx[(a[idx] != b[match[idx]]).any(axis=1)]] = True
     return np.flatnonzero(changed)
-
-
-def _version():
-    return __version__
 
 
 def read_poses(path):
