@@ -337,3 +337,36 @@ def test_float32_poses_differ_from_the_offline_map_within_the_stated_bound(runti
             assert not diff.any()
         else:
             assert 0 < (diff > 0).sum() <= 1e-3 * (want != 0).sum() and diff.max() <= logodds.EVIDENCE_LIMIT
+
+
+def test_a_device_that_goes_away_is_an_error_with_the_map_saved(scene, tmp_path, monkeypatch, capsys):
+    """A USB radar unplugged (a device, not a pty): the map is saved, exit 2, --retry named."""
+    import serial
+
+    from radarcl.commands import live as live_command
+
+    data = b"".join(scene[3][:40])
+
+    class Unplugged:
+        port, timeout, is_open = "/dev/ttyUSB9", 0.2, True
+        sent = False
+
+        @property
+        def in_waiting(self):
+            return len(data) if not self.sent else 0
+
+        def read(self, n):
+            if self.sent:
+                raise serial.SerialException("device reports readiness to read but returned no data")
+            self.sent = True
+            return data
+
+        def close(self):
+            self.is_open = False
+
+    monkeypatch.setattr(live_command, "open_port", lambda url, baud: Unplugged())
+    out = tmp_path / "m.npz"
+    assert main(["live", "--port", "/dev/ttyUSB9", "--out", str(out), "--voxel", VOXEL, "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "went away" in err and "the map is saved" in err and "--retry" in err
+    assert read_meta(out, "stream")["beams"] == 40
