@@ -48,9 +48,11 @@ test: NEED_BROWSER := 1
 test: system $(BIN)/.installed
 	$(BIN)/python -m pytest -q
 
-# The long fuzz run: 16x the CI examples, the counts written to out/fuzz.json.
+# The long fuzz run: 16x the CI examples, the counts written to out/fuzz.json (configurations,
+# frames, files, streams) and out/fuzz_store.json (map stores, stream recordings).
 fuzz: $(BIN)/.installed
-	mkdir -p out && RADARCL_FUZZ=long RADARCL_FUZZ_REPORT=out/fuzz.json $(BIN)/python -m pytest -q tests/test_fuzz.py
+	mkdir -p out && RADARCL_FUZZ=long RADARCL_FUZZ_REPORT=out/fuzz.json RADARCL_FUZZ_STORE_REPORT=out/fuzz_store.json \
+	  $(BIN)/python -m pytest -q -W ignore::hypothesis.errors.HypothesisWarning tests/test_fuzz.py tests/test_fuzz_store.py
 
 bench: $(BIN)/.installed
 	$(BIN)/radarcl bench range-fft

@@ -36,7 +36,7 @@ from radarcl.commands import (
     tune,
     view,
 )
-from radarcl.errors import RadarclError
+from radarcl.errors import RadarclError, Terminated
 
 COMMANDS = {
     "info": info, "sensors": sensors, "config": config, "demo": demo, "tune": tune, "calibrate": calibrate,
@@ -72,7 +72,7 @@ def main(argv=None):
     previous = signal.getsignal(signal.SIGTERM)
 
     def terminated(signum, frame):
-        raise SystemExit(143)                         # unwinds: temporary files are removed
+        raise Terminated()                            # unwinds: temporary files are removed
 
     if threading_main():
         signal.signal(signal.SIGTERM, terminated)
@@ -81,6 +81,9 @@ def main(argv=None):
     except KeyboardInterrupt:
         print("radarcl: interrupted", file=sys.stderr)
         return 130
+    except Terminated:
+        print("radarcl: terminated (SIGTERM)", file=sys.stderr)
+        return 143
     except RadarclError as exc:
         if debug:
             raise

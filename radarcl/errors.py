@@ -31,3 +31,8 @@ class KernelBuildError(RadarclError, RuntimeError):
 
 class DeviceCapabilityError(RadarclError, RuntimeError):
     """The chosen OpenCL device lacks something a kernel needs."""
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread by the CLI's handler: it unwinds like Ctrl-C (temporary
+    files are removed, a live map is saved) and the CLI exits 143 with one line."""

@@ -230,9 +230,21 @@ class BeamLattice:
 
 
 # -- poses -------------------------------------------------------------------------------------------------
+def real_array(values, what):
+    """``values`` as a float64 array, or ConfigError when they are not real numbers (a complex
+    pose would lose its imaginary part silently; text or objects are not numbers)."""
+    try:
+        a = np.asarray(values)
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(f"{what} must be an array of real numbers ({exc})") from None
+    if a.dtype.kind not in "iuf":
+        raise ConfigError(f"{what} must be real numbers, got {a.dtype} {a.shape}")
+    return a.astype(np.float64)
+
+
 def check_pose(pose, what="pose"):
     """A 4x4 rigid transform as float64, or ConfigError saying what is wrong with it."""
-    T = np.asarray(pose, dtype=np.float64)
+    T = real_array(pose, what)
     if T.shape != (4, 4):
         raise ConfigError(f"{what} must be a 4x4 rigid transform, got shape {T.shape}")
     if not np.isfinite(T).all():
@@ -252,7 +264,7 @@ def check_pose(pose, what="pose"):
 
 def check_poses(poses, n_beams):
     """One pose (4, 4), or one per beam (n_beams, 4, 4); returns a (1 or n_beams, 4, 4) array."""
-    P = np.asarray(poses, dtype=np.float64)
+    P = real_array(poses, "poses")
     if P.shape == (4, 4):
         return check_pose(P)[None]
     if P.shape != (n_beams, 4, 4):
@@ -272,6 +284,10 @@ def check_poses(poses, n_beams):
 
 def pose_from_xyz_rpy(x=0.0, y=0.0, z=0.0, roll=0.0, pitch=0.0, yaw=0.0):
     """4x4 pose from a translation [m] and roll, pitch, yaw [rad] (R = Rz(yaw) Ry(pitch) Rx(roll))."""
+    values = real_array([x, y, z, roll, pitch, yaw], "a pose's x, y, z, roll, pitch, yaw")
+    if not np.isfinite(values).all():
+        raise ConfigError(f"a pose's x, y, z, roll, pitch, yaw must be finite, got {values.tolist()}")
+    x, y, z, roll, pitch, yaw = (float(v) for v in values)
     cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
                               math.cos(yaw), math.sin(yaw))
     T = np.eye(4)

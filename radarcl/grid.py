@@ -29,6 +29,8 @@ BRICK_VOXELS = BRICK ** 3
 BRICK_BYTES = 4 * BRICK_VOXELS
 GRID_LIMIT = 2 ** 30                # stored sums saturate here [units]
 MAX_TABLE_BRICKS = 2 ** 28          # the host brick table (int32) stays below 1 GiB
+MAX_EXTENT_M = 1e7                  # as far as a pose may lie (geometry.MAX_TRANSLATION_M)
+MIN_VOXEL_M, MAX_VOXEL_M = 1e-4, 1e4
 
 
 @dataclass(frozen=True)
@@ -41,18 +43,30 @@ class GridSpec:
     shape: tuple
 
     def __post_init__(self):
-        origin = tuple(float(v) for v in np.asarray(self.origin_m, dtype=float).reshape(-1))
+        try:
+            raw = np.asarray(self.origin_m)
+            origin = tuple(float(v) for v in raw.reshape(-1)) if raw.dtype.kind in "iuf" else ()
+        except (TypeError, ValueError):
+            origin = ()
         if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
             raise ConfigError(f"origin_m must be 3 finite numbers, got {self.origin_m!r}")
         if isinstance(self.voxel_m, (bool, np.bool_)) or not (
-                isinstance(self.voxel_m, (int, float, np.floating)) and math.isfinite(self.voxel_m) and self.voxel_m > 0):
-            raise ConfigError(f"voxel_m must be a positive finite number, got {self.voxel_m!r}")
-        shape = tuple(self.shape)
+                isinstance(self.voxel_m, (int, float, np.integer, np.floating)) and math.isfinite(self.voxel_m)
+                and MIN_VOXEL_M <= self.voxel_m <= MAX_VOXEL_M):
+            raise ConfigError(f"voxel_m must be a number in [{MIN_VOXEL_M:g}, {MAX_VOXEL_M:g}] m, got {self.voxel_m!r}")
+        try:
+            shape = tuple(self.shape)
+        except TypeError:
+            shape = ()
         if len(shape) != 3 or not all(isinstance(n, (int, np.integer)) and not isinstance(n, (bool, np.bool_))
                                       and n >= 1 for n in shape):
             raise ConfigError(f"shape must be 3 positive integers (nx, ny, nz), got {self.shape!r}")
         if max(shape) > 2 ** 20:
             raise ConfigError(f"shape {shape} exceeds 2^20 voxels along an axis")
+        far = np.abs(np.asarray(origin)) + np.asarray(shape, np.float64) * float(self.voxel_m)
+        if (far > MAX_EXTENT_M).any():
+            raise ConfigError(f"the grid from {list(origin)} m, {shape} voxels of {float(self.voxel_m):g} m, reaches "
+                              f"beyond +-{MAX_EXTENT_M:g} m; express it in a local frame near the sensor (as poses)")
         object.__setattr__(self, "origin_m", origin)
         object.__setattr__(self, "voxel_m", float(self.voxel_m))
         object.__setattr__(self, "shape", tuple(int(n) for n in shape))
@@ -60,10 +74,18 @@ class GridSpec:
     @classmethod
     def around(cls, centre_m, size_m, voxel_m):
         """A grid of at least ``size_m`` (x, y, z) [m] centred on ``centre_m``."""
-        size = np.asarray(size_m, dtype=float)
-        shape = tuple(int(n) for n in np.maximum(1, np.ceil(size / voxel_m - 1e-9)))
-        origin = np.asarray(centre_m, dtype=float) - 0.5 * np.asarray(shape) * voxel_m
-        return cls(tuple(origin), voxel_m, shape)
+        try:
+            size, centre, voxel = np.asarray(size_m, dtype=float), np.asarray(centre_m, dtype=float), float(voxel_m)
+        except (TypeError, ValueError):
+            raise ConfigError(f"GridSpec.around takes numbers: centre_m {centre_m!r}, size_m {size_m!r}, "
+                              f"voxel_m {voxel_m!r}") from None
+        if size.shape != (3,) or centre.shape != (3,) or not (np.isfinite(size).all() and np.isfinite(centre).all()
+                                                              and math.isfinite(voxel) and voxel > 0):
+            raise ConfigError(f"GridSpec.around needs finite (x, y, z) centre_m and size_m and a positive voxel_m, got "
+                              f"{centre_m!r}, {size_m!r}, {voxel_m!r}")
+        shape = tuple(int(n) for n in np.clip(np.ceil(size / voxel - 1e-9), 1, 2 ** 21))
+        origin = centre - 0.5 * np.asarray(shape) * voxel
+        return cls(tuple(origin), voxel, shape)
 
     @property
     def array_shape(self):

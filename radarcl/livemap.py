@@ -9,6 +9,7 @@ fuse, not by a frame. A part of a frame fused this way sums to exactly what the 
 (``PoseSource``). The loop that runs them, with checkpoints and status, is ``jobs.live``.
 """
 
+import bisect
 import queue
 import time
 from dataclasses import dataclass
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarcl.errors import ConfigError
-from radarcl.geometry import interpolate_pose
+from radarcl.geometry import check_pose, interpolate_pose
 from radarcl.io import beam_protocol, ti_uart
 from radarcl.pipeline import Mapping
 
@@ -78,11 +79,21 @@ class PoseSource:
 
 class LiveMapper:
     """Beams -> the map. Built on the first beam (which must match the sensor: refused with both
-    shapes otherwise, before anything is fused); ``add(beams)`` fuses them, ``save()`` checkpoints.
+    shapes otherwise, before anything is fused); ``add(beams)`` fuses them, ``flush()`` fuses
+    what waits for its pair, ``save()`` checkpoints.
+
+    The map does not depend on how the stream was cut into fuses: the range FFT transforms real
+    beams in pairs (flat beams 2j and 2j + 1 share one complex FFT, and its rounding), so a beam
+    waits for its pair before it is fused, and is fused alone only when its pair is lost (a
+    beam of a later frame came first, or the stream ended); either way the decision depends on
+    the order of the beams alone. So the live map, the replay of its recording and the offline
+    map of the same beams are bit-identical.
 
     runtime: an OpenCL ``Runtime``; config: a ``mapconfig.Resolved``; saver: a ``maps.disk.MapSaver``
     (or None); poses: a ``PoseSource``; on_fused(bricks): told the bricks each fuse changed,
     rows (bx, by, bz, pool slot) (the view stream)."""
+
+    LATENCY_WINDOW_S = 10.0     # the status line's latency covers the beams of the last 10 s
 
     def __init__(self, runtime, config, saver=None, poses=None, on_fused=None):
         self.runtime, self.config, self.saver = runtime, config, saver
@@ -90,12 +101,15 @@ class LiveMapper:
         self.on_fused = on_fused
         self.mapping = None
         self.stats = dict(beams=0, frames=0, fuses=0, duplicates=0, refused=0, late=0, checkpoints=0,
-                          saved_beams=0)
+                          saved_beams=0, bad_poses=0, beams_missing=0)
         self.latencies = []                     # seconds from a beam's last byte to its evidence in the map
+        self.latency_times = []                 # time.perf_counter() when each of those was fused
         self.fused_log = None                   # a list: (frame, azimuth, elevation) of every beam fused
         self.trajectory = []                    # one pose per frame
         self._frame_poses = {}
-        self._seen = {}                         # frame id -> the beams of it fused so far
+        self._seen = {}                         # frame id -> the beams of it fused or waiting so far
+        self._held = {}                         # (frame, pair) -> (index, beam): waiting for its pair
+        self._alone = set()                     # (frame, pair) whose first beam was fused alone
         self._newest = None
 
     # -- the pipeline is built before the stream (or on the first beam, when it fixes the bin count)
@@ -121,8 +135,9 @@ class LiveMapper:
                               "(a turn cannot be fused azimuth range by azimuth range)")
         self.config, self._want = config, want
         self.mapping = Mapping.from_config(self.runtime, config=config)
-        self._frame = np.zeros(self.mapping.frame_shape, self.mapping.range_fft.dtype
-                               if self.mapping.range_fft is not None else np.float32)
+        fft = self.mapping.range_fft
+        self._paired = fft is not None and not fft.complex_input      # real beams share an FFT in pairs
+        self._frame = np.zeros(self.mapping.frame_shape, fft.dtype if fft is not None else np.float32)
         return True
 
     def _index(self, beam):
@@ -131,47 +146,123 @@ class LiveMapper:
             return None
         return (beam.azimuth,) if lat.n_el == 1 else (beam.azimuth, beam.elevation)
 
+    def _pair(self, beam):
+        """(pair number, the flat index of the other beam of the pair or None)."""
+        lat = self.mapping.fusion.lattice
+        flat = beam.azimuth * lat.n_el + beam.elevation
+        other = flat ^ 1
+        return flat >> 1, (other if other < lat.n_az * lat.n_el else None)
+
     # -- fusing ---------------------------------------------------------------------------------------
     def add(self, beams):
-        """Fuse ``beams`` (arrival order): one fuse per frame they belong to. Returns the number fused."""
+        """Fuse ``beams`` (arrival order): one fuse per frame they belong to (a beam whose pair
+        has not arrived waits, see the class docstring). Returns the number fused."""
         if not beams:
             return 0
         self.prepare(beams[0])
         first = beams[0]
-        if self.stats["beams"] == 0 and (len(first.samples), first.samples.dtype) != self._want:
+        if self.stats["beams"] == 0 and not self._seen and (len(first.samples), first.samples.dtype) != self._want:
             raise ConfigError(f"the radar sends beams of {len(first.samples)} {first.samples.dtype} samples; sensor "
                               f"{self.config.sensor.name} expects {self._want[0]} {self._want[1]} (choose the "
                               "matching --sensor)")
-        groups = {}
+        ready = []                              # (frame, index, beam, fused with its pair absent)
         for b in beams:
             index = self._index(b) if (len(b.samples), b.samples.dtype) == self._want else None
             if index is None:
                 self.stats["refused"] += 1
                 continue
+            if b.pose is not None and not _usable_pose(b.pose):
+                self.stats["bad_poses"] += 1    # a CRC-valid packet whose pose is not a rigid transform
+                continue
             newest = self._newest
             if newest is not None and b.frame < newest - KEPT_FRAMES:       # the radar restarted its count
+                ready += self._release(lambda f: True)
+                self._count_missing(list(self._seen))
                 self._seen.clear()
                 self._frame_poses.clear()
                 newest = None
             if b.frame not in self._seen:
                 if newest is not None and b.frame < newest:
                     self.stats["late"] += 1
-                for old in [f for f in self._seen if f < b.frame - KEPT_FRAMES]:
-                    self._seen.pop(old)
-                    self._frame_poses.pop(old, None)
+                old = [f for f in self._seen if f < b.frame - KEPT_FRAMES]
+                self._count_missing(old)
+                for f in old:
+                    self._seen.pop(f)
+                    self._frame_poses.pop(f, None)
             self._newest = b.frame if newest is None else max(newest, b.frame)
             seen = self._seen.setdefault(b.frame, set())
             if index in seen:
                 self.stats["duplicates"] += 1
                 continue
             seen.add(index)
-            groups.setdefault(b.frame, []).append((index, b))
-        fused = sum(self._fuse(frame_id, items) for frame_id, items in groups.items())
+            if self._paired:
+                pair, other = self._pair(b)
+                key = (b.frame, pair)
+                if key in self._held:                   # its pair waited for it
+                    ready.append((b.frame, *self._held.pop(key), False))
+                    ready.append((b.frame, index, b, False))
+                elif other is None:
+                    ready.append((b.frame, index, b, False))
+                elif key in self._alone:                # its pair was fused without it
+                    ready.append((b.frame, index, b, True))
+                else:
+                    self._held[key] = (index, b)
+                ready += self._release(lambda f: f < self._newest)      # the radar moved on: pairs lost
+            else:
+                ready.append((b.frame, index, b, False))
+        return self._fuse_ready(ready)
+
+    def flush(self):
+        """Fuse the beams still waiting for their pair (the stream ended). Returns the number fused."""
+        return self._fuse_ready(self._release(lambda f: True)) if self.mapping is not None else 0
+
+    def _release(self, older):
+        out = []
+        for key in [k for k in self._held if older(k[0])]:
+            index, b = self._held.pop(key)
+            self._alone.add(key)
+            out.append((key[0], index, b, True))
+        self._alone = {k for k in self._alone if k[0] in self._seen}
+        return out
+
+    def _count_missing(self, frames):
+        """Beams of ``frames`` (about to be forgotten) that never arrived."""
+        n = self.mapping.fusion.lattice.n_az * self.mapping.fusion.lattice.n_el
+        self.stats["beams_missing"] += sum(n - len(self._seen[f]) for f in frames)
+
+    def missing(self):
+        """Beams missing from the frames seen so far (each frame's lattice minus what arrived)."""
+        if self.mapping is None:
+            return self.stats["beams_missing"]
+        n = self.mapping.fusion.lattice.n_az * self.mapping.fusion.lattice.n_el
+        return self.stats["beams_missing"] + sum(n - len(s) for s in self._seen.values())
+
+    def _fuse_ready(self, ready):
+        groups = {}
+        for frame_id, index, b, alone in ready:
+            # a beam whose pair was fused alone before goes into a second pass, so that the two
+            # never share an FFT, however the stream was cut
+            passes = groups.setdefault(frame_id, [[], []])
+            late_pair = alone and any(o is not b and self._pair(o)[0] == self._pair(b)[0] for _, o in passes[0])
+            passes[1 if late_pair else 0].append((index, b))
+        fused = 0
+        for frame_id, passes in groups.items():
+            for items in passes:
+                if items:
+                    fused += self._fuse(frame_id, items)
         self.runtime.queue.finish()
         done = time.perf_counter()
-        for items in groups.values():
-            self.latencies.extend(done - b.arrived for _, b in items)
+        for passes in groups.values():
+            for items in passes:
+                self.latencies.extend(done - b.arrived for _, b in items)
+                self.latency_times.extend(done for _ in items)
         return fused
+
+    def recent_latencies(self, now=None):
+        """Latencies [s] of the beams fused in the last ``LATENCY_WINDOW_S`` seconds."""
+        now = time.perf_counter() if now is None else now
+        lo = bisect.bisect_left(self.latency_times, now - self.LATENCY_WINDOW_S)
+        return self.latencies[lo:]
 
     def _fuse(self, frame_id, items):
         if frame_id not in self._frame_poses:
@@ -205,6 +296,14 @@ class LiveMapper:
         self.stats["saved_beams"] = self.stats["beams"]
         self.stats["checkpoints"] += 1
         return self.stats["saved_beams"]
+
+
+def _usable_pose(pose):
+    try:
+        check_pose(pose)
+    except ConfigError:
+        return False
+    return True
 
 
 class Session:

@@ -217,3 +217,88 @@ def _check_fits(runtime, config, spec):
             f"({needed / 2**30:.1f} GiB of int32), more than the largest buffer of {runtime.device.name}, "
             f"{limit / 2**30:.2f} GiB (radarcl info); use voxels of at least {fits:.3g} m, a shorter "
             "interpret.range_max_m, or a smaller grid")
+
+
+# -- is a device fit to run radarcl? ---------------------------------------------------------------------
+# A device counts as fit when every built-in sensor's pipeline builds on it and one synthetic
+# frame through it agrees with the float64 oracle. The bounds are loose on purpose: a compiler
+# that miscompiles is wrong by orders of magnitude, while a sound device differs from float64
+# only by rounding (tests/tolerances.py holds the tight bounds the kernel tests use), and a
+# sound device must never be refused.
+SELF_TEST_PROFILE_RTOL = 1e-3       # range FFT power against float64, relative to a frame's peak
+SELF_TEST_MATCH = 0.99              # evidence bins within 1 unit, and clear voxels within 1 unit per update
+SELF_TEST_VOXEL_M = 2.0             # coarse, and out to SELF_TEST_RANGE_M: the oracle's fusion visits
+SELF_TEST_RANGE_M = 24.0            # every voxel for every beam
+SELF_TEST_BEAMS = 32                # CFAR and eq. 12 compared on this many beams of a frame (they are per beam)
+
+
+def self_test(runtime):
+    """Build every kernel of every built-in sensor's pipeline on ``runtime``'s device, run one
+    synthetic frame through each and compare it with the float64 oracle stage by stage (range
+    FFT, CFAR and eq. 12, fusion). Returns None when all agree, else a sentence saying where
+    they differ. ``radarcl.cl.runtime`` runs it in a child process before it uses a device,
+    so a compiler that aborts cannot take radarcl down with it."""
+    from radarcl import oracle
+
+    rng = np.random.default_rng(29)
+    for name in sensors.builtin_names():
+        sensor = sensors.load(name)
+        program = {"grid.voxel_m": SELF_TEST_VOXEL_M,
+                   "interpret.range_max_m": min(SELF_TEST_RANGE_M, sensor.range_interval_m[1])}
+        config = mapconfig.resolve(sensor, program=program)
+        if not config.sensor.raw and config.sensor.n_bins() is None:
+            sensor = config.sensor
+            n = int(np.ceil(sensor.range_interval_m[1] / sensor.bin_spacing_m())) + 1       # the reader learns them
+            config = config.for_sensor(sensor.with_bins(n))
+        m = Mapping.from_config(runtime, config=config)
+        frame = _synthetic_frame(m, rng)
+        lattice = m.fusion.lattice
+        poses = np.broadcast_to(np.eye(4), (lattice.n_beams, 4, 4)) if m.fusion.per_beam_poses else np.eye(4)
+        m.fuse(frame, poses)
+        got = m.snapshot()
+        it = m.detection.interpreter
+        if m.range_fft is not None:
+            profiles = m.range_fft.arrays["profiles"].get()
+            flags = m.range_fft.arrays["flags"].get()
+            want = oracle.range_profile(frame, m.range_fft.n_fft, window=m.range_fft.window_kind, output="power")
+            err = np.nanmax(np.abs(profiles - want)) / np.nanmax(want)
+            if not err <= SELF_TEST_PROFILE_RTOL:
+                return f"sensor {name}: the range FFT is off by {err:.2g} of the peak (float64 oracle)"
+        else:
+            profiles, flags = frame, None
+        evidence = it.arrays["evidence"].get().reshape(profiles.shape)
+        rows = np.unique(np.linspace(0, lattice.n_beams - 1, SELF_TEST_BEAMS).astype(int))
+        p = profiles.reshape(lattice.n_beams, -1)[rows]
+        noise, _, mask = oracle.cfar(p, m.detection.cfar.config)
+        want_ev = oracle.interpret(p, noise, mask, it.config, it.bin_spacing_m,
+                                   None if flags is None else flags.reshape(-1)[rows])[0]
+        share = float((np.abs(evidence.reshape(lattice.n_beams, -1)[rows].astype(np.int64) - want_ev) <= 1).mean())
+        if share < SELF_TEST_MATCH or not (want_ev != 0).any():
+            return f"sensor {name}: CFAR and eq. 12 agree with the float64 oracle on only {share:.1%} of the bins"
+        sums, updates, ambiguous = oracle.fusion(m.grid.spec, evidence.reshape(lattice.n_beams, -1), lattice,
+                                                 m.fusion.model, poses, m.fusion.bin_spacing_m, m.fusion.first_bin,
+                                                 m.fusion.last_bin, margin=1e-3)
+        clear = (updates > 0) & ~ambiguous
+        share = float((np.abs(got[clear] - sums[clear]) <= updates[clear]).mean()) if clear.any() else 0.0
+        if share < SELF_TEST_MATCH or not (got != 0).any():
+            return f"sensor {name}: the fused map agrees with the float64 oracle on only {share:.1%} of the voxels"
+    return None
+
+
+def _synthetic_frame(mapping, rng):
+    """Noise with one strong echo per beam, in the frame's shape and dtype."""
+    shape = mapping.frame_shape
+    if mapping.range_fft is None:                        # power profiles
+        frame = rng.exponential(1.0, shape).astype(np.float32)
+        bins = rng.integers(shape[-1] // 8, shape[-1] // 2, shape[:-1])
+        np.put_along_axis(frame, bins[..., None], 1e4, axis=-1)
+        return frame
+    n = shape[-1]
+    t = np.arange(n)
+    tone = rng.uniform(0.05, 0.3, shape[:-1])[..., None] * t
+    dtype = mapping.range_fft.dtype
+    if dtype == np.complex64:
+        x = 2000 * np.exp(2j * np.pi * tone) + rng.normal(0, 20, shape) + 1j * rng.normal(0, 20, shape)
+        return x.astype(np.complex64)
+    x = 2000 * np.cos(2 * np.pi * tone) + rng.normal(0, 20, shape)
+    return np.rint(x).astype(dtype)

@@ -7,9 +7,14 @@ and with ``-D`` switches that specialise a kernel (disabled features cost nothin
 """
 
 import contextlib
+import hashlib
+import json
 import logging
 import os
+import signal
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 from radarcl.cl.signature import KernelFunction, parse_kernels
@@ -102,37 +107,149 @@ def _all_devices():
 
 
 _PROBE_SOURCE = "__kernel void probe(__global float *x) { x[get_global_id(0)] = sqrt(x[get_global_id(0)]); }"
-_probed = {}
+_probed = {}                                  # device -> None or the reason it is unusable
 
 _UNKNOWN_CPU_HINT = ("this PoCL's LLVM does not know this CPU (PyPI's PoCL 3.0 has LLVM 14, which "
                      "predates AMD Zen 4/5); install a newer PoCL, e.g. Debian's pocl-opencl-icd "
                      "(make test and make demo do it where they can)")
 
+SELF_TEST = "radarcl.pipeline:self_test"
+"""What the child process runs on a device before radarcl uses it: build every kernel of every
+built-in sensor's pipeline and compare one frame with the float64 oracle. Named, not imported:
+the runtime sits below the pipeline it checks, and the check runs as a program of its own."""
+PROBE_TIMEOUT_S = 600
+VERDICTS = "devices.json"
+
+
+def cache_dir():
+    """radarcl's cache: $XDG_CACHE_HOME/radarcl (default ~/.cache/radarcl)."""
+    root = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(root) / "radarcl"
+
 
 def build_problem(device):
-    """None when ``device`` compiles a small kernel, else the reason it cannot (memoised).
+    """None when ``device`` can run radarcl, else the reason it cannot (memoised per process, and
+    across processes in ``cache_dir()/devices.json`` per device, driver version, radarcl version and
+    kernel sources).
 
-    A device can be listed and still fail every build: PyPI's PoCL 3.0 (LLVM 14) asks LLVM for
-    the host CPU, gets 'generic' on CPUs newer than LLVM 14 (AMD family 26) and every build
-    fails with "unknown target CPU 'generic'". Choosing such a device would fail later, in the
-    first stage, with a compiler log instead of a sentence."""
+    A device can be listed and still fail: PyPI's PoCL 3.0 (LLVM 14) gets 'generic' for CPUs newer
+    than LLVM 14 (AMD family 26) and every build fails with "unknown target CPU 'generic'"; on
+    other CPUs its LLVM aborts the whole process while compiling a kernel ("Cannot emit physreg
+    copy instruction", exit 134). So the check runs in a child process (``radarcl.cl.probe``):
+    a small kernel, then ``SELF_TEST``. A child that dies, fails a build, computes wrong results
+    or runs past ``PROBE_TIMEOUT_S`` makes the device unusable, with the reason."""
     key = device.int_ptr
     if key not in _probed:
-        cl = _cl()
-        try:
-            program = cl.Program(cl.Context([device]), _PROBE_SOURCE)
-            with _quiet_build():
-                program.build()
-            _probed[key] = None
-        except cl.Error as exc:
-            try:
-                said = program.get_build_info(device, cl.program_build_info.LOG).strip()
-            except (cl.Error, UnboundLocalError):
-                said = ""
-            said = said.splitlines()[0] if said else str(exc).splitlines()[0]
-            hint = f"; {_UNKNOWN_CPU_HINT}" if "unknown target CPU" in said else ""
-            _probed[key] = f"cannot build kernels ({said}){hint}"
+        identity = _identity(device)
+        verdicts = _read_verdicts()
+        cached = verdicts.get(identity)
+        if cached is not None:
+            _probed[key] = cached["problem"]
+        else:
+            problem = _probe_in_child(device)
+            _probed[key] = problem
+            verdicts[identity] = dict(problem=problem, device=f"{device.platform.name} / {device.name}",
+                                      driver=device.driver_version, checked=time.strftime("%Y-%m-%dT%H:%M:%S"))
+            _write_verdicts(verdicts)
     return _probed[key]
+
+
+def _identity(device):
+    """The key of a device's verdict: what it is, its driver, and what was checked on it."""
+    from radarcl import __version__
+
+    h = hashlib.sha256()
+    for part in (device.platform.name, device.platform.version, device.name, device.version, device.driver_version,
+                 __version__, _PROBE_SOURCE, SELF_TEST):
+        h.update(str(part).encode() + b"\0")
+    try:
+        directory = kernels_dir()
+        for p in sorted(directory.iterdir()):
+            if p.is_file():
+                h.update(p.name.encode() + b"\0" + p.read_bytes())
+    except (KernelBuildError, OSError):
+        pass
+    return h.hexdigest()
+
+
+def _read_verdicts():
+    """The cached verdicts, each checked; a file that is damaged or not ours counts as empty."""
+    try:
+        data = json.loads((cache_dir() / VERDICTS).read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        return {}
+    if not isinstance(data, dict):
+        return {}
+    return {k: v for k, v in data.items() if isinstance(k, str) and isinstance(v, dict)
+            and (v.get("problem") is None or isinstance(v.get("problem"), str))}
+
+
+def _write_verdicts(verdicts):
+    """Write the verdicts through a temporary file renamed over the cache (atomic for readers);
+    a cache that cannot be written is only a cache."""
+    directory = cache_dir()
+    tmp = directory / f".{VERDICTS}.{os.getpid()}.tmp"
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        tmp.write_text(json.dumps(verdicts, indent=1))
+        os.replace(tmp, directory / VERDICTS)
+    except OSError as exc:
+        log.debug("cannot write the device verdicts in %s: %s", directory, exc)
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def _probe_in_child(device):
+    """Run ``radarcl.cl.probe`` on ``device`` in a child process; None or the reason."""
+    place = next(((p, d) for p, d, _, dev in _all_devices() if dev.int_ptr == device.int_ptr), None)
+    if place is None:
+        return "is not among the listed devices"
+    cmd = [sys.executable, "-m", "radarcl.cl.probe", str(place[0]), str(place[1]), SELF_TEST]
+    env = dict(os.environ, RADARCL_PROBE_SOURCE=_PROBE_SOURCE)
+    log.debug("checking %s / %s in a child process", device.platform.name, device.name)
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=PROBE_TIMEOUT_S, env=env,
+                              stdin=subprocess.DEVNULL)
+    except subprocess.TimeoutExpired:
+        return f"did not finish radarcl's self-test in {PROBE_TIMEOUT_S} s"
+    except OSError as exc:
+        return f"could not be checked ({exc})"
+    lines = [ln for ln in done.stdout.splitlines() if ln.startswith(PROBE_MARK)]
+    if done.returncode == 0 and lines:
+        try:
+            return json.loads(lines[-1][len(PROBE_MARK):])["problem"]
+        except (ValueError, KeyError, TypeError):
+            pass
+    said = [ln for ln in done.stderr.strip().splitlines() if ln.strip()]
+    last = said[-1].strip() if said else ""
+    if done.returncode < 0:
+        how = f"signal {-done.returncode}" + (f" ({signal.Signals(-done.returncode).name})" if
+                                              -done.returncode in signal.valid_signals() else "")
+        return f"crashes while building or running radarcl's kernels ({how}: {last or 'no message'})"
+    return f"failed radarcl's self-test (exit {done.returncode}: {last or 'no message'})"
+
+
+PROBE_MARK = "radarcl-probe: "
+
+
+def probe(device):
+    """In the child (``radarcl.cl.probe``): None when ``device`` builds and runs the small probe
+    kernel, else why not."""
+    cl = _cl()
+    source = os.environ.get("RADARCL_PROBE_SOURCE", _PROBE_SOURCE)
+    try:
+        program = cl.Program(cl.Context([device]), source)
+        with _quiet_build():
+            program.build()
+    except cl.Error as exc:
+        try:
+            said = program.get_build_info(device, cl.program_build_info.LOG).strip()
+        except (cl.Error, UnboundLocalError):
+            said = ""
+        said = said.splitlines()[0] if said else str(exc).splitlines()[0]
+        hint = f"; {_UNKNOWN_CPU_HINT}" if "unknown target CPU" in said else ""
+        return f"cannot build kernels ({said}){hint}"
+    return None
 
 
 def choose_device(spec=None):
@@ -140,8 +257,9 @@ def choose_device(spec=None):
 
     ``spec`` (or the ``RADARCL_DEVICE`` environment variable when ``spec`` is None) selects by
     ``"P:D"`` indices or by a substring of "platform / device". Without either, a GPU is
-    preferred and PoCL's CPU device is the fallback, among the devices that can build a
-    kernel (``build_problem``). Raises ``NoOpenCLError`` when nothing fits.
+    preferred and PoCL's CPU device is the fallback, among the devices that pass radarcl's check
+    (``build_problem``; checked in that order, so only as many as needed). Raises
+    ``NoOpenCLError`` when nothing fits.
     """
     cl = _cl()
     spec = os.environ.get(DEVICE_ENV) if spec is None else spec
@@ -154,22 +272,20 @@ def choose_device(spec=None):
         else:
             matches = [dev for _, _, pl, dev in found if spec.lower() in f"{pl.name} / {dev.name}".lower()]
         if matches:
-            usable = [dev for dev in matches if build_problem(dev) is None]
-            if usable:
-                return usable[0]
+            usable = next((dev for dev in matches if build_problem(dev) is None), None)
+            if usable is not None:
+                return usable
             raise NoOpenCLError(f"{DEVICE_ENV}={spec!r} picks {matches[0].platform.name} / {matches[0].name}, "
                                 f"which {build_problem(matches[0])}")
         listing = "; ".join(f"{p}:{d} {pl.name} / {dev.name}" for p, d, pl, dev in found)
         raise NoOpenCLError(f"{DEVICE_ENV}={spec!r} matches no device; available: {listing}")
-    usable = [(pl, dev) for _, _, pl, dev in found if build_problem(dev) is None]
-    if not usable:
+    order = sorted(found, key=lambda f: (not f[3].type & cl.device_type.GPU,
+                                         "portable computing language" not in f[2].name.lower()))
+    chosen = next((dev for _, _, _, dev in order if build_problem(dev) is None), None)
+    if chosen is None:
         problems = "; ".join(f"{pl.name} / {dev.name}: {build_problem(dev)}" for _, _, pl, dev in found)
-        raise NoOpenCLError(f"no OpenCL device can build radarcl's kernels: {problems}")
-    gpus = [dev for _, dev in usable if dev.type & cl.device_type.GPU]
-    if gpus:
-        return gpus[0]
-    pocl = [dev for pl, dev in usable if "portable computing language" in pl.name.lower()]
-    return (pocl or [usable[0][1]])[0]
+        raise NoOpenCLError(f"no OpenCL device can run radarcl's kernels: {problems}")
+    return chosen
 
 
 def device_report():
@@ -197,6 +313,8 @@ def device_report():
         ]
         if build_problem(device):
             lines.append(f"      UNUSABLE       {build_problem(device)}")
+        else:
+            lines.append("      checked        builds and runs every kernel, agrees with the float64 oracle")
     lines.append(f"(* = chosen; set {DEVICE_ENV}=P:D or a name substring to override)")
     pinned = os.environ.get(AFFINITY_ENV)
     lines.append(f"PoCL CPU workers pinned to cores: {'yes' if pinned == '1' else 'no'} ({AFFINITY_ENV}="
@@ -298,6 +416,28 @@ class Runtime:
             source = path.read_text()
         except OSError as exc:
             raise KernelBuildError(f"cannot read kernel source {path}: {exc}") from exc
+        program, said = self._build(path, source, options)
+        declared = set(parse_kernels(source, path))
+        missing = declared - {k.function_name for k in program.all_kernels()}
+        if missing:
+            # A program that lacks kernels its source declares comes from a damaged driver cache (a
+            # compiler killed mid-build by an earlier process): never used; built again under
+            # options the damaged entry does not match.
+            log.warning("%s built on %s without kernel(s) %s (a damaged driver cache, e.g. PoCL's); building it "
+                        "again past the cache", path.name, self.name, ", ".join(sorted(missing)))
+            program, said = self._build(path, source, options + ["-DRADARCL_CACHE_BYPASS=1"])
+            missing = declared - {k.function_name for k in program.all_kernels()}
+            if missing:
+                raise KernelBuildError(f"building {path} on {self.name} gave no kernel {', '.join(sorted(missing))} "
+                                       "even past the driver's cache; this device cannot run radarcl")
+        log.debug("built %s with %s%s", path.name, options, f"; the compiler said:\n{said}" if said else "")
+        kernel_set = KernelSet(program, path, options, source)
+        self._programs[key] = kernel_set
+        return kernel_set
+
+    def _build(self, path, source, options):
+        """(the built program, what the compiler said) of ``source``, or KernelBuildError with the log."""
+        cl = _cl()
         program = cl.Program(self.context, source)
         try:
             with _quiet_build() as said:
@@ -309,10 +449,7 @@ class Runtime:
                 build_log = "(no build log)"
             raise KernelBuildError(f"building {path} failed on {self.name}\n"
                                    f"options: {' '.join(options)}\nlog:\n{build_log or exc}") from exc
-        log.debug("built %s with %s%s", path.name, options, f"; the compiler said:\n{said[0]}" if said[0] else "")
-        kernel_set = KernelSet(program, path, options, source)
-        self._programs[key] = kernel_set
-        return kernel_set
+        return program, said[0]
 
     def max_local_size(self, kernel):
         """Largest work-group size this device allows for ``kernel`` (a ``KernelFunction`` or

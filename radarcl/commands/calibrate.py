@@ -3,7 +3,8 @@ scenes (``jobs.calibrate``); what both calibration commands write (``fit_outputs
 
 import json
 
-from radarcl.commands.options import positive_float, runtime
+from radarcl.commands.options import bounded_int, positive_float, runtime
+from radarcl.errors import ConfigError
 from radarcl.io import files
 
 SUMMARY = ("fit the interpreter's constants by maximum likelihood on the training scenes; --save writes them as "
@@ -27,7 +28,7 @@ def add_fit_outputs(parser):
 
 def add_arguments(parser):
     parser.add_argument("--voxel", type=positive_float, default=0.2, help="voxel edge [m] (default: %(default)s)")
-    parser.add_argument("--seeds", type=int, nargs="+", default=None,
+    parser.add_argument("--seeds", type=bounded_int(0, 2 ** 32 - 1), nargs="+", default=None,
                         help="training scene seeds (default: generator.TRAIN_SEEDS; the last third validates)")
     parser.add_argument("--unknown-behind", action="store_true",
                         help="hold E_l at 0: the map stays unknown behind the first surface (shadows are unknowable)")
@@ -63,6 +64,9 @@ def run(args):
     from radarcl.jobs import calibrate
 
     paths = fit_outputs(args)
+    if args.seeds is not None and len(set(args.seeds)) != len(args.seeds):
+        raise ConfigError(f"--seeds {' '.join(map(str, args.seeds))}: a scene seed appears twice (fitting and "
+                          "validating on the same scene proves nothing)")
     config, result = calibrate.run(runtime(), args.model, args.voxel, args.seeds, report=print,
                                    unknown_behind=args.unknown_behind)
     print("\n".join(calibrate.format_lines(result)))

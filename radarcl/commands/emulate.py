@@ -1,7 +1,7 @@
 """`radarcl emulate`: a recording played onto a pseudo-terminal (or a port) as a radar would
 send it, with faults (``io.emulator``)."""
 
-import os
+import threading
 import time
 from pathlib import Path
 
@@ -9,7 +9,7 @@ import numpy as np
 
 from radarcl.commands.options import positive_float, positive_int
 from radarcl.config import sensors
-from radarcl.errors import ConfigError
+from radarcl.errors import ConfigError, Terminated
 from radarcl.io import emulator, recording
 from radarcl.io.inputs import open_input
 from radarcl.io.stream import PROTOCOLS, STREAM_MAGIC, open_port, read_stream
@@ -55,30 +55,59 @@ def add_arguments(parser):
 def run(args):
     faults = emulator.Faults.parse(args.faults)
     baud = None if args.baud == "max" else _baud(args.baud)
+    if not 0 <= args.delay < 3600:
+        raise ConfigError(f"--delay must lie in [0, 3600) seconds, got {args.delay}")
+    if not args.frame_period <= MAX_FRAME_PERIOD_S:
+        raise ConfigError(f"--frame-period must lie in (0, {MAX_FRAME_PERIOD_S:g}] seconds, got {args.frame_period:g}")
+    if args.link and not args.pty:
+        raise ConfigError("--link names the pseudo-terminal of --pty; with --port there is none")
+    emulator.check_link(args.link)
     chunks, due = _emulated_chunks(args)
     damaged, intact = faults.apply(chunks)
+    name = None
+    halt = threading.Event()
     if args.pty:
         master, name, slave = emulator.open_pty(args.link)
-        write, close = (lambda b: os.write(master, b)), (lambda: emulator.close_pty(master, slave))
+        write = emulator.pty_writer(master, halt)
         print(f"emulating on {name}" + (f" (link {args.link})" if args.link else "") + f": {len(chunks)} packets, "
               f"{sum(map(len, damaged))} bytes at {args.baud} baud; radarcl live {args.link or name}", flush=True)
     else:
         port = open_port(args.port, baud or 921600)
-        write, close = port.write, port.close
+        write = port.write
         print(f"emulating on {args.port}: {len(chunks)} packets", flush=True)
-    if not 0 <= args.delay < 3600:
-        raise ConfigError(f"--delay must lie in [0, 3600) seconds, got {args.delay}")
-    if args.wait_for is not None:
-        _wait_for(Path(args.wait_for))
-    emu = emulator.Emulator(damaged, write, baud, faults, close, loop=args.loop, due_s=due, delay_s=args.delay).start()
+    emu = emulator.Emulator(damaged, write, baud, faults, None, loop=args.loop, due_s=due, delay_s=args.delay)
+    interrupted, unread = None, 0
     try:
-        while not emu.done.wait(0.5):
+        if args.wait_for is not None:
+            _wait_for(Path(args.wait_for))
+        emu.start()
+        while not emu.done.wait(0.05):
             pass
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, Terminated) as exc:
+        interrupted = exc
+        halt.set()                                    # a write blocked on a full pty gives up at once
         emu.stop()
+    finally:
+        halt.set()
+        if args.pty:                                  # the last bytes still reach a reader, unless stopped
+            try:
+                unread = emulator.close_pty(master, slave, drain=interrupted is None)
+            finally:
+                emulator.remove_link(args.link, name)
+        else:
+            port.close()
+    if emu.error is not None:
+        raise ConfigError(f"the emulator stopped: {emu.error}") from emu.error
     print(f"sent {emu.sent} bytes in {emu.packets_sent} packets ({sum(intact)} intact)"
-          + ("; disconnected as asked" if emu.disconnected.is_set() else ""))
+          + ("; disconnected as asked" if emu.disconnected.is_set() else "")
+          + (f"; {unread} bytes were never read (no reader took them before the pty closed)" if unread else ""),
+          flush=True)
+    if interrupted is not None:
+        raise interrupted
     return 0
+
+
+MAX_FRAME_PERIOD_S = 3600.0
 
 
 def _wait_for(path, poll_s=0.02):
@@ -94,8 +123,9 @@ def _baud(text):
         value = float(text)
     except ValueError:
         value = -1
-    if not 0 < value <= 1e9:
-        raise ConfigError(f"--baud must be a positive number or 'max', got {text!r}")
+    lo, hi = emulator.Emulator.MIN_BAUD, emulator.Emulator.MAX_BAUD
+    if not lo <= value <= hi:
+        raise ConfigError(f"--baud must be a number in [{lo}, {hi:g}] or 'max', got {text!r}")
     return value
 
 
@@ -109,7 +139,7 @@ def _emulated_chunks(args):
             if f.read(len(STREAM_MAGIC)) == STREAM_MAGIC:
                 _, records = read_stream(path)
                 timed = list(records)                   # played at the pace it was recorded
-                return [d for _, d in timed], [(t - timed[0][0]) / 1e9 for t, _ in timed] if timed else None
+                return [d for _, d in timed], emulator.due_times([t for t, _ in timed])
     sensor = sensors.load(args.sensor or _recording_sensor(path))
     source = open_input(sensor, path)
     n = len(source) if args.frames is None else min(args.frames, len(source))

@@ -1,9 +1,13 @@
 """`radarcl export`: a map written for other tools (``maps.exports``), saying what the map says."""
 
-from radarcl.commands.options import add_output
+import math
+from pathlib import Path
+
+from radarcl.commands.options import add_output, add_salvage, say_lost
+from radarcl.errors import ConfigError
 from radarcl.io import files
 from radarcl.maps import disk, exports
-from radarcl.maps.map import FREE_NATS, OCCUPIED_NATS, Map
+from radarcl.maps.map import FREE_NATS, OCCUPIED_NATS, Map, check_thresholds
 
 SUMMARY = "write a map for other tools: OctoMap, PLY, VTK, a ROS costmap or bag"
 DESCRIPTION = ("Every format says what the map says: a voxel is occupied above --occupied-threshold, free below "
@@ -13,6 +17,7 @@ DESCRIPTION = ("Every format says what the map says: a voxel is occupied above -
                "a PLY mesh; vti: the dense log-odds and an observed mask as VTK image data for ParaView; costmap: "
                "a ROS map_server PGM + YAML projected over --band (occupied, free, unknown); rosbag: a ROS 2 bag "
                "with the same grid on /map (latched) and the occupied voxels on /map/points.")
+BAG_FILES = (".db3", ".mcap", ".db3-shm", ".db3-wal", ".db3-journal")
 
 
 def add_arguments(parser):
@@ -32,15 +37,20 @@ def add_arguments(parser):
     p.add_argument("--colour", choices=exports.COLOURS, default="log-odds", help="ply: colour the points by (default: "
                                                                                "%(default)s)")
     p.add_argument("--frame-id", default="map", help="rosbag: the frame of the messages (default: %(default)s)")
+    add_salvage(p)
 
 
 def run(args):
     exports.check_suffix(args.to, args.out)
-    directory = ("ROS 2 bag", exports.is_bag) if args.to == "rosbag" else None
+    check_thresholds(args.occupied, args.free)
+    directory = ("ROS 2 bag", _only_a_bag) if args.to == "rosbag" else None
     out = files.check(args.out, args.force, inputs=[args.map], what="export", directory=directory)
     if args.to == "costmap":
         files.check(out.with_suffix(".yaml"), args.force, inputs=[args.map], what="costmap YAML")
-    m = Map.open(args.map)
+    if args.band is not None and not all(math.isfinite(b) for b in args.band):
+        raise ConfigError(f"--band must be two finite heights [m], got {args.band}")
+    m = Map.open(args.map, salvage=args.salvage)
+    say_lost(m.lost or [])
     thresholds = dict(occupied_nats=args.occupied, free_nats=args.free)
     if args.to == "octomap":
         result = exports.octomap(m, out, resample=args.resample, **thresholds)
@@ -67,3 +77,10 @@ def summary(args, result):
             else f"occupied above {args.occupied:g} nat" if args.to != "vti" else "every voxel's log-odds")
     extra = f"; {result['lattice']}" if "lattice" in result else ""
     return f"wrote {written} ({args.to}: {counts}; {rule}{extra})"
+
+
+def _only_a_bag(path):
+    """A directory --force may replace with a bag: a ROS 2 bag (``exports.is_bag``) holding
+    nothing but a bag's files; notes or data of anyone else's beside them keep it."""
+    return exports.is_bag(path) and all(p.is_file() and (p.name == "metadata.yaml" or p.name.endswith(BAG_FILES))
+                                        for p in Path(path).iterdir())

@@ -3,10 +3,14 @@
 ``summary``)."""
 
 import argparse
+import contextlib
+import json
+import os
 import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -79,10 +83,10 @@ def pose_source(args):
     return PoseSource(mount, None if track is None else (track.times_ns, track.poses))
 
 
-def make_mapper(args, config, out, inputs, on_fused=None):
-    """The ``livemap.LiveMapper`` saving to ``out``."""
+def make_mapper(args, config, out, inputs, on_fused=None, poses=None):
+    """The ``livemap.LiveMapper`` saving to ``out`` (poses: a ``PoseSource``, default --poses/--mount's)."""
     saver = disk.MapSaver(out, config.sensor.toml(), config.as_dict(), inputs)
-    return LiveMapper(runtime(), config, saver, pose_source(args), on_fused)
+    return LiveMapper(runtime(), config, saver, poses or pose_source(args), on_fused)
 
 
 def run(args):
@@ -94,28 +98,32 @@ def run(args):
     args.port = args.port or args.port_option
     config = resolve_config(args)
     out = disk.check_output(args.out, args.force)
-    json_status = files.check(args.json_status, True, what="status file") if args.json_status else None
-    port = open_port(args.port, args.baud)
-    recorder = StreamRecorder(args.record, dict(protocol=config.sensor.protocol, sensor=config.sensor.name,
-                                                baud=args.baud, port=args.port)) if args.record else None
-    session = Session(config.sensor, recorder)
+    json_status = check_status_file(args.json_status, args.force) if args.json_status else None
+    poses = pose_source(args)                        # every argument checked before a file is made
     view = _ViewServer(args) if (args.serve is not None or args.view) else None
-    mapper = make_mapper(args, config, out, [], view.changed if view else None)
-    mapper.prepare()                                 # compile before the radar streams
-    if view:
-        view.start(mapper)
-    say = None if args.quiet else (lambda line: print("\r" + line, end="", file=sys.stderr, flush=True))
-    started = time.monotonic()
-    stop = threading.Event()
-    reader = PortReader(port, session.feed).start()
-    print(f"radarcl live: reading {args.port} at {args.baud} baud as sensor {config.sensor.name} "
-          f"({config.sensor.protocol} protocol) into {out}; Ctrl-C saves and stops", file=sys.stderr, flush=True)
+    port = open_port(args.port, args.baud)
+    # the header keeps what made the map, so that a replay makes the same one without being told
+    recorder = StreamRecorder(args.record, dict(protocol=config.sensor.protocol, sensor=config.sensor.name,
+                                                baud=args.baud, port=args.port, config=config.as_dict(),
+                                                mount=args.mount, poses=args.poses)) if args.record else None
+    reader = None
     try:
+        session = Session(config.sensor, recorder)
+        mapper = make_mapper(args, config, out, [], view.changed if view else None, poses)
+        mapper.prepare()                             # compile before the radar streams
+        if view:
+            view.start(mapper)
+        say = None if args.quiet else (lambda line: print("\r" + line, end="", file=sys.stderr, flush=True))
+        started = time.monotonic()
+        stop = threading.Event()
+        reader = PortReader(port, session.feed).start()
+        print(f"radarcl live: reading {args.port} at {args.baud} baud as sensor {config.sensor.name} "
+              f"({config.sensor.protocol} protocol) into {out}; Ctrl-C saves and stops", file=sys.stderr, flush=True)
         while True:
             watch = threading.Thread(target=_watch, args=(reader, stop, args.duration, started), daemon=True)
             watch.start()
             s = live.run(session, mapper, checkpoint_s=args.checkpoint, say=say, json_status=json_status, stop=stop,
-                         after_fuse=view.publish if view else None)
+                         after_fuse=view.publish if view else None, stop_feeding=reader.stop)
             if reader.lost is None or args.retry is None or s["interrupted"]:
                 break
             print(f"\nradarcl: the port {args.port} went away ({reader.lost}); the map is saved ({s['saved_beams']} "
@@ -124,18 +132,45 @@ def run(args):
             stop.clear()
             reader = PortReader(port, session.feed).start()
     finally:
-        reader.stop()
+        if reader is not None:
+            reader.stop()
+        else:
+            port.close()
         if recorder is not None:
             recorder.close()
+            if recorder.bytes == 0:                  # a header and no byte: nothing to replay, and it
+                with contextlib.suppress(OSError):   # would block the next run's --record
+                    os.unlink(args.record)
         if view:
             view.close()
     if say:
         print(file=sys.stderr)
+    if reader.ended is not None and not s["interrupted"]:
+        print(f"radarcl live: the stream on {args.port} ended ({reader.ended})", file=sys.stderr)
+    if recorder is not None and recorder.bytes == 0:
+        print(f"radarcl live: no byte arrived; {args.record} was not kept", file=sys.stderr)
+    if not s["beams"]:
+        raise ConfigError(f"no beam was fused ({counts_text(s)}); {out} was not written")
     print(summary(s, out))
     if reader.lost is not None and not s["interrupted"] and args.retry is None:
         raise ConfigError(f"the radar's port {args.port} went away ({reader.lost}); the map is saved in {out} "
                           f"({s['saved_beams']} beams); --retry S waits for it to come back")
     return 0
+
+
+def check_status_file(path, force):
+    """--json-status FILE: a path that may be written; an existing file is replaced only when it
+    is a status file radarcl wrote (a JSON object with its counts) or with --force."""
+    path = Path(path)
+    if path.is_file() and not force:
+        try:
+            ours = {"beams", "frames", "bytes_in"} <= set(json.loads(path.read_text()))
+        except (OSError, ValueError, TypeError, UnicodeDecodeError):
+            ours = False
+        if not ours:
+            raise ConfigError(f"status file {path} exists and is not a radarcl status file; pass --force to replace it")
+        force = True
+    return files.check(path, force, what="status file")
 
 
 def _watch(reader, stop, duration, started):
@@ -157,9 +192,15 @@ def summary(s, out):
     """The line a live or replayed stream ends with."""
     lat = "" if s["latency_p50_ms"] is None else f", latency p50 {s['latency_p50_ms']:.0f} ms p99 {s['latency_p99_ms']:.0f} ms"
     return (f"{'interrupted: ' if s.get('interrupted') else ''}fused {s['beams']} beams of {s['frames']} frames in "
-            f"{s['wall_s']:.1f} s ({s['beams_per_s']:.0f}/s{lat}); {s['bytes_in']} bytes in, {s['bytes_dropped']} "
-            f"dropped, {s['crc_failures']} CRC failures, {s['sequence_gaps']} packets missing, {s['duplicates']} "
-            f"duplicates; wrote {out}")
+            f"{s['wall_s']:.1f} s ({s['beams_per_s']:.0f}/s{lat}); {counts_text(s)}; wrote {out}")
+
+
+def counts_text(s):
+    """What arrived and what did not, in words."""
+    bad = f", {s['bad_poses']} with a pose that is not a rigid transform" if s.get("bad_poses") else ""
+    return (f"{s['bytes_in']} bytes in, {s['bytes_dropped']} dropped, {s['crc_failures']} CRC failures, "
+            f"{s['sequence_gaps']} packets missing between those that arrived, {s['beams_missing']} beams missing "
+            f"from the frames seen, {s['duplicates']} duplicates, {s['refused']} refused{bad}")
 
 
 class _ViewServer:

@@ -124,6 +124,21 @@ def read_trajectory(args):
     return track
 
 
+def add_salvage(p):
+    """--salvage: read a damaged map store's intact bricks and list the lost ones."""
+    p.add_argument("--salvage", action="store_true",
+                   help="read a damaged map store anyway: its damaged bricks are left out and each lost brick is "
+                        "listed (without it a damaged store is refused)")
+
+
+def say_lost(lost):
+    """Print what ``--salvage`` left out (every lost brick's key) on stderr."""
+    from radarcl.maps.disk import lost_lines
+
+    for line in lost_lines(lost):
+        print(f"radarcl: salvage: {line}", file=sys.stderr)
+
+
 def add_progress(p):
     """--no-progress."""
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")

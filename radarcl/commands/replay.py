@@ -3,14 +3,15 @@
 
 import sys
 
-from radarcl.commands.live import add_pose_options, make_mapper, summary
+from radarcl.commands.live import counts_text, add_pose_options, make_mapper, summary
 from radarcl.commands.options import add_config, add_output, resolve_config
 from radarcl.errors import ConfigError
 from radarcl.maps import disk
 
 SUMMARY = "fuse a recorded stream (radarcl live --record) again: the same map, bit for bit"
 DESCRIPTION = ("Feeds a stream file through the same parser and mapper as radarcl live, as fast as it parses or "
-               "at the recorded pace; the map is bit-identical to the live one.")
+               "at the recorded pace, with the sensor, configuration and --mount/--poses the recording's header "
+               "keeps (options given here take precedence); the map is bit-identical to the live one.")
 
 
 def add_arguments(parser):
@@ -27,13 +28,22 @@ def run(args):
     out = disk.check_output(args.out, args.force, inputs=[args.stream])
 
     def factory(header):
+        recorded = None
         if args.sensor is None and args.config is None:
-            if not isinstance(header.get("sensor"), str):
+            if not isinstance(header.get("sensor"), str) or not header["sensor"]:
                 raise ConfigError(f"{args.stream} does not name its sensor; give --sensor")
             args.sensor = header["sensor"]
-        config = resolve_config(args)
+            recorded = header.get("config")          # what live used, below any --set given here
+            if recorded is not None and not isinstance(recorded, dict):
+                raise ConfigError(f"{args.stream}: its header's configuration is not a table")
+        if args.mount is None and args.poses is None:
+            args.mount = header.get("mount") if isinstance(header.get("mount"), str) else None
+            args.poses = header.get("poses") if isinstance(header.get("poses"), str) else None
+        config = resolve_config(args, program=recorded)
         return config.sensor, make_mapper(args, config, out, [args.stream])
 
     _, s, header = live.replay(args.stream, factory, args.speed, say=lambda line: print(line, file=sys.stderr))
+    if not s["beams"]:
+        raise ConfigError(f"no beam of {args.stream} could be fused ({counts_text(s)}); {out} was not written")
     print(summary(s, out))
     return 0

@@ -112,7 +112,7 @@ class Resolved:
                       f"{origins['interpret.range_max_m']}) lies beyond sensor {sensor.name}'s last bin; "
                       f"clipped to {hi:g} m",)
             values["interpret.range_max_m"] = hi
-            origins["interpret.range_max_m"] += f", clipped to the last bin"
+            origins["interpret.range_max_m"] += ", clipped to the last bin"
             for name in ("grid.origin_m", "grid.size_m"):
                 if origins[name].endswith("field of view"):
                     del values[name], origins[name]
@@ -206,6 +206,11 @@ def resolve(sensor=None, path=None, flags=None, program=None, force_sensor=False
     by the calling program (a job's own choice, below the user's file and flags). A file made
     for another sensor is refused, or with ``force_sensor`` used with its ``SENSOR_KEYS``
     derived again (see the module)."""
+    if path is not None and not isinstance(path, (str, Path)):
+        raise ConfigError(f"a configuration file is a path, got {path!r}")
+    for what, given in (("flags", flags), ("program", program)):
+        if given is not None and not isinstance(given, dict):
+            raise ConfigError(f"{what} must be a dict {{'section.key': value}}, got {given!r}")
     from_file, notes = {}, ()
     if path is not None:
         from_file = read(path)

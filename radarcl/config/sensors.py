@@ -48,28 +48,31 @@ MAINLOBE_CELLS = 4.0       # Hann mainlobe, null to null, in resolution cells (H
 TRAIN_CELLS = 4.0          # training window per side, in resolution cells
 _NEEDS = {"samples": ("waveform", "beams", "range"), "profiles": ("beams", "range")}
 PADDING = 4                # n_fft = PADDING x the next power of two >= n_samples
+MAX_EXTENDS = 16           # profiles chained by ``extends``: deeper is a mistake, not a sensor
 
 _N = tomlfile.number
 _SCHEMA = {                # section -> key -> check (value -> value, or ConfigError(reason))
     "": {"name": tomlfile.text, "description": tomlfile.text, "extends": tomlfile.text,
          "input": lambda v: tomlfile.choice(v, INPUTS)},
-    "waveform": {"carrier_hz": lambda v: _N(v, 0, lo_open=True, unit="Hz"),
-                 "bandwidth_hz": lambda v: _N(v, 0, lo_open=True, unit="Hz"),
-                 "sweep_time_s": lambda v: _N(v, 0, lo_open=True, unit="s"),
-                 "sample_rate_hz": lambda v: _N(v, 0, lo_open=True, unit="Hz"),
+    # Bounds: what any radar has, with room; beyond them a derived quantity (c / 2B, the bin
+    # spacing, the wavelength) overflows or vanishes and the map would be silently wrong.
+    "waveform": {"carrier_hz": lambda v: _N(v, 1e6, 1e13, unit="Hz"),
+                 "bandwidth_hz": lambda v: _N(v, 1e3, 1e12, unit="Hz"),
+                 "sweep_time_s": lambda v: _N(v, 1e-9, 10.0, unit="s"),
+                 "sample_rate_hz": lambda v: _N(v, 1.0, 1e12, unit="Hz"),
                  "n_samples": lambda v: tomlfile.integer(v, 2, 1 << 20),
                  "sample_type": lambda v: tomlfile.choice(v, tuple(SAMPLE_TYPES))},
-    "range": {"range_min_m": lambda v: _N(v, 0, unit="m"), "range_max_m": lambda v: _N(v, 0, lo_open=True, unit="m"),
+    "range": {"range_min_m": lambda v: _N(v, 0, 1e5, unit="m"), "range_max_m": lambda v: _N(v, 1e-3, 1e5, unit="m"),
               "bin_spacing_m": lambda v: _N(v, 0, 1e3, lo_open=True, unit="m"),
               "n_bins": lambda v: tomlfile.integer(v, 1, 1 << 20),
               "resolution_m": lambda v: _N(v, 0, 1e3, lo_open=True, unit="m"),
-              "carrier_hz": lambda v: _N(v, 0, lo_open=True, unit="Hz")},
+              "carrier_hz": lambda v: _N(v, 1e6, 1e13, unit="Hz")},
     "beams": {"n_azimuth": lambda v: tomlfile.integer(v, 1, 1 << 16), "n_elevation": lambda v: tomlfile.integer(v, 1, 1 << 10),
               "azimuth_step_deg": lambda v: _N(v, 0, 360, unit="deg"), "elevation_step_deg": lambda v: _N(v, 0, 180, unit="deg"),
-              "beamwidth_az_deg": lambda v: _N(v, 0, 179, lo_open=True, unit="deg"),
-              "beamwidth_el_deg": lambda v: _N(v, 0, 179, lo_open=True, unit="deg"),
+              "beamwidth_az_deg": lambda v: _N(v, 1e-3, 179, unit="deg"),
+              "beamwidth_el_deg": lambda v: _N(v, 1e-3, 179, unit="deg"),
               "spinning": tomlfile.boolean},
-    "mounting": {"height_m": lambda v: _N(v, 0, lo_open=True, unit="m"),
+    "mounting": {"height_m": lambda v: _N(v, 1e-3, 1e4, unit="m"),
                  "lowest_elevation_deg": lambda v: _N(v, -89, 0, lo_open=True, unit="deg"),
                  "ground_elevation_deg": lambda v: _N(v, -89, 0, lo_open=True, unit="deg")},
     "stream": {"protocol": lambda v: tomlfile.choice(v, PROTOCOLS),
@@ -288,6 +291,9 @@ def _read(spec, seen=()):
         if isinstance(value, dict):
             if key == "defaults":
                 for section, table in value.items():
+                    if not isinstance(table, dict):
+                        raise ConfigError(f"{source.where('defaults', section)}: [defaults] holds tables "
+                                          f"[defaults.<section>] of configuration keys, got {section} = {table!r}")
                     tables[f"defaults.{section}"] = table
             else:
                 tables[key] = value
@@ -305,6 +311,9 @@ def _read(spec, seen=()):
                 raise ConfigError(f"{source.where(section, key)} {exc}") from None
     base = tables[""].get("extends")
     if base is not None:
+        if len(seen) >= MAX_EXTENDS:
+            raise ConfigError(f"{source.name}: profiles extend each other more than {MAX_EXTENDS} deep "
+                              f"({' -> '.join(seen[:3])} -> ... -> {base})")
         if base in seen:
             raise ConfigError(f"{source.name}: profiles extend each other in a circle: {' -> '.join(seen + (base,))}")
         parent, _ = _read(base, seen + (base,))

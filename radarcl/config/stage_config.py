@@ -7,6 +7,7 @@ The defaults are the radar of Foessel-Bunting §2.3: a bistatic 77 GHz FMCW unit
 
 import functools
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,25 +20,35 @@ from radarcl.errors import ConfigError
 NYQUIST_SLACK = 1e-3
 
 
+def _is_real(value):
+    """A real number, numpy's scalars included (np.float32(0.01) is a valid pfa); never a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def _is_int(value):
+    """An integer, numpy's included; never a bool."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+
+
 def _require(condition, message):
     if not condition:
         raise ConfigError(message)
 
 
 def _positive_finite(name, value):
-    _require(isinstance(value, (int, float)) and not isinstance(value, bool)
+    _require(_is_real(value)
              and math.isfinite(value) and value > 0,
              f"{name} must be a positive finite number, got {value!r}")
 
 
 def _positive_int(name, value):
-    _require(isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value > 0,
+    _require(_is_int(value) and value > 0,
              f"{name} must be a positive integer, got {value!r}")
 
 
 def is_power_of_two(n):
     """True for 1, 2, 4, 8, ... (integers only)."""
-    return isinstance(n, (int, np.integer)) and n > 0 and (n & (n - 1)) == 0
+    return _is_int(n) and n > 0 and (n & (n - 1)) == 0
 
 
 @dataclass(frozen=True)
@@ -70,8 +81,18 @@ class RadarConfig:
             _positive_finite(name, getattr(self, name))
         for name in ("n_samples", "n_azimuth", "n_elevation"):
             _positive_int(name, getattr(self, name))
-        _require(isinstance(self.complex_samples, bool),
+        _require(isinstance(self.complex_samples, (bool, np.bool_)),
                  f"complex_samples must be True or False, got {self.complex_samples!r}")
+        with np.errstate(all="ignore"):
+            derived = {"range resolution c / 2B [m]": self.range_resolution_m, "wavelength [m]": self.wavelength_m,
+                       "beat frequency at range_max_m [Hz] (eq. 10)": self.max_beat_frequency_hz}
+        for what, value in derived.items():
+            _require(math.isfinite(value) and value > 0,
+                     f"the {what} comes out as {value:g}: carrier_hz {self.carrier_hz:g}, bandwidth_hz "
+                     f"{self.bandwidth_hz:g}, sweep_time_s {self.sweep_time_s:g} describe no radar")
+        _require(self.range_resolution_m < self.range_max_m,
+                 f"the range resolution c / 2B = {self.range_resolution_m:.3g} m (bandwidth_hz {self.bandwidth_hz:g}) "
+                 f"is not below range_max_m = {self.range_max_m:g} m: the sweep resolves nothing in its range")
         _require(self.n_samples >= 2, f"n_samples must be at least 2, got {self.n_samples}")
         _require(self.beamwidth_az_deg < 180 and self.beamwidth_el_deg < 180,
                  "beamwidths must be below 180 deg, got "
@@ -82,7 +103,7 @@ class RadarConfig:
         _require(sampled <= self.sweep_time_s * (1 + 1e-9),
                  f"{self.n_samples} samples at {self.sample_rate_hz:g} Hz last {sampled * 1e6:.1f} us, "
                  f"longer than the {self.sweep_time_s * 1e6:.1f} us sweep")
-        _require(isinstance(self.range_min_m, (int, float)) and math.isfinite(self.range_min_m)
+        _require(_is_real(self.range_min_m) and math.isfinite(self.range_min_m)
                  and 0 <= self.range_min_m < self.range_max_m,
                  f"need 0 <= range_min_m < range_max_m, got {self.range_min_m!r} and {self.range_max_m!r}")
         f_max = float(self.max_beat_frequency_hz)
@@ -211,7 +232,7 @@ class CfarConfig:
     def __post_init__(self):
         _require(self.kind in cfar_theory.CFAR_KINDS,
                  f"CFAR kind must be one of {cfar_theory.CFAR_KINDS}, got {self.kind!r}")
-        _require(isinstance(self.guard, (int, np.integer)) and not isinstance(self.guard, bool)
+        _require(_is_int(self.guard)
                  and self.guard >= 0, f"guard must be an integer >= 0, got {self.guard!r}")
         _positive_int("train", self.train)
         most = MAX_TRAIN_OS if self.kind == "os" else MAX_TRAIN
@@ -220,17 +241,17 @@ class CfarConfig:
                                                                 if self.kind == "os" else
                                                                 "its float32 sums must stay finite"))
         _require(self.guard <= MAX_GUARD, f"guard must be at most {MAX_GUARD} cells per side, got {self.guard}")
-        _require(isinstance(self.pfa, (int, float)) and 0 < self.pfa < 1,
+        _require(_is_real(self.pfa) and 0 < self.pfa < 1,
                  f"pfa must lie strictly between 0 and 1, got {self.pfa!r}")
         if self.kind == "os":
             if self.rank is None:
                 object.__setattr__(self, "rank", cfar_theory.default_rank(self.n_train))
-            _require(isinstance(self.rank, (int, np.integer)) and 1 <= self.rank <= self.n_train,
+            _require(_is_int(self.rank) and 1 <= self.rank <= self.n_train,
                      f"OS-CFAR rank must be in [1, {self.n_train}] (2 x train cells), got {self.rank!r}")
         else:
             _require(self.rank is None, f"rank applies to OS-CFAR only, got rank={self.rank!r} "
                                         f"for kind {self.kind!r}")
-        _require(isinstance(self.noise_floor, (int, float)) and 1e-37 <= self.noise_floor < 1e37,
+        _require(_is_real(self.noise_floor) and 1e-37 <= self.noise_floor < 1e37,
                  f"noise_floor must lie in [1e-37, 1e37] (a normal float32), got {self.noise_floor!r}")
         _require(self.alpha * self.noise_floor >= 1.2e-38,
                  f"alpha x noise_floor = {self.alpha * self.noise_floor:.3g} is below the smallest normal "
@@ -305,7 +326,7 @@ class InterpretConfig:
             object.__setattr__(self, "e_high_far", self.e_high)
         for name in ("k_occ", "e_high", "e_low", "range_min_m", "range_max_m", "wide_pulse_m"):
             value = getattr(self, name)
-            _require(isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value),
+            _require(_is_real(value) and math.isfinite(value),
                      f"{name} must be a finite number, got {value!r}")
         _require(self.k_occ >= 0, f"k_occ must be >= 0 (a stronger echo is more evidence), got {self.k_occ}")
         _require(self.e_high <= 0 and self.e_low <= 0,
@@ -316,9 +337,9 @@ class InterpretConfig:
         _require(self.wide_pulse_m > 0, f"wide_pulse_m must be positive, got {self.wide_pulse_m}")
         _positive_int("max_pulses", self.max_pulses)
         _require(self.model in INTERPRETERS, f"model must be one of {INTERPRETERS}, got {self.model!r}")
-        _require(isinstance(self.surface_db, (int, float)) and math.isfinite(self.surface_db),
+        _require(_is_real(self.surface_db) and math.isfinite(self.surface_db),
                  f"surface_db must be a finite number, got {self.surface_db!r}")
-        _require(isinstance(self.e_high_far, (int, float)) and math.isfinite(self.e_high_far) and self.e_high_far <= 0,
+        _require(_is_real(self.e_high_far) and math.isfinite(self.e_high_far) and self.e_high_far <= 0,
                  f"e_high_far is evidence of emptiness and must be a finite number <= 0, got {self.e_high_far!r}")
 
     def bin_interval(self, bin_spacing_m, n_bins):

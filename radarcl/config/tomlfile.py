@@ -7,7 +7,9 @@ exactly (``repr`` of a float round-trips), so no TOML writer is needed as a depe
 """
 
 import math
+import numbers
 import re
+import stat
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,11 +47,24 @@ class Source:
         return f"{at}: {what}" + (f" {key}" if key is not None else "")
 
 
+MAX_BYTES = 1 << 20           # a profile or configuration is a few kB; anything far larger is not one
+
+
 def load(path):
-    """(dict, Source) of a TOML file; ConfigError names the file and what is wrong."""
+    """(dict, Source) of a TOML file; ConfigError names the file and what is wrong. A pipe or
+    socket is refused before it is opened (reading one with no writer would wait for ever), and
+    at most ``MAX_BYTES`` are read (``/dev/zero`` never ends)."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        mode = path.stat().st_mode
+        if stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode) or stat.S_ISDIR(mode):
+            kind = "a directory" if stat.S_ISDIR(mode) else "a pipe or socket"
+            raise ConfigError(f"cannot read {path}: it is {kind}, not a TOML file")
+        with open(path, "rb") as f:
+            raw = f.read(MAX_BYTES + 1)
+        if len(raw) > MAX_BYTES:
+            raise ConfigError(f"cannot read {path}: more than {MAX_BYTES >> 20} MiB, not a profile or configuration")
+        text = raw.decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"cannot read {path}: {exc}") from exc
     return loads(text, str(path)), Source(str(path), text)
@@ -61,12 +76,15 @@ def loads(text, name="<text>"):
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{name}: not valid TOML: {exc}") from exc
+    except RecursionError:
+        raise ConfigError(f"{name}: arrays or tables nested too deeply to be a profile or configuration") from None
 
 
 # -- value checks: each returns the value in its Python type or raises ConfigError(reason) ------
 def number(value, lo=None, hi=None, lo_open=False, unit=""):
     """A finite real number within [lo, hi] ((lo, hi] when lo_open)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if isinstance(value, bool) or type(value).__name__ == "bool_" or not isinstance(value, numbers.Real) \
+            or not math.isfinite(value):
         raise ConfigError(f"must be a finite number{_unit(unit)}, got {value!r}")
     below = (value <= lo) if lo_open else (value < lo) if lo is not None else False
     if below or (hi is not None and value > hi):
@@ -77,7 +95,7 @@ def number(value, lo=None, hi=None, lo_open=False, unit=""):
 
 def integer(value, lo=None, hi=None):
     """An integer (not a bool, not 64.7) within [lo, hi]."""
-    if isinstance(value, bool) or not isinstance(value, int):
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise ConfigError(f"must be an integer, got {value!r}")
     if (lo is not None and value < lo) or (hi is not None and value > hi):
         raise ConfigError(f"must lie in [{lo}, {'inf' if hi is None else hi}], got {value!r}")

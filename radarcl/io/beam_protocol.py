@@ -7,7 +7,7 @@ frame. Byte by byte (little-endian; docs/beam_protocol.md has an example hex dum
     0      4     magic "RCBM" (52 43 42 4D)
     4      1     version (1)
     5      1     header size in bytes (48; a later version at most 64)
-    6      2     flags: bit 0 = a pose follows the header
+    6      2     flags: bit 0 = a float32 pose follows the header, bit 1 = a float64 pose does
     8      4     sequence number (per packet, wraps at 2^32)
     12     4     frame id
     16     2     azimuth index of the beam
@@ -19,7 +19,8 @@ frame. Byte by byte (little-endian; docs/beam_protocol.md has an example hex dum
     36     4     payload size in bytes (pose + samples)
     40     4     reserved (0)
     44     4     CRC-32 of bytes 0-43 (the header's own check)
-    48     48    pose (if flags bit 0): the beam's sensor-to-world 3 x 4 [R | t], float32, row-major
+    48     48|96 pose (flags bit 0 or 1): the beam's sensor-to-world 3 x 4 [R | t], row-major,
+                 float32 (48 bytes) or float64 (96 bytes)
     ...          samples
     end    4     CRC-32 (zlib's) of everything before it
 
@@ -35,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarcl.errors import ConfigError
+from radarcl.geometry import check_pose
 from radarcl.io.stream import BAD, BAD_CRC, NEED_MORE, ScanningParser
 
 MAGIC = b"RCBM"
@@ -42,8 +44,10 @@ VERSION = 1
 HEADER = struct.Struct("<4sBBHIIHHQIB3xII")          # everything before the header CRC
 HEADER_SIZE = HEADER.size + 4                         # 48
 MAX_HEADER_SIZE = 64                                  # what a later version may grow the header to
-POSE_SIZE = 48
+POSE_SIZE = 48                                        # 12 float32
+POSE64_SIZE = 96                                      # 12 float64
 FLAG_POSE = 1
+FLAG_POSE64 = 2
 SAMPLE_TYPES = {1: np.dtype("<i2"), 2: np.dtype([("i", "<i2"), ("q", "<i2")]), 3: np.dtype("<f4")}
 SAMPLE_NAMES = {1: "int16", 2: "complex int16", 3: "float32 power profile"}
 MAX_SAMPLES = 1 << 20                                 # a packet of at most 4 MiB of samples
@@ -80,11 +84,18 @@ def sample_type_of(dtype):
     raise ConfigError(f"the beam protocol carries int16, complex int16 or float32 samples, not {dtype}")
 
 
-def encode(sequence, frame, azimuth, elevation, timestamp_ns, samples, pose=None):
+def encode(sequence, frame, azimuth, elevation, timestamp_ns, samples, pose=None, pose_bits=64):
     """The bytes of one beam packet. ``samples`` int16, complex64 (sent as complex int16: its
-    parts must be whole numbers within int16) or float32; ``pose`` (4, 4) or None."""
+    parts must be whole numbers within int16) or float32; ``pose`` (4, 4) or None, sent as
+    float64 (``pose_bits`` 64: the map equals the offline one bit for bit) or float32 (32: what
+    a radar with a float32 navigation solution sends; the map then differs, see the README)."""
     samples = np.asarray(samples)
     kind = sample_type_of(samples.dtype)
+    for name, value, bits in (("sequence", sequence, None), ("frame", frame, None), ("azimuth", azimuth, 16),
+                              ("elevation", elevation, 16), ("timestamp_ns", timestamp_ns, None)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0 or \
+                (bits is not None and value >= 1 << bits):
+            raise ConfigError(f"{name} must be an integer >= 0{f' below 2^{bits}' if bits else ''}, got {value!r}")
     if samples.ndim != 1 or not 0 < len(samples) <= MAX_SAMPLES:
         raise ConfigError(f"a beam is 1 to {MAX_SAMPLES} samples, got shape {samples.shape}")
     if kind == 2:
@@ -96,10 +107,13 @@ def encode(sequence, frame, azimuth, elevation, timestamp_ns, samples, pose=None
         body = samples.astype(SAMPLE_TYPES[kind]).tobytes()
     flags = 0
     if pose is not None:
-        flags |= FLAG_POSE
-        body = np.asarray(pose, np.float64)[:3, :4].astype("<f4").tobytes() + body
-    head = HEADER.pack(MAGIC, VERSION, HEADER_SIZE, flags, sequence & 0xFFFFFFFF, frame & 0xFFFFFFFF, azimuth,
-                       elevation, timestamp_ns & 0xFFFFFFFFFFFFFFFF, len(samples), kind, len(body), 0)
+        if pose_bits not in (32, 64):
+            raise ConfigError(f"a pose goes out as float32 or float64 (pose_bits 32 or 64), got {pose_bits!r}")
+        flags |= FLAG_POSE64 if pose_bits == 64 else FLAG_POSE
+        body = check_pose(pose, "the beam's pose")[:3, :4].astype("<f8" if pose_bits == 64 else "<f4").tobytes() + body
+    head = HEADER.pack(MAGIC, VERSION, HEADER_SIZE, flags, int(sequence) & 0xFFFFFFFF, int(frame) & 0xFFFFFFFF,
+                       int(azimuth), int(elevation), int(timestamp_ns) & 0xFFFFFFFFFFFFFFFF, len(samples), kind,
+                       len(body), 0)
     head += struct.pack("<I", zlib.crc32(head))
     packet = head + body
     return packet + struct.pack("<I", zlib.crc32(packet))
@@ -144,7 +158,9 @@ class BeamParser(ScanningParser):
             return BAD, None
         flags, n, kind, payload = view[6] | view[7] << 8, *struct.unpack_from("<IB3xI", view, 28)
         if version == VERSION:          # a later version keeps these offsets and is skipped whole
-            pose = POSE_SIZE if flags & FLAG_POSE else 0
+            if flags & FLAG_POSE and flags & FLAG_POSE64:
+                return BAD, None
+            pose = POSE_SIZE if flags & FLAG_POSE else POSE64_SIZE if flags & FLAG_POSE64 else 0
             if kind not in SAMPLE_TYPES or not 0 < n <= MAX_SAMPLES or payload != pose + n * SAMPLE_TYPES[kind].itemsize:
                 return BAD, None
         elif payload > POSE_SIZE + 8 * MAX_SAMPLES:
@@ -164,10 +180,11 @@ class BeamParser(ScanningParser):
         _, _, _, flags, seq, frame, az, el, t, n, kind, _, _ = fields
         at = HEADER_SIZE
         pose = None
-        if flags & FLAG_POSE:
+        if flags & (FLAG_POSE | FLAG_POSE64):
+            wide = flags & FLAG_POSE64
             pose = np.eye(4)
-            pose[:3, :4] = np.frombuffer(data, "<f4", 12, at).reshape(3, 4)
-            at += POSE_SIZE
+            pose[:3, :4] = np.frombuffer(data, "<f8" if wide else "<f4", 12, at).reshape(3, 4)
+            at += POSE64_SIZE if wide else POSE_SIZE
         raw = np.frombuffer(data, SAMPLE_TYPES[kind], n, at)
         if kind == 1:
             samples = raw.astype(np.int16)

@@ -10,6 +10,8 @@ The subscriber checks every message (kind, sizes, keys inside the grid) and stop
 bad one with the reason, as any input from outside would be.
 """
 
+import collections
+import contextlib
 import json
 import socket
 import struct
@@ -49,14 +51,75 @@ def parse_address(text, default_host="127.0.0.1"):
     return host or default_host, number
 
 
+class _Viewer:
+    """One connected viewer: messages queue here and a thread of its own sends them, so a viewer
+    that reads slowly, or not at all, never holds the engine. Past ``limit`` bytes waiting, or
+    a send that takes longer than ``timeout_s``, it is dropped."""
+
+    def __init__(self, conn, limit, timeout_s):
+        self.conn, self.limit = conn, limit
+        self.conn.settimeout(timeout_s)
+        self.waiting, self.closed = 0, threading.Event()
+        self._queue = collections.deque()
+        self._ready = threading.Condition()
+        threading.Thread(target=self._send, name="radarcl-view-sender", daemon=True).start()
+
+    def put(self, message):
+        """Queue ``message``; False (and the viewer closed) when too much already waits."""
+        with self._ready:
+            if self.closed.is_set():
+                return False
+            if self.waiting + len(message) > self.limit:
+                self._close()
+                return False
+            self._queue.append(message)
+            self.waiting += len(message)
+            self._ready.notify()
+        return True
+
+    def _send(self):
+        while True:
+            with self._ready:
+                while not self._queue and not self.closed.is_set():
+                    self._ready.wait()
+                if self.closed.is_set():
+                    return
+                message = self._queue.popleft()
+            try:
+                self.conn.sendall(message)
+            except OSError:
+                with self._ready:
+                    self._close()
+                return
+            with self._ready:
+                self.waiting -= len(message)
+
+    def _close(self):
+        self.closed.set()
+        self._queue.clear()
+        self._ready.notify_all()
+        with contextlib.suppress(OSError):
+            self.conn.shutdown(socket.SHUT_RDWR)
+        self.conn.close()
+
+    def close(self):
+        with self._ready:
+            self._close()
+
+
 class BrickPublisher:
     """Serves viewers on ``address`` (port 0: a free one; ``address`` says which). ``publish``
-    sends changed bricks to every viewer; a viewer that connects first gets the whole map from
-    ``snapshot()`` -> (spec, keys, data, poses). A viewer that stops reading is dropped."""
+    queues changed bricks for every viewer and returns at once (each viewer has a sender
+    thread); a viewer that connects first gets the whole map from ``snapshot()`` -> (spec,
+    keys, data, poses). A viewer that stops reading is dropped once ``limit_bytes`` wait for it
+    or a send takes longer than ``timeout_s``: the engine's latency never depends on viewers."""
 
-    def __init__(self, snapshot, address=("127.0.0.1", 0), timeout_s=2.0):
-        self.snapshot, self.timeout_s = snapshot, timeout_s
-        self._server = socket.create_server(address)
+    def __init__(self, snapshot, address=("127.0.0.1", 0), timeout_s=2.0, limit_bytes=256 << 20):
+        self.snapshot, self.timeout_s, self.limit = snapshot, timeout_s, limit_bytes
+        try:
+            self._server = socket.create_server(address)
+        except (OSError, OverflowError, TypeError) as exc:
+            raise ConfigError(f"cannot serve viewers on {address[0]}:{address[1]} ({exc})") from None
         self.address = self._server.getsockname()[:2]
         self._new, self._clients = [], []
         self._lock = threading.Lock()
@@ -69,17 +132,17 @@ class BrickPublisher:
                 conn, _ = self._server.accept()
             except OSError:
                 return
-            conn.settimeout(self.timeout_s)
             with self._lock:
-                self._new.append(conn)
+                self._new.append(_Viewer(conn, self.limit, self.timeout_s))
 
     @property
     def viewers(self):
         with self._lock:
+            self._clients = [c for c in self._clients if not c.closed.is_set()]
             return len(self._clients) + len(self._new)
 
     def publish(self, keys=None, data=None, poses=None):
-        """Send the changed bricks (and the poses) to the viewers; greet new ones with everything."""
+        """Queue the changed bricks (and the poses) for the viewers; greet new ones with everything."""
         with self._lock:
             new, self._new = self._new, []
         if new:
@@ -89,28 +152,19 @@ class BrickPublisher:
             greeting += bricks_message(all_keys, all_data)
             if all_poses is not None:
                 greeting += _message(POSES, np.ascontiguousarray(all_poses, "<f8").tobytes())
-            self._send(new, greeting)
-            with self._lock:
-                self._clients += new
+            for c in new:
+                c.put(greeting)
         message = b""
         if keys is not None and len(keys):
             message += bricks_message(keys, data)
         if poses is not None:
             message += _message(POSES, np.ascontiguousarray(poses, "<f8").tobytes())
+        with self._lock:
+            old = [c for c in self._clients if not c.closed.is_set()]
+            self._clients = old + [c for c in new if not c.closed.is_set()]
         if message:
-            with self._lock:
-                clients = [c for c in self._clients if c not in new]
-            self._send(clients, message)
-
-    def _send(self, clients, message):
-        for c in clients:
-            try:
-                c.sendall(message)
-            except OSError:
-                c.close()
-                with self._lock:
-                    if c in self._clients:
-                        self._clients.remove(c)
+            for c in old:
+                c.put(message)
 
     def close(self):
         self._closed.set()

@@ -7,6 +7,8 @@ packets went out intact; ``Emulator`` paces bytes onto a port (8N1: baud / 10 by
 No pyopencl imports here.
 """
 
+import contextlib
+import math
 import os
 import threading
 import time
@@ -35,14 +37,24 @@ class Faults:
     disconnect: int = 0
     seed: int = 0
 
+    MAX_PAUSE_S = 3600.0
+
     def __post_init__(self):
         for f in fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, bool) or not np.isfinite(v) or v < 0:
-                raise ConfigError(f"fault {f.name} must be a finite number >= 0, got {v!r}")
+            whole = f.type in (int, "int")
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer) if whole else
+                                                                  (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(float(v) if abs(v) < 1e300 else math.inf) or v < 0:
+                raise ConfigError(f"fault {f.name} must be a finite {'whole ' if whole else ''}number >= 0, got {v!r}")
         for name in ("ber", "drop", "dup", "truncate", "noise"):
             if getattr(self, name) > 1:
                 raise ConfigError(f"fault rate {name} is a probability in [0, 1], got {getattr(self, name)}")
+        if self.pause > self.MAX_PAUSE_S:
+            raise ConfigError(f"fault pause is at most {self.MAX_PAUSE_S:g} s, got {self.pause!r}")
+        for name in ("seed", "pause_every", "disconnect"):
+            if getattr(self, name) >= 1 << 63:
+                raise ConfigError(f"fault {name} must lie in [0, 2^63), got {getattr(self, name)!r}")
 
     @classmethod
     def parse(cls, text):
@@ -58,8 +70,9 @@ class Faults:
                 raise ConfigError(f"--faults {text!r}: expected NAME=VALUE pairs with names {', '.join(names)}")
             try:
                 values[key] = int(value) if names[key] in (int, "int") else float(value)
-            except ValueError:
-                raise ConfigError(f"--faults: {key} needs a number, got {value!r}") from None
+            except (ValueError, OverflowError):
+                raise ConfigError(f"--faults: {key} needs a {'whole ' if names[key] in (int, 'int') else ''}number, "
+                                  f"got {value!r}") from None
         return cls(**values)
 
     @property
@@ -125,6 +138,18 @@ def ti_packets(profiles_q9, first_frame=0, version=0x03050004):
     return out
 
 
+MAX_GAP_S = 10.0     # a longer silence in a recorded stream is a clock that jumped: skipped
+
+
+def due_times(times_ns, max_gap_s=MAX_GAP_S):
+    """Seconds from the start at which recorded chunks go out: the recorded gaps, none negative,
+    and a gap longer than ``max_gap_s`` skipped (a clock that jumps must not hold the stream
+    for years)."""
+    gaps = np.diff(np.asarray(times_ns, np.float64)) / 1e9
+    gaps = np.where(gaps > max_gap_s, 0.0, np.maximum(gaps, 0.0))
+    return np.concatenate([[0.0], np.cumsum(gaps)]).tolist() if len(times_ns) else None
+
+
 def q9_of_power(power, antennas, q_bits=9):
     """Power profiles as TI's range profile carries them (the inverse of
     ``ti_uart.profile_power``): round(2^q_bits antennas log2 sqrt(power)), within uint16."""
@@ -132,20 +157,79 @@ def q9_of_power(power, antennas, q_bits=9):
     return np.clip(np.rint((1 << q_bits) * antennas * log2_mag), 0, 65535).astype(np.uint16)
 
 
+def is_pty_link(path):
+    """True for a symbolic link to a pseudo-terminal (what ``open_pty`` makes, perhaps left by
+    an emulator that was killed): the only thing ``--link`` may replace."""
+    return os.path.islink(path) and os.readlink(path).startswith("/dev/pts/")
+
+
+def check_link(link):
+    """ConfigError unless ``link`` may become the pty's link: nothing there yet, or a link to a
+    pseudo-terminal (an earlier emulator's). A file, a directory or any other link is the user's."""
+    if link is None:
+        return None
+    if os.path.lexists(link) and not is_pty_link(link):
+        what = "a symbolic link to " + os.readlink(link) if os.path.islink(link) else \
+            "a directory" if os.path.isdir(link) else "a file"
+        raise ConfigError(f"--link {link} is {what}; it would be replaced: give a new name (only a link to a "
+                          "pseudo-terminal, an earlier emulator's, is replaced)")
+    parent = os.path.dirname(os.path.abspath(link))
+    if not os.path.isdir(parent) or not os.access(parent, os.W_OK | os.X_OK):
+        raise ConfigError(f"--link {link}: {parent} is not a writable directory")
+    return link
+
+
+def remove_link(link, name):
+    """Remove ``link`` if it still points at the pty ``name`` (ours, not one a later run made)."""
+    try:
+        if link and os.path.islink(link) and os.readlink(link) == name:
+            os.unlink(link)
+    except OSError:
+        pass
+
+
 def open_pty(link=None):
     """A pseudo-terminal in raw mode: (master fd, slave path, slave fd). The emulator keeps the
     slave open, so bytes written before a reader opens it wait in the pty instead of being
-    lost; ``link`` makes a symbolic link to the slave (a stable name for scripts)."""
+    lost; ``link`` makes a symbolic link to the slave (a stable name for scripts; see
+    ``check_link``: only an earlier emulator's link is replaced, atomically)."""
     import tty
 
+    check_link(link)
     master, slave = os.openpty()
     tty.setraw(slave)
     name = os.ttyname(slave)
     if link:
-        if os.path.lexists(link):
-            os.unlink(link)
-        os.symlink(name, link)
+        tmp = f"{link}.{os.getpid()}.tmp"
+        try:
+            os.symlink(name, tmp)
+            check_link(link)                        # still nothing of the user's there
+            os.replace(tmp, link)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            os.close(master)
+            os.close(slave)
+            raise
     return master, name, slave
+
+
+def pty_writer(master, halt):
+    """``write(bytes)`` onto a pty's master that never blocks past ``halt`` (an Event): a pty
+    nobody reads fills up, and a plain write would hold Ctrl-C until the kernel took the bytes."""
+    import fcntl
+    import select
+
+    fcntl.fcntl(master, fcntl.F_SETFL, fcntl.fcntl(master, fcntl.F_GETFL) | os.O_NONBLOCK)
+
+    def write(data):
+        view = memoryview(data)
+        while len(view) and not halt.is_set():
+            try:
+                view = view[os.write(master, view):]
+            except BlockingIOError:
+                select.select([], [master], [], 0.05)
+    return write
 
 
 def pending(fd):
@@ -157,18 +241,34 @@ def pending(fd):
     return struct.unpack("i", fcntl.ioctl(fd, termios.FIONREAD, b"\0\0\0\0"))[0]
 
 
-def close_pty(master, slave, timeout_s=10.0):
+def close_pty(master, slave, timeout_s=10.0, drain=True):
     """Close a pty once its reader has taken what was sent (closing the master discards what
-    still waits on the slave), or after ``timeout_s``."""
+    still waits on the slave), or after ``timeout_s``; returns the bytes left unread (0 when the
+    reader took everything; with ``drain`` False it closes at once). The slave's count does not
+    see bytes still in the kernel's buffer between the two ends, so it must read 0 for
+    ``QUIET_S`` in a row before the pty is taken as drained."""
     deadline = time.monotonic() + timeout_s
+    left = 0
     try:
-        while pending(slave) and time.monotonic() < deadline:
+        quiet_since = None
+        while drain and time.monotonic() < deadline:
+            left = pending(slave)
+            if left:
+                quiet_since = None
+            elif quiet_since is None:
+                quiet_since = time.monotonic()
+            elif time.monotonic() - quiet_since >= QUIET_S:
+                break
             time.sleep(0.01)                     # the reader is another process: poll its progress
     except OSError:
         pass
     finally:
         os.close(master)
         os.close(slave)
+    return left
+
+
+QUIET_S = 0.3
 
 
 class Emulator:
@@ -178,12 +278,18 @@ class Emulator:
     disconnects (``disconnected`` is then set). ``sent`` counts bytes, ``done`` is set at the
     end, ``stop()`` ends it early; nothing is sent for the first ``delay_s`` seconds."""
 
+    MIN_BAUD, MAX_BAUD = 50, 1e9
+
     def __init__(self, chunks, write, baud=921600, faults=Faults(), close=None, loop=False, due_s=None, delay_s=0.0):
-        if baud is not None and not (isinstance(baud, (int, float)) and 0 < baud <= 1e9):
-            raise ConfigError(f"baud must be a positive number, got {baud!r}")
+        if baud is not None and (isinstance(baud, (bool, np.bool_)) or not isinstance(baud, (int, float, np.number))
+                                 or not self.MIN_BAUD <= baud <= self.MAX_BAUD):
+            raise ConfigError(f"baud must lie in [{self.MIN_BAUD}, {self.MAX_BAUD:g}], got {baud!r}")
+        if not (isinstance(delay_s, (int, float, np.number)) and 0 <= delay_s < 3600):
+            raise ConfigError(f"delay_s must lie in [0, 3600) seconds, got {delay_s!r}")
         self.chunks, self.write, self.baud, self.faults = chunks, write, baud, faults
         self.close, self.loop, self.due_s, self.delay_s = close, loop, due_s, delay_s
         self.sent, self.packets_sent = 0, 0
+        self.error = None                          # what ended the thread, if not the end or stop()
         self.done, self.disconnected = threading.Event(), threading.Event()
         self._stop = threading.Event()
         self.thread = threading.Thread(target=self._run, name="radarcl-emulator", daemon=True)
@@ -235,6 +341,8 @@ class Emulator:
                     return
         except OSError:                           # the reader went away
             self.disconnected.set()
+        except Exception as exc:                  # noqa: BLE001 - told to the main thread (``error``)
+            self.error = exc
         finally:
             if self.close is not None:
                 self.close()

@@ -15,6 +15,7 @@ import contextlib
 import os
 import re
 import shutil
+import stat
 import zipfile
 import zlib
 from pathlib import Path
@@ -111,7 +112,38 @@ def atomic(path):
             tmp.unlink()
 
 
+@contextlib.contextmanager
+def scratch(beside):
+    """A private directory beside the output ``beside`` for a command's intermediate files (a
+    report's figures, dask's spill), removed on every way out; one a killed process left
+    (``kill -9``) is removed by the next ``scratch`` of the same output."""
+    owner = Path(beside).with_name(Path(beside).name + ".work")
+    clean_stale(owner)
+    directory = owner.with_name(f".{owner.name}.{os.getpid()}.tmp")
+    directory.mkdir(parents=True, exist_ok=True)
+    try:
+        yield directory
+    finally:
+        shutil.rmtree(directory, ignore_errors=True)
+
+
 # -- reading: .npz files without pickles, sizes checked before allocating ------------------------------
+def check_readable(path, what="file"):
+    """FrameFormatError unless ``path`` is a regular file: a pipe with no writer would hold the
+    reader for ever, a device such as /dev/zero never ends, a directory is not a file."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise FrameFormatError(f"{path} does not exist") from None
+    except OSError as exc:
+        raise FrameFormatError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(mode):
+        kind = "a directory" if stat.S_ISDIR(mode) else "a pipe" if stat.S_ISFIFO(mode) else \
+            "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode) else "special"
+        raise FrameFormatError(f"{path} is {kind}, not a {what}")
+
+
+
 def memory_budget():
     """Bytes one loaded file may take: RADARCL_MEMORY_BUDGET (bytes), else half the RAM."""
     env = os.environ.get("RADARCL_MEMORY_BUDGET")
@@ -151,6 +183,7 @@ class SafeNpz:
     def __init__(self, path, budget=None, what="readable .npz file"):
         self.path = Path(path)
         self.budget = memory_budget() if budget is None else budget
+        check_readable(self.path, what)
         try:
             self._zip = zipfile.ZipFile(self.path)
         except (OSError, zipfile.BadZipFile, ValueError, NotImplementedError) as exc:

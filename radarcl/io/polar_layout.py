@@ -109,7 +109,7 @@ class PolarLayout:
             raise ConfigError("[reader] timestamps = 'side-file' needs timestamp_file = \"...\" (relative to the "
                               "scans' directory)")
         if not math.isfinite(self.timestamp_offset_s):
-            raise ConfigError(f"[reader] timestamp_offset_s must be a finite number of seconds")
+            raise ConfigError("[reader] timestamp_offset_s must be a finite number of seconds")
         if not (math.isfinite(self.scan_period_s) and self.scan_period_s > 0):
             raise ConfigError(f"[reader] scan_period_s must be a positive number of seconds, got {self.scan_period_s}")
 
@@ -133,7 +133,7 @@ class PolarLayout:
                         f"[reader] orientation = \"{flip}\""
                         + (" and meta_columns = 0" if flip == "range-rows" and self.meta_columns else ""))
             else:
-                hint = f"; set [beams] n_azimuth to the scans' azimuth count, or check [reader] orientation"
+                hint = "; set [beams] n_azimuth to the scans' azimuth count, or check [reader] orientation"
             raise FrameFormatError(said + f" ({az} azimuths where the sensor has {n_az})" + hint)
         if bins < 1:
             raise FrameFormatError(said + f": no range bins after {self.meta_columns} metadata columns; check "

@@ -66,7 +66,7 @@ def load(path):
         with safe_npz(path) as z:
             if "version" not in z.files:
                 raise FrameFormatError(f"{path} is not a radarcl recording: it has no version")
-            version = int(z["version"])
+            version = _scalar(path, "version", z["version"], "i")
             if version not in (1, VERSION):
                 raise FrameFormatError(f"{path} has recording version {version}; this radarcl reads 1 and {VERSION}")
             frames_key = "samples" if version == 1 else "frames"
@@ -75,7 +75,9 @@ def load(path):
                 raise FrameFormatError(f"{path} is not a radarcl recording: missing {', '.join(missing)}")
             frames, poses = z[frames_key], z["poses"]
             flags = z["flags"] if "flags" in z.files else None
-            sensor = "paper" if version == 1 else str(z["sensor"])
+            sensor = "paper" if version == 1 else _scalar(path, "sensor", z["sensor"], "U")
+            if not sensor:
+                raise FrameFormatError(f"{path}: its sensor name is empty")
             meta = {k: z[k] for k in SIMULATION_META + _OPTIONAL_META if k in z.files}
     except (OSError, ValueError, EOFError) as exc:
         if isinstance(exc, FrameFormatError):
@@ -95,5 +97,24 @@ def load(path):
         raise FrameFormatError(f"{path}: {exc}") from exc
     if flags is not None and (flags.dtype != np.uint8 or len(flags) != n):
         raise FrameFormatError(f"{path}: flags must be (n_frames, *batch) uint8, got {flags.shape} {flags.dtype}")
-    meta = {k: (v.astype(np.float64) if k == "tilts_deg" else int(v)) for k, v in meta.items()}
+    meta = {k: _tilts(path, v, n) if k == "tilts_deg" else _scalar(path, k, v, "i") for k, v in meta.items()}
     return Recording(frames, poses.astype(np.float64), sensor, flags, meta)
+
+
+def _scalar(path, name, value, kind):
+    """A recording's metadata entry as one integer (kind "i") or string ("U"); FrameFormatError
+    names the entry and what it holds instead (a vector, a string, a float where an integer belongs)."""
+    value = np.asarray(value)
+    ok = value.ndim == 0 and (value.dtype.kind in "iu" if kind == "i" else value.dtype.kind == "U")
+    if not ok:
+        want = "an integer" if kind == "i" else "a string"
+        raise FrameFormatError(f"{path}: its {name} must be {want}, got {value.dtype} of shape {value.shape}")
+    return int(value) if kind == "i" else str(value)
+
+
+def _tilts(path, value, n):
+    """A simulation's tilt per frame (n,) finite degrees."""
+    value = np.asarray(value)
+    if value.dtype.kind not in "iuf" or value.shape != (n,) or not np.isfinite(value).all():
+        raise FrameFormatError(f"{path}: tilts_deg must be {n} finite angles [deg], got {value.dtype} {value.shape}")
+    return value.astype(np.float64)

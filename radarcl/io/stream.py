@@ -8,14 +8,17 @@ blocks, never sleeps and never raises into its caller. The port is an adapter: p
 ``socket://host:port``, ``rfc2217://``, a pty) into the parser. No pyopencl imports here.
 """
 
+import errno
 import json
 import logging
+import os
 import struct
 import threading
 import time
 from dataclasses import asdict, dataclass
 
 from radarcl.errors import ConfigError, FrameFormatError
+from radarcl.io.files import check_readable
 
 log = logging.getLogger(__name__)
 
@@ -157,43 +160,74 @@ def open_port(url, baud=921600, timeout=0.2):
 
 class PortReader:
     """Moves bytes from a pyserial port to ``sink(receive_time_ns, chunk)`` (a ``Session.feed``:
-    recorder and parser) on a thread of its own. ``lost`` is set with the reason when the port
-    goes away (a USB radar unplugged, the far end of a pty closed), and ``closed`` then.
+    recorder and parser) on a thread of its own. When the port goes away, ``closed`` is set and
+    either ``ended`` (the far end of a pseudo-terminal or a socket closed: the stream is over,
+    as when ``radarcl emulate`` finishes) or ``lost`` (a device that went away, e.g. a USB radar
+    unplugged) holds the reason.
 
     Written here rather than with pyserial's ``serial.threaded.ReaderThread``: that one catches
     only ``SerialException``, and a pty whose far end closes raises ``OSError`` (EIO) from
-    ``in_waiting``, which ends its thread with a traceback and tells nobody."""
+    ``in_waiting``, which ends its thread with a traceback and tells nobody. A socket's
+    ``in_waiting`` says 1 whenever anything waits, so a socket is read by whole receive buffers,
+    not byte by byte."""
+
+    CHUNK = 1 << 16
 
     def __init__(self, port, sink):
         self.port, self.sink = port, sink
-        self.lost = None
+        self.lost, self.ended = None, None
         self.closed = threading.Event()
         self._stop = threading.Event()
+        self._socket = type(port).__module__.rsplit(".", 1)[-1] in ("protocol_socket", "protocol_rfc2217")
+        self._pty = isinstance(getattr(port, "port", None), str) and os.path.realpath(port.port).startswith("/dev/pts/")
         self.thread = threading.Thread(target=self._run, name="radarcl-port-reader", daemon=True)
 
     def start(self):
         self.thread.start()
         return self
 
-    def _run(self):
-        import serial
+    def _read(self):
+        if not self._socket:
+            return self.port.read(self.port.in_waiting or 1)
+        data = self.port.read(1)                          # waits up to the port's timeout
+        if data:
+            timeout, self.port.timeout = self.port.timeout, 0
+            try:
+                data += self.port.read(self.CHUNK)        # and whatever else waits, at once
+            finally:
+                self.port.timeout = timeout
+        return data
 
+    def _run(self):
         try:
             while not self._stop.is_set():
-                data = self.port.read(self.port.in_waiting or 1)
+                data = self._read()
                 if data:
                     self.sink(time.time_ns(), data)
-        except (serial.SerialException, OSError, TypeError, ValueError) as exc:
+        except Exception as exc:                          # noqa: BLE001 - a port that went away, in any form
+            # (pyserial's socket port closed under a read raises AttributeError): said, not a traceback
             if not self._stop.is_set():                   # not our own close
-                self.lost = str(exc) or type(exc).__name__
+                reason = str(exc) or type(exc).__name__
+                eio = getattr(exc, "errno", None) == errno.EIO or f"[Errno {errno.EIO}]" in reason
+                hangup = eio or "returned no data" in reason        # a pty's far end closed: EIO, or an empty read
+                if self._socket and "disconnected" in reason or self._pty and hangup:
+                    self.ended = reason
+                else:
+                    self.lost = reason
         finally:
             self.closed.set()
 
     def stop(self):
+        """Stop reading and close the port; after it returns, ``sink`` is not called again."""
+        if self._stop.is_set():
+            self.thread.join(2)
+            return
         self._stop.set()
         try:
-            if hasattr(self.port, "cancel_read"):
+            if hasattr(self.port, "cancel_read") and self.port.is_open:
                 self.port.cancel_read()
+        except (OSError, ValueError):
+            pass
         finally:
             self.port.close()
         self.thread.join(2)
@@ -249,6 +283,7 @@ def read_stream(path):
     """(header dict, iterator of (time_ns, bytes)) of a ``StreamRecorder`` file. A file that is
     not one is refused; a torn last record (the writer was killed) ends the iteration, and the
     iterator's ``torn`` attribute says how many bytes were left over."""
+    check_readable(path, "radarcl stream recording")
     f = open(path, "rb")
     try:
         if f.read(len(STREAM_MAGIC)) != STREAM_MAGIC:
@@ -258,7 +293,7 @@ def read_stream(path):
             header = json.loads(line)
             if not isinstance(header, dict):
                 raise ValueError("not an object")
-        except ValueError as exc:
+        except (ValueError, RecursionError) as exc:
             raise FrameFormatError(f"{path}: the stream header is not a JSON object ({exc})") from exc
     except BaseException:
         f.close()

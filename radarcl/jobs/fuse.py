@@ -8,12 +8,12 @@ map file is rewritten every that many frames (atomically), so ``radarcl view --l
 map growing; a store output makes each rewrite cost the changed bricks only.
 """
 
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
+from radarcl.io.files import scratch
 from radarcl.maps.disk import MapSaver
 from radarcl.maps.map import Map
 from radarcl.pipeline import Mapping
@@ -78,7 +78,7 @@ def write_report(page, out, source, config, result, map_, trajectory):
         run["saved every"] = f"{result['every']} frames"
     spec = map_.spec
     title = f"{config.sensor.name}: {result['frames']} frames fused at {spec.voxel_m:g} m, seen from above"
-    with tempfile.TemporaryDirectory() as tmp:
+    with scratch(page) as tmp:                   # beside the page: a killed run's is removed by the next
         top = Path(tmp) / "top.png"
         figures.save(figures.plane_map_figure(map_.column_extremes(), spec, trajectory, title, "sensor path",
                                           "most telling log-odds of the column [nat]"), top)

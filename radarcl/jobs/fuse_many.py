@@ -13,14 +13,19 @@ Cost model of the merge: the coordinator adds every worker's bricks, O(bricks x 
 fusion itself scales with the workers until the inputs run out.
 """
 
+import contextlib
 import os
+import tempfile
 import time
 
 import numpy as np
 
 from radarcl.errors import ConfigError
 from radarcl.grid import GRID_LIMIT
+from radarcl.io.files import scratch
 from radarcl.io.inputs import open_input
+
+SCHEDULER_TIMEOUT_S = 10
 
 
 def fuse_one(config_values, sensor_toml, path, spec_tuple):
@@ -28,7 +33,6 @@ def fuse_one(config_values, sensor_toml, path, spec_tuple):
     os.environ.setdefault("POCL_MAX_PTHREAD_COUNT", "1")
     if os.environ["POCL_MAX_PTHREAD_COUNT"] == "1":
         os.environ["POCL_AFFINITY"] = "0"       # one thread per worker: pinned, all would share CPU 0
-    import tempfile
     from pathlib import Path
 
     from radarcl.cl import Runtime
@@ -98,7 +102,7 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
     spec = config.grid_spec()
     report(f"fusing {len(paths)} inputs ({sum(n for _, n in shapes.values())} frames) of sensor {config.sensor.name} "
            f"into a {' x '.join(map(str, spec.shape))} grid of {spec.voxel_m:g} m")
-    own = None
+    own, spill = None, contextlib.ExitStack()
     if client is None:
         import logging
 
@@ -110,9 +114,22 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
         os.environ["POCL_MAX_PTHREAD_COUNT"] = "1"          # the workers inherit it
         os.environ["POCL_AFFINITY"] = "0"                   # and each its one thread unpinned
         if scheduler:
-            client = own = Client(scheduler)
+            try:
+                client = own = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+            except (ValueError, OSError, TimeoutError, TypeError) as exc:
+                raise ConfigError(f"cannot reach the Dask scheduler {scheduler!r} ({exc}); give its address as "
+                                  "tcp://HOST:PORT, or leave --scheduler out for a local cluster") from None
         else:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+            import dask
+
+            from radarcl.cl import choose_device
+
+            choose_device()               # the device check once, here, not in every worker at once
+
+            directory = str(spill.enter_context(scratch(out)))        # dask's scratch space, not the user's cwd
+            dask.config.set({"temporary-directory": directory})
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   local_directory=directory)
             client = own = Client(cluster)
     try:
         start = time.perf_counter()
@@ -129,6 +146,7 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
             own.close()
             if cluster is not None:
                 cluster.close()
+        spill.close()
 
     class _Snapshot:                                        # what MapSaver reads of a grid
         def __init__(self):

@@ -39,22 +39,42 @@ def check_output(path, force=False, inputs=(), what="map"):
 
 def read(path):
     """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32) of a map file or store, without a
-    device (numpy only, for the viewer). What is not a radarcl map raises ``FrameFormatError``
-    saying what was wrong."""
+    device (numpy only, for the viewer), every structure checked before it is used. What is
+    not a radarcl map, or a damaged one, raises ``FrameFormatError`` saying what was wrong."""
+    return read_salvaged(path, salvage=False)[:3]
+
+
+def read_salvaged(path, salvage=True):
+    """As ``read``, plus the bricks a damaged map store lost: (spec, keys, data, lost), lost a
+    list of {"reason", "keys"} (empty for an intact map). With ``salvage`` a store's damaged
+    bricks are left out (and listed) instead of refusing the store; an npz file has no part
+    that can be left out (its members are read whole and checked), so it is read or refused."""
+    if path is None or not isinstance(path, (str, Path)):
+        raise FrameFormatError(f"a map is a path to an .npz file or a map store, got {path!r}")
     if format_of(path) == "store":
-        spec, keys, data, manifest = store.read(path)
+        spec, keys, data, manifest = store.read(path, salvage=salvage)
         if manifest["incomplete"]:
             log.warning("%s: a save after version %d did not complete (%s left behind); read version %d",
                         path, manifest["version"], ", ".join(manifest["incomplete"]), manifest["version"])
-        return spec, keys, data
-    return npz.read(path)
+        return spec, keys, data, manifest["lost"]
+    if Path(path).is_dir():
+        raise FrameFormatError(f"{path} is a directory that is not a radarcl map store (no radarcl manifest)")
+    return (*npz.read(path), [])
+
+
+def lost_lines(lost):
+    """What ``read_salvaged`` lost, one line per reason with every brick key (bx, by, bz)."""
+    return [f"lost {len(e['keys'])} brick(s) ({e['reason']}): " + " ".join(f"({x},{y},{z})" for x, y, z in e["keys"])
+            if e["keys"] else e["reason"] for e in lost]
 
 
 def read_poses(path):
     """The sensor poses (n, 4, 4) a map file or store keeps, or None."""
     try:
         return FORMATS["store" if Path(path).is_dir() else "npz"].read_poses(path)
-    except (ShapeError, ValueError) as exc:
+    except FrameFormatError:
+        raise
+    except (ShapeError, ValueError, TypeError) as exc:
         raise FrameFormatError(f"{path}: bad sensor poses ({exc})") from exc
 
 
@@ -86,7 +106,9 @@ class MapSaver:
         (JSON-able values, e.g. a live stream's counts) goes into the manifest or the npz's
         ``meta`` (``read_meta`` reads either)."""
         if self.npz:
-            npz.write(self.path, grid.spec, *grid.bricks(), poses=poses, meta=meta or None)
+            kept = dict(sensor=self.meta["sensor_toml"] or None, config=self.meta["config"] or None)
+            npz.write(self.path, grid.spec, *grid.bricks(), poses=poses,
+                      meta={**{k: v for k, v in kept.items() if v}, **meta} or None)
             return
         if self.writer is None:
             self.writer = store.StoreWriter(self.path, grid.spec, overwrite=True, **self.meta)
@@ -94,18 +116,22 @@ class MapSaver:
         self.writer.save(*grid.bricks(), poses=poses)
 
 
-def convert(source, target):
+def convert(source, target, salvage=False):
     """Copy a map between the npz and store formats (by ``target``'s name: ``.npz`` or a
-    store directory); returns (spec, number of bricks)."""
-    spec, keys, data = read(source)
-    manifest = store.read_manifest(source) if format_of(source) == "store" else {}
+    store directory) with its sensor poses, sensor profile and configuration; returns (spec,
+    number of bricks, the bricks lost: see ``read_salvaged``)."""
+    spec, keys, data, lost = read_salvaged(source, salvage)
+    poses = read_poses(source)
+    kept = {key: read_meta(source, key) for key in ("sensor", "config")}
+    kept = dict(sensor=kept["sensor"] if isinstance(kept["sensor"], str) else None,
+                config=kept["config"] if isinstance(kept["config"], dict) else None)
     if output_format(target) == "npz":
-        npz.write(target, spec, keys, data)
+        npz.write(target, spec, keys, data, poses=poses, meta={k: v for k, v in kept.items() if v} or None)
     else:
-        writer = store.StoreWriter(target, spec, manifest.get("sensor", ""), manifest.get("config"), inputs=[source],
-                                   overwrite=True)
+        writer = store.StoreWriter(target, spec, kept["sensor"] or "", kept["config"], inputs=[source],
+                                   overwrite=True, poses=poses)
         writer.save(keys, data)
-    return spec, len(keys)
+    return spec, len(keys), lost
 
 
 def save_grid(grid, path, poses=None):

@@ -58,7 +58,7 @@ def check_suffix(fmt, path):
     owner = next((f for f, s in SUFFIXES.items() if suffix and suffix in s), None)
     named = f" (a {owner} file)" if owner else ""
     raise ConfigError(f"--to {fmt} writes {' or '.join(allowed)} files; {path} names a {suffix or 'file without an'} "
-                      f"extension{named}: give --out a name ending in {allowed[0]}")
+                      f"extension{named}: give --out {Path(path).with_suffix(allowed[0])}")
 
 
 def _warn_empty(path, n):

@@ -22,7 +22,7 @@ from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.grid import BRICK, GridSpec
 from radarcl.io.files import memory_budget
-from radarcl.maps.disk import read
+from radarcl.maps.disk import read_salvaged
 
 UNKNOWN = -1          # a 2D cell that is neither occupied nor free (the ROS OccupancyGrid convention)
 OCCUPIED_NATS = 1.0   # occupied above this log-odds (p 0.73)
@@ -64,11 +64,14 @@ class Map:
     keys: np.ndarray
     data: np.ndarray
 
+    lost: list = None          # bricks a salvaged store could not give (``maps.disk.read_salvaged``)
+
     @classmethod
-    def open(cls, path):
-        """Read a map file or store (``maps.disk.read``)."""
-        spec, keys, data = read(path)
-        return cls(spec, keys, data)
+    def open(cls, path, salvage=False):
+        """Read a map file or store (``maps.disk.read``; with ``salvage``, a damaged store's
+        intact bricks, the lost ones listed in ``lost``)."""
+        spec, keys, data, lost = read_salvaged(path, salvage)
+        return cls(spec, keys, data, lost)
 
     @classmethod
     def of_grid(cls, grid):
@@ -77,8 +80,14 @@ class Map:
         return cls(grid.spec, keys, data)
 
     def __post_init__(self):
-        if self.data.shape != (len(self.keys), BRICK, BRICK, BRICK):
-            raise ShapeError(f"expected bricks ({len(self.keys)}, 8, 8, 8), got {self.data.shape}")
+        if not isinstance(self.spec, GridSpec):
+            raise ShapeError(f"spec must be a GridSpec, got {type(self.spec).__name__}")
+        self.keys, self.data = np.asarray(self.keys), np.asarray(self.data)
+        if self.keys.ndim != 2 or self.keys.shape[1:] != (3,) or self.keys.dtype.kind not in "iu":
+            raise ShapeError(f"expected brick keys (n, 3) integers, got {self.keys.shape} {self.keys.dtype}")
+        if self.data.shape != (len(self.keys), BRICK, BRICK, BRICK) or self.data.dtype != np.int32:
+            raise ShapeError(f"expected bricks ({len(self.keys)}, 8, 8, 8) int32, got {self.data.shape} "
+                             f"{self.data.dtype}")
         k = self.keys.astype(np.int64)
         self._ids = (k[:, 2] << 42) | (k[:, 1] << 21) | k[:, 0]
         self._order = np.argsort(self._ids)
@@ -87,9 +96,7 @@ class Map:
     def units_at(self, points):
         """int32 logodds units at world points (..., 3) [m]: 0 where no beam reached, and for
         points outside the grid (``inside`` tells them apart)."""
-        p = np.asarray(points, dtype=np.float64)
-        if p.shape[-1:] != (3,):
-            raise ShapeError(f"points must be (..., 3) [m], got {p.shape}")
+        p = _points(points)
         if not np.isfinite(p).all():
             raise ConfigError("points must be finite")
         idx = self.spec.world_to_index(p.reshape(-1, 3))
@@ -110,7 +117,7 @@ class Map:
 
     def inside(self, points):
         """(...,) bool: points inside the grid."""
-        return self.spec.contains(self.spec.world_to_index(np.asarray(points, dtype=np.float64)))
+        return self.spec.contains(self.spec.world_to_index(_points(points)))
 
     def log_odds_at(self, points):
         """Log-odds [nat] at world points (..., 3); NaN outside the grid."""
@@ -125,6 +132,8 @@ class Map:
     def voxels(self, lo_nats=None, hi_nats=None):
         """(indices (N, 3) int64 (x, y, z), units (N,) int32) of the observed voxels (non-zero)
         whose log-odds lie in [lo_nats, hi_nats] (None: unbounded), inside the grid."""
+        lo_nats = None if lo_nats is None else _number(lo_nats, "lo_nats", infinite=True)
+        hi_nats = None if hi_nats is None else _number(hi_nats, "hi_nats", infinite=True)
         if not len(self.keys):
             return np.zeros((0, 3), np.int64), np.zeros(0, np.int32)
         keep = self.data != 0
@@ -151,6 +160,7 @@ class Map:
     def occupied(self, threshold_nats=OCCUPIED_NATS):
         """(centres (N, 3) [m], log-odds (N,) [nat]) of the occupied voxels: strictly above
         ``threshold_nats``, as ``classes`` counts them."""
+        threshold_nats = _number(threshold_nats, "threshold_nats")
         idx, units = self.voxels(lo_nats=threshold_nats)
         above = units > threshold_nats * logodds.SCALE
         return self.spec.index_to_world(idx[above]), logodds.to_nats(units[above])
@@ -176,7 +186,10 @@ class Map:
         nz = self.spec.shape[2]
         if band is None:
             return 0, nz
-        lo, hi = (float(v) for v in band)
+        try:
+            lo, hi = (float(v) for v in band)
+        except (TypeError, ValueError):
+            raise ConfigError(f"the height band must be two numbers z_min < z_max [m], got {band!r}") from None
         if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
             raise ConfigError(f"the height band must be two finite numbers z_min < z_max [m], got {band!r}")
         oz, v = self.spec.origin_m[2], self.spec.voxel_m
@@ -189,10 +202,11 @@ class Map:
 
     def slice(self, z_m):
         """Log-odds [nat] (ny, nx) of the layer whose voxels contain height ``z_m``."""
-        k = int(np.floor((float(z_m) - self.spec.origin_m[2]) / self.spec.voxel_m))
+        z = _number(z_m, "z_m")
+        k = np.floor((z - self.spec.origin_m[2]) / self.spec.voxel_m)
         if not 0 <= k < self.spec.shape[2]:
             raise ConfigError(f"z = {z_m} m lies outside the grid")
-        top = self.spec.origin_m[2] + (k + 0.5) * self.spec.voxel_m
+        top = self.spec.origin_m[2] + (int(k) + 0.5) * self.spec.voxel_m
         return logodds.to_nats(self.dense((top - 0.25 * self.spec.voxel_m, top + 0.25 * self.spec.voxel_m))[0])
 
     def _column_hi_lo(self):
@@ -240,3 +254,24 @@ class Map:
         out[lo < free * logodds.SCALE] = 0
         out[hi > occ * logodds.SCALE] = 100
         return out
+
+
+def _points(points):
+    """World points (..., 3) [m] as float64; ShapeError for anything but real numbers of that shape."""
+    p = np.asarray(points)
+    if p.dtype.kind not in "iuf" or p.shape[-1:] != (3,):
+        raise ShapeError(f"points must be real numbers (..., 3) [m], got {p.shape} {p.dtype}")
+    return p.astype(np.float64)
+
+
+def _number(value, name, infinite=False):
+    """``value`` as a float: a real number (numpy scalars too), finite unless ``infinite``; never NaN."""
+    try:
+        if isinstance(value, (bool, np.bool_, complex, np.complexfloating, str, bytes)):
+            raise TypeError
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} must be a number, got {value!r}") from None
+    if np.isnan(x) or (not infinite and not np.isfinite(x)):
+        raise ConfigError(f"{name} must be a {'' if infinite else 'finite '}number, got {value!r}")
+    return x

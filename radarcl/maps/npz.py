@@ -83,7 +83,10 @@ def read(path):
 def check_trajectory(poses):
     """Sensor poses (n, 4, 4) float64 to keep with a map: finite, at most MAX_POSES (evenly
     subsampled, the last kept)."""
-    P = np.asarray(poses, dtype=np.float64)
+    P = np.asarray(poses)
+    if P.dtype.kind not in "iuf":
+        raise ShapeError(f"poses must be real numbers (n, 4, 4), got {P.shape} {P.dtype}")
+    P = P.astype(np.float64)
     if P.ndim != 3 or P.shape[1:] != (4, 4) or not np.isfinite(P).all():
         raise ShapeError(f"poses must be finite (n, 4, 4), got {P.shape}")
     if len(P) > MAX_POSES:

@@ -7,44 +7,71 @@ immutable chunk files makes a save atomic for readers without locks, where an HD
 modified in place is torn by a killed writer.
 
 Layout of ``map.rcmap/`` (any directory name):
-  zarr.json               the zarr group
+  zarr.json               the zarr group, its attribute "radarcl" marking it as a store
   segment_<k>/            (n, 8, 8, 8) int32 bricks written by one save; never modified again
   index_<v>/              (n_bricks, 5) int32: bx, by, bz, segment, row of every brick in version v
   manifest.json           written last (temporary file + rename): the version, its index, its
-                          segments, the grid spec, the sensor profile and configuration that made
-                          the map, and its provenance (radarcl version, inputs and their SHA-256)
+                          segments, the grid spec, a CRC-32 of the index and of each chunk of
+                          ``CHUNK_BRICKS`` bricks of every segment (format 2), the sensor profile,
+                          poses and configuration that made the map, and its provenance (radarcl
+                          version, inputs and their SHA-256)
 
 A save writes the changed bricks as a new segment, a new index, then the manifest; a reader
 reads the manifest first and only what it names, so it sees the previous version or the new one,
 never a mix. A killed writer leaves unnamed segments and indexes: readers ignore them (and say
 so), the next save removes them. When more than ``COMPACT_SEGMENTS`` segments accumulate or half
 the stored bricks are dead, a save writes everything into one new segment.
+
+Nothing is believed on trust (``read``): every entry of the manifest, the index and each chunk
+are checked before a byte reaches the map, so a deleted, zeroed, swapped or damaged chunk, a
+key repeated or outside the grid, a segment of another dtype or a manifest that lies are refused
+with what is wrong, or, asked to ``salvage``, left out and listed brick by brick. Only a
+directory radarcl marked is a store (``recognises``): ``--force`` never replaces another
+program's zarr group. Format 1 (no checksums) is still read, with every structural check.
 """
 
 import hashlib
 import json
+import logging
 import os
+import re
 import shutil
 import time
+import zlib
 from pathlib import Path
 
 import numpy as np
 
 from radarcl import __version__
-from radarcl.errors import ConfigError, FrameFormatError
-from radarcl.grid import BRICK, GridSpec
+from radarcl.errors import ConfigError, FrameFormatError, RadarclError
+from radarcl.grid import BRICK, GRID_LIMIT, GridSpec
 from radarcl.maps.npz import check_trajectory
 
+log = logging.getLogger(__name__)
 FORMAT = "radarcl-map-store"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2          # 2: a CRC-32 per chunk of every segment and of the index; 1 is still read
 CHUNK_BRICKS = 256
 COMPACT_SEGMENTS = 32
 MANIFEST = "manifest.json"
+_NAME = re.compile(r"^index_[0-9]{1,9}$")
 
 
 def recognises(path):
-    """True when ``path`` is a map store directory."""
-    return Path(path, MANIFEST).is_file() or (Path(path).is_dir() and Path(path, "zarr.json").is_file())
+    """True when ``path`` is a map store directory: one that radarcl's own manifest, or the mark
+    radarcl puts on the zarr group it creates (before the first save lands), says is a store.
+    A zarr group another program wrote is not one, so ``--force`` never removes it."""
+    path = Path(path)
+    if not path.is_dir():
+        return False
+    for name, check in ((MANIFEST, lambda d: d.get("format")),
+                        ("zarr.json", lambda d: d.get("attributes", {}).get("radarcl"))):
+        try:
+            found = json.loads((path / name).read_text())
+        except (OSError, ValueError, UnicodeDecodeError):
+            continue
+        if isinstance(found, dict) and isinstance(found.get("attributes", {}), dict) and check(found) == FORMAT:
+            return True
+    return False
 
 
 def _zarr():
@@ -71,54 +98,222 @@ def file_digest(path, limit=1 << 30):
     return h.hexdigest()
 
 
+def chunk_crcs(data):
+    """CRC-32 of each ``CHUNK_BRICKS`` bricks of ``data`` (n, 8, 8, 8) int32, as stored (little-endian)."""
+    data = np.ascontiguousarray(data, "<i4")
+    return [zlib.crc32(data[i:i + CHUNK_BRICKS]) for i in range(0, len(data), CHUNK_BRICKS)]
+
+
 def read_manifest(path):
-    """The store's manifest (a dict), checked; FrameFormatError says what is wrong."""
+    """The store's manifest (a dict), checked (``check_manifest``); FrameFormatError says what is wrong."""
     path = Path(path)
     try:
         manifest = json.loads((path / MANIFEST).read_text())
     except FileNotFoundError:
         raise FrameFormatError(f"{path} has no complete save yet (no {MANIFEST})") from None
-    except (OSError, ValueError, UnicodeDecodeError) as exc:
+    except (OSError, ValueError, UnicodeDecodeError, RecursionError) as exc:
         raise FrameFormatError(f"{path}/{MANIFEST} is not readable ({exc})") from exc
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         raise FrameFormatError(f"{path} is not a radarcl map store")
     version = manifest.get("format_version")
-    if not isinstance(version, int) or version > FORMAT_VERSION:
-        raise FrameFormatError(f"{path} was written in store format {version!r}; this radarcl reads format "
-                               f"{FORMAT_VERSION} and older: update radarcl")
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise FrameFormatError(f"{path}: its manifest names no store format (format_version {version!r})")
+    if version > FORMAT_VERSION:
+        raise FrameFormatError(f"{path} was written in store format {version}; this radarcl reads formats 1 to "
+                               f"{FORMAT_VERSION}: update radarcl")
+    manifest["sealed"] = version < 2 or manifest.get("crc32") == seal(manifest)
+    check_manifest(path, manifest)
     return manifest
 
 
-def read(path):
-    """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32, manifest) of the last complete save.
-    ``manifest["incomplete"]`` names anything a killed writer left (ignored here)."""
+UNSEALED = "the manifest does not match its checksum: its grid and array names were believed as they read"
+
+
+def seal(manifest):
+    """The CRC-32 of a manifest's entries (all but ``crc32`` itself and what a reader adds),
+    kept in format 2 so that an edited or damaged manifest (a grid moved, a segment dropped) is
+    found, not believed."""
+    kept = {k: v for k, v in manifest.items() if k not in ("crc32", "sealed", "spec", "incomplete", "lost")}
+    return zlib.crc32(json.dumps(kept, sort_keys=True, separators=(",", ":")).encode())
+
+
+def check_manifest(path, m):
+    """FrameFormatError unless every entry a reader relies on has its type and range."""
+    def bad(what):
+        raise FrameFormatError(f"{path}/{MANIFEST}: {what}; the store is damaged")
+
+    if not isinstance(m.get("version"), int) or isinstance(m["version"], bool) or m["version"] < 1:
+        bad(f"version {m.get('version')!r} is not a save number")
+    if not isinstance(m.get("index"), str) or not _NAME.match(m["index"]):
+        bad(f"index {m.get('index')!r} is not the name of an index array (index_<n>)")
+    segments = m.get("segments")
+    if not isinstance(segments, list) or not all(isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 1 << 30
+                                                 for s in segments) or len(set(segments)) != len(segments):
+        bad(f"segments {str(segments)[:80]} is not a list of distinct segment numbers")
+    grid = m.get("grid")
+    try:
+        m["spec"] = GridSpec(tuple(grid["origin_m"]), grid["voxel_m"], tuple(grid["shape"]))
+    except (TypeError, KeyError, ValueError, RadarclError) as exc:
+        bad(f"grid {str(grid)[:120]} does not describe a grid ({exc})")
+    if not isinstance(m.get("bricks"), int) or isinstance(m["bricks"], bool) or m["bricks"] < 0:
+        bad(f"bricks {m.get('bricks')!r} is not a count")
+    if m["format_version"] >= 2:
+        crcs = m.get("checksums")
+        if not isinstance(crcs, dict) or not isinstance(crcs.get("index"), int) or not isinstance(crcs.get("segments"), dict):
+            bad("it has no checksums (format 2 keeps a CRC-32 of the index and of every chunk)")
+        for s in segments:
+            entry = crcs["segments"].get(str(s))
+            if not (isinstance(entry, dict) and isinstance(entry.get("rows"), int) and entry["rows"] >= 1
+                    and isinstance(entry.get("crc32"), list) and len(entry["crc32"]) == -(-entry["rows"] // CHUNK_BRICKS)
+                    and all(isinstance(c, int) for c in entry["crc32"])):
+                bad(f"segment {s} has no checksum entry")
+
+
+def read(path, salvage=False):
+    """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32, manifest) of the last complete save,
+    verified before any byte reaches the map: the manifest's entries, the index (dtype, shape,
+    CRC-32, keys unique and inside the grid, each naming a listed segment and a row it holds),
+    every listed segment (present, int32 bricks, each chunk's CRC-32, values within the grid's
+    saturation). A damaged store raises ``FrameFormatError`` saying what is wrong; with
+    ``salvage`` the damaged bricks are left out instead and ``manifest["lost"]`` lists them
+    (reason and keys). ``manifest["incomplete"]`` names anything a killed writer left (ignored)."""
     zarr, _ = _zarr()
     path = Path(path)
     manifest = read_manifest(path)
-    try:
-        g = zarr.open_group(str(path), mode="r")
-        spec = GridSpec(tuple(manifest["grid"]["origin_m"]), float(manifest["grid"]["voxel_m"]),
-                        tuple(int(n) for n in manifest["grid"]["shape"]))
-        index = g[manifest["index"]][:]
-        if index.ndim != 2 or index.shape[1] != 5:
-            raise FrameFormatError(f"{path}: index {manifest['index']} has shape {index.shape}, expected (n, 5)")
-        data = np.empty((len(index), BRICK, BRICK, BRICK), np.int32)
-        for segment in manifest["segments"]:
-            rows = index[:, 3] == segment
-            if rows.any():
-                stored = g[f"segment_{segment}"]
-                if stored.shape[1:] != (BRICK, BRICK, BRICK) or index[rows, 4].max() >= stored.shape[0]:
-                    raise FrameFormatError(f"{path}: segment {segment} does not hold the rows its index names")
-                data[rows] = stored[:][index[rows, 4]]
-    except FrameFormatError:
-        raise
-    except Exception as exc:                        # zarr raises its own types for damaged stores
-        raise FrameFormatError(f"{path}: a damaged map store ({type(exc).__name__}: {exc})") from exc
-    named = {manifest["index"]} | {f"segment_{s}" for s in manifest["segments"]} | set(manifest.get("previous", []))
+    if not manifest["sealed"]:
+        if not salvage:
+            raise FrameFormatError(f"{path}/{MANIFEST} does not match its checksum: edited or damaged, it may name "
+                                   "another grid or other bricks; radarcl refuses it (--salvage reads it as it says, "
+                                   "every brick still checked)")
+        log.warning("%s/%s does not match its checksum; read as it says (--salvage)", path, MANIFEST)
+    spec = manifest["spec"]
+    group = _Arrays(zarr, path)                     # each array by its own path: the group's metadata is not needed
+    index = _read_index(group, path, manifest)
+    lost = _Lost(index[:, :3])
+    _check_index(index, spec, manifest, lost)
+    data = np.zeros((len(index), BRICK, BRICK, BRICK), np.int32)      # never uninitialised memory
+    filled = np.zeros(len(index), bool)
+    for segment in manifest["segments"]:
+        _read_segment(group, path, manifest, segment, index, data, filled, lost)
+    lost.add(~filled & ~lost.mask, "no stored data")
+    if lost.mask.any() and not salvage:
+        raise FrameFormatError(f"{path}: a damaged map store: {lost.summary(len(index))}; radarcl refuses it "
+                               "(--salvage reads the rest and lists the lost bricks)")
+    keep = ~lost.mask
+    previous = manifest.get("previous")                 # only guides the next writer's clean-up
+    named = {manifest["index"]} | {f"segment_{s}" for s in manifest["segments"]} | \
+        {p for p in (previous if isinstance(previous, list) else []) if isinstance(p, str)}
     stray = sorted(p.name for p in path.iterdir() if p.is_dir() and p.name not in named
                    and p.name.startswith(("segment_", "index_")))
-    manifest["incomplete"] = stray
-    return spec, np.ascontiguousarray(index[:, :3], dtype=np.int32), data, manifest
+    unsealed = [] if manifest["sealed"] else [dict(reason=UNSEALED, keys=[])]
+    manifest["incomplete"], manifest["lost"] = stray, unsealed + lost.entries
+    return spec, np.ascontiguousarray(index[keep, :3], dtype=np.int32), data[keep], manifest
+
+
+class _Arrays:
+    """The store's arrays by name, each opened from its own directory (``group[name]`` would need
+    the group's zarr.json, which holds nothing the manifest does not)."""
+
+    def __init__(self, zarr, path):
+        self.zarr, self.path = zarr, path
+
+    def __getitem__(self, name):
+        return self.zarr.open_array(str(self.path / name), mode="r")
+
+
+class _Lost:
+    """Bricks (rows of the index) a damaged store cannot give, each with the reason."""
+
+    def __init__(self, keys):
+        self.keys, self.mask, self.entries = keys, np.zeros(len(keys), bool), []
+
+    def add(self, rows, reason):
+        rows = np.flatnonzero(rows) if np.asarray(rows).dtype == bool else np.asarray(rows, np.int64)
+        rows = rows[~self.mask[rows]]
+        if len(rows):
+            self.mask[rows] = True
+            self.entries.append(dict(reason=reason, keys=self.keys[rows].tolist()))
+
+    def summary(self, n):
+        lost = int(self.mask.sum())
+        reasons = "; ".join(f"{e['reason']} ({len(e['keys'])} bricks)" for e in self.entries[:4])
+        more = f"; and {len(self.entries) - 4} more" if len(self.entries) > 4 else ""
+        return f"{lost} of {n} bricks cannot be read: {reasons}{more}"
+
+
+def _read_index(group, path, manifest):
+    name = manifest["index"]
+    try:
+        stored = group[name]
+        ok = stored.dtype == np.int32 and stored.ndim == 2 and stored.shape[1] == 5
+        index = stored[:] if ok else None
+    except Exception as exc:
+        raise FrameFormatError(f"{path}: its index {name} cannot be read ({type(exc).__name__}: {exc}); "
+                               "the store is damaged") from exc
+    if index is None:
+        raise FrameFormatError(f"{path}: its index {name} holds {stored.shape} {stored.dtype}, expected (n, 5) int32")
+    if len(index) != manifest["bricks"]:
+        raise FrameFormatError(f"{path}: its index {name} lists {len(index)} bricks, the manifest {manifest['bricks']}")
+    if manifest["format_version"] >= 2 and zlib.crc32(np.ascontiguousarray(index, "<i4")) != manifest["checksums"]["index"]:
+        raise FrameFormatError(f"{path}: its index {name} does not match its checksum; the store is damaged "
+                               "and which brick is where cannot be known")
+    return index
+
+
+def _check_index(index, spec, manifest, lost):
+    keys = index[:, :3].astype(np.int64)
+    lost.add(((keys < 0) | (keys >= np.asarray(spec.brick_shape))).any(axis=1), "a key outside the grid")
+    ids = (keys[:, 2] << 42) | (keys[:, 1] << 21) | (keys[:, 0] & ((1 << 21) - 1))
+    _, inverse, counts = np.unique(ids, return_inverse=True, return_counts=True)
+    lost.add(counts[inverse] > 1, "a key listed more than once")
+    listed = np.isin(index[:, 3], manifest["segments"])
+    lost.add(~listed, "a segment the manifest does not list")
+    where = index[:, 3].astype(np.int64) << 32 | (index[:, 4].astype(np.int64) & 0xFFFFFFFF)
+    _, inverse, counts = np.unique(where, return_inverse=True, return_counts=True)
+    lost.add(counts[inverse] > 1, "a stored brick named by two keys")
+
+
+def _read_segment(group, path, manifest, segment, index, data, filled, lost):
+    """Copy the bricks of ``segment`` that the index names into ``data``, chunk by chunk, each
+    chunk checked (CRC-32 in format 2, saturation always); what cannot be read goes to ``lost``."""
+    uses = np.flatnonzero(index[:, 3] == segment)
+    if not len(uses):
+        return
+    rows = index[uses, 4].astype(np.int64)
+    entry = manifest["checksums"]["segments"][str(segment)] if manifest["format_version"] >= 2 else None
+    name = f"segment_{segment}"
+    try:
+        stored = group[name]
+        shape, dtype = stored.shape, stored.dtype
+    except Exception:
+        lost.add(uses, f"{name} is missing")
+        return
+    if dtype != np.int32 or len(shape) != 4 or tuple(shape[1:]) != (BRICK, BRICK, BRICK):
+        lost.add(uses, f"{name} holds {shape} {dtype}, not (n, 8, 8, 8) int32 bricks")
+        return
+    n = shape[0] if entry is None else entry["rows"]
+    if shape[0] != n:
+        lost.add(uses, f"{name} holds {shape[0]} bricks, its checksum entry {n}")
+        return
+    lost.add(uses[(rows < 0) | (rows >= n)], f"a row beyond the {n} bricks of {name}")
+    for c, start in enumerate(range(0, n, CHUNK_BRICKS)):
+        stop = min(n, start + CHUNK_BRICKS)
+        here = uses[(rows >= start) & (rows < stop)]
+        if not len(here):
+            continue
+        try:
+            chunk = np.ascontiguousarray(stored[start:stop], np.int32)
+        except Exception as exc:
+            lost.add(here, f"{name} chunk {c} cannot be read ({type(exc).__name__})")
+            continue
+        if entry is not None and zlib.crc32(np.ascontiguousarray(chunk, "<i4")) != entry["crc32"][c]:
+            lost.add(here, f"{name} chunk {c} does not match its checksum (zeroed, missing or damaged)")
+            continue
+        if chunk.size and (chunk.max() > GRID_LIMIT or chunk.min() < -GRID_LIMIT):
+            lost.add(here, f"{name} chunk {c} holds values beyond the grid's saturation")
+            continue
+        data[here] = chunk[index[here, 4] - start]
+        filled[here] = True
 
 
 class StoreWriter:
@@ -141,14 +336,18 @@ class StoreWriter:
                 shutil.rmtree(self.path)
         self.spec = spec
         self.group = zarr.open_group(str(self.path), mode="a")
+        if self.group.attrs.get("radarcl") != FORMAT:
+            self.group.attrs["radarcl"] = FORMAT          # marks the directory ours before any save lands
         self.meta = dict(sensor=sensor_toml, config=config or {},
                          poses=[] if poses is None else check_trajectory(poses).reshape(-1, 16).tolist(),
-                         provenance=dict(radarcl=_version(), created=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                         provenance=dict(radarcl=__version__, created=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                                          inputs=[dict(path=str(p), sha256=file_digest(p)) for p in inputs]))
         self.version, self.segments, self.keys, self.data = 0, [], None, None
         self.index = np.zeros((0, 5), np.int32)
         self.segment_rows = {}                              # segment -> bricks stored in it
-        if (self.path / MANIFEST).is_file():                # continue an existing store
+        self.crcs = {}                                      # segment -> CRC-32 of each of its chunks
+        self._legacy = False
+        if (self.path / MANIFEST).is_file():                # continue an existing store (verified)
             spec0, keys, data, manifest = read(self.path)
             if spec0 != spec:
                 raise ConfigError(f"{self.path} holds a map of grid {spec0}, not {spec}; choose another name")
@@ -156,6 +355,10 @@ class StoreWriter:
             self.index = self.group[manifest["index"]][:]
             self.keys, self.data = keys, data
             self.segment_rows = {s: self.group[f"segment_{s}"].shape[0] for s in self.segments}
+            if manifest["format_version"] >= 2:
+                self.crcs = {s: manifest["checksums"]["segments"][str(s)]["crc32"] for s in self.segments}
+            else:
+                self._legacy = True                         # no checksums: the next save rewrites it whole
             if poses is None:
                 self.meta["poses"] = manifest.get("poses", [])
 
@@ -177,7 +380,8 @@ class StoreWriter:
             changed = np.arange(len(keys))
         else:
             changed = _changed_rows(self.keys, self.data, keys, data)
-        compact = len(self.segments) + 1 > COMPACT_SEGMENTS or self.dead + len(changed) > len(keys)
+        compact = (self._legacy or len(self.segments) + 1 > COMPACT_SEGMENTS
+                   or self.dead + len(changed) > len(keys))
         rows = np.arange(len(keys)) if compact else changed
         segment = (max(self.segments) + 1) if self.segments else 0
         if len(rows):
@@ -185,6 +389,7 @@ class StoreWriter:
             arr = self.group.create_array(f"segment_{segment}", shape=(len(rows), 8, 8, 8), dtype="int32",
                                           chunks=(CHUNK_BRICKS, 8, 8, 8), compressors=self._codec(level=1))
             arr[:] = data[rows]
+            self.crcs[segment] = chunk_crcs(data[rows])
         index = self._next_index(keys, rows, segment, compact)
         version = self.version + 1
         name = f"index_{version}"
@@ -199,15 +404,20 @@ class StoreWriter:
                         previous=previous,
                         grid=dict(origin_m=list(self.spec.origin_m), voxel_m=self.spec.voxel_m,
                                   shape=list(self.spec.shape)), bricks=len(keys), saved=time.strftime("%Y-%m-%dT%H:%M:%S"),
+                        checksums=dict(index=zlib.crc32(np.ascontiguousarray(index, "<i4")),
+                                       segments={str(s): dict(rows=self.segment_rows[s], crc32=self.crcs[s])
+                                                 for s in segments}),
                         **self.meta)
+        manifest["crc32"] = seal(manifest)
         tmp = self.path / f".{MANIFEST}.{os.getpid()}.tmp"
         tmp.write_text(json.dumps(manifest, indent=1))
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
         os.replace(tmp, self.path / MANIFEST)             # the save happens here
         self.version, self.index, self.keys, self.data = version, index, keys.copy(), data.copy()
-        self.segments = segments
+        self.segments, self._legacy = segments, False
         self.segment_rows = {s: self.segment_rows[s] for s in segments}
+        self.crcs = {s: self.crcs[s] for s in segments}
         self._clean(keep=set(previous))                  # a reader may still be reading those
         return len(rows)
 
@@ -275,10 +485,6 @@ def _changed_rows(old_keys, old_data, keys, data):
     if len(idx):
         changed[idx[(a[idx] != b[match[idx]]).any(axis=1)]] = True
     return np.flatnonzero(changed)
-
-
-def _version():
-    return __version__
 
 
 def read_poses(path):

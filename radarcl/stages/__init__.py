@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarcl import logodds, oracle
-from radarcl.errors import ConfigError, ShapeError
+from radarcl.errors import ConfigError, DeviceCapabilityError, ShapeError
 from radarcl.grid import GRID_LIMIT
 
 COMMON_DEFINES = dict(
@@ -60,7 +60,7 @@ def spacing(value, what="bin_spacing_m"):
     """A positive finite number of metres, or ConfigError."""
     import math
 
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.floating)) \
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
             or not math.isfinite(value) or value <= 0:
         raise ConfigError(f"{what} must be a positive finite number [m], got {value!r}")
     return float(value)
@@ -119,6 +119,13 @@ class Stage:
 
         self.inputs, self.outputs = tuple(inputs), tuple(outputs)
         q = self.runtime.queue
+        limit = self.runtime.device.max_mem_alloc_size
+        for p in self.inputs + self.outputs:              # before the driver refuses with a code
+            nbytes = float(np.prod(p.shape, dtype=np.float64)) * np.dtype(p.dtype).itemsize
+            if nbytes > limit:
+                raise DeviceCapabilityError(f"{type(self).__name__}: {p.what} {tuple(p.shape)} {np.dtype(p.dtype)} "
+                                            f"takes {nbytes / 2**30:.3g} GiB, more than the largest buffer of "
+                                            f"{self.runtime.device.name}, {limit / 2**30:.2f} GiB (radarcl info)")
         self.arrays = {p.name: cla.empty(q, p.shape, p.dtype) for p in self.inputs + self.outputs}
         self._ports = {p.name: p for p in self.inputs + self.outputs}
 

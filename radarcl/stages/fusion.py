@@ -287,6 +287,8 @@ class Fusion(Stage):
         A radar streaming beam by beam fuses what has arrived this way (``radarcl live``)."""
         if self.lattice.wraps:
             raise ConfigError("a spinning radar's turn wraps around in azimuth: fuse whole turns, not azimuth ranges")
+        if not all(isinstance(a, (int, np.integer)) and not isinstance(a, (bool, np.bool_)) for a in (az_lo, az_hi)):
+            raise ConfigError(f"azimuths {az_lo!r}..{az_hi!r} must be integer beam indices")
         lo, hi = int(az_lo), int(az_hi)
         if not 0 <= lo <= hi < self.lattice.n_az:
             raise ConfigError(f"azimuths {az_lo}..{az_hi} are not a range of this lattice's 0..{self.lattice.n_az - 1}")

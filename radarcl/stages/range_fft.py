@@ -29,6 +29,7 @@ from radarcl.stages import Port, Stage, beam_batch, build, count
 # Full groups of real beams load each sample row as two vectors with the checks per lane
 # (lane by lane with branches the loads took half the kernel): bench range-fft, upload +
 # kernel vs scipy.fft, 1.37 / 1.15 -> 0.95 / 0.90 at n_fft 512 / 1024 (PoCL 3.1, Zen 5).
+MAX_FFT = 1 << 16              # the kernel's two complex work buffers live in local memory
 CPU_LOCAL_SIZE = 16
 CPU_VECTOR_WIDTH = 8
 VECTOR_WIDTHS = (1, 2, 4, 8)
@@ -84,11 +85,14 @@ class RangeFFT(Stage):
         self.runtime = runtime
         self.batch, self.n_beams = beam_batch(batch)
         self.n_samples = count(n_samples, "n_samples", lo=2)
-        if not is_power_of_two(n_fft) or n_fft < max(self.n_samples, 4):
-            raise ConfigError(f"n_fft must be a power of two >= max(n_samples, 4) = "
-                              f"{max(self.n_samples, 4)} (eq. 11 pads, never truncates), got {n_fft!r}")
+        if not is_power_of_two(n_fft) or n_fft < max(self.n_samples, 4) or n_fft > MAX_FFT:
+            raise ConfigError(f"n_fft must be a power of two >= max(n_samples, 4) = {max(self.n_samples, 4)} "
+                              f"(eq. 11 pads, never truncates) and <= {MAX_FFT}, got {n_fft!r}")
         self.n_fft = int(n_fft)
-        self.dtype = np.dtype(dtype)
+        try:
+            self.dtype = np.dtype(dtype)
+        except TypeError:
+            raise ConfigError(f"dtype must be one of float32, int16, complex64, got {dtype!r}") from None
         if self.dtype not in _INPUT_KINDS:
             raise ConfigError(f"dtype must be one of float32, int16, complex64, got {self.dtype}")
         self.complex_input = self.dtype == np.complex64
@@ -102,7 +106,10 @@ class RangeFFT(Stage):
         calibration = (1.0 / w.sum()) ** (2 if output == "power" else 1)
         per_bin = np.full(self.n_bins, calibration)
         if gain is not None:
-            gain = np.asarray(gain, dtype=np.float64)
+            gain = np.asarray(gain)
+            if gain.dtype.kind not in "iuf":
+                raise ShapeError(f"gain must be real numbers with shape ({self.n_bins},), got {gain.shape} {gain.dtype}")
+            gain = gain.astype(np.float64)
             if gain.shape != (self.n_bins,) or not np.isfinite(gain).all():
                 raise ShapeError(f"gain must be finite with shape ({self.n_bins},), got {gain.shape}")
             per_bin = per_bin * gain

@@ -1,0 +1,33 @@
+"""The child program that checks a device before radarcl uses it (``runtime.build_problem``):
+``python -m radarcl.cl.probe P D [MODULE:FUNCTION ...]`` builds a small kernel on device P:D,
+then runs each named check (``runtime.SELF_TEST``: every kernel of every built-in pipeline
+against the float64 oracle) and prints one line, ``radarcl-probe: {"problem": null or why}``.
+A compiler that aborts kills this process, not radarcl; the parent reads the signal."""
+
+import importlib
+import json
+import sys
+
+from radarcl.cl import runtime
+
+
+def main(argv=None):
+    """Check device P:D (argv[0], argv[1]) with the checks named in argv[2:]; returns 0."""
+    argv = sys.argv[1:] if argv is None else argv
+    p, d, checks = int(argv[0]), int(argv[1]), argv[2:]
+    device = next(dev for pi, di, _, dev in runtime._all_devices() if (pi, di) == (p, d))
+    problem = runtime.probe(device)
+    for name in checks if problem is None else ():
+        module, _, function = name.partition(":")
+        try:
+            problem = getattr(importlib.import_module(module), function)(runtime.Runtime(device))
+        except Exception as exc:                     # noqa: BLE001 - the verdict is the point
+            problem = f"{type(exc).__name__} in {name}: {str(exc).splitlines()[0] if str(exc) else ''}"
+        if problem is not None:
+            break
+    print(runtime.PROBE_MARK + json.dumps(dict(problem=problem)), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

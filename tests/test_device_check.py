@@ -1,0 +1,100 @@
+"""A device is checked in a child process before radarcl uses it (issue 29): one whose compiler
+aborts (PyPI's PoCL 3.0 on some CPUs: "LLVM ERROR: Cannot emit physreg copy instruction", exit
+134) is marked unusable by `radarcl info` and never chosen, the verdict is cached per device
+and driver, and a program a damaged driver cache hands back without its kernels is never used."""
+
+import json
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+from radarcl.cl import runtime as rt_module
+from radarcl.cli import main
+from radarcl.errors import NoOpenCLError
+
+HERE = Path(__file__).resolve().parent
+
+
+def abort_like_llvm(runtime):
+    """A self-test that dies as PyPI's PoCL 3.0 did, on the device named by RADARCL_TEST_ABORT_ON."""
+    if runtime.device.name == os.environ.get("RADARCL_TEST_ABORT_ON"):
+        sys.stderr.write("LLVM ERROR: Cannot emit physreg copy instruction\n")
+        sys.stderr.flush()
+        os.abort()
+    return None
+
+
+@pytest.fixture
+def crashing(monkeypatch, tmp_path):
+    """The last listed device's self-test aborts; verdicts go to a private cache."""
+    devices = rt_module._all_devices()
+    p, d, platform, victim = devices[-1]
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")]))
+    monkeypatch.setenv("RADARCL_TEST_ABORT_ON", victim.name)
+    monkeypatch.setattr(rt_module, "SELF_TEST", "test_device_check:abort_like_llvm")
+    monkeypatch.setattr(rt_module, "_probed", {})
+    return f"{p}:{d}", victim, len(devices)
+
+
+def test_a_device_whose_compiler_aborts_is_marked_unusable_and_never_chosen(crashing, capsys, monkeypatch):
+    spec, victim, n = crashing
+    status = main(["info"])
+    out, err = capsys.readouterr()
+    block = out[out.index(f"  {spec}  ") if f"  {spec}  " in out else out.index(f"* {spec}  "):]
+    unusable = [ln for ln in block.splitlines() if "UNUSABLE" in ln][0]
+    assert "crashes while building or running radarcl's kernels (signal 6 (SIGABRT)" in unusable
+    assert "LLVM ERROR: Cannot emit physreg copy instruction" in unusable
+    assert status == (0 if n > 1 else 2) and "Traceback" not in err
+    monkeypatch.setenv("RADARCL_DEVICE", spec)                 # asked for by index: a sentence, not exit 134
+    with pytest.raises(NoOpenCLError, match="crashes while building"):
+        rt_module.choose_device()
+    if n > 1:
+        monkeypatch.delenv("RADARCL_DEVICE")
+        assert rt_module.choose_device().int_ptr != victim.int_ptr
+    # the verdict is kept per device and driver: a new process asks no child again
+    verdicts = json.loads((Path(os.environ["XDG_CACHE_HOME"]) / "radarcl" / "devices.json").read_text())
+    assert any("SIGABRT" in (v["problem"] or "") and v["driver"] == victim.driver_version for v in verdicts.values())
+    monkeypatch.setattr(rt_module, "_probed", {})
+    monkeypatch.setattr(rt_module, "_probe_in_child", lambda device: pytest.fail("the cached verdict was not used"))
+    assert "SIGABRT" in rt_module.build_problem(victim)
+
+
+def test_a_damaged_verdict_cache_is_ignored_and_rewritten(crashing):
+    _, victim, _ = crashing
+    cache = Path(os.environ["XDG_CACHE_HOME"]) / "radarcl"
+    cache.mkdir(parents=True)
+    (cache / "devices.json").write_text('{"x": {"problem": 5}, "torn": ')
+    assert "SIGABRT" in rt_module.build_problem(victim)
+    assert "SIGABRT" in json.dumps(json.loads((cache / "devices.json").read_text()))
+    assert not list(cache.glob(".*.tmp"))
+
+
+def test_a_program_without_its_kernels_is_built_again_past_the_cache(runtime, monkeypatch, caplog):
+    """What a compiler killed mid-build left in PoCL's cache came back as a program with no
+    kernels, and every later run failed with "cfar.cl has no kernel 'cfar'"."""
+    from radarcl.stages import build
+
+    real = rt_module.Runtime._build
+    seen = []
+
+    class Empty:
+        def all_kernels(self):
+            return []
+
+    def damaged_once(self, path, source, options):
+        seen.append(options)
+        if len(seen) == 1:
+            return Empty(), ""
+        return real(self, path, source, options)
+
+    fresh = rt_module.Runtime(runtime.device)
+    monkeypatch.setattr(rt_module.Runtime, "_build", damaged_once)
+    from radarcl.stages.cfar import Cfar
+
+    stage = Cfar(fresh, (4,), 256)
+    assert len(seen) == 2 and "-DRADARCL_CACHE_BYPASS=1" in seen[1] and "-DRADARCL_CACHE_BYPASS=1" not in seen[0]
+    assert "without kernel(s) cfar" in caplog.text
+    assert stage is not None and build is not None
