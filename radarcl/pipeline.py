@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from radarcl.cl.runtime import register_device_check
 from radarcl.config import mapconfig, sensors
 from radarcl.errors import ConfigError, DeviceCapabilityError
 from radarcl.geometry import BeamLattice, BeamModel
@@ -302,3 +303,6 @@ def _synthetic_frame(mapping, rng):
         return x.astype(np.complex64)
     x = 2000 * np.cos(2 * np.pi * tone) + rng.normal(0, 20, shape)
     return np.rint(x).astype(dtype)
+
+
+register_device_check(self_test)       # every process that can build a pipeline checks its device with it

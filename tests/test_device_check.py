@@ -34,7 +34,7 @@ def crashing(monkeypatch, tmp_path):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")]))
     monkeypatch.setenv("RADARCL_TEST_ABORT_ON", victim.name)
-    monkeypatch.setattr(rt_module, "SELF_TEST", "test_device_check:abort_like_llvm")
+    monkeypatch.setattr(rt_module, "DEVICE_CHECKS", ["test_device_check:abort_like_llvm"])
     monkeypatch.setattr(rt_module, "_probed", {})
     return f"{p}:{d}", victim, len(devices)
 

@@ -257,15 +257,18 @@ def test_a_status_file_replaces_only_a_status_file(tmp_path, capsys):
 def test_socket_ports_are_read_by_buffers_not_bytes(scene):
     payload = b"".join(scene[3]) * 7                           # about 2 MiB
     server = socket.create_server(("127.0.0.1", 0))
+    reading = threading.Event()
 
     def serve():
         conn, _ = server.accept()
+        reading.wait(20)            # pyserial drops what arrived before its open finished (reset_input_buffer)
         conn.sendall(payload)
         conn.close()
     threading.Thread(target=serve, daemon=True).start()
     chunks = []
     reader = PortReader(open_port(f"socket://127.0.0.1:{server.getsockname()[1]}"),
                         lambda t, d: chunks.append(len(d))).start()
+    reading.set()
     assert reader.closed.wait(20), f"{sum(chunks)} of {len(payload)} bytes in 20 s"
     reader.stop()
     assert sum(chunks) == len(payload) and len(chunks) < len(payload) / 1000 and reader.ended is not None

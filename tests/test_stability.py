@@ -185,7 +185,7 @@ def test_extreme_configurations_are_refused(make, reason):
     if reason is None:                  # a NaN pose is refused where it is used
         from radarcl.geometry import check_pose
 
-        with pytest.raises(ConfigError, match="NaN"):
+        with pytest.raises(ConfigError, match="(?i)nan|finite"):
             check_pose(make())
         return
     with pytest.raises(ConfigError, match=reason):

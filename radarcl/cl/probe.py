@@ -1,7 +1,8 @@
 """The child program that checks a device before radarcl uses it (``runtime.build_problem``):
 ``python -m radarcl.cl.probe P D [MODULE:FUNCTION ...]`` builds a small kernel on device P:D,
-then runs each named check (``runtime.SELF_TEST``: every kernel of every built-in pipeline
-against the float64 oracle) and prints one line, ``radarcl-probe: {"problem": null or why}``.
+then runs each named check (``runtime.DEVICE_CHECKS``, registered by the layers above: the
+pipeline's every kernel against the float64 oracle) and prints one line,
+``radarcl-probe: {"problem": null or why}``.
 A compiler that aborts kills this process, not radarcl; the parent reads the signal."""
 
 import importlib

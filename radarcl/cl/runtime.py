@@ -113,10 +113,21 @@ _UNKNOWN_CPU_HINT = ("this PoCL's LLVM does not know this CPU (PyPI's PoCL 3.0 h
                      "predates AMD Zen 4/5); install a newer PoCL, e.g. Debian's pocl-opencl-icd "
                      "(make test and make demo do it where they can)")
 
-SELF_TEST = "radarcl.pipeline:self_test"
-"""What the child process runs on a device before radarcl uses it: build every kernel of every
-built-in sensor's pipeline and compare one frame with the float64 oracle. Named, not imported:
-the runtime sits below the pipeline it checks, and the check runs as a program of its own."""
+DEVICE_CHECKS = []
+"""What the child process runs on a device before radarcl uses it, after the small kernel:
+"module:function" names of checks taking a ``Runtime`` and returning None or the reason the
+device cannot be used. The runtime sits below what it checks, so the layers above register
+their checks (``register_device_check``: ``radarcl.pipeline`` registers its ``self_test``, which
+builds every kernel of every built-in pipeline and compares a frame with the float64 oracle)."""
+
+
+def register_device_check(function):
+    """Have the child check devices with ``function`` (a module-level function taking a
+    ``Runtime``, returning None or a reason) before any is used; registering twice is once."""
+    name = f"{function.__module__}:{function.__qualname__}"
+    if name not in DEVICE_CHECKS:
+        DEVICE_CHECKS.append(name)
+        _probed.clear()                         # verdicts without this check do not answer for it
 PROBE_TIMEOUT_S = 600
 VERDICTS = "devices.json"
 
@@ -136,7 +147,7 @@ def build_problem(device):
     than LLVM 14 (AMD family 26) and every build fails with "unknown target CPU 'generic'"; on
     other CPUs its LLVM aborts the whole process while compiling a kernel ("Cannot emit physreg
     copy instruction", exit 134). So the check runs in a child process (``radarcl.cl.probe``):
-    a small kernel, then ``SELF_TEST``. A child that dies, fails a build, computes wrong results
+    a small kernel, then the ``DEVICE_CHECKS``. A child that dies, fails a build, computes wrong results
     or runs past ``PROBE_TIMEOUT_S`` makes the device unusable, with the reason."""
     key = device.int_ptr
     if key not in _probed:
@@ -160,7 +171,7 @@ def _identity(device):
 
     h = hashlib.sha256()
     for part in (device.platform.name, device.platform.version, device.name, device.version, device.driver_version,
-                 __version__, _PROBE_SOURCE, SELF_TEST):
+                 __version__, _PROBE_SOURCE, *DEVICE_CHECKS):
         h.update(str(part).encode() + b"\0")
     try:
         directory = kernels_dir()
@@ -204,7 +215,7 @@ def _probe_in_child(device):
     place = next(((p, d) for p, d, _, dev in _all_devices() if dev.int_ptr == device.int_ptr), None)
     if place is None:
         return "is not among the listed devices"
-    cmd = [sys.executable, "-m", "radarcl.cl.probe", str(place[0]), str(place[1]), SELF_TEST]
+    cmd = [sys.executable, "-m", "radarcl.cl.probe", str(place[0]), str(place[1]), *DEVICE_CHECKS]
     env = dict(os.environ, RADARCL_PROBE_SOURCE=_PROBE_SOURCE)
     log.debug("checking %s / %s in a child process", device.platform.name, device.name)
     try:
