@@ -13,6 +13,10 @@ Layout of ``map.rcmap/`` (any directory name):
   manifest.json           written last (temporary file + rename): the version, its index, its
                           segments, the grid spec, the sensor profile and configuration that made
                           the map, and its provenance (radarcl version, inputs and their SHA-256)
+  knowledge_<k>/          only in a map of the detection-statistics model (store format 2): the
+                          knowledge bricks of segment k, row for row (``maps.npz`` says what they
+                          are); its manifest adds "look_limit" (the reading's correlated-evidence
+                          limit). Without them a store is format 1, as before.
 
 A save writes the changed bricks as a new segment, a new index, then the manifest; a reader
 reads the manifest first and only what it names, so it sees the previous version or the new one,
@@ -37,6 +41,7 @@ from radarcl.maps.npz import check_trajectory
 
 FORMAT = "radarcl-map-store"
 FORMAT_VERSION = 1
+KNOWLEDGE_FORMAT = 2        # a store with knowledge_<k> arrays and a look_limit
 CHUNK_BRICKS = 256
 COMPACT_SEGMENTS = 32
 MANIFEST = "manifest.json"
@@ -83,9 +88,13 @@ def read_manifest(path):
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         raise FrameFormatError(f"{path} is not a radarcl map store")
     version = manifest.get("format_version")
-    if not isinstance(version, int) or version > FORMAT_VERSION:
+    if not isinstance(version, int) or version > KNOWLEDGE_FORMAT:
         raise FrameFormatError(f"{path} was written in store format {version!r}; this radarcl reads format "
-                               f"{FORMAT_VERSION} and older: update radarcl")
+                               f"{KNOWLEDGE_FORMAT} and older: update radarcl")
+    if version == KNOWLEDGE_FORMAT:
+        limit = manifest.get("look_limit")
+        if isinstance(limit, bool) or not isinstance(limit, (int, float)) or not limit > 0:
+            raise FrameFormatError(f"{path}: a format {version} store needs a positive look_limit, got {limit!r}")
     return manifest
 
 
@@ -103,21 +112,28 @@ def read(path):
         if index.ndim != 2 or index.shape[1] != 5:
             raise FrameFormatError(f"{path}: index {manifest['index']} has shape {index.shape}, expected (n, 5)")
         data = np.empty((len(index), BRICK, BRICK, BRICK), np.int32)
+        has_knowledge = manifest["format_version"] == KNOWLEDGE_FORMAT
+        knowledge = np.empty_like(data) if has_knowledge else None
         for segment in manifest["segments"]:
             rows = index[:, 3] == segment
             if rows.any():
-                stored = g[f"segment_{segment}"]
-                if stored.shape[1:] != (BRICK, BRICK, BRICK) or index[rows, 4].max() >= stored.shape[0]:
-                    raise FrameFormatError(f"{path}: segment {segment} does not hold the rows its index names")
-                data[rows] = stored[:][index[rows, 4]]
+                for name, out in (("segment", data), ("knowledge", knowledge)):
+                    if out is None:
+                        continue
+                    stored = g[f"{name}_{segment}"]
+                    if stored.shape[1:] != (BRICK, BRICK, BRICK) or index[rows, 4].max() >= stored.shape[0]:
+                        raise FrameFormatError(f"{path}: {name} {segment} does not hold the rows its index names")
+                    out[rows] = stored[:][index[rows, 4]]
     except FrameFormatError:
         raise
     except Exception as exc:                        # zarr raises its own types for damaged stores
         raise FrameFormatError(f"{path}: a damaged map store ({type(exc).__name__}: {exc})") from exc
-    named = {manifest["index"]} | {f"segment_{s}" for s in manifest["segments"]} | set(manifest.get("previous", []))
+    named = ({manifest["index"]} | {f"{kind}_{s}" for s in manifest["segments"] for kind in ("segment", "knowledge")}
+             | set(manifest.get("previous", [])))
     stray = sorted(p.name for p in path.iterdir() if p.is_dir() and p.name not in named
-                   and p.name.startswith(("segment_", "index_")))
+                   and p.name.startswith(("segment_", "index_", "knowledge_")))
     manifest["incomplete"] = stray
+    manifest["knowledge"] = knowledge
     return spec, np.ascontiguousarray(index[:, :3], dtype=np.int32), data, manifest
 
 
@@ -129,7 +145,7 @@ class StoreWriter:
     made the map (kept in the manifest); inputs: paths whose SHA-256 goes into the provenance.
     """
 
-    def __init__(self, path, spec, sensor_toml="", config=None, inputs=(), overwrite=False, poses=None):
+    def __init__(self, path, spec, sensor_toml="", config=None, inputs=(), overwrite=False, poses=None, look_limit=None):
         zarr, self._codec = _zarr()
         self.path = Path(path)
         if self.path.exists() and not self.path.is_dir():
@@ -146,6 +162,7 @@ class StoreWriter:
                          provenance=dict(radarcl=_version(), created=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                                          inputs=[dict(path=str(p), sha256=file_digest(p)) for p in inputs]))
         self.version, self.segments, self.keys, self.data = 0, [], None, None
+        self.look_limit = look_limit                        # a map with the knowledge channel, or None
         self.index = np.zeros((0, 5), np.int32)
         self.segment_rows = {}                              # segment -> bricks stored in it
         if (self.path / MANIFEST).is_file():                # continue an existing store
@@ -154,7 +171,10 @@ class StoreWriter:
                 raise ConfigError(f"{self.path} holds a map of grid {spec0}, not {spec}; choose another name")
             self.version, self.segments = manifest["version"], list(manifest["segments"])
             self.index = self.group[manifest["index"]][:]
-            self.keys, self.data = keys, data
+            if (manifest["knowledge"] is None) != (look_limit is None):
+                raise ConfigError(f"{self.path} holds a map {'with' if look_limit is None else 'without'} the knowledge "
+                                  "channel; this map is the other kind: choose another name")
+            self.keys, self.data = keys, data if look_limit is None else np.stack([data, manifest["knowledge"]], 1)
             self.segment_rows = {s: self.group[f"segment_{s}"].shape[0] for s in self.segments}
             if poses is None:
                 self.meta["poses"] = manifest.get("poses", [])
@@ -164,14 +184,19 @@ class StoreWriter:
         """Stored bricks no longer in the map (superseded by later saves)."""
         return sum(self.segment_rows[s] for s in self.segments) - len(self.index)
 
-    def save(self, keys, data, poses=None):
-        """Write the bricks (keys (n, 3), data (n, 8, 8, 8) int32) that differ from the last save,
-        and the sensor ``poses`` (n, 4, 4) so far when given; returns the number of bricks
-        written. Atomic for readers."""
+    def save(self, keys, data, poses=None, knowledge=None):
+        """Write the bricks (keys (n, 3), data (n, 8, 8, 8) int32, and their ``knowledge`` bricks
+        for a writer made with a ``look_limit``) that differ from the last save, and the sensor
+        ``poses`` (n, 4, 4) so far when given; returns the number of bricks written. Atomic for
+        readers."""
         if poses is not None:
             self.meta["poses"] = check_trajectory(poses).reshape(-1, 16).tolist()
+        if (knowledge is None) != (self.look_limit is None):
+            raise ConfigError("a store made with a look_limit saves knowledge bricks with its data, and only it")
         keys = np.ascontiguousarray(keys, np.int32)
         data = np.ascontiguousarray(data, np.int32)
+        if knowledge is not None:                           # compared and kept as one (n, 2, 8, 8, 8) array
+            data = np.ascontiguousarray(np.stack([data, np.asarray(knowledge, np.int32)], axis=1))
         self._clean()
         if self.keys is None:
             changed = np.arange(len(keys))
@@ -182,9 +207,11 @@ class StoreWriter:
         segment = (max(self.segments) + 1) if self.segments else 0
         if len(rows):
             self.segment_rows[segment] = len(rows)
-            arr = self.group.create_array(f"segment_{segment}", shape=(len(rows), 8, 8, 8), dtype="int32",
-                                          chunks=(CHUNK_BRICKS, 8, 8, 8), compressors=self._codec(level=1))
-            arr[:] = data[rows]
+            parts = (("segment", data),) if knowledge is None else (("segment", data[:, 0]), ("knowledge", data[:, 1]))
+            for name, values in parts:
+                arr = self.group.create_array(f"{name}_{segment}", shape=(len(rows), 8, 8, 8), dtype="int32",
+                                              chunks=(CHUNK_BRICKS, 8, 8, 8), compressors=self._codec(level=1))
+                arr[:] = values[rows]
         index = self._next_index(keys, rows, segment, compact)
         version = self.version + 1
         name = f"index_{version}"
@@ -193,10 +220,12 @@ class StoreWriter:
         if len(index):
             arr[:] = index
         segments = sorted(set(index[:, 3].tolist()))
+        kinds = ("segment",) if knowledge is None else ("segment", "knowledge")
         previous = sorted(({f"index_{self.version}"} if self.version else set()) |
-                          {f"segment_{s}" for s in self.segments})
-        manifest = dict(format=FORMAT, format_version=FORMAT_VERSION, version=version, index=name, segments=segments,
-                        previous=previous,
+                          {f"{kind}_{s}" for s in self.segments for kind in kinds})
+        extra = {} if knowledge is None else dict(look_limit=float(self.look_limit))
+        manifest = dict(format=FORMAT, format_version=FORMAT_VERSION if knowledge is None else KNOWLEDGE_FORMAT,
+                        version=version, index=name, segments=segments, previous=previous, **extra,
                         grid=dict(origin_m=list(self.spec.origin_m), voxel_m=self.spec.voxel_m,
                                   shape=list(self.spec.shape)), bricks=len(keys), saved=time.strftime("%Y-%m-%dT%H:%M:%S"),
                         **self.meta)
@@ -229,9 +258,10 @@ class StoreWriter:
     def _clean(self, keep=()):
         """Remove segments and indexes no manifest names (a killed writer's, or superseded ones
         beyond the previous version, which a reader may still be reading)."""
-        named = {f"index_{self.version}"} | {f"segment_{s}" for s in self.segments} | set(keep)
+        named = ({f"index_{self.version}"} | {f"{kind}_{s}" for s in self.segments for kind in ("segment", "knowledge")}
+                 | set(keep))
         for p in self.path.iterdir():
-            if p.is_dir() and p.name.startswith(("segment_", "index_")) and p.name not in named:
+            if p.is_dir() and p.name.startswith(("segment_", "index_", "knowledge_")) and p.name not in named:
                 shutil.rmtree(p, ignore_errors=True)
         for p in self.path.glob(f".{MANIFEST}.*.tmp"):
             p.unlink(missing_ok=True)
