@@ -19,6 +19,7 @@ from radarcl.geometry import BEAM_MODELS
 
 KEYS = ("auc_detectable", "iou_detectable", "auc_obstacles", "iou_obstacles", "auc_weak", "false_free",
         "false_free_obstacles", "shadow_unknown", "ece", "brier")
+KNOWLEDGE_KEYS = ("ece_known", "shadow_unknown_k", "known_visible")     # maps with the knowledge channel
 
 
 def configurations(voxel_m, extra=()):
@@ -31,9 +32,15 @@ def configurations(voxel_m, extra=()):
     from radarcl.config.presets import paper_config
     from radarcl.evaluation.tuning import TUNED
 
+    from radarcl.evaluation.calibration import CALIBRATED, DETSTATS_CALIBRATED
+
     tuned = paper_config(voxel_m, TUNED)
     out = [("tuned", tuned), ("paper constants", paper_config(voxel_m))]
     out += [(f"tuned, beam {b}", tuned.replaced(beam__model=b)) for b in BEAM_MODELS if b != tuned["beam.model"]]
+    out += [("calibrated, occlusion (last release)", paper_config(voxel_m, CALIBRATED)),
+            ("detection statistics", paper_config(voxel_m, {"interpret.model": "detstats"}))]
+    if DETSTATS_CALIBRATED:
+        out.append(("detection statistics, calibrated", paper_config(voxel_m, DETSTATS_CALIBRATED)))
     out += [(Path(f).stem, mapconfig.resolve(path=f, program={"grid.voxel_m": voxel_m}).replaced(grid__voxel_m=voxel_m))
             for f in extra]
     return out
@@ -57,8 +64,9 @@ def run(runtime, seeds, voxel_m=0.2, report=None, extra=(), physics=0):
         inst = instrument(runtime, scene, obs, configs[0][1])
         maps = {}
         for name, config in configs:
+            config = for_scene(config, described)
             res = inst.reference_map if config is configs[0][1] else map_observations(runtime, obs, config)
-            maps[name] = dict(radar_score(inst, res.log_odds), ms_per_frame=res.ms_per_frame)
+            maps[name] = dict(radar_score(inst, res.log_odds, res.knowledge), ms_per_frame=res.ms_per_frame)
             del res
         maps.update({f"baseline: {k}": v for k, v in baselines(runtime, inst, obs).items()})
         maps["oracle detections, free 0"] = dict(oracle_detections(runtime, inst, obs), ms_per_frame=0.0)
@@ -72,11 +80,20 @@ def run(runtime, seeds, voxel_m=0.2, report=None, extra=(), physics=0):
         if not rows:
             mean[name] = dict(error=per_scene[0]["maps"][name].get("error"))
             continue
-        mean[name] = {k: _mean([r[k] for r in rows]) for k in KEYS + ("ms_per_frame",)}
+        mean[name] = {k: _mean([r.get(k) for r in rows]) for k in KEYS + KNOWLEDGE_KEYS + ("ms_per_frame",)}
         mean[name]["objects_found"] = sum(r["objects_found"] for r in rows)
         mean[name]["objects_total"] = sum(r["objects_total"] for r in rows)
     return dict(benchmark="scenes", device=runtime.name, seeds=list(seeds), voxel_m=voxel_m, physics=physics_names(physics),
                 mean=mean, scenes=per_scene)
+
+
+def for_scene(config, described):
+    """``config`` for a generated scene: the detection-statistics model gets the scene's mounting
+    (the sensor's height above its ground plane, as a user gives their own); others unchanged."""
+    if config["interpret.model"] != "detstats" or config.origins["sensor_model.ground_below_m"] != \
+            f"sensor {config.sensor.name}: the sensor's [mounting] height_m: the ground plane below it":
+        return config
+    return config.replaced(sensor_model__ground_below_m=described["sensor_height_m"])
 
 
 def physics_names(physics):
@@ -96,15 +113,17 @@ def format_table(r):
     lines = [f"{len(r['seeds'])} generated scenes (seeds {', '.join(map(str, r['seeds']))}) at {r['voxel_m']} m, "
              f"harder physics: {', '.join(r.get('physics', ['none']))}, on {r['device']}; each scored on its own fixed "
              f"voxel set, means over the scenes",
-             f"  {'map':28s} {'AUCdet':>6s} {'IoUdet':>6s} {'AUCobs':>6s} {'IoUobs':>6s} {'AUCwk':>6s} {'f-free':>6s} "
-             f"{'ff-obs':>6s} {'shd-unk':>7s} {'ECE':>6s} {'Brier':>6s} {'objects':>8s} {'ms/frame':>8s}"]
+             f"  {'map':36s} {'AUCdet':>6s} {'IoUdet':>6s} {'AUCobs':>6s} {'IoUobs':>6s} {'AUCwk':>6s} {'f-free':>6s} "
+             f"{'ff-obs':>6s} {'shd-unk':>7s} {'ECE':>6s} {'Brier':>6s} {'objects':>8s} {'ms/frame':>8s} "
+             f"{'ECEknwn':>7s} {'shd-K':>6s} {'known':>6s}"]
     for name, m in r["mean"].items():
         if "error" in m:
-            lines.append(f"  {name:28s} {m['error']}")
+            lines.append(f"  {name:36s} {m['error']}")
             continue
         cells = " ".join(f"{m[k]:6.3f}" if m[k] is not None else f"{'-':>6s}" for k in KEYS[:7])
-        lines.append(f"  {name:28s} {cells} {m['shadow_unknown']:7.3f} {m['ece']:6.3f} {m['brier']:6.3f} "
-                     f"{m['objects_found']:>3d}/{m['objects_total']:<4d} {m['ms_per_frame']:8.1f}")
+        extra = " ".join(f"{m.get(k):7.3f}" if m.get(k) is not None else f"{'-':>7s}" for k in KNOWLEDGE_KEYS)
+        lines.append(f"  {name:36s} {cells} {m['shadow_unknown']:7.3f} {m['ece']:6.3f} {m['brier']:6.3f} "
+                     f"{m['objects_found']:>3d}/{m['objects_total']:<4d} {m['ms_per_frame']:8.1f} {extra}")
     for s in r["scenes"]:
         lines.append(f"  scene {s['scene']['seed']}: {s['voxel_set']}")
     return lines

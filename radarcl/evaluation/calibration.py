@@ -43,6 +43,9 @@ CHANNELS = ("occ", "near", "far", "after")
 CALIBRATED = {"cfar.kind": "ca", "cfar.pfa": 1e-3, "interpret.model": "occlusion", "interpret.surface_db": 15.0,
               "interpret.k_occ": 0.0811, "interpret.e_high": -1.1553, "interpret.e_high_far": -2.276,
               "interpret.e_low": -0.9791}
+# `radarcl calibrate --model detstats --voxel 0.4` (the detection-statistics model's physical
+# parameters by maximum likelihood on the training scenes): empty until it has run.
+DETSTATS_CALIBRATED = {}
 NAMES = {"occlusion": ("interpret.k_occ", "interpret.e_high", "interpret.e_high_far", "interpret.e_low"),
          "paper": ("interpret.k_occ", "interpret.e_high", "interpret.e_low")}
 SIGNS = {"interpret.k_occ": 1, "interpret.e_high": -1, "interpret.e_high_far": -1, "interpret.e_low": -1}

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl import logodds, oracle
+from radarcl import logodds, oracle, sensor_model
 from radarcl.errors import ConfigError
 from radarcl.evaluation import baseline
 from radarcl.evaluation import visibility as vis
@@ -39,6 +39,7 @@ class MapResult:
     detections: list
     memory: dict
     grid: object = None
+    knowledge: np.ndarray = None     # detstats: (nz, ny, nx) float32 summed detection opportunity [looks]
 
 
 def map_observations(runtime, obs, config, progress=None):
@@ -74,8 +75,20 @@ def map_observations(runtime, obs, config, progress=None):
         profiles = mapping.range_fft(obs.samples[j]).profiles
         detections.append(mapping.detection.cfar(profiles).mask.reshape(lattice.n_beams, -1))
     runtime.queue.finish()
-    log_odds = (grid.snapshot() / np.float32(logodds.SCALE)).astype(np.float32)
-    return MapResult(config, spec, log_odds, count.snapshot() > 0, ms_per_frame, detections, grid.memory(), grid)
+    log_odds, knowledge = read_map(grid, config)
+    return MapResult(config, spec, log_odds, count.snapshot() > 0, ms_per_frame, detections, grid.memory(), grid,
+                     knowledge)
+
+
+def read_map(grid, config):
+    """(log-odds [nat], knowledge [looks] or None), dense float32, of an ``EvidenceGrid`` made with
+    ``config``: the detection-statistics model's as its reading says (``sensor_model.read_log_odds``)."""
+    units = grid.snapshot()
+    if not grid.has_knowledge:
+        return (units / np.float32(logodds.SCALE)).astype(np.float32), None
+    known = grid.knowledge_snapshot()
+    log_odds = sensor_model.read_log_odds(units, known, config.model_params().reading).astype(np.float32)
+    return log_odds, (known / np.float32(logodds.KNOWLEDGE_SCALE)).astype(np.float32)
 
 
 def baseline_map(obs, detections, config):
@@ -141,9 +154,10 @@ def instrument(runtime, scene, obs, reference, progress=None):
     return Instrument(ref_map.spec, truth, objects, hidden, reference, ref_map, power, noise)
 
 
-def radar_score(inst, log_odds):
-    """``metrics.radar_scores`` of ``log_odds`` on ``inst``, NaN as None (JSON)."""
-    out = radar_scores(log_odds, inst.truth, inst.objects)
+def radar_score(inst, log_odds, knowledge=None):
+    """``metrics.radar_scores`` of ``log_odds`` (and the map's ``knowledge`` [looks], when it has
+    one) on ``inst``, NaN as None (JSON)."""
+    out = radar_scores(log_odds, inst.truth, inst.objects, knowledge)
     return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in out.items()}
 
 

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from radarcl.errors import FrameFormatError, ShapeError
+from radarcl import sensor_model
+from radarcl.errors import ConfigError, FrameFormatError, ShapeError
 from radarcl.grid import EvidenceGrid
 from radarcl.io import files
 from radarcl.maps import npz, store
@@ -40,14 +41,39 @@ def check_output(path, force=False, inputs=(), what="map"):
 def read(path):
     """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32) of a map file or store, without a
     device (numpy only, for the viewer). What is not a radarcl map raises ``FrameFormatError``
-    saying what was wrong."""
+    saying what was wrong. ``data`` are the stored sums: for a map with the knowledge channel
+    read them with ``read_channels`` (``maps.Map`` does)."""
+    return read_channels(path)[:3]
+
+
+def read_channels(path):
+    """``read``'s (spec, keys, data) and the map's ``npz.Channels`` (knowledge and reading), or
+    None for a map without the knowledge channel."""
     if format_of(path) == "store":
         spec, keys, data, manifest = store.read(path)
         if manifest["incomplete"]:
             log.warning("%s: a save after version %d did not complete (%s left behind); read version %d",
                         path, manifest["version"], ", ".join(manifest["incomplete"]), manifest["version"])
-        return spec, keys, data
-    return npz.read(path)
+        knowledge = manifest["knowledge"]
+        return spec, keys, data, None if knowledge is None else npz.Channels(knowledge, manifest["reading"])
+    return npz.read_channels(path)
+
+
+def reading_of(config):
+    """The reading a map of ``config`` (a ``Resolved`` or its ``as_dict()``) keeps: its
+    [sensor_model] keys' (``sensor_model.READING``)."""
+    values = dict(config or {}) if config is None or isinstance(config, dict) else config.values
+    return sensor_model.ModelParams.of(values).reading
+
+
+def _channels(grid, reading):
+    """The grid's knowledge channel and reading (``npz.Channels``), or None for a grid without."""
+    if not getattr(grid, "has_knowledge", False):
+        return None
+    if reading is None:
+        raise ConfigError("a map with the knowledge channel is saved with its reading (the [sensor_model] keys "
+                          "look_limit, prior_nats, prior_looks)")
+    return npz.Channels(grid.knowledge_bricks(), reading)
 
 
 def read_poses(path):
@@ -78,44 +104,50 @@ class MapSaver:
         """Save ``grid`` (and the sensor ``poses`` (n, 4, 4) so far, when given); ``meta``
         (JSON-able values, e.g. a live stream's counts) goes into the manifest or the npz's
         ``meta`` (``read_meta`` reads either)."""
+        keys, data = grid.bricks()
+        channels = _channels(grid, reading_of(self.meta["config"]))
         if self.npz:
-            npz.write(self.path, grid.spec, *grid.bricks(), poses=poses, meta=meta or None)
+            npz.write(self.path, grid.spec, keys, data, poses=poses, meta=meta or None, channels=channels)
             return
         if self.writer is None:
-            self.writer = store.StoreWriter(self.path, grid.spec, overwrite=True, **self.meta)
+            self.writer = store.StoreWriter(self.path, grid.spec, overwrite=True, **self.meta,
+                                            reading=None if channels is None else channels.reading)
         self.writer.meta.update(meta)
-        self.writer.save(*grid.bricks(), poses=poses)
+        self.writer.save(keys, data, poses=poses, knowledge=None if channels is None else channels.knowledge)
 
 
 def convert(source, target):
     """Copy a map between the npz and store formats (by ``target``'s name: ``.npz`` or a
     store directory); returns (spec, number of bricks)."""
-    spec, keys, data = read(source)
+    spec, keys, data, channels = read_channels(source)
     manifest = store.read_manifest(source) if format_of(source) == "store" else {}
     if output_format(target) == "npz":
-        npz.write(target, spec, keys, data)
+        npz.write(target, spec, keys, data, channels=channels)
     else:
         writer = store.StoreWriter(target, spec, manifest.get("sensor", ""), manifest.get("config"), inputs=[source],
-                                   overwrite=True)
-        writer.save(keys, data)
+                                   overwrite=True, reading=None if channels is None else channels.reading)
+        writer.save(keys, data, knowledge=None if channels is None else channels.knowledge)
     return spec, len(keys)
 
 
-def save_grid(grid, path, poses=None):
+def save_grid(grid, path, poses=None, reading=None):
     """Write an ``EvidenceGrid`` (spec and allocated bricks, not the dense volume) to an npz
-    file, with the sensor's ``poses`` (n, 4, 4) when given (the viewer draws them)."""
-    npz.write(path, grid.spec, *grid.bricks(), poses=poses)
+    file, with the sensor's ``poses`` (n, 4, 4) when given (the viewer draws them); a grid with
+    the knowledge channel with it and its ``reading`` (``reading_of``)."""
+    npz.write(path, grid.spec, *grid.bricks(), poses=poses, channels=_channels(grid, reading))
 
 
 def load_grid(runtime, path):
     """An ``EvidenceGrid`` on ``runtime``'s device holding the map file or store at ``path``."""
     import pyopencl as cl
 
-    spec, keys, data = read(path)
-    grid = EvidenceGrid(runtime, spec)
+    spec, keys, data, channels = read_channels(path)
+    grid = EvidenceGrid(runtime, spec, knowledge=channels is not None)
     slots = grid.allocate(keys)
     if len(keys):
-        ordered = np.empty_like(data)
-        ordered[slots] = data
-        cl.enqueue_copy(runtime.queue, grid.pool, ordered, is_blocking=True)
+        for pool, values in ((grid.pool, data), (grid.knowledge, None if channels is None else channels.knowledge)):
+            if values is not None:
+                ordered = np.empty_like(values)
+                ordered[slots] = values
+                cl.enqueue_copy(runtime.queue, pool, ordered, is_blocking=True)
     return grid

@@ -6,10 +6,12 @@ Members: ``version`` (``FILE_VERSION``), ``origin_m``, ``voxel_m``, ``shape`` (t
 A map of the detection-statistics model (``radarcl.sensor_model``) adds two members and is
 version ``KNOWLEDGE_VERSION`` (2): ``knowledge`` (n, 8, 8, 8) int32 [z, y, x], the summed
 detection opportunity in ``logodds.KNOWLEDGE_SCALE`` units per look (same bricks, same order as
-``data``), and ``look_limit`` (a float64 scalar): the log-odds of a voxel read as ``data``
-divided by max(1, knowledge / look_limit) (``sensor_model.read_log_odds``). A map without them is
-written as version 1, byte for byte as before; version 1 files read as maps without knowledge.
-A radarcl that reads only version 1 refuses version 2 instead of showing unread sums as log-odds.
+``data``; 0 where never observed), and ``reading`` (a JSON object of
+``sensor_model.READING``: look_limit, prior_nats, prior_looks): a voxel's log-odds is
+``sensor_model.read_log_odds(data, knowledge, reading)``, not ``data`` itself. A map without
+them is written as version 1, byte for byte as before; version 1 files read as maps without
+knowledge. A radarcl that reads only version 1 refuses version 2 instead of showing unread sums
+as log-odds.
 Written through a temporary file renamed over the target, so a reader (``radarcl view --live``)
 sees the old map or the new one, never half of one. Read member by member with every size
 checked against its header and the memory budget (``io.files.safe_npz``), never unpickled.
@@ -25,6 +27,7 @@ import numpy as np
 from radarcl.errors import FrameFormatError, ShapeError
 from radarcl.grid import BRICK, GRID_LIMIT, GridSpec
 from radarcl.io.files import atomic, safe_npz
+from radarcl.sensor_model import READING
 
 FILE_VERSION = 1
 KNOWLEDGE_VERSION = 2      # a file with the knowledge channel (see the module docstring)
@@ -41,10 +44,24 @@ def recognises(path):
 class Channels:
     """What a map of the detection-statistics model keeps beside its sums: ``knowledge``
     (n, 8, 8, 8) int32 in ``logodds.KNOWLEDGE_SCALE`` units (the bricks of ``data``, in order) and
-    ``look_limit`` (the reading's correlated-evidence limit, in looks)."""
+    ``reading`` (a dict of ``sensor_model.READING``, checked by ``check_reading``)."""
 
     knowledge: np.ndarray
-    look_limit: float
+    reading: dict
+
+
+def check_reading(reading, where):
+    """A map's reading as a dict of floats, or FrameFormatError naming what is wrong."""
+    if not isinstance(reading, dict) or set(reading) != set(READING):
+        raise FrameFormatError(f"{where}: its reading must give exactly {', '.join(READING)}, got {reading!r}")
+    out = {}
+    for key, value in reading.items():
+        ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+        if not ok or (value > 0) != (key != "prior_nats") or (key == "prior_nats" and value > 0):
+            raise FrameFormatError(f"{where}: reading {key} = {value!r} is not a "
+                                   f"{'number <= 0' if key == 'prior_nats' else 'positive number'}")
+        out[key] = float(value)
+    return out
 
 
 def write(path, spec, keys, data, poses=None, meta=None, channels=None):
@@ -59,7 +76,7 @@ def write(path, spec, keys, data, poses=None, meta=None, channels=None):
         if np.shape(channels.knowledge) != np.shape(data):
             raise ShapeError(f"knowledge bricks {np.shape(channels.knowledge)} must match the data's {np.shape(data)}")
         extra["knowledge"] = np.ascontiguousarray(channels.knowledge, np.int32)
-        extra["look_limit"] = np.float64(channels.look_limit)
+        extra["reading"] = np.str_(json.dumps(check_reading(channels.reading, path)))
         version = KNOWLEDGE_VERSION
     with atomic(path) as tmp, open(tmp, "wb") as f:
         np.savez_compressed(f, version=version, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
@@ -103,21 +120,19 @@ def read_channels(path):
         keys, data = f["keys"], f["data"]
         channels = None
         if version == KNOWLEDGE_VERSION:
-            if "knowledge" not in f.files or "look_limit" not in f.files:
-                raise FrameFormatError(f"{path}: a version {version} map lacks its knowledge or look_limit")
+            if "knowledge" not in f.files or "reading" not in f.files:
+                raise FrameFormatError(f"{path}: a version {version} map lacks its knowledge or reading")
             if f.header("knowledge")[0] != n_data:
                 raise FrameFormatError(f"{path}: knowledge bricks {f.header('knowledge')[0]} do not match the "
                                        f"data's {n_data}")
-            knowledge, limit = f["knowledge"], f["look_limit"]
+            knowledge = f["knowledge"]
             if knowledge.dtype != np.int32 or (knowledge.size and (knowledge.min() < 0 or knowledge.max() > GRID_LIMIT)):
                 raise FrameFormatError(f"{path}: knowledge must be int32 in [0, {GRID_LIMIT}] (radarcl writes nothing else)")
             try:
-                limit = float(limit)
-            except (TypeError, ValueError):
-                limit = float("nan")
-            if not (math.isfinite(limit) and limit > 0):
-                raise FrameFormatError(f"{path}: look_limit must be a positive number, got {f['look_limit']!r}")
-            channels = Channels(knowledge, limit)
+                reading = json.loads(str(f["reading"]))
+            except (ValueError, TypeError) as exc:
+                raise FrameFormatError(f"{path}: its reading is not JSON ({exc})") from exc
+            channels = Channels(knowledge, check_reading(reading, path))
     if data.dtype != np.int32:
         raise FrameFormatError(f"{path}: expected bricks ({len(keys)}, 8, 8, 8) int32, got {data.shape} {data.dtype}")
     if keys.dtype != np.int32:

@@ -15,8 +15,8 @@ Layout of ``map.rcmap/`` (any directory name):
                           the map, and its provenance (radarcl version, inputs and their SHA-256)
   knowledge_<k>/          only in a map of the detection-statistics model (store format 2): the
                           knowledge bricks of segment k, row for row (``maps.npz`` says what they
-                          are); its manifest adds "look_limit" (the reading's correlated-evidence
-                          limit). Without them a store is format 1, as before.
+                          are); its manifest adds "reading" (``sensor_model.READING``: how the
+                          sums are read). Without them a store is format 1, as before.
 
 A save writes the changed bricks as a new segment, a new index, then the manifest; a reader
 reads the manifest first and only what it names, so it sees the previous version or the new one,
@@ -37,11 +37,11 @@ import numpy as np
 from radarcl import __version__
 from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.grid import BRICK, GridSpec
-from radarcl.maps.npz import check_trajectory
+from radarcl.maps.npz import check_reading, check_trajectory
 
 FORMAT = "radarcl-map-store"
 FORMAT_VERSION = 1
-KNOWLEDGE_FORMAT = 2        # a store with knowledge_<k> arrays and a look_limit
+KNOWLEDGE_FORMAT = 2        # a store with knowledge_<k> arrays and a reading
 CHUNK_BRICKS = 256
 COMPACT_SEGMENTS = 32
 MANIFEST = "manifest.json"
@@ -92,9 +92,7 @@ def read_manifest(path):
         raise FrameFormatError(f"{path} was written in store format {version!r}; this radarcl reads format "
                                f"{KNOWLEDGE_FORMAT} and older: update radarcl")
     if version == KNOWLEDGE_FORMAT:
-        limit = manifest.get("look_limit")
-        if isinstance(limit, bool) or not isinstance(limit, (int, float)) or not limit > 0:
-            raise FrameFormatError(f"{path}: a format {version} store needs a positive look_limit, got {limit!r}")
+        manifest["reading"] = check_reading(manifest.get("reading"), path)
     return manifest
 
 
@@ -145,7 +143,7 @@ class StoreWriter:
     made the map (kept in the manifest); inputs: paths whose SHA-256 goes into the provenance.
     """
 
-    def __init__(self, path, spec, sensor_toml="", config=None, inputs=(), overwrite=False, poses=None, look_limit=None):
+    def __init__(self, path, spec, sensor_toml="", config=None, inputs=(), overwrite=False, poses=None, reading=None):
         zarr, self._codec = _zarr()
         self.path = Path(path)
         if self.path.exists() and not self.path.is_dir():
@@ -162,7 +160,7 @@ class StoreWriter:
                          provenance=dict(radarcl=_version(), created=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                                          inputs=[dict(path=str(p), sha256=file_digest(p)) for p in inputs]))
         self.version, self.segments, self.keys, self.data = 0, [], None, None
-        self.look_limit = look_limit                        # a map with the knowledge channel, or None
+        self.reading = reading                              # a map with the knowledge channel: its reading
         self.index = np.zeros((0, 5), np.int32)
         self.segment_rows = {}                              # segment -> bricks stored in it
         if (self.path / MANIFEST).is_file():                # continue an existing store
@@ -171,10 +169,10 @@ class StoreWriter:
                 raise ConfigError(f"{self.path} holds a map of grid {spec0}, not {spec}; choose another name")
             self.version, self.segments = manifest["version"], list(manifest["segments"])
             self.index = self.group[manifest["index"]][:]
-            if (manifest["knowledge"] is None) != (look_limit is None):
-                raise ConfigError(f"{self.path} holds a map {'with' if look_limit is None else 'without'} the knowledge "
+            if (manifest["knowledge"] is None) != (reading is None):
+                raise ConfigError(f"{self.path} holds a map {'with' if reading is None else 'without'} the knowledge "
                                   "channel; this map is the other kind: choose another name")
-            self.keys, self.data = keys, data if look_limit is None else np.stack([data, manifest["knowledge"]], 1)
+            self.keys, self.data = keys, data if reading is None else np.stack([data, manifest["knowledge"]], 1)
             self.segment_rows = {s: self.group[f"segment_{s}"].shape[0] for s in self.segments}
             if poses is None:
                 self.meta["poses"] = manifest.get("poses", [])
@@ -186,13 +184,13 @@ class StoreWriter:
 
     def save(self, keys, data, poses=None, knowledge=None):
         """Write the bricks (keys (n, 3), data (n, 8, 8, 8) int32, and their ``knowledge`` bricks
-        for a writer made with a ``look_limit``) that differ from the last save, and the sensor
+        for a writer made with a ``reading``) that differ from the last save, and the sensor
         ``poses`` (n, 4, 4) so far when given; returns the number of bricks written. Atomic for
         readers."""
         if poses is not None:
             self.meta["poses"] = check_trajectory(poses).reshape(-1, 16).tolist()
-        if (knowledge is None) != (self.look_limit is None):
-            raise ConfigError("a store made with a look_limit saves knowledge bricks with its data, and only it")
+        if (knowledge is None) != (self.reading is None):
+            raise ConfigError("a store made with a reading saves knowledge bricks with its data, and only it")
         keys = np.ascontiguousarray(keys, np.int32)
         data = np.ascontiguousarray(data, np.int32)
         if knowledge is not None:                           # compared and kept as one (n, 2, 8, 8, 8) array
@@ -223,7 +221,7 @@ class StoreWriter:
         kinds = ("segment",) if knowledge is None else ("segment", "knowledge")
         previous = sorted(({f"index_{self.version}"} if self.version else set()) |
                           {f"{kind}_{s}" for s in self.segments for kind in kinds})
-        extra = {} if knowledge is None else dict(look_limit=float(self.look_limit))
+        extra = {} if knowledge is None else dict(reading=check_reading(dict(self.reading), self.path))
         manifest = dict(format=FORMAT, format_version=FORMAT_VERSION if knowledge is None else KNOWLEDGE_FORMAT,
                         version=version, index=name, segments=segments, previous=previous, **extra,
                         grid=dict(origin_m=list(self.spec.origin_m), voxel_m=self.spec.voxel_m,
