@@ -31,8 +31,13 @@ def run(runtime, config, data_dir, report=None):
     spec = navtech_map.grid_for(per_beam, config["interpret.range_max_m"], config["grid.voxel_m"])
     train, test = list(range(0, len(scans), 2)), list(range(1, len(scans), 2))
     say(f"{len(scans)} scans: map of scans {train}, held out {test}")
-    maps = {"map": navtech_map.build_map(runtime, config, spec, [scans[k] for k in train], per_beam[train]).snapshot(),
-            "baseline: raw_intensity": raw_map(runtime, config, spec, [scans[k] for k in train], per_beam[train])}
+    maps = {"map": _units(navtech_map.build_map(runtime, config, spec, [scans[k] for k in train], per_beam[train]),
+                          config)}
+    if config["interpret.model"] != "detstats":       # the detection-statistics model beside the configuration's
+        detstats = config.replaced(interpret__model="detstats")
+        maps["detection statistics"] = _units(navtech_map.build_map(runtime, detstats, spec, [scans[k] for k in train],
+                                                                    per_beam[train]), detstats)
+    maps["baseline: raw_intensity"] = raw_map(runtime, config, spec, [scans[k] for k in train], per_beam[train])
     # the outcomes: the sensor profile's own detector, whatever the compared map's CFAR is
     outcome = mapconfig.resolve(config.sensor, program={"grid.voxel_m": config["grid.voxel_m"]})
     stacked, y = predictions(runtime, outcome, spec, np.stack(list(maps.values()), axis=-1),
@@ -45,6 +50,14 @@ def run(runtime, config, data_dir, report=None):
     return dict(benchmark="heldout-scans", device=runtime.name, sensor=config.sensor.name, scans=len(scans),
                 train=train, held_out=test, voxel_m=config["grid.voxel_m"], config=config.label(),
                 outcome_detector=outcome.label(), results=out)
+
+
+def _units(grid, config):
+    """A map's dense log-odds as read (``evaluate.read_map``), in logodds units."""
+    from radarcl import logodds
+    from radarcl.evaluation.evaluate import read_map
+
+    return logodds.to_fixed(read_map(grid, config)[0])
 
 
 def format_table(r):

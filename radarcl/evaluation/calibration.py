@@ -46,6 +46,7 @@ CALIBRATED = {"cfar.kind": "ca", "cfar.pfa": 1e-3, "interpret.model": "occlusion
 # `radarcl calibrate --model detstats --voxel 0.4` (the detection-statistics model's physical
 # parameters by maximum likelihood on the training scenes): empty until it has run.
 DETSTATS_CALIBRATED = {}
+DETSTATS_CALIBRATED_SPINNING = {}        # the same on the generated streets (`--radar spinning`)
 NAMES = {"occlusion": ("interpret.k_occ", "interpret.e_high", "interpret.e_high_far", "interpret.e_low"),
          "paper": ("interpret.k_occ", "interpret.e_high", "interpret.e_low")}
 SIGNS = {"interpret.k_occ": 1, "interpret.e_high": -1, "interpret.e_high_far": -1, "interpret.e_low": -1}

@@ -43,7 +43,8 @@ def grid_for(poses, range_m, voxel_m):
 def build_map(runtime, config, spec, scans, per_beam, progress=None):
     """Fuse ``scans`` taken at ``per_beam`` poses (n, n_az, 4, 4) into a new grid of ``spec``
     with ``config`` (a ``mapconfig.Resolved``); returns the grid."""
-    mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec), per_beam_poses=True)
+    grid = EvidenceGrid(runtime, spec, knowledge=config["interpret.model"] == "detstats")
+    mapping = Mapping.from_config(runtime, config=config, grid=grid, per_beam_poses=True)
     source = polar_source(config.sensor, scans, per_beam, f"{len(scans)} polar scans")
     mapping.fuse_source(source, None if progress is None else lambda j, _: progress(j + 1, len(scans)))
     mapping.runtime.queue.finish()
