@@ -132,10 +132,13 @@ class ModelParams:
     spinning radar's one horizontal beam)."""
 
     snr_1m2_at_10m_db: float = DEFAULT_SNR_DB
-    target_gamma_db: float = -10.0
-    target_spread_db: float = 5.0
-    target_extent_m: float = 0.5
-    terrain_gamma_db: float = -20.0
+    # the typical target and the terrain: `radarcl calibrate --model detstats --voxel 0.4` (the
+    # likelihood of 216,766 looks at the occupied voxels of training scenes 101-104; jackknife SEs
+    # 8.5 dB, 0.75 dB, 0.08 m, 2.6 dB: README). A simulator's world: a real radar's may differ.
+    target_gamma_db: float = -20.0
+    target_spread_db: float = 10.0
+    target_extent_m: float = 0.4
+    terrain_gamma_db: float = -24.0
     terrain_band_m: float = 0.3
     block_gamma_db: float = -20.0
     look_limit: float = 4.0

@@ -31,10 +31,12 @@ def configurations(voxel_m, extra=()):
     from radarcl.evaluation.calibration import DETSTATS_CALIBRATED
     from radarcl.evaluation.tuning import TUNED
 
-    detstats = paper_config(voxel_m, {"interpret.model": "detstats", **DETSTATS_CALIBRATED})
+    detstats = paper_config(voxel_m, {"interpret.model": "detstats"})
     out = [("paper constants", paper_config(voxel_m)), ("tuned", paper_config(voxel_m, TUNED)),
            ("detection statistics", detstats),
-           ("detection statistics, no look limit", detstats.replaced(sensor_model__look_limit=1e4))]
+           ("detection statistics, no look limit", detstats.replaced(sensor_model__look_limit=1e4)),
+           ("detection statistics, look limit 1", detstats.replaced(sensor_model__look_limit=1.0)),
+           ("detection statistics, fitted reading", paper_config(voxel_m, DETSTATS_CALIBRATED))]
     out += [(Path(f).stem, mapconfig.resolve(path=f, program={"grid.voxel_m": voxel_m}).replaced(grid__voxel_m=voxel_m))
             for f in extra]
     return out

@@ -48,7 +48,7 @@ def configurations(voxel_m, extra=(), radar="paper"):
             ("detection statistics", preset({"interpret.model": "detstats"}))]
     calibrated = DETSTATS_CALIBRATED if radar == "paper" else DETSTATS_CALIBRATED_SPINNING
     if calibrated:
-        out.append(("detection statistics, calibrated", preset(calibrated)))
+        out.append(("detection statistics, fitted reading", preset(calibrated)))
     out += [(Path(f).stem, mapconfig.resolve(path=f, program={"grid.voxel_m": voxel_m}).replaced(grid__voxel_m=voxel_m))
             for f in extra]
     return out
