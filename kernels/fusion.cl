@@ -37,8 +37,10 @@
  *     interpolation integer: e_s + ((e_{s+1} - e_s) (q & 4095) + 2048) >> 12, so the gather and
  *     the still table give the same integers whatever the compiler contracts. The evidence goes
  *     to pool[], the opportunity to knowledge[] (the knowledge channel: "never observed" apart
- *     from "observed, undecided"). The still table keeps q + 1 (never 0, whose bits mean "no
- *     beam") as an integer in place of the weight, and the class in bit 16.
+ *     from "observed, undecided"), and looks[] counts the updates whose opportunity is not 0 (the
+ *     reading counts correlated looks once: sensor_model.read_log_odds). The still table keeps
+ *     q + 1 (never 0, whose bits mean "no beam") as an integer in place of the weight, and the
+ *     class in bit 16.
  *
  * fusion_cached: a still radar's frame from the recorded table: each voxel sums
  * rint(evidence[entry] * weight) over its entries, the same integers the gather gives (the
@@ -205,6 +207,7 @@ __kernel void fusion(
     const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (header)
     const float terrain_dz,           // DETSTATS: voxels with z - beam origin z below this are terrain [m]
     __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity [KNOWLEDGE_SCALE units]
+    __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity [count]
     __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
 {
     const int id = get_global_id(0);
@@ -225,9 +228,9 @@ __kernel void fusion(
     for (int u = 0; u < UNITS; ++u)
         acc[u] = 0;
 #if defined(DETSTATS) && !RECORD
-    intL kacc[UNITS];                 /* the knowledge channel's sums */
+    intL kacc[UNITS], nacc[UNITS];    /* the knowledge channel's sums, the looks' counts */
     for (int u = 0; u < UNITS; ++u)
-        kacc[u] = 0;
+        kacc[u] = nacc[u] = 0;
 #endif
 #ifndef PER_BEAM_POSES
     /* one origin for the frame: one bin per voxel, -1 where no evidence can come; computed when
@@ -379,7 +382,9 @@ __kernel void fusion(
                 intL pe, pk;
                 GATHER_NODES(pe, pk, row_nodes, at);
                 acc[u] += NODE_LERP(pe, f) & inside;
-                kacc[u] += NODE_LERP(pk, f) & inside;
+                const intL kn = NODE_LERP(pk, f) & inside;
+                kacc[u] += kn;
+                nacc[u] -= kn > 0;                            /* true is -1 */
 #else
                 intL e = GATHER_L(row_ev, j);
   #ifdef GAUSSIAN
@@ -418,6 +423,9 @@ __kernel void fusion(
                                  + ((r0 >> 2) * 8 + (r0 & 3)) * 8;
             const intL v = vloadL(0, cell) + kacc[u];
             vstoreL(v > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : v, 0, cell);
+            __global int *count = looks + (cell - knowledge);
+            const intL c = vloadL(0, count) + nacc[u];
+            vstoreL(c > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : c, 0, count);
         }
 #endif
     }
@@ -435,6 +443,7 @@ __kernel void fusion_cached(
     const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (the class
                                       //   of each entry is in its record)
     __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity
+    __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity
     __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
 {
     const int id = get_global_id(0);
@@ -467,6 +476,7 @@ __kernel void fusion_cached(
         GATHER_NODES_V(pe, pk, nodes, at);
         intV sum = NODE_LERP(pe, f) & reached;
         intV ksum = NODE_LERP(pk, f) & reached;
+        intV nsum = -(ksum > 0);
 #else
         /* the weight's sign bit says "more entries follow" (weights are positive) */
         const floatV product = convert_floatV(GATHER(evidence, index)) * as_floatV(bits & 0x7FFFFFFF);
@@ -476,13 +486,13 @@ __kernel void fusion_cached(
             const size_t t = (size_t)id * 16 + row;
             int extra[VEC];
 #ifdef DETSTATS
-            int kextra[VEC];
+            int kextra[VEC], nextra[VEC];
 #endif
             int at = row_start[t];
             for (int lane = 0; lane < VEC; ++lane) {
                 int add = 0;
 #ifdef DETSTATS
-                int kadd = 0;
+                int kadd = 0, nadd = 0;
 #endif
                 const int n = counts[t * VEC + lane];
                 for (int m = 1; m < n; ++m, ++at) {
@@ -492,7 +502,9 @@ __kernel void fusion_cached(
                     const int sg = min(qe >> 12, SEGMENTS - 1);
                     const int2 node = nodes[(entry.x * CLASSES + ((entry.y >> 16) & 1)) * SEGMENTS + sg];
                     add += NODE_LERP(node.x, qe - (sg << 12));
-                    kadd += NODE_LERP(node.y, qe - (sg << 12));
+                    const int kn = NODE_LERP(node.y, qe - (sg << 12));
+                    kadd += kn;
+                    nadd += kn > 0;
 #else
                     const float p = (float)evidence[entry.x] * as_float(entry.y);
                     add += as_int(p + 12582912.0f) - 0x4B400000;    /* rint, half to even, as RINT_INTV */
@@ -501,11 +513,13 @@ __kernel void fusion_cached(
                 extra[lane] = add;
 #ifdef DETSTATS
                 kextra[lane] = kadd;
+                nextra[lane] = nadd;
 #endif
             }
             sum += vloadV(0, extra);
 #ifdef DETSTATS
             ksum += vloadV(0, kextra);
+            nsum += vloadV(0, nextra);
 #endif
         }
 #ifdef DETSTATS
@@ -513,6 +527,9 @@ __kernel void fusion_cached(
             __global int *cell = kcells + ((row >> 2) * 8 + (row & 3)) * 8;
             const intV v = vloadV(0, cell) + ksum;
             vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : v, 0, cell);
+            __global int *count = looks + (cell - knowledge);
+            const intV c = vloadV(0, count) + nsum;
+            vstoreV(c > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : c, 0, count);
         }
 #endif
         if (or_lanes(sum)) {

@@ -14,9 +14,10 @@ p = 1 in float64 anyway); only there would the order matter. Views (``log_odds``
 Storage: bricks of 8 x 8 x 8 voxels (2 KiB), allocated the first time some beam reaches them
 ("leave out what the scene does not need"). A host table maps brick -> slot in one device pool.
 A grid made with ``knowledge=True`` (the detection-statistics model, ``radarcl.sensor_model``)
-holds a second pool with the same slots: per voxel the summed detection opportunity of its looks
-(int32, ``logodds.KNOWLEDGE_SCALE`` units per look, non-negative, saturating at ``GRID_LIMIT``),
-so that "never observed" (0) differs from "observed, undecided" (evidence near 0).
+holds two more pools with the same slots: per voxel the summed detection opportunity of its looks
+(``knowledge``: int32, ``logodds.KNOWLEDGE_SCALE`` units per look, non-negative, saturating at
+``GRID_LIMIT``), so that "never observed" (0) differs from "observed, undecided" (evidence near
+0), and the number of those looks (``looks``: the reading counts correlated looks once).
 This module holds the grid on the device only; ``radarcl.maps`` reads and writes it as files.
 """
 
@@ -157,6 +158,7 @@ class EvidenceGrid:
         self.pool = None
         self.has_knowledge = bool(knowledge)
         self.knowledge = None                                   # the knowledge pool (same slots)
+        self.looks = None                                       # the looks' count pool (same slots)
         self.capacity = 0
         self.generation = 0                                     # bumped by clear(): slots change
         if dense:
@@ -172,7 +174,7 @@ class EvidenceGrid:
     def memory(self):
         """Bytes of the grid stored densely and as allocated here, and the brick counts."""
         table = self.table.nbytes
-        channels = 2 if self.has_knowledge else 1
+        channels = 3 if self.has_knowledge else 1
         return {"dense_bytes": self.spec.dense_bytes, "sparse_bytes": channels * self.n_bricks * BRICK_BYTES + table,
                 "bricks": self.n_bricks, "bricks_total": int(self.table.size)}
 
@@ -194,7 +196,7 @@ class EvidenceGrid:
         capacity = max(needed, min(int(self.capacity * 1.5) + 64, limit // BRICK_BYTES))
         q = self.runtime.queue
         pools = []
-        for old in (self.pool, self.knowledge) if self.has_knowledge else (self.pool,):
+        for old in (self.pool, self.knowledge, self.looks) if self.has_knowledge else (self.pool,):
             pool = self.runtime.empty(capacity * BRICK_BYTES)
             cl.enqueue_fill_buffer(q, pool, np.int32(0), 0, capacity * BRICK_BYTES)
             if old is not None and self.capacity:
@@ -202,7 +204,7 @@ class EvidenceGrid:
             pools.append(pool)
         self.pool, self.capacity = pools[0], capacity
         if self.has_knowledge:
-            self.knowledge = pools[1]
+            self.knowledge, self.looks = pools[1], pools[2]
 
     def allocate(self, bricks):
         """Slots of bricks (n, 3) (bx, by, bz), allocating the missing ones in the order of their
@@ -261,22 +263,24 @@ class EvidenceGrid:
             cl.enqueue_copy(self.runtime.queue, data, self.pool, is_blocking=True)
         return self.keys.copy(), data
 
-    def knowledge_bricks(self):
-        """The knowledge pool's bricks in the order of ``bricks()``'s keys: (n, 8, 8, 8) int32
-        [z, y, x] in ``logodds.KNOWLEDGE_SCALE`` units, or None for a grid without knowledge."""
+    def knowledge_bricks(self, channel="knowledge"):
+        """The knowledge pool's bricks (or ``channel="looks"``: the looks' counts) in the order of
+        ``bricks()``'s keys: (n, 8, 8, 8) int32 [z, y, x] in ``logodds.KNOWLEDGE_SCALE`` units
+        (counts), or None for a grid without knowledge."""
         import pyopencl as cl
 
         if not self.has_knowledge:
             return None
         data = np.zeros((self.n_bricks, BRICK, BRICK, BRICK), np.int32)
         if self.n_bricks:
-            cl.enqueue_copy(self.runtime.queue, data, self.knowledge, is_blocking=True)
+            cl.enqueue_copy(self.runtime.queue, data, {"knowledge": self.knowledge, "looks": self.looks}[channel],
+                            is_blocking=True)
         return data
 
-    def knowledge_snapshot(self):
-        """Dense int32 (nz, ny, nx) copy of the knowledge channel (0 where never observed), or
-        None for a grid without knowledge."""
-        data = self.knowledge_bricks()
+    def knowledge_snapshot(self, channel="knowledge"):
+        """Dense int32 (nz, ny, nx) copy of the knowledge channel (0 where never observed) or the
+        looks' counts (``channel="looks"``), or None for a grid without knowledge."""
+        data = self.knowledge_bricks(channel)
         return None if data is None else assemble(self.spec, self.keys.copy(), data)
 
     def read_slots(self, slots):
@@ -313,7 +317,7 @@ class EvidenceGrid:
         """Forget all evidence and free the bricks."""
         self.table.fill(-1)
         self.keys = np.empty((0, 3), np.int32)
-        self.pool, self.knowledge, self.capacity = None, None, 0
+        self.pool, self.knowledge, self.looks, self.capacity = None, None, None, 0
         self.generation += 1
 
 

@@ -303,11 +303,12 @@ def fusion_at_points(centres, evidence, lattice, model, poses, bin_spacing_m, fi
     int (the detection-statistics model, ``sensor_model.unpack_nodes``), ``evidence`` is ignored:
     a voxel takes ``sensor_model.node_lerp`` of its bin's nodes of its class at its quantised
     rho2 (class 1, terrain, where its centre lies more than -``terrain_dz`` below the beam's
-    origin: z - origin z < terrain_dz; else class 0), and the result has a fourth array, the
-    knowledge sums (n,)."""
+    origin: z - origin z < terrain_dz; else class 0), and the result has two more arrays, the
+    knowledge sums and the counts of updates with an opportunity above 0 (n,)."""
     if nodes is not None:
         e_nodes, d_nodes = (np.asarray(a) for a in nodes)
         knowledge = np.zeros(len(centres), np.int64)
+        looks = np.zeros(len(centres), np.int64)
         evidence = np.zeros(e_nodes.shape[:2], np.int64)
     evidence = np.asarray(evidence)
     P = check_poses(poses, lattice.n_beams)
@@ -331,14 +332,16 @@ def fusion_at_points(centres, evidence, lattice, model, poses, bin_spacing_m, fi
             q = quantised_rho2(rho2[inside])
             cls = (x[inside, 2] < terrain_dz).astype(np.int64)
             sums[inside] += node_lerp(e_nodes[b, j[inside], cls], q)
-            knowledge[inside] += node_lerp(d_nodes[b, j[inside], cls], q)
+            opportunity = node_lerp(d_nodes[b, j[inside], cls], q)
+            knowledge[inside] += opportunity
+            looks[inside] += opportunity > 0
             updates[inside] += 1
             continue
         e = evidence[b, j[inside]].astype(np.float64)
         sums[inside] += np.rint(e * model.weight(rho2[inside])).astype(np.int64)
         updates[inside] += 1
     if nodes is not None:
-        return sums, updates, ambiguous, knowledge
+        return sums, updates, ambiguous, knowledge, looks
     return sums, updates, ambiguous
 
 

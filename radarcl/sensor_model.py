@@ -29,9 +29,10 @@ strong evidence. delta_v itself is the knowledge channel: the looks in which an 
 have been seen; summed per voxel it tells "never observed" (0) from "observed, undecided".
 
 Correlated evidence: looks from one viewpoint share speckle and model error, so they are not
-independent. The grid keeps exact integer sums (order-independent); the reading divides the
-evidence E of a voxel whose knowledge K exceeds ``look_limit`` looks by K / look_limit
-(``read_log_odds``): at most that many looks' worth of mean evidence, however many scans.
+independent. The grid keeps exact integer sums (order-independent), and the number of looks n;
+the reading divides the evidence E of a voxel looked at more than ``look_limit`` times by
+n / look_limit (``read_log_odds``): at most that many looks' worth of mean evidence, however
+many scans.
 
 Node tables (what the interpreter writes and the fusion reads, ``pack_nodes``): per (beam, bin)
 the update and delta at rho2 = 0, 1/4, ..., 1, packed as SEGMENTS int2 pairs of 16-bit halves;
@@ -118,6 +119,7 @@ RANGES = {
     "look_limit": (0.5, 1e4, "looks"),            # correlated evidence: at most this many looks' worth
     "prior_nats": (-10.0, 0.0, "nat"),            # log-odds of an occupied voxel before any look
     "prior_looks": (0.01, 100.0, "looks"),        # the knowledge at which the prior applies in full
+    "false_alarm": (0.0, 0.5, ""),                # a measured false-alarm rate (0: the CFAR's statistics)
 }
 GROUND_RANGE = (0.0, 1000.0, "m")                 # ground_below_m: the sensor's height above the ground plane (0: none)
 DEFAULT_SNR_DB = 50.0                             # the sensitivity assumed for a profile that gives none
@@ -144,6 +146,7 @@ class ModelParams:
     look_limit: float = 4.0
     prior_nats: float = 0.0
     prior_looks: float = 0.5
+    false_alarm: float = 0.0
     ground_below_m: float = 0.0
 
     def __post_init__(self):
@@ -324,22 +327,30 @@ class BinModel:
                                 table(ln_ter[:, None] - t[None, :])], axis=1)
         cells = 1.0 if oversampling is None else float(oversampling)
         blocking = 1.0 / (block_snr(params, ranges, half_az_rad, half_el_rad) * HANN_ENBW * cells)
-        return cls(opportunity, 1.0 - opportunity, blocking, table.pfa)
+        pfa = table.pfa
+        if params.false_alarm > pfa:
+            # a measured rate above the statistics' (profiles whose noise is not exponential, clutter):
+            # the same P_d, less of it beyond what noise alone gives
+            pd = table.pfa + (1.0 - table.pfa) * opportunity
+            pfa = params.false_alarm
+            opportunity = np.clip((pd - pfa) / (1.0 - pfa), 0.0, 1.0)
+        return cls(opportunity, 1.0 - opportunity, blocking, pfa)
 
 
 # -- the reading: correlated evidence and the prior ---------------------------------------------------------------------
-def read_log_odds(evidence, knowledge, reading):
+def read_log_odds(evidence, knowledge, looks, reading):
     """Log-odds [nat] of stored sums, order-independent (a function of the exact integer sums):
 
-        L = E / max(1, K / look_limit) + prior_nats x min(1, K / prior_looks)
+        L = E / max(1, n / look_limit) + prior_nats x min(1, K / prior_looks)
 
-    with E = ``evidence`` [logodds units] and K = ``knowledge`` [KNOWLEDGE_SCALE units] in looks,
-    ``reading`` a dict of ``READING``. Correlated looks (one viewpoint, one speckle) count at most
-    ``look_limit`` looks' worth of their mean evidence; the prior applies where the radar looked,
-    so a voxel never observed (K = 0) reads 0: unknown."""
+    with E = ``evidence`` [logodds units], K = ``knowledge`` [KNOWLEDGE_SCALE units] in looks and
+    n = ``looks`` the number of looks with an opportunity, ``reading`` a dict of ``READING``.
+    Correlated looks (one viewpoint, one speckle, a partial blocker seen again) count at most
+    ``look_limit`` looks' worth of their mean evidence, however many scans; the prior applies
+    where the radar looked, so a voxel never observed (K = 0) reads 0: unknown."""
     e = np.asarray(evidence, np.float64) / logodds.SCALE
     k = np.asarray(knowledge, np.float64) / logodds.KNOWLEDGE_SCALE
-    out = e / np.maximum(1.0, k / float(reading["look_limit"]))
+    out = e / np.maximum(1.0, np.asarray(looks, np.float64) / float(reading["look_limit"]))
     if reading.get("prior_nats", 0.0):
         out = out + float(reading["prior_nats"]) * np.minimum(1.0, k / float(reading["prior_looks"]))
     return out

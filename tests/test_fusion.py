@@ -316,6 +316,7 @@ def random_nodes(lattice, seed=0, spread=3000):
     rng = np.random.default_rng(seed)
     e = rng.integers(-spread, spread, (lattice.n_beams, N_BINS, sm.N_CLASSES, sm.NODES))
     d = rng.integers(0, logodds_scale() + 1, e.shape)
+    d[:, ::3] = 0                                    # bins whose looks see nothing: not counted as looks
     return e, d, sm.pack_nodes(e, d)
 
 
@@ -348,8 +349,9 @@ def test_detstats_matches_its_oracle(runtime, model, rows):
     nz, ny, nx = SMALL.array_shape
     iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)
     centres = SMALL.index_to_world(np.stack([ix, iy, iz], axis=1))
-    sums, updates, ambiguous, knowledge = (a.reshape(nz, ny, nx) for a in oracle.fusion_at_points(
+    sums, updates, ambiguous, knowledge, looks = (a.reshape(nz, ny, nx) for a in oracle.fusion_at_points(
         centres, None, lattice, model, POSE, SPACING, FIRST, LAST, FUSION_DECISION_MARGIN, nodes=(e, d), terrain_dz=-0.8))
+    counted = grid.knowledge_snapshot("looks")
     reached = updates > 0
     assert reached.sum() > 1000 and ambiguous.sum() <= FUSION_AMBIGUOUS_MAX * reached.sum()
     terrain = (SMALL.index_to_world(np.stack([ix, iy, iz], 1))[:, 2] - POSE[2, 3] < -0.8).reshape(nz, ny, nx)
@@ -359,10 +361,14 @@ def test_detstats_matches_its_oracle(runtime, model, rows):
     assert (np.abs(got - sums)[clear] <= step * updates[clear]).all()
     assert (np.abs(known - knowledge)[clear] <= step * updates[clear]).all()
     assert not known[~reached & clear].any()
+    # a look counts where its interpolated opportunity is above 0: the same as the oracle's except
+    # where one quantisation step of rho2 moves a node value across 0 (then by one)
+    assert (np.abs(counted - looks)[clear] <= (np.abs(known - knowledge)[clear] > 0)).all() and counted.sum() > 1000
     fusion(packed, POSE)                             # the pose comes back: the table is recorded
     fusion(packed, POSE)                             # and streamed
     assert fusion.plan(POSE).table is not None
     assert np.array_equal(grid.snapshot(), 3 * got) and np.array_equal(grid.knowledge_snapshot(), 3 * known)
+    assert np.array_equal(grid.knowledge_snapshot("looks"), 3 * counted)
 
 
 def test_detstats_sums_do_not_depend_on_the_order_of_frames(runtime):
@@ -375,9 +381,9 @@ def test_detstats_sums_do_not_depend_on_the_order_of_frames(runtime):
         fusion = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, detstats=True, terrain_dz=-0.8)
         for k in order:
             fusion(frames[k], poses[k])
-        maps.append((grid.snapshot(), grid.knowledge_snapshot()))
-    for e_map, k_map in maps[1:]:
-        assert np.array_equal(e_map, maps[0][0]) and np.array_equal(k_map, maps[0][1])
+        maps.append((grid.snapshot(), grid.knowledge_snapshot(), grid.knowledge_snapshot("looks")))
+    for e_map, k_map, n_map in maps[1:]:
+        assert np.array_equal(e_map, maps[0][0]) and np.array_equal(k_map, maps[0][1]) and np.array_equal(n_map, maps[0][2])
     assert maps[0][1].min() >= 0 and maps[0][1].any()
 
 

@@ -143,12 +143,13 @@ def test_a_profile_without_sensitivity_says_which_figure_and_the_default():
 
 
 def test_the_reading():
-    e = np.array([8 * logodds.SCALE, -8 * logodds.SCALE, 0, 3 * logodds.SCALE])
-    k = np.array([16, 2, 0, 1]) * logodds.KNOWLEDGE_SCALE
+    e = np.array([8 * logodds.SCALE, -8 * logodds.SCALE, 0, 3 * logodds.SCALE, -logodds.SCALE])
+    k = np.array([16, 2, 0, 1, 0.25]) * logodds.KNOWLEDGE_SCALE
+    n = np.array([16, 2, 0, 1, 100])                  # the last: 100 looks of a voxel a blocker hides
     reading = dict(look_limit=4.0, prior_nats=0.0, prior_looks=0.5)
-    assert np.allclose(sm.read_log_odds(e, k, reading), [2.0, -8.0, 0.0, 3.0])     # 16 looks count as 4
+    assert np.allclose(sm.read_log_odds(e, k, n, reading), [2.0, -8.0, 0.0, 3.0, -0.04])   # 16 looks count as 4
     reading["prior_nats"] = -2.0
-    assert np.allclose(sm.read_log_odds(e, k, reading), [0.0, -10.0, 0.0, 1.0])   # never observed: still 0
+    assert np.allclose(sm.read_log_odds(e, k, n, reading), [0.0, -10.0, 0.0, 1.0, -1.04])  # never observed: still 0
 
 
 def test_node_packing_round_trips_and_interpolates():

@@ -168,7 +168,8 @@ def knowledge_map(seed=1):
     knowledge = rng.integers(0, 20 * 4096, data.shape).astype(np.int32)
     knowledge[0] = 0                                     # a brick never observed: no evidence either
     data[0] = 0
-    return keys, data, knowledge
+    looks = (knowledge // 2048).astype(np.int32)
+    return keys, data, knowledge, looks
 
 
 def test_knowledge_round_trips_through_npz_store_and_conversion(tmp_path):
@@ -177,16 +178,17 @@ def test_knowledge_round_trips_through_npz_store_and_conversion(tmp_path):
     from radarcl.maps import npz
     from radarcl.maps.disk import convert, read_channels
 
-    keys, data, knowledge = knowledge_map()
+    keys, data, knowledge, looks = knowledge_map()
     plain = tmp_path / "plain.npz"
     npz.write(plain, SPEC, keys, data)
     with np.load(plain) as f:
         assert int(f["version"]) == 1 and "knowledge" not in f.files
     assert read_channels(plain)[3] is None
     path = tmp_path / "k.npz"
-    npz.write(path, SPEC, keys, data, channels=npz.Channels(knowledge, READING))
+    npz.write(path, SPEC, keys, data, channels=npz.Channels(knowledge, looks, READING))
     spec, k, d, ch = read_channels(path)
     assert spec == SPEC and np.array_equal(d, data) and np.array_equal(ch.knowledge, knowledge) and ch.reading == READING
+    assert np.array_equal(ch.looks, looks)
     target = tmp_path / "k.rcmap"
     convert(path, target)
     assert store.read_manifest(target)["format_version"] == store.KNOWLEDGE_FORMAT
@@ -194,9 +196,10 @@ def test_knowledge_round_trips_through_npz_store_and_conversion(tmp_path):
     convert(target, back)
     _, k2, d2, ch2 = read_channels(back)
     assert same(SPEC, keys, data, k2, d2) and same(SPEC, keys, knowledge, k2, ch2.knowledge) and ch2.reading == READING
+    assert same(SPEC, keys, looks, k2, ch2.looks)
     w = store.StoreWriter(target, SPEC, reading=READING)          # continued: a second save writes what changed
     knowledge[3, 0, 0, 0] += 4096
-    assert w.save(keys, data, knowledge=knowledge) == 1
+    assert w.save(keys, data, knowledge=knowledge, looks=looks) == 1
     assert same(SPEC, keys, knowledge, *read_channels(target)[1:2], read_channels(target)[3].knowledge)
     with pytest.raises(ConfigError, match="holds a map with the knowledge channel"):
         store.StoreWriter(target, SPEC)
@@ -205,9 +208,9 @@ def test_knowledge_round_trips_through_npz_store_and_conversion(tmp_path):
 def test_damaged_knowledge_is_refused(tmp_path):
     from radarcl.maps import npz
 
-    keys, data, knowledge = knowledge_map()
+    keys, data, knowledge, looks = knowledge_map()
     path = tmp_path / "k.npz"
-    npz.write(path, SPEC, keys, data, channels=npz.Channels(knowledge, READING))
+    npz.write(path, SPEC, keys, data, channels=npz.Channels(knowledge, looks, READING))
     with np.load(path) as f:
         members = {name: f[name] for name in f.files}
     for change, message in ((dict(knowledge=-knowledge - 1), "knowledge must be int32 in"),
@@ -227,9 +230,9 @@ def test_map_queries_read_through_the_knowledge_channel(tmp_path):
     from radarcl.maps.map import FREE, OCCUPIED, UNDECIDED
     from radarcl.sensor_model import read_log_odds
 
-    keys, data, knowledge = knowledge_map()
+    keys, data, knowledge, looks = knowledge_map()
     path = tmp_path / "k.npz"
-    npz.write(path, SPEC, keys, data, channels=npz.Channels(knowledge, READING))
+    npz.write(path, SPEC, keys, data, channels=npz.Channels(knowledge, looks, READING))
     m = Map.open(path)
     assert m.has_knowledge
     rng = np.random.default_rng(3)
@@ -237,12 +240,12 @@ def test_map_queries_read_through_the_knowledge_channel(tmp_path):
                           keys[:1] * 8 + rng.integers(0, 8, (20, 3))])                # the unobserved brick
     idx = idx[SPEC.contains(idx)]
     points = SPEC.index_to_world(idx)
-    dense_e, dense_k = assemble(SPEC, keys, data), assemble(SPEC, keys, knowledge)
-    e, k = dense_e[idx[:, 2], idx[:, 1], idx[:, 0]], dense_k[idx[:, 2], idx[:, 1], idx[:, 0]]
-    assert np.allclose(m.log_odds_at(points), read_log_odds(e, k, READING))
+    dense_e, dense_k, dense_n = (assemble(SPEC, keys, a) for a in (data, knowledge, looks))
+    e, k, n = (a[idx[:, 2], idx[:, 1], idx[:, 0]] for a in (dense_e, dense_k, dense_n))
+    assert np.allclose(m.log_odds_at(points), read_log_odds(e, k, n, READING))
     assert np.allclose(m.knowledge_at(points), k / 4096)
     state = m.state_at(points)
-    nats = read_log_odds(e, k, READING)
+    nats = read_log_odds(e, k, n, READING)
     assert np.array_equal(state == UNKNOWN, k < 0.5 * 4096)
     assert (state[(k >= 2048) & (nats > 1)] == OCCUPIED).all() and (state[(k >= 2048) & (nats < -1)] == FREE).all()
     assert (state[(k >= 2048) & (np.abs(nats) <= 1)] == UNDECIDED).all()

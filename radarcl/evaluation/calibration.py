@@ -50,7 +50,9 @@ CALIBRATED = {"cfar.kind": "ca", "cfar.pfa": 1e-3, "interpret.model": "occlusion
 # the same fit are sensor_model's defaults; the model's default reading adds no prior.
 DETSTATS_CALIBRATED = {"interpret.model": "detstats", "sensor_model.prior_nats": -6.0, "sensor_model.prior_looks": 0.25,
                        "sensor_model.look_limit": 1.0}
-DETSTATS_CALIBRATED_SPINNING = {}        # the same on the generated streets (`--radar spinning`)
+# the same on the generated streets (`radarcl calibrate --model detstats --radar spinning`, 301-304)
+DETSTATS_CALIBRATED_SPINNING = {"interpret.model": "detstats", "sensor_model.prior_nats": -5.5,
+                                "sensor_model.prior_looks": 0.25, "sensor_model.look_limit": 1.0}
 NAMES = {"occlusion": ("interpret.k_occ", "interpret.e_high", "interpret.e_high_far", "interpret.e_low"),
          "paper": ("interpret.k_occ", "interpret.e_high", "interpret.e_low")}
 SIGNS = {"interpret.k_occ": 1, "interpret.e_high": -1, "interpret.e_high_far": -1, "interpret.e_low": -1}

@@ -37,32 +37,33 @@ P_CLIP = 1e-6
 
 
 def visible_sums(res, truth):
-    """(E [nat], K [looks], y) of the visible voxels of a detstats ``MapResult``: the stored
-    sums, not yet read."""
+    """(E [nat], K [looks], n [looks counted], y) of the visible voxels of a detstats
+    ``MapResult``: the stored sums, not yet read."""
     c = truth.classes
     keep = (c == vis.FREE_VISIBLE) | (c == vis.DETECTABLE) | (c == vis.WEAK)
     e = res.grid.snapshot()[keep] / float(logodds.SCALE)
     k = res.grid.knowledge_snapshot()[keep] / float(logodds.KNOWLEDGE_SCALE)
-    return e, k, c[keep] != vis.FREE_VISIBLE
+    n = res.grid.knowledge_snapshot("looks")[keep]
+    return e, k, n, c[keep] != vis.FREE_VISIBLE
 
 
-def log_likelihood(e, k, y, reading):
+def log_likelihood(e, k, n, y, reading):
     """Mean log p(y) per voxel under ``reading``."""
-    L = sensor_model.read_log_odds(e * logodds.SCALE, k * logodds.KNOWLEDGE_SCALE, reading)
+    L = sensor_model.read_log_odds(e * logodds.SCALE, k * logodds.KNOWLEDGE_SCALE, n, reading)
     p = np.clip(1.0 / (1.0 + np.exp(-L)), P_CLIP, 1.0 - P_CLIP)
     return float(np.mean(np.where(y, np.log(p), np.log1p(-p))))
 
 
 def fit_reading(per_scene):
-    """The ``READING_GRID`` point of the best pooled log-likelihood over scenes' (e, k, y):
+    """The ``READING_GRID`` point of the best pooled log-likelihood over scenes' (e, k, n, y):
     (reading, pooled log-lik, per-scene log-liks)."""
     best = None
     for limit, prior, looks in itertools.product(*READING_GRID.values()):
         if prior == 0.0 and looks != READING_GRID["prior_looks"][0]:
             continue                                   # prior_looks means nothing without a prior
         reading = dict(look_limit=limit, prior_nats=prior, prior_looks=looks)
-        scenes = [log_likelihood(e, k, y, reading) for e, k, y in per_scene]
-        n = [len(y) for _, _, y in per_scene]
+        scenes = [log_likelihood(e, k, n, y, reading) for e, k, n, y in per_scene]
+        n = [len(y) for *_, y in per_scene]
         pooled = float(np.average(scenes, weights=n))
         if best is None or pooled > best[1]:
             best = (reading, pooled, scenes)

@@ -88,7 +88,8 @@ def read_map(grid, config):
     if not grid.has_knowledge:
         return (units / np.float32(logodds.SCALE)).astype(np.float32), None
     known = grid.knowledge_snapshot()
-    log_odds = sensor_model.read_log_odds(units, known, config.model_params().reading).astype(np.float32)
+    log_odds = sensor_model.read_log_odds(units, known, grid.knowledge_snapshot("looks"),
+                                          config.model_params().reading).astype(np.float32)
     return log_odds, (known / np.float32(logodds.KNOWLEDGE_SCALE)).astype(np.float32)
 
 

@@ -86,8 +86,9 @@ ECE_BINS = 10
 
 
 def probability(log_odds_nats):
-    """p = 1 / (1 + e^-L), in float64."""
-    return 1.0 / (1.0 + np.exp(-np.asarray(log_odds_nats, np.float64)))
+    """p = 1 / (1 + e^-L), in float64 (L below -709 nat gives 0, without a warning)."""
+    with np.errstate(over="ignore"):
+        return 1.0 / (1.0 + np.exp(-np.asarray(log_odds_nats, np.float64)))
 
 
 def auc_iou(log_odds_nats, positive, negative):

@@ -55,7 +55,8 @@ def read_channels(path):
             log.warning("%s: a save after version %d did not complete (%s left behind); read version %d",
                         path, manifest["version"], ", ".join(manifest["incomplete"]), manifest["version"])
         knowledge = manifest["knowledge"]
-        return spec, keys, data, None if knowledge is None else npz.Channels(knowledge, manifest["reading"])
+        return spec, keys, data, None if knowledge is None else npz.Channels(knowledge, manifest["looks"],
+                                                                               manifest["reading"])
     return npz.read_channels(path)
 
 
@@ -73,7 +74,7 @@ def _channels(grid, reading):
     if reading is None:
         raise ConfigError("a map with the knowledge channel is saved with its reading (the [sensor_model] keys "
                           "look_limit, prior_nats, prior_looks)")
-    return npz.Channels(grid.knowledge_bricks(), reading)
+    return npz.Channels(grid.knowledge_bricks(), grid.knowledge_bricks("looks"), reading)
 
 
 def read_poses(path):
@@ -113,7 +114,8 @@ class MapSaver:
             self.writer = store.StoreWriter(self.path, grid.spec, overwrite=True, **self.meta,
                                             reading=None if channels is None else channels.reading)
         self.writer.meta.update(meta)
-        self.writer.save(keys, data, poses=poses, knowledge=None if channels is None else channels.knowledge)
+        self.writer.save(keys, data, poses=poses, knowledge=None if channels is None else channels.knowledge,
+                         looks=None if channels is None else channels.looks)
 
 
 def convert(source, target):
@@ -126,7 +128,8 @@ def convert(source, target):
     else:
         writer = store.StoreWriter(target, spec, manifest.get("sensor", ""), manifest.get("config"), inputs=[source],
                                    overwrite=True, reading=None if channels is None else channels.reading)
-        writer.save(keys, data, knowledge=None if channels is None else channels.knowledge)
+        writer.save(keys, data, knowledge=None if channels is None else channels.knowledge,
+                    looks=None if channels is None else channels.looks)
     return spec, len(keys)
 
 
@@ -145,7 +148,9 @@ def load_grid(runtime, path):
     grid = EvidenceGrid(runtime, spec, knowledge=channels is not None)
     slots = grid.allocate(keys)
     if len(keys):
-        for pool, values in ((grid.pool, data), (grid.knowledge, None if channels is None else channels.knowledge)):
+        planes = ((grid.pool, data),) if channels is None else ((grid.pool, data), (grid.knowledge, channels.knowledge),
+                                                                  (grid.looks, channels.looks))
+        for pool, values in planes:
             if values is not None:
                 ordered = np.empty_like(values)
                 ordered[slots] = values

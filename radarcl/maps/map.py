@@ -36,13 +36,14 @@ KNOWN_LOOKS = 0.5     # a voxel whose knowledge reaches this many looks is known
 class Map:
     """A sparse map: ``spec`` (GridSpec), ``keys`` (n, 3) int32 bricks (bx, by, bz) and ``data``
     (n, 8, 8, 8) int32 [z, y, x] in logodds units; for the detection-statistics model also
-    ``knowledge`` (n, 8, 8, 8) int32 [``logodds.KNOWLEDGE_SCALE`` units] and its ``reading`` (a
-    dict, ``sensor_model.READING``)."""
+    ``knowledge`` (n, 8, 8, 8) int32 [``logodds.KNOWLEDGE_SCALE`` units], ``looks`` (n, 8, 8, 8)
+    int32 counts and its ``reading`` (a dict, ``sensor_model.READING``)."""
 
     spec: GridSpec
     keys: np.ndarray
     data: np.ndarray
     knowledge: np.ndarray = None
+    looks: np.ndarray = None
     reading: dict = None
 
     @classmethod
@@ -51,7 +52,7 @@ class Map:
         spec, keys, data, channels = read_channels(path)
         if channels is None:
             return cls(spec, keys, data)
-        return cls(spec, keys, data, channels.knowledge, channels.reading)
+        return cls(spec, keys, data, channels.knowledge, channels.looks, channels.reading)
 
     @classmethod
     def of_grid(cls, grid, reading=None):
@@ -62,15 +63,16 @@ class Map:
             return cls(grid.spec, keys, data)
         if reading is None:
             raise ConfigError("a grid with the knowledge channel is read with its reading: Map.of_grid(grid, reading)")
-        return cls(grid.spec, keys, data, grid.knowledge_bricks(), reading)
+        return cls(grid.spec, keys, data, grid.knowledge_bricks(), grid.knowledge_bricks("looks"), reading)
 
     def __post_init__(self):
         if self.data.shape != (len(self.keys), BRICK, BRICK, BRICK):
             raise ShapeError(f"expected bricks ({len(self.keys)}, 8, 8, 8), got {self.data.shape}")
-        if (self.knowledge is None) != (self.reading is None):
-            raise ConfigError("a map's knowledge comes with its reading, and only with it")
-        if self.knowledge is not None and np.shape(self.knowledge) != self.data.shape:
-            raise ShapeError(f"expected knowledge bricks {self.data.shape}, got {np.shape(self.knowledge)}")
+        if not ((self.knowledge is None) == (self.looks is None) == (self.reading is None)):
+            raise ConfigError("a map's knowledge comes with its looks and its reading, and only with them")
+        for name in ("knowledge", "looks"):
+            if getattr(self, name) is not None and np.shape(getattr(self, name)) != self.data.shape:
+                raise ShapeError(f"expected {name} bricks {self.data.shape}, got {np.shape(getattr(self, name))}")
         k = self.keys.astype(np.int64)
         self._ids = (k[:, 2] << 42) | (k[:, 1] << 21) | k[:, 0]
         self._order = np.argsort(self._ids)
@@ -84,7 +86,8 @@ class Map:
     def nats(self):
         """(n, 8, 8, 8) float64 log-odds of the bricks as the map reads them (computed once)."""
         if self._nats is None:
-            self._nats = (sensor_model.read_log_odds(self.data, self.knowledge, self.reading) if self.has_knowledge
+            self._nats = (sensor_model.read_log_odds(self.data, self.knowledge, self.looks, self.reading)
+                          if self.has_knowledge
                           else logodds.to_nats(self.data))
         return self._nats
 
@@ -97,10 +100,10 @@ class Map:
 
     # -- point queries --------------------------------------------------------------------------------
     def units_at(self, points, channel="data"):
-        """int32 stored sums at world points (..., 3) [m] (logodds units; ``channel="knowledge"``:
-        the knowledge channel's): 0 where no beam reached, and for points outside the grid
+        """int32 stored sums at world points (..., 3) [m] (logodds units; ``channel="knowledge"`` or
+        ``"looks"``: those channels'): 0 where no beam reached, and for points outside the grid
         (``inside`` tells them apart)."""
-        source = self.data if channel == "data" else self.knowledge
+        source = {"data": self.data, "knowledge": self.knowledge, "looks": self.looks}[channel]
         if source is None:
             raise ConfigError("this map has no knowledge channel (made with eq. 12, not the detection-statistics model)")
         return self._at(points, source)
@@ -134,7 +137,8 @@ class Map:
     def log_odds_at(self, points):
         """Log-odds [nat] at world points (..., 3), as the map reads them; NaN outside the grid."""
         if self.has_knowledge:
-            nats = sensor_model.read_log_odds(self.units_at(points), self.units_at(points, "knowledge"), self.reading)
+            nats = sensor_model.read_log_odds(self.units_at(points), self.units_at(points, "knowledge"),
+                                              self.units_at(points, "looks"), self.reading)
         else:
             nats = logodds.to_nats(self.units_at(points))
         return np.where(self.inside(points), nats, np.nan)

@@ -3,12 +3,13 @@
 Members: ``version`` (``FILE_VERSION``), ``origin_m``, ``voxel_m``, ``shape`` (the ``GridSpec``),
 ``keys`` (n, 3) int32 bricks (bx, by, bz), ``data`` (n, 8, 8, 8) int32 [z, y, x] in
 ``radarcl.logodds`` units, optional ``poses`` (m, 4, 4) float64 and ``meta`` (a JSON object).
-A map of the detection-statistics model (``radarcl.sensor_model``) adds two members and is
+A map of the detection-statistics model (``radarcl.sensor_model``) adds three members and is
 version ``KNOWLEDGE_VERSION`` (2): ``knowledge`` (n, 8, 8, 8) int32 [z, y, x], the summed
 detection opportunity in ``logodds.KNOWLEDGE_SCALE`` units per look (same bricks, same order as
-``data``; 0 where never observed), and ``reading`` (a JSON object of
-``sensor_model.READING``: look_limit, prior_nats, prior_looks): a voxel's log-odds is
-``sensor_model.read_log_odds(data, knowledge, reading)``, not ``data`` itself. A map without
+``data``; 0 where never observed), ``looks`` (n, 8, 8, 8) int32, the number of those looks, and
+``reading`` (a JSON object of ``sensor_model.READING``: look_limit, prior_nats, prior_looks): a
+voxel's log-odds is ``sensor_model.read_log_odds(data, knowledge, looks, reading)``, not
+``data`` itself. A map without
 them is written as version 1, byte for byte as before; version 1 files read as maps without
 knowledge. A radarcl that reads only version 1 refuses version 2 instead of showing unread sums
 as log-odds.
@@ -43,10 +44,12 @@ def recognises(path):
 @dataclass(frozen=True)
 class Channels:
     """What a map of the detection-statistics model keeps beside its sums: ``knowledge``
-    (n, 8, 8, 8) int32 in ``logodds.KNOWLEDGE_SCALE`` units (the bricks of ``data``, in order) and
-    ``reading`` (a dict of ``sensor_model.READING``, checked by ``check_reading``)."""
+    (n, 8, 8, 8) int32 in ``logodds.KNOWLEDGE_SCALE`` units and ``looks`` (n, 8, 8, 8) int32
+    counts (the bricks of ``data``, in order), and ``reading`` (a dict of
+    ``sensor_model.READING``, checked by ``check_reading``)."""
 
     knowledge: np.ndarray
+    looks: np.ndarray
     reading: dict
 
 
@@ -73,9 +76,10 @@ def write(path, spec, keys, data, poses=None, meta=None, channels=None):
         extra["meta"] = np.str_(json.dumps(meta))
     version = FILE_VERSION
     if channels is not None:
-        if np.shape(channels.knowledge) != np.shape(data):
-            raise ShapeError(f"knowledge bricks {np.shape(channels.knowledge)} must match the data's {np.shape(data)}")
-        extra["knowledge"] = np.ascontiguousarray(channels.knowledge, np.int32)
+        for name in ("knowledge", "looks"):
+            if np.shape(getattr(channels, name)) != np.shape(data):
+                raise ShapeError(f"{name} bricks {np.shape(getattr(channels, name))} must match the data's {np.shape(data)}")
+            extra[name] = np.ascontiguousarray(getattr(channels, name), np.int32)
         extra["reading"] = np.str_(json.dumps(check_reading(channels.reading, path)))
         version = KNOWLEDGE_VERSION
     with atomic(path) as tmp, open(tmp, "wb") as f:
@@ -120,19 +124,21 @@ def read_channels(path):
         keys, data = f["keys"], f["data"]
         channels = None
         if version == KNOWLEDGE_VERSION:
-            if "knowledge" not in f.files or "reading" not in f.files:
-                raise FrameFormatError(f"{path}: a version {version} map lacks its knowledge or reading")
-            if f.header("knowledge")[0] != n_data:
-                raise FrameFormatError(f"{path}: knowledge bricks {f.header('knowledge')[0]} do not match the "
-                                       f"data's {n_data}")
-            knowledge = f["knowledge"]
-            if knowledge.dtype != np.int32 or (knowledge.size and (knowledge.min() < 0 or knowledge.max() > GRID_LIMIT)):
-                raise FrameFormatError(f"{path}: knowledge must be int32 in [0, {GRID_LIMIT}] (radarcl writes nothing else)")
+            missing = {"knowledge", "looks", "reading"} - set(f.files)
+            if missing:
+                raise FrameFormatError(f"{path}: a version {version} map lacks its {', '.join(sorted(missing))}")
+            planes = {}
+            for name in ("knowledge", "looks"):
+                if f.header(name)[0] != n_data:
+                    raise FrameFormatError(f"{path}: {name} bricks {f.header(name)[0]} do not match the data's {n_data}")
+                plane = planes[name] = f[name]
+                if plane.dtype != np.int32 or (plane.size and (plane.min() < 0 or plane.max() > GRID_LIMIT)):
+                    raise FrameFormatError(f"{path}: {name} must be int32 in [0, {GRID_LIMIT}] (radarcl writes nothing else)")
             try:
                 reading = json.loads(str(f["reading"]))
             except (ValueError, TypeError) as exc:
                 raise FrameFormatError(f"{path}: its reading is not JSON ({exc})") from exc
-            channels = Channels(knowledge, check_reading(reading, path))
+            channels = Channels(planes["knowledge"], planes["looks"], check_reading(reading, path))
     if data.dtype != np.int32:
         raise FrameFormatError(f"{path}: expected bricks ({len(keys)}, 8, 8, 8) int32, got {data.shape} {data.dtype}")
     if keys.dtype != np.int32:

@@ -14,9 +14,9 @@ Layout of ``map.rcmap/`` (any directory name):
                           segments, the grid spec, the sensor profile and configuration that made
                           the map, and its provenance (radarcl version, inputs and their SHA-256)
   knowledge_<k>/          only in a map of the detection-statistics model (store format 2): the
-                          knowledge bricks of segment k, row for row (``maps.npz`` says what they
-                          are); its manifest adds "reading" (``sensor_model.READING``: how the
-                          sums are read). Without them a store is format 1, as before.
+  looks_<k>/              knowledge and looks bricks of segment k, row for row (``maps.npz`` says
+                          what they are); its manifest adds "reading" (``sensor_model.READING``:
+                          how the sums are read). Without them a store is format 1, as before.
 
 A save writes the changed bricks as a new segment, a new index, then the manifest; a reader
 reads the manifest first and only what it names, so it sees the previous version or the new one,
@@ -41,7 +41,8 @@ from radarcl.maps.npz import check_reading, check_trajectory
 
 FORMAT = "radarcl-map-store"
 FORMAT_VERSION = 1
-KNOWLEDGE_FORMAT = 2        # a store with knowledge_<k> arrays and a reading
+KNOWLEDGE_FORMAT = 2        # a store with knowledge_<k> and looks_<k> arrays and a reading
+KINDS = ("segment", "knowledge", "looks")
 CHUNK_BRICKS = 256
 COMPACT_SEGMENTS = 32
 MANIFEST = "manifest.json"
@@ -112,10 +113,11 @@ def read(path):
         data = np.empty((len(index), BRICK, BRICK, BRICK), np.int32)
         has_knowledge = manifest["format_version"] == KNOWLEDGE_FORMAT
         knowledge = np.empty_like(data) if has_knowledge else None
+        looks = np.empty_like(data) if has_knowledge else None
         for segment in manifest["segments"]:
             rows = index[:, 3] == segment
             if rows.any():
-                for name, out in (("segment", data), ("knowledge", knowledge)):
+                for name, out in (("segment", data), ("knowledge", knowledge), ("looks", looks)):
                     if out is None:
                         continue
                     stored = g[f"{name}_{segment}"]
@@ -126,12 +128,12 @@ def read(path):
         raise
     except Exception as exc:                        # zarr raises its own types for damaged stores
         raise FrameFormatError(f"{path}: a damaged map store ({type(exc).__name__}: {exc})") from exc
-    named = ({manifest["index"]} | {f"{kind}_{s}" for s in manifest["segments"] for kind in ("segment", "knowledge")}
+    named = ({manifest["index"]} | {f"{kind}_{s}" for s in manifest["segments"] for kind in KINDS}
              | set(manifest.get("previous", [])))
     stray = sorted(p.name for p in path.iterdir() if p.is_dir() and p.name not in named
-                   and p.name.startswith(("segment_", "index_", "knowledge_")))
+                   and p.name.startswith(("segment_", "index_", "knowledge_", "looks_")))
     manifest["incomplete"] = stray
-    manifest["knowledge"] = knowledge
+    manifest["knowledge"], manifest["looks"] = knowledge, looks
     return spec, np.ascontiguousarray(index[:, :3], dtype=np.int32), data, manifest
 
 
@@ -172,7 +174,8 @@ class StoreWriter:
             if (manifest["knowledge"] is None) != (reading is None):
                 raise ConfigError(f"{self.path} holds a map {'with' if reading is None else 'without'} the knowledge "
                                   "channel; this map is the other kind: choose another name")
-            self.keys, self.data = keys, data if reading is None else np.stack([data, manifest["knowledge"]], 1)
+            self.keys = keys
+            self.data = data if reading is None else np.stack([data, manifest["knowledge"], manifest["looks"]], 1)
             self.segment_rows = {s: self.group[f"segment_{s}"].shape[0] for s in self.segments}
             if poses is None:
                 self.meta["poses"] = manifest.get("poses", [])
@@ -182,9 +185,9 @@ class StoreWriter:
         """Stored bricks no longer in the map (superseded by later saves)."""
         return sum(self.segment_rows[s] for s in self.segments) - len(self.index)
 
-    def save(self, keys, data, poses=None, knowledge=None):
-        """Write the bricks (keys (n, 3), data (n, 8, 8, 8) int32, and their ``knowledge`` bricks
-        for a writer made with a ``reading``) that differ from the last save, and the sensor
+    def save(self, keys, data, poses=None, knowledge=None, looks=None):
+        """Write the bricks (keys (n, 3), data (n, 8, 8, 8) int32, and their ``knowledge`` and
+        ``looks`` bricks for a writer made with a ``reading``) that differ from the last save, and the sensor
         ``poses`` (n, 4, 4) so far when given; returns the number of bricks written. Atomic for
         readers."""
         if poses is not None:
@@ -193,8 +196,9 @@ class StoreWriter:
             raise ConfigError("a store made with a reading saves knowledge bricks with its data, and only it")
         keys = np.ascontiguousarray(keys, np.int32)
         data = np.ascontiguousarray(data, np.int32)
-        if knowledge is not None:                           # compared and kept as one (n, 2, 8, 8, 8) array
-            data = np.ascontiguousarray(np.stack([data, np.asarray(knowledge, np.int32)], axis=1))
+        if knowledge is not None:                           # compared and kept as one (n, 3, 8, 8, 8) array
+            data = np.ascontiguousarray(np.stack([data, np.asarray(knowledge, np.int32), np.asarray(looks, np.int32)],
+                                                 axis=1))
         self._clean()
         if self.keys is None:
             changed = np.arange(len(keys))
@@ -205,7 +209,7 @@ class StoreWriter:
         segment = (max(self.segments) + 1) if self.segments else 0
         if len(rows):
             self.segment_rows[segment] = len(rows)
-            parts = (("segment", data),) if knowledge is None else (("segment", data[:, 0]), ("knowledge", data[:, 1]))
+            parts = (("segment", data),) if knowledge is None else tuple(zip(KINDS, (data[:, 0], data[:, 1], data[:, 2])))
             for name, values in parts:
                 arr = self.group.create_array(f"{name}_{segment}", shape=(len(rows), 8, 8, 8), dtype="int32",
                                               chunks=(CHUNK_BRICKS, 8, 8, 8), compressors=self._codec(level=1))
@@ -218,7 +222,7 @@ class StoreWriter:
         if len(index):
             arr[:] = index
         segments = sorted(set(index[:, 3].tolist()))
-        kinds = ("segment",) if knowledge is None else ("segment", "knowledge")
+        kinds = ("segment",) if knowledge is None else KINDS
         previous = sorted(({f"index_{self.version}"} if self.version else set()) |
                           {f"{kind}_{s}" for s in self.segments for kind in kinds})
         extra = {} if knowledge is None else dict(reading=check_reading(dict(self.reading), self.path))
@@ -256,10 +260,9 @@ class StoreWriter:
     def _clean(self, keep=()):
         """Remove segments and indexes no manifest names (a killed writer's, or superseded ones
         beyond the previous version, which a reader may still be reading)."""
-        named = ({f"index_{self.version}"} | {f"{kind}_{s}" for s in self.segments for kind in ("segment", "knowledge")}
-                 | set(keep))
+        named = ({f"index_{self.version}"} | {f"{kind}_{s}" for s in self.segments for kind in KINDS} | set(keep))
         for p in self.path.iterdir():
-            if p.is_dir() and p.name.startswith(("segment_", "index_", "knowledge_")) and p.name not in named:
+            if p.is_dir() and p.name.startswith(("segment_", "index_", "knowledge_", "looks_")) and p.name not in named:
                 shutil.rmtree(p, ignore_errors=True)
         for p in self.path.glob(f".{MANIFEST}.*.tmp"):
             p.unlink(missing_ok=True)

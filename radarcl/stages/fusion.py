@@ -414,9 +414,10 @@ class Fusion(Stage):
         pool (the other model's get a placeholder); the still table keeps each entry's class."""
         none = self._no_table[1]
         if self.detstats:
-            out = dict(evidence=none, nodes=evidence, knowledge=self.grid.knowledge, terrain_dz=self.terrain_dz)
+            out = dict(evidence=none, nodes=evidence, knowledge=self.grid.knowledge, looks=self.grid.looks,
+                       terrain_dz=self.terrain_dz)
         else:
-            out = dict(evidence=evidence, nodes=self._no_table[2], knowledge=none, terrain_dz=-math.inf)
+            out = dict(evidence=evidence, nodes=self._no_table[2], knowledge=none, looks=none, terrain_dz=-math.inf)
         if cached:
             del out["terrain_dz"]
         return out
