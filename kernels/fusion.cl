@@ -24,7 +24,23 @@
  *     RECORD (1 or 2: instead of fusing, record what each voxel takes, for fusion_cached below;
  *     1 counts each voxel's beams into counts[], 2 writes each voxel's first (beam * N_BINS +
  *     bin, weight) into first[] and the rest into extras[] from row_start[], the host's prefix
- *     sums of the counts beyond the first).
+ *     sums of the counts beyond the first);
+ *     DETSTATS (the detection-statistics model, radarcl.sensor_model): a bin's update is not
+ *     e x weight(rho2) but a function of rho2 the interpreter tabulated at NODES rho2 = 0, 1/4,
+ *     ..., 1 (the CFAR's P_d falls non-linearly with the voxel's two-way gain), for each of two
+ *     classes of target (0 upright, 1 terrain: a voxel whose centre lies below its beam's origin by
+ *     more than -terrain_dz, i.e. z - origin z < terrain_dz, near the ground plane). nodes[] holds
+ *     per (beam, bin, class, segment s) the int2 (e_s | e_{s+1} << 16, d_s | d_{s+1} << 16) of the evidence
+ *     e [logodds units] and the detection opportunity d [KNOWLEDGE_SCALE units] at the segment's
+ *     two ends, one 8-byte gather per voxel. rho2 is quantised to q = floor(rho2 x 2^14) (a
+ *     float32 multiply by a power of two, then truncation), the segment is q >> 12 and the
+ *     interpolation integer: e_s + ((e_{s+1} - e_s) (q & 4095) + 2048) >> 12, so the gather and
+ *     the still table give the same integers whatever the compiler contracts. The evidence goes
+ *     to pool[], the opportunity to knowledge[] (the knowledge channel: "never observed" apart
+ *     from "observed, undecided"), and looks[] counts the updates whose opportunity is not 0 (the
+ *     reading counts correlated looks once: sensor_model.read_log_odds). The still table keeps
+ *     q + 1 (never 0, whose bits mean "no beam") as an integer in place of the weight, and the
+ *     class in bit 16.
  *
  * fusion_cached: a still radar's frame from the recorded table: each voxel sums
  * rint(evidence[entry] * weight) over its entries, the same integers the gather gives (the
@@ -81,9 +97,11 @@
 #define floatL CAT(float, LN)
 #define intL CAT(int, LN)
 #define convert_floatL CAT(convert_float, LN)
+#define convert_intL CAT(convert_int, LN)
 #define vloadL CAT(vload, LN)
 #define vstoreL CAT(vstore, LN)
 #define as_intL CAT(as_int, LN)
+#define as_floatL CAT(as_float, LN)
 #define as_intV CAT(as_int, VEC)
 #define as_floatV CAT(as_float, VEC)
 /* Builtin-free forms for the hot loop (PoCL may call builtins out of line; see weight_nb):
@@ -124,6 +142,25 @@ static inline int or_unit(int16 v)
 #define ROW_Y ((float16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3))
 #define ROW_Z ((float16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3))
 /* bit r set where lane r of an int16 mask is true */
+#ifdef DETSTATS
+/* one 8-byte node pair per lane: its evidence half into pe, its opportunity half into pk */
+#define G2_(pe, pk, p, at, l) { const int2 q_ = p[at.s##l]; pe.s##l = q_.x; pk.s##l = q_.y; }
+#define G2_4(pe, pk, p, at) G2_(pe, pk, p, at, 0) G2_(pe, pk, p, at, 1) G2_(pe, pk, p, at, 2) G2_(pe, pk, p, at, 3)
+#define G2_8(pe, pk, p, at) G2_4(pe, pk, p, at) G2_(pe, pk, p, at, 4) G2_(pe, pk, p, at, 5) G2_(pe, pk, p, at, 6) \
+    G2_(pe, pk, p, at, 7)
+#define G2_16(pe, pk, p, at) G2_8(pe, pk, p, at) G2_(pe, pk, p, at, 8) G2_(pe, pk, p, at, 9) G2_(pe, pk, p, at, a) \
+    G2_(pe, pk, p, at, b) G2_(pe, pk, p, at, c) G2_(pe, pk, p, at, d) G2_(pe, pk, p, at, e) G2_(pe, pk, p, at, f)
+#define GATHER_NODES(pe, pk, p, at) CAT(G2_, LN)(pe, pk, p, at)
+#define GATHER_NODES_V(pe, pk, p, at) CAT(G2_, VEC)(pe, pk, p, at)
+#define SEGMENTS 4                            /* node segments over rho2 in [0, 1] */
+#define CLASSES 2                             /* target classes: upright, terrain */
+#define Q_ONE 16384.0f                        /* rho2 = 1 in quantisation steps (2^14; 2^12 per segment) */
+/* the interpolated value between the signed 16-bit halves of x at the fraction f / 4096 */
+#define NODE_LERP(x, f) ((((x) << 16) >> 16) + (((((x) >> 16) - (((x) << 16) >> 16)) * (f) + 2048) >> 12))
+#if !defined(KNOWLEDGE_SCALE)
+#error "KNOWLEDGE_SCALE comes from radarcl.stages.COMMON_DEFINES"
+#endif
+#endif
 #define ROW_BITS(m) ((uint)(as_uint(m.s0) & 1u) | (as_uint(m.s1) & 2u) | (as_uint(m.s2) & 4u) | (as_uint(m.s3) & 8u) \
     | (as_uint(m.s4) & 16u) | (as_uint(m.s5) & 32u) | (as_uint(m.s6) & 64u) | (as_uint(m.s7) & 128u) \
     | (as_uint(m.s8) & 256u) | (as_uint(m.s9) & 512u) | (as_uint(m.sa) & 1024u) | (as_uint(m.sb) & 2048u) \
@@ -167,6 +204,10 @@ __kernel void fusion(
     __global int2 *first,             // RECORD 2: out, per voxel its first (beam * N_BINS + bin,
                                       //   as_int(weight)); (0, 0) where no beam reaches
     __global int2 *extras,            // RECORD 2: out, the voxels' further entries, row by row
+    const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (header)
+    const float terrain_dz,           // DETSTATS: voxels with z - beam origin z below this are terrain [m]
+    __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity [KNOWLEDGE_SCALE units]
+    __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity [count]
     __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
 {
     const int id = get_global_id(0);
@@ -186,6 +227,11 @@ __kernel void fusion(
     intL acc[UNITS];
     for (int u = 0; u < UNITS; ++u)
         acc[u] = 0;
+#if defined(DETSTATS) && !RECORD
+    intL kacc[UNITS], nacc[UNITS];    /* the knowledge channel's sums, the looks' counts */
+    for (int u = 0; u < UNITS; ++u)
+        kacc[u] = nacc[u] = 0;
+#endif
 #ifndef PER_BEAM_POSES
     /* one origin for the frame: one bin per voxel, -1 where no evidence can come; computed when
      * the first beam reaches the block (a quarter of the kernel's time went here, for blocks
@@ -231,7 +277,11 @@ __kernel void fusion(
             }
 #endif
             touched = 1;
+#ifdef DETSTATS
+            const __global int2 *row_nodes = nodes + (size_t)b * N_BINS * CLASSES * SEGMENTS;
+#else
             const __global int *row_ev = evidence + b * N_BINS;
+#endif
             const floatL qx = px - o.x;
             const floatL dx = qx * U.x, yx = qx * V.x, zx = qx * W.x;
             /* Rows that may hold an inside voxel. Inside needs d > 0 and |y| <= W_az(d) <=
@@ -295,7 +345,11 @@ __kernel void fusion(
 #if RECORD == 1
                 acc[u] -= inside;                                 /* inside is -1 */
 #elif RECORD == 2
-  #ifdef GAUSSIAN
+  #if defined(DETSTATS)
+                intL q = convert_intL(MINF(num / den, 1.0f) * Q_ONE);
+                const int cls = qz < terrain_dz;
+                const floatL wt = as_floatL(((q < 0 ? (intL)0 : q) + 1) | (cls << 16));   /* see the header */
+  #elif defined(GAUSSIAN)
                 const floatL wt = weight_nb(num / den);
   #else
                 const floatL wt = (floatL)1.0f;
@@ -317,6 +371,20 @@ __kernel void fusion(
                     }
                 }
                 acc[u] -= inside;                                 /* inside is -1 */
+#elif defined(DETSTATS)
+                /* rho2 quantised (den = 0 and outside lanes give junk, masked below) */
+                intL q = convert_intL(MINF(num / den, 1.0f) * Q_ONE);
+                q = q < 0 ? (intL)0 : q;
+                intL seg = q >> 12;
+                seg = seg > SEGMENTS - 1 ? (intL)(SEGMENTS - 1) : seg;
+                const intL f = q - (seg << 12);
+                const intL at = (j * CLASSES + (qz < terrain_dz)) * SEGMENTS + seg;
+                intL pe, pk;
+                GATHER_NODES(pe, pk, row_nodes, at);
+                acc[u] += NODE_LERP(pe, f) & inside;
+                const intL kn = NODE_LERP(pk, f) & inside;
+                kacc[u] += kn;
+                nacc[u] -= kn > 0;                            /* true is -1 */
 #else
                 intL e = GATHER_L(row_ev, j);
   #ifdef GAUSSIAN
@@ -348,6 +416,18 @@ __kernel void fusion(
             const intL v = vloadL(0, cell) + acc[u];
             vstoreL(v > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : (v < (intL)-GRID_LIMIT ? (intL)-GRID_LIMIT : v), 0, cell);
         }
+#if defined(DETSTATS) && !RECORD
+        if (or_unit(kacc[u])) {       /* non-negative, saturating at GRID_LIMIT: order does not matter */
+            const int r0 = ROWS * u;
+            __global int *cell = knowledge + brick.w * 512 + (corner.z * 8 + corner.y) * 8 + corner.x
+                                 + ((r0 >> 2) * 8 + (r0 & 3)) * 8;
+            const intL v = vloadL(0, cell) + kacc[u];
+            vstoreL(v > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : v, 0, cell);
+            __global int *count = looks + (cell - knowledge);
+            const intL c = vloadL(0, count) + nacc[u];
+            vstoreL(c > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : c, 0, count);
+        }
+#endif
     }
 }
 
@@ -360,6 +440,10 @@ __kernel void fusion_cached(
     const __global int2 *first,       // (n_items * 16 * VEC,) each voxel's first entry (RECORD 2)
     const __global int2 *extras,      // the further entries (RECORD 2)
     const int n_items,                // the gather's work-items: listed bricks x SUBS
+    const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (the class
+                                      //   of each entry is in its record)
+    __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity
+    __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity
     __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
 {
     const int id = get_global_id(0);
@@ -369,6 +453,9 @@ __kernel void fusion_cached(
     const int sub = id % SUBS;
     const int3 corner = (int3)((sub >> 2) * VEC, (sub & 1) * SUB, ((sub >> 1) & 1) * SUB);
     __global int *cells = pool + brick.w * 512 + (corner.z * 8 + corner.y) * 8 + corner.x;
+#ifdef DETSTATS
+    __global int *kcells = knowledge + brick.w * 512 + (corner.z * 8 + corner.y) * 8 + corner.x;
+#endif
     const __global int *dense = (const __global int *)first + (size_t)id * 16 * VEC * 2;
     for (int row = 0; row < SUB * SUB; ++row) {
         const intV2 pairs = vloadV2(0, dense + row * VEC * 2);       /* idx, weight, idx, weight, ... */
@@ -376,25 +463,75 @@ __kernel void fusion_cached(
         if (!or_lanes(bits))                   /* no beam reaches the row */
             continue;
         const intV index = pairs.even;
+#ifdef DETSTATS
+        /* q + 1 in place of the weight (0: no beam), the class in bit 16, the sign bit "more
+         * entries follow" */
+        const intV q = (bits & 0xFFFF) - 1;
+        const intV reached = bits != 0;
+        intV seg = q >> 12;
+        seg = seg > SEGMENTS - 1 ? (intV)(SEGMENTS - 1) : (seg < 0 ? (intV)0 : seg);
+        const intV f = q - (seg << 12);
+        const intV at = (index * CLASSES + ((bits >> 16) & 1)) * SEGMENTS + seg;
+        intV pe, pk;
+        GATHER_NODES_V(pe, pk, nodes, at);
+        intV sum = NODE_LERP(pe, f) & reached;
+        intV ksum = NODE_LERP(pk, f) & reached;
+        intV nsum = -(ksum > 0);
+#else
         /* the weight's sign bit says "more entries follow" (weights are positive) */
         const floatV product = convert_floatV(GATHER(evidence, index)) * as_floatV(bits & 0x7FFFFFFF);
         intV sum = RINT_INTV(product);
+#endif
         if (or_lanes(bits) < 0) {              /* the few voxels several beams reach */
             const size_t t = (size_t)id * 16 + row;
             int extra[VEC];
+#ifdef DETSTATS
+            int kextra[VEC], nextra[VEC];
+#endif
             int at = row_start[t];
             for (int lane = 0; lane < VEC; ++lane) {
                 int add = 0;
+#ifdef DETSTATS
+                int kadd = 0, nadd = 0;
+#endif
                 const int n = counts[t * VEC + lane];
                 for (int m = 1; m < n; ++m, ++at) {
                     const int2 entry = extras[at];
+#ifdef DETSTATS
+                    const int qe = (entry.y & 0xFFFF) - 1;
+                    const int sg = min(qe >> 12, SEGMENTS - 1);
+                    const int2 node = nodes[(entry.x * CLASSES + ((entry.y >> 16) & 1)) * SEGMENTS + sg];
+                    add += NODE_LERP(node.x, qe - (sg << 12));
+                    const int kn = NODE_LERP(node.y, qe - (sg << 12));
+                    kadd += kn;
+                    nadd += kn > 0;
+#else
                     const float p = (float)evidence[entry.x] * as_float(entry.y);
                     add += as_int(p + 12582912.0f) - 0x4B400000;    /* rint, half to even, as RINT_INTV */
+#endif
                 }
                 extra[lane] = add;
+#ifdef DETSTATS
+                kextra[lane] = kadd;
+                nextra[lane] = nadd;
+#endif
             }
             sum += vloadV(0, extra);
+#ifdef DETSTATS
+            ksum += vloadV(0, kextra);
+            nsum += vloadV(0, nextra);
+#endif
         }
+#ifdef DETSTATS
+        if (or_lanes(ksum)) {
+            __global int *cell = kcells + ((row >> 2) * 8 + (row & 3)) * 8;
+            const intV v = vloadV(0, cell) + ksum;
+            vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : v, 0, cell);
+            __global int *count = looks + (cell - knowledge);
+            const intV c = vloadV(0, count) + nsum;
+            vstoreV(c > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : c, 0, count);
+        }
+#endif
         if (or_lanes(sum)) {
             /* |sum| < 255 beams x 2^14 (RECORD refuses more) and |cell| <= GRID_LIMIT = 2^30: no
              * int32 overflow to saturate */

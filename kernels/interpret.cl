@@ -27,10 +27,23 @@
  *   surface_decades (a calibrated test: a strong narrow echo is a tree, a post, a drum).
  * OCCLUSION=0 is eq. 12 exactly; e_high_far and surface_decades are then unused.
  *
+ * With -D DETSTATS=1, the detection-statistics model (radarcl.sensor_model; equivalent to
+ * radarcl.oracle.interpret_detstats): evidence[] is (n_beams, N_BINS, 2 classes, 4 segments)
+ * int2 node pairs (sensor_model.pack_nodes) of the evidence e [logodds units] and the detection
+ * opportunity d [KNOWLEDGE_SCALE units] at rho2 = 0, 1/4, ..., 1, per class of target:
+ *   tau = exp(-X), X the blocking of the pulses that ended before the bin (a pulse's summed
+ *       (r/n - 1)+ times blocking[] at its peak); delta = tau opportunity[bin, class, node];
+ *   no detection: e = ln(1 - delta) = ln((1 - tau) + tau miss[bin, class, node]);
+ *   detection: e = ln(1 + delta (r / r_peak) c_det), c_det = (1 - P_fa) / P_fa;
+ *   d = delta.
+ * Until the first pulse (tau = 1) a noise bin copies unblocked[] (the host's exact nodes).
+ * Logs without builtins (log10_nb); one exp and expm1 per pulse. eq. 12's constants are unused.
+ *
  * -D constants (set by radarcl/stages/interpret.py):
  *   N_BINS      bins per profile
  *   MAX_PULSES  pulse rows kept per beam; more are counted and still give evidence
  *   OCCLUSION   0: the paper's eq. 12; 1: the occlusion-aware variant above
+ *   DETSTATS    0, or 1: the detection-statistics model above (with OCCLUSION 0)
  */
 #include "radarcl_common.h"
 
@@ -77,6 +90,35 @@ static inline float8 log10_nb8(float8 x)
     return x == 0.0f ? (float8)(-INFINITY) : (x < 0.0f ? (float8)(NAN) : y);
 }
 
+#if DETSTATS
+#define NODE_WORDS 8                  /* int2 per bin: 2 classes x 4 segments */
+#define LN10 2.302585093f
+
+/* a node value in fixed point: rint(clamp(v, -limit, limit) x scale), without builtins */
+static inline int fixed_nb(float v, float scale)
+{
+    v = v > EVIDENCE_LIMIT_NATS ? EVIDENCE_LIMIT_NATS : (v < -EVIDENCE_LIMIT_NATS ? -EVIDENCE_LIMIT_NATS : v);
+    return as_int(v * scale + 12582912.0f) - 0x4B400000;       /* rint, half to even, as logodds.to_fixed */
+}
+
+/* one bin's node pairs: for each class, the five nodes of e and d packed per segment */
+static inline void write_nodes(__global int2 *out, const __global float *opp, const __global float *miss,
+                               float tau, float omt, int detected, float share_c)
+{
+    for (int c = 0; c < 2; ++c) {
+        int e[5], d[5];
+        for (int k = 0; k < 5; ++k) {
+            const float delta = tau * opp[c * 5 + k];
+            const float arg = detected ? 1.0f + delta * share_c : omt + tau * miss[c * 5 + k];
+            e[k] = fixed_nb(log10_nb(arg) * LN10, LOGODDS_SCALE);
+            d[k] = as_int(delta * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
+        }
+        for (int k = 0; k < 4; ++k)
+            out[c * 4 + k] = (int2)((e[k] & 0xFFFF) | (e[k + 1] << 16), (d[k] & 0xFFFF) | (d[k + 1] << 16));
+    }
+}
+#endif
+
 __kernel void interpret(
     const __global float *profiles,   // (n_beams, N_BINS) power r_i
     const __global float *noise,      // (n_beams, N_BINS) CFAR noise estimate n_i (floored)
@@ -90,8 +132,13 @@ __kernel void interpret(
     const int wide_bins,              // a pulse this wide or wider is wide [bins]
     const int e_high_far,             // OCCLUSION: E_h at last_bin [logodds units]
     const float surface_decades,      // OCCLUSION: a pulse whose peak log10(r/n) reaches this is a surface
+    const __global float *opportunity,  // DETSTATS: (N_BINS, 2, 5) delta at tau = 1 per class and node
+    const __global float *miss,         // DETSTATS: (N_BINS, 2, 5) 1 - opportunity, exact from the host
+    const __global float *blocking,     // DETSTATS: (N_BINS,) a pulse's blocking per unit of (r/n - 1)+ at its peak
+    const __global int2 *unblocked,     // DETSTATS: (N_BINS, 8) a noise bin's node pairs at tau = 1
+    const float c_det,                  // DETSTATS: (1 - P_fa) / P_fa, P_fa the achieved false-alarm rate
     const int n_beams,
-    __global int *evidence,           // (n_beams, N_BINS) out [logodds units]
+    __global int *evidence,           // (n_beams, N_BINS) out [logodds units]; DETSTATS: (n_beams, N_BINS, 8) int2
     __global int4 *pulses,            // (n_beams, MAX_PULSES) out: start, end, peak, wide; -1 unused
     __global int *n_pulses,           // (n_beams,) out: pulses found (may exceed MAX_PULSES)
     __global uchar *flags_out)        // (n_beams,) out: flags_in | BAD_PROFILE | SILENT
@@ -127,6 +174,58 @@ __kernel void interpret(
     flags_out[beam] = flags;
     for (int k = 0; k < MAX_PULSES; k++)
         pl[k] = (int4)(-1);
+#if DETSTATS
+    __global int2 *nd = (__global int2 *)evidence + (size_t)beam * N_BINS * NODE_WORDS;
+    if (flags & NO_EVIDENCE_FLAGS) {
+        for (int j = 0; j < N_BINS * NODE_WORDS; j++)
+            nd[j] = (int2)(0);
+        n_pulses[beam] = 0;
+        return;
+    }
+    for (int j = 0; j < first_bin && j < N_BINS; j++)
+        for (int w = 0; w < NODE_WORDS; w++)
+            nd[j * NODE_WORDS + w] = (int2)(0);
+    {
+        int count = 0, j = first_bin;
+        float blocked = 0.0f, tau = 1.0f, omt = 0.0f;
+        while (j <= last_bin) {
+            if (!m[j]) {
+                if (blocked == 0.0f) {
+                    for (int w = 0; w < NODE_WORDS; w++)
+                        nd[j * NODE_WORDS + w] = unblocked[j * NODE_WORDS + w];
+                } else {
+                    write_nodes(nd + j * NODE_WORDS, opportunity + j * 10, miss + j * 10, tau, omt, 0, 0.0f);
+                }
+                j++;
+                continue;
+            }
+            const int start = j;
+            int peak = j;
+            float energy = 0.0f;
+            for (; j <= last_bin && m[j]; j++) {
+                if (r[j] > r[peak])
+                    peak = j;
+                const float excess = r[j] / n[j] - 1.0f;
+                energy += excess > 0.0f ? excess : 0.0f;
+            }
+            const int end = j - 1;
+            const float scale = c_det / r[peak];
+            for (int i = start; i <= end; i++)
+                write_nodes(nd + i * NODE_WORDS, opportunity + i * 10, miss + i * 10, tau, omt, 1, r[i] * scale);
+            if (count < MAX_PULSES)
+                pl[count] = (int4)(start, end, peak, end - start + 1 >= wide_bins);
+            count++;
+            blocked += energy * blocking[peak];
+            tau = exp(-blocked);                  /* builtins, once per pulse */
+            omt = -expm1(-blocked);
+        }
+        for (int jj = max(last_bin + 1, 0); jj < N_BINS; jj++)
+            for (int w = 0; w < NODE_WORDS; w++)
+                nd[jj * NODE_WORDS + w] = (int2)(0);
+        n_pulses[beam] = count;
+        return;
+    }
+#endif
     if (flags & NO_EVIDENCE_FLAGS) {
         for (int j = 0; j < N_BINS; j++)
             ev[j] = 0;

@@ -13,6 +13,11 @@ p = 1 in float64 anyway); only there would the order matter. Views (``log_odds``
 
 Storage: bricks of 8 x 8 x 8 voxels (2 KiB), allocated the first time some beam reaches them
 ("leave out what the scene does not need"). A host table maps brick -> slot in one device pool.
+A grid made with ``knowledge=True`` (the detection-statistics model, ``radarcl.sensor_model``)
+holds two more pools with the same slots: per voxel the summed detection opportunity of its looks
+(``knowledge``: int32, ``logodds.KNOWLEDGE_SCALE`` units per look, non-negative, saturating at
+``GRID_LIMIT``), so that "never observed" (0) differs from "observed, undecided" (evidence near
+0), and the number of those looks (``looks``: the reading counts correlated looks once).
 This module holds the grid on the device only; ``radarcl.maps`` reads and writes it as files.
 """
 
@@ -159,10 +164,11 @@ class EvidenceGrid:
     """A fixed-point log-odds grid on one device, stored in sparse bricks.
 
     runtime: a ``radarcl.cl.Runtime``; spec: a ``GridSpec``. ``dense=True`` allocates every
-    brick at once (to compare memory, or when the whole grid will be seen anyway).
+    brick at once (to compare memory, or when the whole grid will be seen anyway);
+    ``knowledge=True`` adds the knowledge pool (see the module docstring).
     """
 
-    def __init__(self, runtime, spec, *, dense=False):
+    def __init__(self, runtime, spec, *, dense=False, knowledge=False):
         if not isinstance(spec, GridSpec):
             raise ConfigError(f"spec must be a GridSpec, got {type(spec).__name__}")
         self.runtime = runtime
@@ -172,6 +178,9 @@ class EvidenceGrid:
         self.table = np.full((nbz, nby, nbx), -1, np.int32)     # brick (z, y, x) -> slot
         self.keys = np.empty((0, 3), np.int32)                  # slot -> brick (bx, by, bz)
         self.pool = None
+        self.has_knowledge = bool(knowledge)
+        self.knowledge = None                                   # the knowledge pool (same slots)
+        self.looks = None                                       # the looks' count pool (same slots)
         self.capacity = 0
         self.generation = 0                                     # bumped by clear(): slots change
         if dense:
@@ -187,7 +196,8 @@ class EvidenceGrid:
     def memory(self):
         """Bytes of the grid stored densely and as allocated here, and the brick counts."""
         table = self.table.nbytes
-        return {"dense_bytes": self.spec.dense_bytes, "sparse_bytes": self.n_bricks * BRICK_BYTES + table,
+        channels = 3 if self.has_knowledge else 1
+        return {"dense_bytes": self.spec.dense_bytes, "sparse_bytes": channels * self.n_bricks * BRICK_BYTES + table,
                 "bricks": self.n_bricks, "bricks_total": int(self.table.size)}
 
     def _check_fits(self, needed):
@@ -206,12 +216,17 @@ class EvidenceGrid:
 
         limit = self._check_fits(needed)
         capacity = max(needed, min(int(self.capacity * 1.5) + 64, limit // BRICK_BYTES))
-        pool = self.runtime.empty(capacity * BRICK_BYTES)
         q = self.runtime.queue
-        cl.enqueue_fill_buffer(q, pool, np.int32(0), 0, capacity * BRICK_BYTES)
-        if self.pool is not None and self.capacity:
-            cl.enqueue_copy(q, pool, self.pool, byte_count=self.n_bricks * BRICK_BYTES)
-        self.pool, self.capacity = pool, capacity
+        pools = []
+        for old in (self.pool, self.knowledge, self.looks) if self.has_knowledge else (self.pool,):
+            pool = self.runtime.empty(capacity * BRICK_BYTES)
+            cl.enqueue_fill_buffer(q, pool, np.int32(0), 0, capacity * BRICK_BYTES)
+            if old is not None and self.capacity:
+                cl.enqueue_copy(q, pool, old, byte_count=self.n_bricks * BRICK_BYTES)
+            pools.append(pool)
+        self.pool, self.capacity = pools[0], capacity
+        if self.has_knowledge:
+            self.knowledge, self.looks = pools[1], pools[2]
 
     def allocate(self, bricks):
         """Slots of bricks (n, 3) (bx, by, bz), allocating the missing ones in the order of their
@@ -270,6 +285,26 @@ class EvidenceGrid:
             cl.enqueue_copy(self.runtime.queue, data, self.pool, is_blocking=True)
         return self.keys.copy(), data
 
+    def knowledge_bricks(self, channel="knowledge"):
+        """The knowledge pool's bricks (or ``channel="looks"``: the looks' counts) in the order of
+        ``bricks()``'s keys: (n, 8, 8, 8) int32 [z, y, x] in ``logodds.KNOWLEDGE_SCALE`` units
+        (counts), or None for a grid without knowledge."""
+        import pyopencl as cl
+
+        if not self.has_knowledge:
+            return None
+        data = np.zeros((self.n_bricks, BRICK, BRICK, BRICK), np.int32)
+        if self.n_bricks:
+            cl.enqueue_copy(self.runtime.queue, data, {"knowledge": self.knowledge, "looks": self.looks}[channel],
+                            is_blocking=True)
+        return data
+
+    def knowledge_snapshot(self, channel="knowledge"):
+        """Dense int32 (nz, ny, nx) copy of the knowledge channel (0 where never observed) or the
+        looks' counts (``channel="looks"``), or None for a grid without knowledge."""
+        data = self.knowledge_bricks(channel)
+        return None if data is None else assemble(self.spec, self.keys.copy(), data)
+
     def read_slots(self, slots):
         """(keys (n, 3), data (n, 8, 8, 8)) of the bricks in pool ``slots`` (e.g. a plan's
         bricks[:, 3]), read in contiguous runs: what changed, without the whole pool."""
@@ -304,7 +339,7 @@ class EvidenceGrid:
         """Forget all evidence and free the bricks."""
         self.table.fill(-1)
         self.keys = np.empty((0, 3), np.int32)
-        self.pool, self.capacity = None, 0
+        self.pool, self.knowledge, self.looks, self.capacity = None, None, None, 0
         self.generation += 1
 
 

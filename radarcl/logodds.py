@@ -10,6 +10,7 @@ with ``==`` (../shared/ARCHITECTURE.md, "Fixed-point log-odds").
 - One update (one beam's evidence for one bin) is clamped to +-``EVIDENCE_LIMIT_NATS`` = 16 nat
   (p = 1 - 1.1e-7) before rounding, so the log of any finite SNR fits: 256 beams x 16 nat x
   1024 = 4.2e6 units per frame and voxel, 500x below the int32 range.
+- The knowledge channel counts looks the same way, in ``KNOWLEDGE_SCALE`` units per look.
 - Rounding is to the nearest integer, ties to even: ``np.rint`` here, ``convert_int_rte`` in
   the kernels, so the two agree wherever float32 and float64 round the same way.
 """
@@ -19,6 +20,10 @@ import numpy as np
 from radarcl.errors import ConfigError
 
 SCALE = 1024                      # fixed-point units per nat
+# The knowledge channel (radarcl.sensor_model): per voxel the summed detection opportunity of its
+# looks, int32 in units of 1 / KNOWLEDGE_SCALE look; one look's opportunity is in [0, 1], so a
+# node of it fits 16 bits, and a voxel saturates (at 2^30 units) after 262,144 full looks.
+KNOWLEDGE_SCALE = 4096
 EVIDENCE_LIMIT_NATS = 16.0        # |one update| <= this, in nats
 EVIDENCE_LIMIT = int(EVIDENCE_LIMIT_NATS * SCALE)   # the same in units
 

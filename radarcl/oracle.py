@@ -4,11 +4,15 @@ Kernels are tested against these functions at named tolerances; benchmarks repor
 against them. Nothing here is fast, and nothing here needs OpenCL.
 """
 
+import math
+
 import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import check_poses
+from radarcl.sensor_model import NODES as NODES_PER_BIN
+from radarcl.sensor_model import node_lerp, quantised_rho2
 
 WINDOWS = ("hann", "rect")
 OUTPUTS = ("magnitude", "power")
@@ -297,9 +301,21 @@ def fusion(spec, evidence, lattice, model, poses, bin_spacing_m, first_bin, last
 
 
 def fusion_at_points(centres, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin=0.0,
-                     beams=None):
+                     beams=None, nodes=None, terrain_dz=-math.inf):
     """``fusion`` at voxel centres (n, 3) [m, world], over ``beams`` (indices; default all).
-    Returns (sums, updates, ambiguous), each (n,)."""
+    Returns (sums, updates, ambiguous), each (n,).
+
+    With ``nodes`` = (evidence nodes, opportunity nodes), each (n_beams, n_bins, CLASSES, NODES)
+    int (the detection-statistics model, ``sensor_model.unpack_nodes``), ``evidence`` is ignored:
+    a voxel takes ``sensor_model.node_lerp`` of its bin's nodes of its class at its quantised
+    rho2 (class 1, terrain, where its centre lies more than -``terrain_dz`` below the beam's
+    origin: z - origin z < terrain_dz; else class 0), and the result has two more arrays, the
+    knowledge sums and the counts of updates with an opportunity above 0 (n,)."""
+    if nodes is not None:
+        e_nodes, d_nodes = (np.asarray(a) for a in nodes)
+        knowledge = np.zeros(len(centres), np.int64)
+        looks = np.zeros(len(centres), np.int64)
+        evidence = np.zeros(e_nodes.shape[:2], np.int64)
     evidence = np.asarray(evidence)
     P = check_poses(poses, lattice.n_beams)
     centres = np.asarray(centres, dtype=np.float64)
@@ -318,7 +334,76 @@ def fusion_at_points(centres, evidence, lattice, model, poses, bin_spacing_m, fi
         ambiguous |= near & ((np.abs(rho2 - 1) < margin) | (np.abs(np.abs(bins - j) - 0.5) < margin)
                              | (np.abs(d) < margin))
         inside = (d > 0) & (rho2 <= 1) & (j >= first_bin) & (j <= last_bin)
+        if nodes is not None:
+            q = quantised_rho2(rho2[inside])
+            cls = (x[inside, 2] < terrain_dz).astype(np.int64)
+            sums[inside] += node_lerp(e_nodes[b, j[inside], cls], q)
+            opportunity = node_lerp(d_nodes[b, j[inside], cls], q)
+            knowledge[inside] += opportunity
+            looks[inside] += opportunity > 0
+            updates[inside] += 1
+            continue
         e = evidence[b, j[inside]].astype(np.float64)
         sums[inside] += np.rint(e * model.weight(rho2[inside])).astype(np.int64)
         updates[inside] += 1
+    if nodes is not None:
+        return sums, updates, ambiguous, knowledge, looks
     return sums, updates, ambiguous
+
+
+def interpret_detstats(profiles, noise, mask, config, bin_spacing_m, model, flags=None):
+    """The detection-statistics interpreter (``sensor_model``; ``InterpretConfig.model ==
+    "detstats"``) on (..., n_bins) arrays, in float64.
+
+    ``model`` is a ``sensor_model.BinModel``. Per beam and bin j inside the range window, with
+    pulses as runs of detections (as ``interpret``):
+      tau_j = exp(-X_j), X_j the summed blocking of the pulses that ended before j: a pulse's
+          sum of (r/n - 1)+ over its bins times model.blocking at its peak (its first largest r);
+      delta = tau_j model.opportunity[j] per class and node;
+      a bin without detection: e = ln(1 - delta) = ln((1 - tau) + tau model.miss[j]);
+      a detected bin: e = ln(1 + delta w_j (1 - P_fa) / P_fa), w_j = r_j / r_peak of its pulse
+          (the echo came from where the profile is strongest: its flanks share less).
+    Returns ``(evidence, opportunity, pulses, n_pulses, flags)``: evidence int32 (..., n_bins,
+    CLASSES, NODES) [logodds units, clamped to +-16 nat], opportunity int32 (same shape)
+    [KNOWLEDGE_SCALE units], pulses, n_pulses and flags as ``interpret``'s. Beams with a
+    ``NO_EVIDENCE_FLAGS`` flag give 0 and no pulses; bins outside the window give 0."""
+    r = np.asarray(profiles, dtype=np.float64)
+    n = np.asarray(noise, dtype=np.float64)
+    m = np.asarray(mask).astype(bool)
+    if r.ndim < 1 or n.shape != r.shape or m.shape != r.shape:
+        raise ShapeError(f"profiles, noise and mask must share one shape (..., n_bins), got "
+                         f"{r.shape}, {n.shape}, {m.shape}")
+    _, pulses, n_pulses, flags_out = interpret(r, n, m, config, bin_spacing_m, flags)
+    batch, n_bins = r.shape[:-1], r.shape[-1]
+    if model.opportunity.shape[0] != n_bins:
+        raise ShapeError(f"the model has {model.opportunity.shape[0]} bins, the profiles {n_bins}")
+    first, last = config.bin_interval(bin_spacing_m, n_bins)
+    tail = model.opportunity.shape[1:]
+    evidence = np.zeros((*batch, n_bins, *tail), np.int32).reshape(-1, n_bins, *tail)
+    opportunity = np.zeros_like(evidence)
+    c_det = (1.0 - model.pfa) / model.pfa
+    for b, (rb, nb, mb) in enumerate(zip(r.reshape(-1, n_bins), n.reshape(-1, n_bins), m.reshape(-1, n_bins))):
+        if flags_out.reshape(-1)[b] & NO_EVIDENCE_FLAGS:
+            continue
+        blocked, j = 0.0, first
+        while j <= last:
+            if not mb[j]:
+                tau = math.exp(-blocked)
+                with np.errstate(divide="ignore"):
+                    evidence[b, j] = logodds.to_fixed(np.log((1.0 - tau) + tau * model.miss[j]))
+                opportunity[b, j] = np.rint(tau * model.opportunity[j] * logodds.KNOWLEDGE_SCALE)
+                j += 1
+                continue
+            start = j
+            while j <= last and mb[j]:
+                j += 1
+            run = slice(start, j)
+            peak = start + int(np.argmax(rb[run]))
+            tau = math.exp(-blocked)
+            for i in range(start, j):
+                delta = tau * model.opportunity[i]
+                evidence[b, i] = logodds.to_fixed(np.log1p(delta * (rb[i] / rb[peak]) * c_det))
+                opportunity[b, i] = np.rint(delta * logodds.KNOWLEDGE_SCALE)
+            blocked += np.maximum(rb[run] / nb[run] - 1.0, 0.0).sum() * model.blocking[peak]
+    shape = (*batch, n_bins, *tail)
+    return evidence.reshape(shape), opportunity.reshape(shape), pulses, n_pulses, flags_out

@@ -6,10 +6,13 @@ through CFAR and the eq. 12 interpreter. ``Mapping`` runs raw frames (range FFT 
 range profiles through detection and fuses the evidence into an ``EvidenceGrid`` (eq. 9).
 """
 
+import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from radarcl import sensor_model
 from radarcl.cl.runtime import register_device_check
 from radarcl.config import mapconfig, sensors
 from radarcl.errors import ConfigError, DeviceCapabilityError
@@ -34,13 +37,14 @@ class Detection:
 
     runtime: a ``radarcl.cl.Runtime``; batch: beam shape; n_bins: bins per profile;
     bin_spacing_m: range between bins; cfar_config, interpret_config: ``CfarConfig`` and
-    ``InterpretConfig`` (defaults: the paper's). Extra keywords go to ``Cfar``.
+    ``InterpretConfig`` (defaults: the paper's); bin_model: the ``sensor_model.BinModel`` the
+    detection-statistics interpreter needs. Extra keywords go to ``Cfar``.
     """
 
     def __init__(self, runtime, batch, n_bins, bin_spacing_m, cfar_config=None, interpret_config=None,
-                 **cfar_options):
+                 bin_model=None, **cfar_options):
         self.cfar = Cfar(runtime, batch, n_bins, cfar_config, **cfar_options)
-        self.interpreter = Interpreter(runtime, batch, n_bins, bin_spacing_m, interpret_config)
+        self.interpreter = Interpreter(runtime, batch, n_bins, bin_spacing_m, interpret_config, bin_model=bin_model)
 
     def enqueue(self, profiles=None, flags=None, wait_for=None):
         """Launch both stages on a device array of power profiles (default: the CFAR's own, as
@@ -72,10 +76,14 @@ class Mapping:
     Profile input (Navtech): give ``n_bins`` and ``bin_spacing_m``; frames are power profiles
     (*lattice.batch, n_bins) float32 and enter at CFAR.
     cfar_config, interpret_config: as for ``Detection``; per_beam_poses: as for ``Fusion``.
+    The detection-statistics model (interpret_config.model "detstats") needs ``bin_model`` (a
+    ``sensor_model.BinModel``), a grid with the knowledge channel and its ``terrain_dz``
+    (``sensor_model.terrain_dz``); ``from_config`` builds all three.
     """
 
     def __init__(self, runtime, grid, lattice, model, *, radar=None, n_fft=None, dtype=np.int16, n_bins=None,
-                 bin_spacing_m=None, cfar_config=None, interpret_config=None, per_beam_poses=False, window="hann"):
+                 bin_spacing_m=None, cfar_config=None, interpret_config=None, per_beam_poses=False, window="hann",
+                 bin_model=None, terrain_dz=-math.inf):
         if not isinstance(grid, EvidenceGrid) or not isinstance(lattice, BeamLattice) or not isinstance(model, BeamModel):
             raise ConfigError("Mapping needs an EvidenceGrid, a BeamLattice and a BeamModel")
         if (radar is None) == (n_bins is None):
@@ -95,10 +103,11 @@ class Mapping:
             raise ConfigError("profile input needs bin_spacing_m")
         else:
             batch = lattice.batch
-        self.detection = Detection(runtime, batch, n_bins, bin_spacing_m, cfar_config, interpret_config)
+        self.detection = Detection(runtime, batch, n_bins, bin_spacing_m, cfar_config, interpret_config,
+                                   bin_model=bin_model)
         it = self.detection.interpreter
         self.fusion = Fusion(runtime, grid, lattice, model, n_bins, bin_spacing_m, it.first_bin, it.last_bin,
-                             per_beam_poses=per_beam_poses)
+                             per_beam_poses=per_beam_poses, detstats=it.detstats, terrain_dz=terrain_dz)
         self.frames = 0
         self.config = None          # the mapconfig.Resolved it was built from (from_config)
 
@@ -118,19 +127,23 @@ class Mapping:
         sensor = config.sensor
         spec = grid.spec if grid is not None else config.grid_spec()
         _check_fits(runtime, config, spec)
+        detstats = config["interpret.model"] == "detstats"
         if grid is None:
-            grid = EvidenceGrid(runtime, spec)
+            grid = EvidenceGrid(runtime, spec, knowledge=detstats)
         model = sensor.beam_model(config["beam.model"], grid.spec.voxel_m)
         per_beam = sensor.spinning if per_beam_poses is None else per_beam_poses
         common = dict(cfar_config=config.cfar_config(), interpret_config=config.interpret_config(),
                       per_beam_poses=per_beam)
+        if not sensor.raw and sensor.n_bins() is None:
+            raise ConfigError(f"sensor {sensor.name} does not say how many range bins it has; the reader "
+                              "learns it from the data (SensorProfile.with_bins)")
+        if detstats:
+            common.update(bin_model=bin_model(config, grid.spec.voxel_m),
+                          terrain_dz=sensor_model.terrain_dz(config.model_params()))
         if sensor.raw:
             mapping = cls(runtime, grid, sensor.lattice(), model, radar=sensor.radar, n_fft=config.n_fft,
                           dtype=sensor.sample_dtype, window=config["range_fft.window"], **common)
         else:
-            if sensor.n_bins() is None:
-                raise ConfigError(f"sensor {sensor.name} does not say how many range bins it has; the reader "
-                                  "learns it from the data (SensorProfile.with_bins)")
             mapping = cls(runtime, grid, sensor.lattice(), model, n_bins=sensor.n_bins(),
                           bin_spacing_m=sensor.bin_spacing_m(), **common)
         mapping.config, mapping.sensor = config, sensor
@@ -196,6 +209,34 @@ class Mapping:
         """Dense int32 (nz, ny, nx) copy of the grid after every queued frame."""
         self.runtime.queue.finish()
         return self.grid.snapshot()
+
+
+def bin_model(config, voxel_m):
+    """The ``sensor_model.BinModel`` of a detection-statistics configuration (a ``Resolved``) at
+    ``voxel_m``: the correlated training cells of its x(n_fft / n_samples) zero padding (raw
+    sensors) or of its bins per resolution cell (profiles, read as a Hann-windowed FFT's). A
+    profile without the sensitivity the model needs gets its sentence, once, as a warning."""
+    sensor = config.sensor
+    if config.origins.get("sensor_model.snr_1m2_at_10m_db", "").endswith(sensors.missing_sensitivity(sensor)):
+        _warn_once(sensors.missing_sensitivity(sensor))
+    if sensor.raw:
+        oversampling = config.n_fft / sensor.radar.n_samples
+    else:
+        oversampling = max(1.0, sensor.range_resolution_m / sensor.bin_spacing_m())
+    n_bins = sensor.n_bins(config.n_fft)
+    half_az = math.radians(sensor.get("beams", "beamwidth_az_deg")) / 2
+    half_el = math.radians(sensor.get("beams", "beamwidth_el_deg")) / 2
+    return sensor_model.BinModel.build(config.model_params(), config.cfar_config(), n_bins, config.bin_spacing_m,
+                                       oversampling, half_az, half_el, voxel_m)
+
+
+_WARNED = set()
+
+
+def _warn_once(sentence):
+    if sentence not in _WARNED:
+        _WARNED.add(sentence)
+        logging.getLogger("radarcl").warning(sentence)
 
 
 # A frame must fit one device buffer (the grid's brick pool). Refused before anything runs when

@@ -132,10 +132,11 @@ def test_bench_fusion_has_the_issue_keys():
                    spin_spec=GridSpec((-20.0, -20.0, -2.0), 0.5, (80, 80, 8)))
     for key in ("still_ms_per_frame", "moving_ms_per_frame", "spinning_ms_per_frame", "planning_ms",
                 "planning_ms_numpy", "pipeline_ms_per_frame", "voxels_per_frame", "floor_ms_per_frame",
-                "spinning_voxels_per_frame", "ratio_vs_floor", "ratio_vs_numpy"):
+                "spinning_voxels_per_frame", "ratio_vs_floor", "ratio_vs_numpy", "detstats_gather_ms_per_frame",
+                "detstats_still_ms_per_frame", "detstats_moving_ms_per_frame", "detstats_gather_ratio"):
         assert r[key] > 0, key
     assert set(r["load"]) == {"still", "gather", "moving", "planning", "planning_numpy", "spinning", "spinning_gather",
-                              "pipeline"}
+                              "pipeline", "detstats_still", "detstats_gather", "detstats_moving"}
     assert r["max_error_units"] <= 1 and r["oracle_voxels_compared"] > 10000
     assert r["sparse_mib"] < r["dense_mib"]
     assert any("ratio_vs_floor" in line for line in fusion.format_table(r))

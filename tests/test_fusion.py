@@ -307,3 +307,98 @@ def test_a_tilting_stand_reuses_each_positions_plan(runtime):
     assert all(a is b and a.table is not None for a, b in zip(first, again))
     grid.clear()
     assert f(ev, tilts[0]) is not first[0] and len(f._plans) == 1
+
+
+# -- the detection-statistics model (DETSTATS): node pairs interpolated in rho2, the knowledge pool -----------------
+def random_nodes(lattice, seed=0, spread=3000):
+    from radarcl import sensor_model as sm
+
+    rng = np.random.default_rng(seed)
+    e = rng.integers(-spread, spread, (lattice.n_beams, N_BINS, sm.N_CLASSES, sm.NODES))
+    d = rng.integers(0, logodds_scale() + 1, e.shape)
+    d[:, ::3] = 0                                    # bins whose looks see nothing: not counted as looks
+    return e, d, sm.pack_nodes(e, d)
+
+
+def logodds_scale():
+    from radarcl import logodds
+
+    return logodds.KNOWLEDGE_SCALE
+
+
+def detstats_grid(runtime, spec, lattice, model, packed, poses, terrain_dz, **options):
+    grid = EvidenceGrid(runtime, spec, knowledge=True)
+    fusion = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, detstats=True, terrain_dz=terrain_dz,
+                    **options)
+    plan = fusion(packed, poses)
+    return grid, fusion, plan
+
+
+@pytest.mark.parametrize("rows", [1, 2])
+@pytest.mark.parametrize("model", [MODELS["near_field=True, gaussian=True"], MODELS["near_field=False, gaussian=False"]],
+                         ids=["cylindrical-conical", "uniform cone"])
+def test_detstats_matches_its_oracle(runtime, model, rows):
+    """Each voxel takes its class's nodes (terrain below terrain_dz) interpolated at its quantised
+    rho2: the evidence and knowledge sums equal the oracle's within one quantisation step of rho2
+    per update (float32 vs float64 rho2: 1 + |step between nodes| / 4096 units) and are exact
+    integers: the still table gives the gather's."""
+    lattice = LATTICES["paper, tilt -10 deg"]
+    e, d, packed = random_nodes(lattice)
+    grid, fusion, _ = detstats_grid(runtime, SMALL, lattice, model, packed, POSE, -0.8, rows=rows, still=True)
+    got, known = grid.snapshot(), grid.knowledge_snapshot()
+    nz, ny, nx = SMALL.array_shape
+    iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)
+    centres = SMALL.index_to_world(np.stack([ix, iy, iz], axis=1))
+    sums, updates, ambiguous, knowledge, looks = (a.reshape(nz, ny, nx) for a in oracle.fusion_at_points(
+        centres, None, lattice, model, POSE, SPACING, FIRST, LAST, FUSION_DECISION_MARGIN, nodes=(e, d), terrain_dz=-0.8))
+    counted = grid.knowledge_snapshot("looks")
+    reached = updates > 0
+    assert reached.sum() > 1000 and ambiguous.sum() <= FUSION_AMBIGUOUS_MAX * reached.sum()
+    terrain = (SMALL.index_to_world(np.stack([ix, iy, iz], 1))[:, 2] - POSE[2, 3] < -0.8).reshape(nz, ny, nx)
+    assert (reached & terrain).sum() > 100 and (reached & ~terrain).sum() > 100    # both classes are tested
+    step = 1 + -(-max(np.abs(np.diff(e, axis=-1)).max(), np.abs(np.diff(d, axis=-1)).max()) // 4096)
+    clear = ~ambiguous
+    assert (np.abs(got - sums)[clear] <= step * updates[clear]).all()
+    assert (np.abs(known - knowledge)[clear] <= step * updates[clear]).all()
+    assert not known[~reached & clear].any()
+    # a look counts where its interpolated opportunity is above 0: the same as the oracle's except
+    # where one quantisation step of rho2 moves a node value across 0 (then by one)
+    assert (np.abs(counted - looks)[clear] <= (np.abs(known - knowledge)[clear] > 0)).all() and counted.sum() > 1000
+    fusion(packed, POSE)                             # the pose comes back: the table is recorded
+    fusion(packed, POSE)                             # and streamed
+    assert fusion.plan(POSE).table is not None
+    assert np.array_equal(grid.snapshot(), 3 * got) and np.array_equal(grid.knowledge_snapshot(), 3 * known)
+    assert np.array_equal(grid.knowledge_snapshot("looks"), 3 * counted)
+
+
+def test_detstats_sums_do_not_depend_on_the_order_of_frames(runtime):
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
+    poses = [POSE, pose_from_xyz_rpy(0.5, -0.3, 0.1, pitch=0.05, yaw=-0.08), pose_from_xyz_rpy(1.0, 0.4, 0.0, yaw=0.1)]
+    frames = [random_nodes(lattice, seed=s)[2] for s in range(3)]
+    maps = []
+    for order in ((0, 1, 2), (2, 0, 1), (1, 2, 0)):
+        grid = EvidenceGrid(runtime, SMALL, knowledge=True)
+        fusion = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, detstats=True, terrain_dz=-0.8)
+        for k in order:
+            fusion(frames[k], poses[k])
+        maps.append((grid.snapshot(), grid.knowledge_snapshot(), grid.knowledge_snapshot("looks")))
+    for e_map, k_map, n_map in maps[1:]:
+        assert np.array_equal(e_map, maps[0][0]) and np.array_equal(k_map, maps[0][1]) and np.array_equal(n_map, maps[0][2])
+    assert maps[0][1].min() >= 0 and maps[0][1].any()
+
+
+def test_detstats_refusals(runtime):
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
+    with pytest.raises(ConfigError, match=r"EvidenceGrid\(\.\.\., knowledge=True\)"):
+        Fusion(runtime, EvidenceGrid(runtime, SMALL), lattice, model, N_BINS, SPACING, FIRST, LAST, detstats=True)
+    fusion = Fusion(runtime, EvidenceGrid(runtime, SMALL, knowledge=True), lattice, model, N_BINS, SPACING, FIRST,
+                    LAST, detstats=True)
+    with pytest.raises(ShapeError, match=r"expected evidence nodes of shape \(64, 4, 160, 2, 4, 2\) int32"):
+        fusion(evidence(lattice), POSE)
+    e, d, _ = random_nodes(lattice)
+    from radarcl import sensor_model as sm
+
+    bad = sm.pack_nodes(e, d)
+    bad[0, 0, 0, 0, 1] = -1                          # an opportunity below 0
+    with pytest.raises(ConfigError, match="opportunity within"):
+        fusion(bad, POSE)

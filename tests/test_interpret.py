@@ -228,3 +228,60 @@ def test_log10_nb8_is_log10_nb_lane_for_lane(runtime):
     finite = (x > 0) & np.isfinite(x)
     assert np.abs(s[finite] - np.log10(x[finite].astype(np.float64))).max() < 4e-6
     assert s[x == 0].tolist() == [-np.inf] * int((x == 0).sum())
+
+
+# -- the detection-statistics model (DETSTATS=1) ------------------------------------------------------------------
+def detstats_model(n_bins=256, ground_below_m=1.5):
+    import math
+
+    from radarcl import sensor_model as sm
+
+    params = sm.ModelParams(50.28, ground_below_m=ground_below_m)
+    return sm.BinModel.build(params, CfarConfig(guard=16, train=8), n_bins, SPACING, 4.0, math.radians(0.5),
+                             math.radians(1.0), 0.2)
+
+
+@pytest.mark.parametrize("local_size", [1, 16, 64])
+def test_detstats_matches_its_oracle(runtime, local_size):
+    """Node values identical to the float64 oracle until a beam's first pulse (the host's exact
+    table), within EVIDENCE_UNITS_TOL after it (float32 logs and blocking); pulses, counts and
+    flags identical; flagged beams and bins outside the window give 0."""
+    from radarcl import sensor_model as sm
+
+    x = frame(seed=11 + local_size)
+    beams = x.reshape(-1, 256)
+    beams[3, 40:44] = 30.0                       # a weak pulse: partial blocking behind it
+    beams[4] = 0.0                               # silent
+    cfg = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4, model="detstats")
+    model = detstats_model()
+    det = Detection(runtime, x.shape[:-1], 256, SPACING, CfarConfig(guard=16, train=8), cfg, bin_model=model)
+    det.interpreter = Interpreter(runtime, x.shape[:-1], 256, SPACING, cfg, bin_model=model, local_size=local_size)
+    got = det(x)
+    e, d, pulses, n_pulses, flags = oracle.interpret_detstats(x, got.cfar.noise, got.cfar.mask, cfg, SPACING, model)
+    assert np.array_equal(got.interpret.pulses, pulses) and np.array_equal(got.interpret.n_pulses, n_pulses)
+    assert np.array_equal(got.interpret.flags, flags) and flags.reshape(-1)[4] & oracle.FLAG_SILENT
+    ge, gd = sm.unpack_nodes(got.interpret.evidence)
+    assert ge.shape == e.shape == (16, 4, 256, 2, 5)
+    assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
+    mask = got.cfar.mask.reshape(-1, 256).astype(bool)
+    first, last = cfg.bin_interval(SPACING, 256)
+    before = np.zeros_like(mask)                 # noise bins before each beam's first pulse: exact
+    for b in range(len(mask)):
+        hits = np.flatnonzero(mask[b, first:last + 1])
+        before[b, first:(first + hits[0]) if len(hits) else last + 1] = True
+    before &= ~mask
+    assert np.array_equal(ge.reshape(-1, 256, 2, 5)[before], e.reshape(-1, 256, 2, 5)[before])
+    assert not ge.reshape(-1, 256, 2, 5)[4].any() and not ge[..., :first, :, :].any()
+    window = np.zeros_like(mask)
+    window[:, first:last + 1] = True
+    hit = e.reshape(-1, 256, 2, 5)[mask & window & (flags.reshape(-1)[:, None] == 0)]
+    # a detection is evidence of occupancy (0 only where nearer echoes block the beam)
+    assert len(hit) and (hit >= 0).all() and (hit[:, 0, 0] > 0).mean() > 0.5
+
+
+def test_detstats_needs_its_model(runtime):
+    cfg = InterpretConfig(model="detstats")
+    with pytest.raises(ConfigError, match="needs its sensor_model.BinModel"):
+        Interpreter(runtime, (4,), 256, SPACING, cfg)
+    with pytest.raises(ConfigError, match="the bin model has 256 bins; the profiles have 128"):
+        Interpreter(runtime, (4,), 128, SPACING, cfg, bin_model=detstats_model(256))

@@ -61,7 +61,7 @@ LAYERS = (
     ("config", "maps"),
     ("io",),
     ("oracle",),
-    ("geometry", "grid"),
+    ("geometry", "grid", "sensor_model"),
     ("physics", "cfar_theory", "cl", "logodds"),
     ("errors", "__init__"),
 )

@@ -68,7 +68,7 @@ def test_newer_or_foreign_stores_are_refused(tmp_path):
     manifest = json.loads((path / "manifest.json").read_text())
     manifest["format_version"] = 99
     (path / "manifest.json").write_text(json.dumps(manifest))
-    with pytest.raises(FrameFormatError, match="written in store format 99; this radarcl reads formats 1 to 2"):
+    with pytest.raises(FrameFormatError, match="written in store format 99; this radarcl reads formats 1 to 3"):
         read(path)
     (path / "manifest.json").write_text("{ torn")
     with pytest.raises(FrameFormatError, match="manifest.json is not readable"):
@@ -157,3 +157,130 @@ def test_point_queries_agree_with_the_dense_map(tmp_path):
         m.projection((50.0, 60.0))
     hi, lo = dense.max(axis=0), dense.min(axis=0)             # unseen voxels are 0
     assert np.array_equal(m.column_extremes(), np.where(hi > 0, hi, lo) / 1024)
+
+
+# -- the knowledge channel (the detection-statistics model) ---------------------------------------------------------
+READING = dict(look_limit=4.0, prior_nats=-2.0, prior_looks=0.5)
+
+
+def knowledge_map(seed=1):
+    keys, data = random_map(seed)
+    rng = np.random.default_rng(seed + 100)
+    knowledge = rng.integers(0, 20 * 4096, data.shape).astype(np.int32)
+    knowledge[0] = 0                                     # a brick never observed: no evidence either
+    data[0] = 0
+    looks = (knowledge // 2048).astype(np.int32)
+    return keys, data, knowledge, looks
+
+
+def test_knowledge_round_trips_through_npz_store_and_conversion(tmp_path):
+    """A version 2 npz and a format 3 store hold the same sums, knowledge and reading, and convert
+    into each other; a map without knowledge is still written as npz version 1."""
+    from radarcl.maps import npz
+    from radarcl.maps.disk import convert, read_channels
+
+    keys, data, knowledge, looks = knowledge_map()
+    plain = tmp_path / "plain.npz"
+    npz.write(plain, SPEC, keys, data)
+    with np.load(plain) as f:
+        assert int(f["version"]) == 1 and "knowledge" not in f.files
+    assert read_channels(plain)[3] is None
+    path = tmp_path / "k.npz"
+    npz.write(path, SPEC, keys, data, channels=npz.Channels(knowledge, looks, READING))
+    spec, k, d, ch = read_channels(path)
+    assert spec == SPEC and np.array_equal(d, data) and np.array_equal(ch.knowledge, knowledge) and ch.reading == READING
+    assert np.array_equal(ch.looks, looks)
+    target = tmp_path / "k.rcmap"
+    convert(path, target)
+    assert store.read_manifest(target)["format_version"] == store.KNOWLEDGE_FORMAT
+    back = tmp_path / "back.npz"
+    convert(target, back)
+    _, k2, d2, ch2 = read_channels(back)
+    assert same(SPEC, keys, data, k2, d2) and same(SPEC, keys, knowledge, k2, ch2.knowledge) and ch2.reading == READING
+    assert same(SPEC, keys, looks, k2, ch2.looks)
+    w = store.StoreWriter(target, SPEC, reading=READING)          # continued: a second save writes what changed
+    knowledge[3, 0, 0, 0] += 4096
+    assert w.save(keys, data, knowledge=knowledge, looks=looks) == 1
+    assert same(SPEC, keys, knowledge, *read_channels(target)[1:2], read_channels(target)[3].knowledge)
+    with pytest.raises(ConfigError, match="holds a map with the knowledge channel"):
+        store.StoreWriter(target, SPEC)
+
+
+def test_damaged_knowledge_is_refused(tmp_path):
+    from radarcl.maps import npz
+
+    keys, data, knowledge, looks = knowledge_map()
+    path = tmp_path / "k.npz"
+    npz.write(path, SPEC, keys, data, channels=npz.Channels(knowledge, looks, READING))
+    with np.load(path) as f:
+        members = {name: f[name] for name in f.files}
+    for change, message in ((dict(knowledge=-knowledge - 1), "knowledge must be int32 in"),
+                            (dict(reading=np.str_('{"look_limit": 0, "prior_nats": 0, "prior_looks": 1}')),
+                             "reading look_limit = 0 is not a positive number"),
+                            (dict(knowledge=knowledge[:3]), "knowledge bricks .* do not match")):
+        bad = tmp_path / "bad.npz"
+        np.savez(bad, **{**members, **change})
+        with pytest.raises(FrameFormatError, match=message):
+            Map.open(bad)
+
+
+def test_a_stores_knowledge_is_checked_like_its_sums(tmp_path):
+    """The knowledge and looks arrays of a format 3 store carry their own chunk checksums: a
+    zeroed knowledge chunk is refused naming the array, and --salvage lists the bricks it lost;
+    a manifest without the knowledge checksums is refused."""
+    import json
+
+    import zarr
+
+    keys, data, knowledge, looks = knowledge_map()
+    path = tmp_path / "k.rcmap"
+    store.StoreWriter(path, SPEC, reading=READING).save(keys, data, knowledge=knowledge, looks=looks)
+    stored = zarr.open_array(str(path / "knowledge_0"), mode="a")
+    stored[1] = stored[1] + 1                        # one brick changed after the save
+    with pytest.raises(FrameFormatError, match="knowledge_0 chunk 0 does not match its checksum"):
+        Map.open(path)
+    m = Map.open(path, salvage=True)
+    assert len(m.keys) < len(keys) and any("knowledge_0" in e["reason"] for e in m.lost)
+    manifest = json.loads((path / "manifest.json").read_text())
+    manifest["checksums"].pop("looks")
+    manifest["crc32"] = store.seal(manifest)
+    (path / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(FrameFormatError, match="looks 0 has no checksum entry"):
+        Map.open(path)
+
+
+def test_map_queries_read_through_the_knowledge_channel(tmp_path):
+    """log_odds_at applies the reading; a voxel never observed is UNKNOWN and reads 0 whatever
+    the prior; knowledge_at is in looks; a map without knowledge refuses knowledge queries."""
+    from radarcl.maps import npz
+    from radarcl.maps.map import FREE, OCCUPIED, UNDECIDED
+    from radarcl.sensor_model import read_log_odds
+
+    keys, data, knowledge, looks = knowledge_map()
+    path = tmp_path / "k.npz"
+    npz.write(path, SPEC, keys, data, channels=npz.Channels(knowledge, looks, READING))
+    m = Map.open(path)
+    assert m.has_knowledge
+    rng = np.random.default_rng(3)
+    idx = np.concatenate([keys[rng.integers(0, len(keys), 300)] * 8 + rng.integers(0, 8, (300, 3)),
+                          keys[:1] * 8 + rng.integers(0, 8, (20, 3))])                # the unobserved brick
+    idx = idx[SPEC.contains(idx)]
+    points = SPEC.index_to_world(idx)
+    dense_e, dense_k, dense_n = (assemble(SPEC, keys, a) for a in (data, knowledge, looks))
+    e, k, n = (a[idx[:, 2], idx[:, 1], idx[:, 0]] for a in (dense_e, dense_k, dense_n))
+    assert np.allclose(m.log_odds_at(points), read_log_odds(e, k, n, READING))
+    assert np.allclose(m.knowledge_at(points), k / 4096)
+    state = m.state_at(points)
+    nats = read_log_odds(e, k, n, READING)
+    assert np.array_equal(state == UNKNOWN, k < 0.5 * 4096)
+    assert (state[(k >= 2048) & (nats > 1)] == OCCUPIED).all() and (state[(k >= 2048) & (nats < -1)] == FREE).all()
+    assert (state[(k >= 2048) & (np.abs(nats) <= 1)] == UNDECIDED).all()
+    unseen = points[-1:] if dense_k[idx[-1, 2], idx[-1, 1], idx[-1, 0]] == 0 else None
+    assert unseen is not None and m.log_odds_at(unseen)[0] == 0.0 and m.state_at(unseen)[0] == UNKNOWN
+    assert np.isnan(m.log_odds_at([[1e3, 0, 0]]))[0] and m.state_at([[1e3, 0, 0]])[0] == UNKNOWN
+    idx_all, units, looks = m.voxels(with_knowledge=True)
+    assert (looks >= 0.5).all() and len(idx_all) == int((dense_k >= 2048).sum())
+    keys2, data2 = random_map()
+    plain = Map(SPEC, keys2, data2)
+    with pytest.raises(ConfigError, match="has no knowledge channel"):
+        plain.knowledge_at(points)

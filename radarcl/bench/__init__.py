@@ -5,7 +5,7 @@ measured in the same run (interleaved, medians: ``timing``). Each benchmark modu
 import json
 import sys
 
-from radarcl.bench import cfar, fusion, heldout_scans, live, polar_read, quality, range_fft, scenes, store, viewer
+from radarcl.bench import cfar, frames, fusion, heldout_scans, live, polar_read, quality, range_fft, scenes, store, viewer
 from radarcl.commands.options import runtime
 
 SUMMARY = "benchmarks, each against a baseline measured in the same run"
@@ -22,6 +22,8 @@ BENCHES = {
                                      "detections of the odd ones, vs raw intensity"),
     "scenes": (scenes, "the maps of generated scenes (held-out or training split) scored on their visibility truth, "
                        "beside the three baselines"),
+    "frames": (frames, "do probabilities hold at any number of scans: maps of 1, 10 and 100 frames of a still and a "
+                       "moving radar on generated scenes, scored on their visibility truth"),
     "store": (store, "saving and loading the paper's 0.1 m map as .npz vs the map store, with an incremental save, "
                      "same run"),
     "live": (live, "the reference scene streamed beam by beam over a pty into the live engine: throughput, latency, "

@@ -11,6 +11,9 @@ which other processes used more than a quarter of a core are discarded: ``interl
 - a spinning Navtech-like lattice (400 azimuths x 1, 1.8 x 40 deg beams, 0.0432 m bins) still,
   every bin -1 nat, into an 80 x 80 x 4 m grid at 0.1 m around it;
 - the whole pipeline: upload raw samples, range FFT, CFAR, eq. 12, fusion;
+- the same frame with the detection-statistics model (``sensor_model``; interpret.model
+  "detstats"): the gather, the still table and the moving radar on its node pairs and knowledge
+  pool, beside eq. 12's in the same interleaved run (issue 27's goal: at most 1.5x eq. 12's gather);
 - the float64 numpy oracle (``oracle.fusion_at_points``), timed on ``ORACLE_BEAMS`` beams over
   the voxels of the reached bricks and scaled to the frame (it is linear in beams); the
   kernel's error is measured on those beams;
@@ -123,6 +126,7 @@ def run(runtime, repeat=20, report=None, spec=PAPER_GRID, spin_spec=SPIN_GRID):
     def planning_numpy():
         numpy_planning(fusion, moving_pose())
 
+    ds = _detstats(runtime, spec, lattice, model, samples, pose, moving_pose)
     spin = _spinning(runtime, spin_spec)
     say(f"timing a still, a moving and a spinning radar, planning and the pipeline, {repeat} frames each ...")
     load = {}
@@ -130,7 +134,8 @@ def run(runtime, repeat=20, report=None, spec=PAPER_GRID, spin_spec=SPIN_GRID):
         say("  (no still table: it would not fit the device's memory budget; still = the gather)")
     t = interleaved_medians(dict(still=fusion_only, gather=gather_only, moving=moving, planning=planning,
                                  planning_numpy=planning_numpy, spinning=spin["fuse"], spinning_gather=spin["gather"],
-                                 pipeline=pipeline), repeat, block=10, warmup=2, load=load)
+                                 pipeline=pipeline, detstats_still=ds["still"], detstats_gather=ds["gather"],
+                                 detstats_moving=ds["moving"]), repeat, block=10, warmup=2, load=load)
     plan_s = t["planning"]
     say(f"float64 oracle on {len(ORACLE_BEAMS)} of {lattice.n_beams} beams over {len(plan.bricks)} bricks ...")
     evidence = it.arrays["evidence"].get(runtime.queue).reshape(lattice.n_beams, it.n_bins)
@@ -163,6 +168,9 @@ def run(runtime, repeat=20, report=None, spec=PAPER_GRID, spin_spec=SPIN_GRID):
         spinning_voxels_per_frame=spin["voxels"],
         spinning_floor_ms_per_frame=spin_floor_s * 1e3, spinning_grid_shape=list(spin_spec.shape),
         pipeline_ms_per_frame=t["pipeline"] * 1e3, plan_ms_first=first_plan_s * 1e3,
+        detstats_still_ms_per_frame=t["detstats_still"] * 1e3, detstats_gather_ms_per_frame=t["detstats_gather"] * 1e3,
+        detstats_moving_ms_per_frame=t["detstats_moving"] * 1e3,
+        detstats_gather_ratio=t["detstats_gather"] / t["gather"],
         voxels_per_frame=voxels, bricks_per_frame=int(len(plan.bricks)),
         copy_bandwidth_gb_s=bandwidth / 1e9, floor_ms_per_frame=floor_s * 1e3,
         ratio_vs_floor=t["still"] / floor_s, load=load, load_before=list(load_before), load_after=list(os.getloadavg()),
@@ -173,6 +181,25 @@ def run(runtime, repeat=20, report=None, spec=PAPER_GRID, spin_spec=SPIN_GRID):
         dense_mib=mem["dense_bytes"] / 2 ** 20, sparse_mib=mem["sparse_bytes"] / 2 ** 20,
         goal=f"moving_ms_per_frame <= {GOAL_MS}, still_ms_per_frame <= {STILL_GOAL_MS}",
     )
+
+
+def _detstats(runtime, spec, lattice, model, samples, pose, moving_pose):
+    """The frame with the detection-statistics model into a grid of ``spec`` with the knowledge
+    channel: {"still", "gather", "moving"}, callables fusing the frame's node pairs."""
+    from radarcl.config.presets import paper_config
+    from radarcl.pipeline import bin_model
+    from radarcl.sensor_model import terrain_dz
+
+    config = paper_config(spec.voxel_m, {"interpret.model": "detstats"})
+    grid = EvidenceGrid(runtime, spec, knowledge=True)
+    mapping = Mapping(runtime, grid, lattice, model, radar=PAPER_RADAR, n_fft=N_FFT, dtype=np.float32,
+                      interpret_config=config.interpret_config(), bin_model=bin_model(config, spec.voxel_m),
+                      terrain_dz=terrain_dz(config.model_params()))
+    mapping.fuse(samples, pose)
+    fusion, nodes = mapping.fusion, mapping.detection.interpreter.arrays["evidence"]
+    plan = fusion.plan(pose)                        # the pose came back: the still table is recorded
+    return dict(still=lambda: fusion.enqueue(nodes, plan).wait(), gather=lambda: fusion.enqueue(nodes, plan, gather=True).wait(),
+                moving=lambda: fusion.enqueue(nodes, fusion.plan(moving_pose(), cache=False)).wait())
 
 
 def _spinning(runtime, spec):
@@ -221,6 +248,9 @@ def format_table(r):
         f"{'x'.join(map(str, r['spinning_grid_shape']))} voxels, {r['spinning_voxels_per_frame']} updated; the gather: "
         f"{r['spinning_gather_ms_per_frame']:.1f} ms; floor {r['spinning_floor_ms_per_frame']:.2f} ms)",
         f"  whole pipeline, still    {r['pipeline_ms_per_frame']:9.1f} ms/frame  (raw samples to map)",
+        f"  detection statistics     {r['detstats_gather_ms_per_frame']:9.1f} ms/frame  (the gather on node pairs + "
+        f"knowledge: {r['detstats_gather_ratio']:.2f}x eq. 12's gather, goal <= 1.5; still table "
+        f"{r['detstats_still_ms_per_frame']:.1f} ms, moving {r['detstats_moving_ms_per_frame']:.1f} ms)",
         f"  float64 numpy oracle     {r['numpy_ms_per_frame']:9.0f} ms/frame  (timed on {r['oracle_beams']} beams, scaled)"
         f"  ratio_vs_numpy {r['ratio_vs_numpy']:.0f}",
         f"  memory floor             {r['floor_ms_per_frame']:9.2f} ms/frame  (int32 read+write of the updated voxels at "

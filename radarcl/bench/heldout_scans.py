@@ -16,7 +16,8 @@ import numpy as np
 from radarcl.commands.options import add_config, default_data, resolve_config
 from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
-from radarcl.evaluation.heldout import predictions, raw_map, score
+from radarcl import logodds
+from radarcl.evaluation.heldout import detection_probability, predictions, raw_map, score, score_probability
 from radarcl.io import polar_png
 from radarcl.jobs import navtech_map
 
@@ -31,13 +32,27 @@ def run(runtime, config, data_dir, report=None):
     spec = navtech_map.grid_for(per_beam, config["interpret.range_max_m"], config["grid.voxel_m"])
     train, test = list(range(0, len(scans), 2)), list(range(1, len(scans), 2))
     say(f"{len(scans)} scans: map of scans {train}, held out {test}")
-    maps = {"map": navtech_map.build_map(runtime, config, spec, [scans[k] for k in train], per_beam[train]).snapshot(),
-            "baseline: raw_intensity": raw_map(runtime, config, spec, [scans[k] for k in train], per_beam[train])}
+    maps = {"map": _units(navtech_map.build_map(runtime, config, spec, [scans[k] for k in train], per_beam[train]),
+                          config)}
+    if config["interpret.model"] != "detstats":       # the detection-statistics model beside the configuration's
+        detstats = config.replaced(interpret__model="detstats")
+        maps["detection statistics"] = _units(navtech_map.build_map(runtime, detstats, spec, [scans[k] for k in train],
+                                                                    per_beam[train]), detstats)
+    maps["baseline: raw_intensity"] = raw_map(runtime, config, spec, [scans[k] for k in train], per_beam[train])
     # the outcomes: the sensor profile's own detector, whatever the compared map's CFAR is
     outcome = mapconfig.resolve(config.sensor, program={"grid.voxel_m": config["grid.voxel_m"]})
-    stacked, y = predictions(runtime, outcome, spec, np.stack(list(maps.values()), axis=-1),
-                             [scans[k] for k in test], per_beam[test])
+    stacked, y, ranges = predictions(runtime, outcome, spec, np.stack(list(maps.values()), axis=-1),
+                                     [scans[k] for k in test], per_beam[test], with_ranges=True)
     out = {name: score(stacked[:, m], y) for m, name in enumerate(maps)}
+    if "detection statistics" in maps:
+        # the model's own prediction of a detection from the map, and the same with no map (p = 1/2
+        # everywhere: the detection opportunity's fall with range alone, the control it must beat)
+        detstats = config.replaced(interpret__model="detstats")
+        column = list(maps).index("detection statistics")
+        out["detection statistics, predictive"] = score_probability(
+            detection_probability(detstats, stacked[:, column] / logodds.SCALE, ranges), y)
+        out["control: P_d by range, no map"] = score_probability(
+            detection_probability(detstats, np.zeros(len(y)), ranges), y)
     out["baseline: no map"] = score(np.zeros(len(y)), y)
     # no radar data beyond one number: the held-out detection rate itself, as a constant log-odds
     rate = float(y.mean())
@@ -45,6 +60,13 @@ def run(runtime, config, data_dir, report=None):
     return dict(benchmark="heldout-scans", device=runtime.name, sensor=config.sensor.name, scans=len(scans),
                 train=train, held_out=test, voxel_m=config["grid.voxel_m"], config=config.label(),
                 outcome_detector=outcome.label(), results=out)
+
+
+def _units(grid, config):
+    """A map's dense log-odds as read (``evaluate.read_map``), in logodds units."""
+    from radarcl.evaluation.evaluate import read_map
+
+    return logodds.to_fixed(read_map(grid, config)[0])
 
 
 def format_table(r):

@@ -15,52 +15,79 @@ whose ties count one half); they show what the footprint and strong free evidenc
 
 import numpy as np
 
+from radarcl.errors import ConfigError
 from radarcl.geometry import BEAM_MODELS
 
 KEYS = ("auc_detectable", "iou_detectable", "auc_obstacles", "iou_obstacles", "auc_weak", "false_free",
         "false_free_obstacles", "shadow_unknown", "ece", "brier")
+KNOWLEDGE_KEYS = ("ece_known", "shadow_unknown_k", "known_visible")     # maps with the knowledge channel
 
 
-def configurations(voxel_m, extra=()):
+RADARS = {"paper": "paper", "spinning": "spinning-sim"}      # --radar: the sensor profile it simulates
+SPINNING_TURNS = 8                                           # turns of the spinning radar per street (10 m driven)
+
+
+def configurations(voxel_m, extra=(), radar="paper"):
     """(name, Resolved) of the compared configurations; the first is the reference. ``extra``:
     configuration files (e.g. from `radarcl calibrate --save`), named by their stem, at
-    ``voxel_m``."""
+    ``voxel_m``. ``radar``: "paper" (the tilting stand) or "spinning" (``scene.streets``)."""
     from pathlib import Path
 
     from radarcl.config import mapconfig
-    from radarcl.config.presets import paper_config
+    from radarcl.evaluation.calibration import CALIBRATED, DETSTATS_CALIBRATED, DETSTATS_CALIBRATED_SPINNING
     from radarcl.evaluation.tuning import TUNED
 
-    tuned = paper_config(voxel_m, TUNED)
-    out = [("tuned", tuned), ("paper constants", paper_config(voxel_m))]
-    out += [(f"tuned, beam {b}", tuned.replaced(beam__model=b)) for b in BEAM_MODELS if b != tuned["beam.model"]]
+    def preset(values=None):
+        return mapconfig.resolve(RADARS[radar], program={"grid.voxel_m": voxel_m, **(values or {})})
+
+    tuned = preset(TUNED)
+    out = [("tuned", tuned), ("paper constants", preset())]
+    if radar == "paper":
+        out += [(f"tuned, beam {b}", tuned.replaced(beam__model=b)) for b in BEAM_MODELS if b != tuned["beam.model"]]
+    out += [("calibrated, occlusion (last release)", preset(CALIBRATED)),
+            ("detection statistics", preset({"interpret.model": "detstats"}))]
+    calibrated = DETSTATS_CALIBRATED if radar == "paper" else DETSTATS_CALIBRATED_SPINNING
+    if calibrated:
+        out.append(("detection statistics, fitted reading", preset(calibrated)))
     out += [(Path(f).stem, mapconfig.resolve(path=f, program={"grid.voxel_m": voxel_m}).replaced(grid__voxel_m=voxel_m))
             for f in extra]
     return out
 
 
-def run(runtime, seeds, voxel_m=0.2, report=None, extra=(), physics=0):
+def run(runtime, seeds, voxel_m=0.2, report=None, extra=(), physics=0, radar="paper"):
     """Score every configuration and baseline on every scene of ``seeds``; returns the --json dict."""
-    from radarcl.evaluation.evaluate import baselines, instrument, map_observations, oracle_detections, radar_score
-    from radarcl.scene.generator import generate
+    from radarcl.evaluation.evaluate import (baselines, for_scene, instrument, map_observations, oracle_detections,
+                                             radar_score)
+    from radarcl.scene import generator, streets
     from radarcl.scene.observe import observe
     from radarcl.scene.outdoor import PAPER_TILTS_DEG
 
     say = report or (lambda _: None)
-    configs = configurations(voxel_m, extra)
+    configs = configurations(voxel_m, extra, radar)
     per_scene = []
     for n, seed in enumerate(seeds, 1):
-        scene, described = generate(seed)
-        say(f"scene {seed} ({n}/{len(seeds)}): {described['terrain']} terrain, sensor at "
-            f"{described['sensor_height_m']} m, {len(described['objects'])} solids ...")
-        obs = observe(scene, PAPER_TILTS_DEG, seed=seed, physics=physics)
+        if radar == "spinning":
+            if physics:
+                raise ConfigError("--physics applies to the tilting stand (--radar paper) only")
+            scene, described = streets.generate(seed)
+            say(f"street {seed} ({n}/{len(seeds)}): sensor at {described['sensor_height_m']} m, "
+                f"{len(described['objects'])} solids ...")
+            sensor = configs[0][1].sensor
+            obs = streets.observe(scene, sensor.radar, sensor.lattice(), SPINNING_TURNS, seed=seed)
+        else:
+            scene, described = generator.generate(seed)
+            say(f"scene {seed} ({n}/{len(seeds)}): {described['terrain']} terrain, sensor at "
+                f"{described['sensor_height_m']} m, {len(described['objects'])} solids ...")
+            obs = observe(scene, PAPER_TILTS_DEG, seed=seed, physics=physics)
         inst = instrument(runtime, scene, obs, configs[0][1])
         maps = {}
         for name, config in configs:
+            config = for_scene(config, described)
             res = inst.reference_map if config is configs[0][1] else map_observations(runtime, obs, config)
-            maps[name] = dict(radar_score(inst, res.log_odds), ms_per_frame=res.ms_per_frame)
+            maps[name] = dict(radar_score(inst, res.log_odds, res.knowledge), ms_per_frame=res.ms_per_frame)
             del res
-        maps.update({f"baseline: {k}": v for k, v in baselines(runtime, inst, obs).items()})
+        ground = -described["sensor_height_m"] if radar == "spinning" else 0.0       # streets: the head at z = 0
+        maps.update({f"baseline: {k}": v for k, v in baselines(runtime, inst, obs, ground).items()})
         maps["oracle detections, free 0"] = dict(oracle_detections(runtime, inst, obs), ms_per_frame=0.0)
         maps["oracle detections, free -1"] = dict(oracle_detections(runtime, inst, obs, -1.0), ms_per_frame=0.0)
         per_scene.append(dict(scene=described, voxel_set=inst.describe(), classes=inst.truth.counts(),
@@ -72,11 +99,11 @@ def run(runtime, seeds, voxel_m=0.2, report=None, extra=(), physics=0):
         if not rows:
             mean[name] = dict(error=per_scene[0]["maps"][name].get("error"))
             continue
-        mean[name] = {k: _mean([r[k] for r in rows]) for k in KEYS + ("ms_per_frame",)}
+        mean[name] = {k: _mean([r.get(k) for r in rows]) for k in KEYS + KNOWLEDGE_KEYS + ("ms_per_frame",)}
         mean[name]["objects_found"] = sum(r["objects_found"] for r in rows)
         mean[name]["objects_total"] = sum(r["objects_total"] for r in rows)
-    return dict(benchmark="scenes", device=runtime.name, seeds=list(seeds), voxel_m=voxel_m, physics=physics_names(physics),
-                mean=mean, scenes=per_scene)
+    return dict(benchmark="scenes", device=runtime.name, radar=radar, seeds=list(seeds), voxel_m=voxel_m,
+                physics=physics_names(physics), mean=mean, scenes=per_scene)
 
 
 def physics_names(physics):
@@ -93,18 +120,21 @@ def _mean(values):
 
 def format_table(r):
     """Human-readable lines: the mean of each score per configuration over the scenes."""
-    lines = [f"{len(r['seeds'])} generated scenes (seeds {', '.join(map(str, r['seeds']))}) at {r['voxel_m']} m, "
+    lines = [f"{len(r['seeds'])} generated {'streets, spinning radar' if r.get('radar') == 'spinning' else 'scenes'} "
+             f"(seeds {', '.join(map(str, r['seeds']))}) at {r['voxel_m']} m, "
              f"harder physics: {', '.join(r.get('physics', ['none']))}, on {r['device']}; each scored on its own fixed "
              f"voxel set, means over the scenes",
-             f"  {'map':28s} {'AUCdet':>6s} {'IoUdet':>6s} {'AUCobs':>6s} {'IoUobs':>6s} {'AUCwk':>6s} {'f-free':>6s} "
-             f"{'ff-obs':>6s} {'shd-unk':>7s} {'ECE':>6s} {'Brier':>6s} {'objects':>8s} {'ms/frame':>8s}"]
+             f"  {'map':36s} {'AUCdet':>6s} {'IoUdet':>6s} {'AUCobs':>6s} {'IoUobs':>6s} {'AUCwk':>6s} {'f-free':>6s} "
+             f"{'ff-obs':>6s} {'shd-unk':>7s} {'ECE':>6s} {'Brier':>6s} {'objects':>8s} {'ms/frame':>8s} "
+             f"{'ECEknwn':>7s} {'shd-K':>6s} {'known':>6s}"]
     for name, m in r["mean"].items():
         if "error" in m:
-            lines.append(f"  {name:28s} {m['error']}")
+            lines.append(f"  {name:36s} {m['error']}")
             continue
         cells = " ".join(f"{m[k]:6.3f}" if m[k] is not None else f"{'-':>6s}" for k in KEYS[:7])
-        lines.append(f"  {name:28s} {cells} {m['shadow_unknown']:7.3f} {m['ece']:6.3f} {m['brier']:6.3f} "
-                     f"{m['objects_found']:>3d}/{m['objects_total']:<4d} {m['ms_per_frame']:8.1f}")
+        extra = " ".join(f"{m.get(k):7.3f}" if m.get(k) is not None else f"{'-':>7s}" for k in KNOWLEDGE_KEYS)
+        lines.append(f"  {name:36s} {cells} {m['shadow_unknown']:7.3f} {m['ece']:6.3f} {m['brier']:6.3f} "
+                     f"{m['objects_found']:>3d}/{m['objects_total']:<4d} {m['ms_per_frame']:8.1f} {extra}")
     for s in r["scenes"]:
         lines.append(f"  scene {s['scene']['seed']}: {s['voxel_set']}")
     return lines
@@ -116,6 +146,9 @@ def add_arguments(parser):
 
     parser.add_argument("--split", choices=("held-out", "train"), default="held-out",
                         help="which scenes (default: %(default)s; tune only on train)")
+    parser.add_argument("--radar", choices=tuple(RADARS), default="paper",
+                        help="paper: the tilting stand in generated scenes; spinning: a simulated Navtech-like radar "
+                             "driving through generated streets (default: %(default)s)")
     parser.add_argument("--voxel", type=positive_float, default=0.2, help="voxel [m] (default: %(default)s)")
     parser.add_argument("--seeds", type=int, nargs="+", default=None, help="these scene seeds instead of a split")
     parser.add_argument("--physics", default="", metavar="LIST",
@@ -128,8 +161,12 @@ def command(args, runtime, say):
     """Run the bench; returns (result dict, table lines)."""
     from radarcl.scene.generator import HELD_OUT_SEEDS, TRAIN_SEEDS
 
-    seeds = args.seeds or (HELD_OUT_SEEDS if args.split == "held-out" else TRAIN_SEEDS)
-    from radarcl.errors import ConfigError
+    from radarcl.scene import streets
+
+    if args.radar == "spinning":
+        seeds = args.seeds or (streets.HELD_OUT_SEEDS if args.split == "held-out" else streets.TRAIN_SEEDS)
+    else:
+        seeds = args.seeds or (HELD_OUT_SEEDS if args.split == "held-out" else TRAIN_SEEDS)
     from radarcl.scene.observe import MULTIPATH, SIDELOBES
 
     bits = {"sidelobes": SIDELOBES, "multipath": MULTIPATH}
@@ -137,5 +174,6 @@ def command(args, runtime, say):
     unknown = [w for w in words if w not in bits]
     if unknown:
         raise ConfigError(f"--physics takes sidelobes and/or multipath, got {', '.join(unknown)}")
-    result = run(runtime(), seeds, args.voxel, report=say, extra=args.extra, physics=sum(bits[w] for w in set(words)))
+    result = run(runtime(), seeds, args.voxel, report=say, extra=args.extra, physics=sum(bits[w] for w in set(words)),
+                 radar=args.radar)
     return result, format_table(result)

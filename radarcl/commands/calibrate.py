@@ -16,9 +16,9 @@ DESCRIPTION = ("Simulates the generated training scenes (radarcl/scene/generator
                "and a reliability diagram. The held-out scenes are never used (radarcl bench scenes reports on them).")
 
 
-def add_fit_outputs(parser):
+def add_fit_outputs(parser, models=("occlusion", "paper")):
     """--model, --save, --figure, --json, --force: the options both calibration commands share."""
-    parser.add_argument("--model", choices=("occlusion", "paper"), default="occlusion",
+    parser.add_argument("--model", choices=models, default="occlusion",
                         help="the interpreter to calibrate (default: %(default)s)")
     parser.add_argument("--save", default=None, metavar="FILE", help="write the calibrated configuration to FILE")
     parser.add_argument("--figure", default=None, metavar="PNG", help="write the before/after reliability diagram")
@@ -27,12 +27,16 @@ def add_fit_outputs(parser):
 
 
 def add_arguments(parser):
-    parser.add_argument("--voxel", type=positive_float, default=0.2, help="voxel edge [m] (default: %(default)s)")
+    parser.add_argument("--voxel", type=positive_float, default=None,
+                        help="voxel edge [m] (default: 0.2; 0.4 for --model detstats, whose every candidate is a map)")
     parser.add_argument("--seeds", type=bounded_int(0, 2 ** 32 - 1), nargs="+", default=None,
                         help="training scene seeds (default: generator.TRAIN_SEEDS; the last third validates)")
     parser.add_argument("--unknown-behind", action="store_true",
                         help="hold E_l at 0: the map stays unknown behind the first surface (shadows are unknowable)")
-    add_fit_outputs(parser)
+    parser.add_argument("--radar", choices=("paper", "spinning"), default="paper",
+                        help="--model detstats: the tilting stand's generated scenes, or the simulated spinning radar's "
+                             "streets (default: %(default)s)")
+    add_fit_outputs(parser, ("occlusion", "paper", "detstats"))
 
 
 def fit_outputs(args):
@@ -67,11 +71,16 @@ def run(args):
     if args.seeds is not None and len(set(args.seeds)) != len(args.seeds):
         raise ConfigError(f"--seeds {' '.join(map(str, args.seeds))}: a scene seed appears twice (fitting and "
                           "validating on the same scene proves nothing)")
-    config, result = calibrate.run(runtime(), args.model, args.voxel, args.seeds, report=print,
-                                   unknown_behind=args.unknown_behind)
+    if args.model == "detstats":
+        from radarcl.jobs import calibrate_detstats as calibrate
+
+        config, result = calibrate.run(runtime(), args.voxel or 0.4, args.seeds, report=print, radar=args.radar)
+    else:
+        config, result = calibrate.run(runtime(), args.model, args.voxel or 0.2, args.seeds, report=print,
+                                       unknown_behind=args.unknown_behind)
     print("\n".join(calibrate.format_lines(result)))
     write_fit(paths, config, ("radarcl map configuration fitted by `radarcl calibrate`",
-                              f"{result['model']} interpreter, training scenes {result['fit_seeds']} "
+                              f"{result['model']} model, training scenes {result['fit_seeds']} "
                               f"(validation {result['validation_seeds']}), {result['voxel_m']} m"),
               lambda: calibrate.reliability_figure(result), result)
     return 0

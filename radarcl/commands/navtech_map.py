@@ -17,7 +17,7 @@ from radarcl.commands.options import (
 )
 from radarcl.errors import ConfigError
 from radarcl.io import files
-from radarcl.maps.disk import save_grid
+from radarcl.maps.disk import reading_of, save_grid
 
 SUMMARY = "fuse polar scans with their odometry into a map; check the geometry by half-map consistency"
 DESCRIPTION = ("Fuses the first and second half of the scans into two maps and prints how well they agree with "
@@ -57,12 +57,12 @@ def run(args):
           f"{pulses['cfar']['train_bins']} bins; {pulses['detections_per_scan']:.0f} detections and "
           f"{pulses['pulses_per_scan']:.0f} pulses per scan, pulse width median {pulses['pulse_width_median_m']:.3f} m "
           f"(90 % below {pulses['pulse_width_p90_m']:.3f} m), {100 * pulses['wide_fraction']:.1f} % wide")
-    navtech_map.plot_map(grid, poses, out, results, title=config.sensor.name)
+    navtech_map.plot_map(grid, poses, out, results, title=config.sensor.name, config=config)
     mem = grid.memory()
     print(f"map: {mem['bricks']} bricks, {mem['sparse_bytes'] / 2**20:.1f} MiB allocated "
           f"({mem['dense_bytes'] / 2**20:.1f} MiB dense); wrote {out}")
     if map_out:
-        save_grid(grid, map_out, poses=poses)
+        save_grid(grid, map_out, poses=poses, reading=reading_of(config) if grid.has_knowledge else None)
         print(f"wrote {map_out} (radarcl render / view open it)")
     if json_out:
         with files.atomic(json_out) as tmp:

@@ -6,6 +6,7 @@ Below both ``sensors`` (a profile's ``[defaults.*]`` tables are checked here) an
 
 from dataclasses import dataclass
 
+from radarcl import sensor_model
 from radarcl.cfar_theory import CFAR_KINDS
 from radarcl.config import tomlfile
 from radarcl.config.stage_config import INTERPRETERS, is_power_of_two
@@ -54,6 +55,21 @@ KEYS = {
                                 "occlusion: a pulse whose peak r/n reaches this is a surface"),
     "interpret.e_high_far": Key(lambda v: _N(v, -16, 0, unit="nat"), "nat",
                                 "occlusion: E_h at the far end of the range (e_high at the near end)"),
+    **{f"sensor_model.{name}": Key(lambda v, lo=lo, hi=hi, unit=unit: _N(v, lo, hi, unit=unit), unit, why)
+       for name, (lo, hi, unit), why in zip(sensor_model.RANGES, sensor_model.RANGES.values(), (
+           "detstats: SNR of a 1 m^2 target at 10 m on the beam's axis (the sensor's sensitivity)",
+           "detstats: reflectivity of a typical occupied voxel's upright surface",
+           "detstats: log-normal spread of the typical target's mean RCS",
+           "detstats: side of the typical target's patch",
+           "detstats: reflectivity of the terrain at grazing incidence",
+           "detstats: voxels whose centre lies below the ground plane + this are terrain",
+           "detstats: a detected echo blocks the beam as an opaque surface of this reflectivity",
+           "detstats: correlated evidence counts at most this many looks' worth",
+           "detstats: log-odds of an occupied voxel before any look, where the radar looked",
+           "detstats: looks at which the prior applies in full",
+           "detstats: a measured false-alarm rate of the CFAR on these profiles (0: from its statistics)"))},
+    "sensor_model.ground_below_m": Key(lambda v: _N(v, *sensor_model.GROUND_RANGE[:2], unit="m"), "m",
+                                       "detstats: the sensor's height above the ground plane (0: no terrain class)"),
     "beam.model": Key(lambda v: tomlfile.choice(v, BEAM_MODELS), "", "beam volume (§3.4, Fig. 7c)"),
     "grid.voxel_m": Key(lambda v: _N(v, 1e-4, 1e3, unit="m"), "m", "voxel edge"),
     "grid.origin_m": Key(lambda v: tomlfile.vector(v, unit="m"), "m", "low corner (x, y, z), world frame"),
@@ -66,10 +82,12 @@ BUILTIN = {
     "cfar.noise_floor": 1e-30, "interpret.k_occ": 1.0, "interpret.e_high": -1.0, "interpret.e_low": -0.1,
     "interpret.max_pulses": 32, "beam.model": "cylindrical-conical", "grid.voxel_m": 0.1,
     "interpret.model": "paper", "interpret.surface_db": 10.0,
+    **{f"sensor_model.{name}": value for name, value in sensor_model.DEFAULTS.items()},
 }
 """radarcl's own defaults: the paper's CFAR (CA, P_fa 1e-3, Fig. 6), its eq. 12 constants
 (k_occ 1, E_h -1 from Fig. 10; E_l -0.1 ours, the paper gives none), Rohling's OS rank 3/4,
-the paper's beam (Fig. 7c) and voxel (0.1 m)."""
+the paper's beam (Fig. 7c) and voxel (0.1 m); the detection-statistics model's
+(``sensor_model.DEFAULTS``)."""
 
 
 def check_value(name, value):

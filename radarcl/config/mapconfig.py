@@ -1,12 +1,14 @@
 """The map configuration: how a map is made, in physical units, in one file.
 
-A configuration file (TOML) has five tables; every key is optional:
+A configuration file (TOML) has these tables; every key is optional:
 
   [range_fft]  n_fft (raw-sample sensors), window
   [cfar]       kind, pfa, guard_m, train_m (windows in metres), os_rank, noise_floor
   [interpret]  k_occ, e_high, e_low (eq. 12 [nat]), wide_pulse_m, range_min_m, range_max_m, max_pulses
   [beam]       model
   [grid]       voxel_m, origin_m, size_m
+  [sensor_model]  the detection-statistics model's parameters (interpret.model = "detstats";
+               ``radarcl.sensor_model``): each refused outside its physical range
 
 ``resolve(sensor, file, flags)`` fills each key from, in increasing priority: radarcl's default
 (``BUILTIN``), the sensor's geometry (``sensors.derived_defaults``), the sensor profile's own
@@ -26,6 +28,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from radarcl import sensor_model
 from radarcl.config import sensors, tomlfile
 from radarcl.config.keys import BUILTIN, KEYS, SECTIONS, check_value
 from radarcl.config.stage_config import CfarConfig, InterpretConfig
@@ -145,6 +148,10 @@ class Resolved:
                                max_pulses=self["interpret.max_pulses"], model=self["interpret.model"],
                                surface_db=self["interpret.surface_db"],
                                e_high_far=self.values.get("interpret.e_high_far"))   # unset: E_h (no ramp)
+
+    def model_params(self):
+        """The detection-statistics model's ``sensor_model.ModelParams`` of [sensor_model]."""
+        return sensor_model.ModelParams.of(self.values)
 
     def grid_spec(self):
         """The ``GridSpec`` of [grid]: origin_m, ceil(size_m / voxel_m) voxels."""

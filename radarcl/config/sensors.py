@@ -21,7 +21,11 @@ Defaults derived from the sensor (``derived_defaults``), each with the reason it
   lowest elevation, §3.3), else from twice a point target's mainlobe;
 - the FFT pads x4 (the paper's 1024 points for 256 samples, §4.1); the range interval is the
   sensor's; the grid is the field of view's bounding box (one voxel thick for a spinning radar
-  with one elevation: it maps a plane).
+  with one elevation: it maps a plane);
+- the detection-statistics model (``radarcl.sensor_model``) takes the sensor's sensitivity from
+  ``[sensitivity] snr_1m2_at_10m_db`` (a profile without it gets a sentence saying so and the
+  default used, ``missing_sensitivity``) and its ground plane from ``[mounting] height_m``
+  (stacked beams only: a spinning radar's one elevation maps a plane and has no terrain class).
 """
 
 import math
@@ -30,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from radarcl import physics
+from radarcl import physics, sensor_model
 from radarcl.config import tomlfile
 from radarcl.config.keys import check_value
 from radarcl.config.stage_config import RadarConfig, is_power_of_two
@@ -72,6 +76,7 @@ _SCHEMA = {                # section -> key -> check (value -> value, or ConfigE
               "beamwidth_az_deg": lambda v: _N(v, 1e-3, 179, unit="deg"),
               "beamwidth_el_deg": lambda v: _N(v, 1e-3, 179, unit="deg"),
               "spinning": tomlfile.boolean},
+    "sensitivity": {"snr_1m2_at_10m_db": lambda v: _N(v, *sensor_model.RANGES["snr_1m2_at_10m_db"][:2], unit="dB")},
     "mounting": {"height_m": lambda v: _N(v, 1e-3, 1e4, unit="m"),
                  "lowest_elevation_deg": lambda v: _N(v, -89, 0, lo_open=True, unit="deg"),
                  "ground_elevation_deg": lambda v: _N(v, -89, 0, lo_open=True, unit="deg")},
@@ -409,7 +414,21 @@ def derived_defaults(sensor):
     n_bins = sensor.n_bins(out.get("range_fft.n_fft", (None,))[0])
     if n_bins is not None:
         out["interpret.max_pulses"] = (max(32, n_bins // 32), f"one per 32 of {n_bins} bins, at least 32")
+    snr = sensor.get("sensitivity", "snr_1m2_at_10m_db")
+    if snr is not None:
+        out["sensor_model.snr_1m2_at_10m_db"] = (snr, "the sensor's [sensitivity]")
+    else:
+        out["sensor_model.snr_1m2_at_10m_db"] = (sensor_model.DEFAULT_SNR_DB, missing_sensitivity(sensor))
+    height = sensor.get("mounting", "height_m")
+    if height is not None and sensor.n_elevation > 1:
+        out["sensor_model.ground_below_m"] = (height, "the sensor's [mounting] height_m: the ground plane below it")
     return out
+
+
+def missing_sensitivity(sensor):
+    """The sentence for a profile without the figure the detection-statistics model needs."""
+    return (f"sensor {sensor.name} has no [sensitivity] snr_1m2_at_10m_db (the SNR of a 1 m^2 target at 10 m on "
+            f"the beam's axis); using {sensor_model.DEFAULT_SNR_DB:g} dB; `radarcl calibrate-scans` fits it")
 
 
 def field_of_view_box(sensor, voxel_m, range_max_m):

@@ -282,7 +282,7 @@ class CfarConfig:
         return int(n_bins)
 
 
-INTERPRETERS = ("paper", "occlusion")
+INTERPRETERS = ("paper", "occlusion", "detstats")
 
 
 @dataclass(frozen=True)
@@ -306,6 +306,9 @@ class InterpretConfig:
         before the first surface get E_h interpolated in range from e_high (first bin) to
         e_high_far (last bin), noise bins after it E_l; a pulse is a surface when it is wide or
         its peak 10 log10(r / n) reaches surface_db. (kernels/interpret.cl says why.)
+        "detstats": the detection-statistics model (``radarcl.sensor_model``): evidence from the
+        CFAR's own detection statistics; eq. 12's constants are unused, its own parameters are
+        the ``sensor_model`` keys.
     """
 
     k_occ: float = 1.0

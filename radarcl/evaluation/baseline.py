@@ -66,6 +66,9 @@ def detection_points(pose, axes, ranges, mask, min_range, max_range):
     max_range] on its beam's axis (``axes`` (n_beams, 3) in the head frame) at its range."""
     mask = np.asarray(mask, bool) & ((ranges >= min_range) & (ranges <= max_range))[None]
     beam, b = np.nonzero(mask)
+    pose = np.asarray(pose)
+    if pose.ndim == 3:                               # one pose per beam (a spinning radar on a vehicle)
+        return pose[beam, :3, 3] + ranges[b, None] * np.einsum("nij,nj->ni", pose[beam, :3, :3], axes[beam])
     return pose[:3, 3] + ranges[b, None] * (axes[beam] @ pose[:3, :3].T)
 
 
@@ -112,5 +115,6 @@ def detection_scans(obs, detections, config):
     axes = config.sensor.lattice().beam_rotations()[:, :, 0]
     ranges = config.sensor.radar.bin_ranges_m(config.n_fft)
     i = config.interpret_config()
-    return [(pose[:3, 3], detection_points(pose, axes, ranges, mask, i.range_min_m, i.range_max_m))
-            for pose, mask in zip(obs.poses, detections)]
+    return [((pose if pose.ndim == 2 else pose[len(pose) // 2])[:3, 3],
+             detection_points(pose, axes, ranges, mask, i.range_min_m, i.range_max_m))
+            for pose, mask in zip(np.asarray(obs.poses), detections)]

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl import logodds, oracle
+from radarcl import logodds, oracle, sensor_model
 from radarcl.errors import ConfigError
 from radarcl.evaluation import baseline
 from radarcl.evaluation import visibility as vis
@@ -23,6 +23,7 @@ from radarcl.evaluation.metrics import evaluate, radar_scores
 from radarcl.evaluation.visibility import DETECTABLE_DB
 from radarcl.grid import EvidenceGrid
 from radarcl.pipeline import Mapping
+from radarcl.scene import streets
 from radarcl.scene.observe import NOISE_RMS, observe
 from radarcl.stages.fusion import Fusion
 
@@ -39,6 +40,7 @@ class MapResult:
     detections: list
     memory: dict
     grid: object = None
+    knowledge: np.ndarray = None     # detstats: (nz, ny, nx) float32 summed detection opportunity [looks]
 
 
 def map_observations(runtime, obs, config, progress=None):
@@ -66,7 +68,7 @@ def map_observations(runtime, obs, config, progress=None):
     count = EvidenceGrid(runtime, spec)
     fusion = mapping.fusion
     counter = Fusion(runtime, count, lattice, model, fusion.n_bins, fusion.bin_spacing_m, fusion.first_bin,
-                     fusion.last_bin)
+                     fusion.last_bin, per_beam_poses=fusion.per_beam_poses)
     counter.upload(np.full(counter.evidence_shape, logodds.SCALE, np.int32)).wait()
     detections = []
     for j in range(n_frames):
@@ -74,8 +76,30 @@ def map_observations(runtime, obs, config, progress=None):
         profiles = mapping.range_fft(obs.samples[j]).profiles
         detections.append(mapping.detection.cfar(profiles).mask.reshape(lattice.n_beams, -1))
     runtime.queue.finish()
-    log_odds = (grid.snapshot() / np.float32(logodds.SCALE)).astype(np.float32)
-    return MapResult(config, spec, log_odds, count.snapshot() > 0, ms_per_frame, detections, grid.memory(), grid)
+    log_odds, knowledge = read_map(grid, config)
+    return MapResult(config, spec, log_odds, count.snapshot() > 0, ms_per_frame, detections, grid.memory(), grid,
+                     knowledge)
+
+
+def read_map(grid, config):
+    """(log-odds [nat], knowledge [looks] or None), dense float32, of an ``EvidenceGrid`` made with
+    ``config``: the detection-statistics model's as its reading says (``sensor_model.read_log_odds``)."""
+    units = grid.snapshot()
+    if not grid.has_knowledge:
+        return (units / np.float32(logodds.SCALE)).astype(np.float32), None
+    known = grid.knowledge_snapshot()
+    log_odds = sensor_model.read_log_odds(units, known, grid.knowledge_snapshot("looks"),
+                                          config.model_params().reading).astype(np.float32)
+    return log_odds, (known / np.float32(logodds.KNOWLEDGE_SCALE)).astype(np.float32)
+
+
+def for_scene(config, described):
+    """``config`` for a generated scene: the detection-statistics model gets the scene's mounting
+    (the sensor's height above its ground plane, as a user gives their own); others unchanged."""
+    if config["interpret.model"] != "detstats" or config.origins["sensor_model.ground_below_m"] != \
+            f"sensor {config.sensor.name}: the sensor's [mounting] height_m: the ground plane below it":
+        return config
+    return config.replaced(sensor_model__ground_below_m=described["sensor_height_m"])
 
 
 def baseline_map(obs, detections, config):
@@ -126,7 +150,12 @@ def instrument(runtime, scene, obs, reference, progress=None):
     are functions of the seed, ``observe.lattice_rays``)."""
     ref_map = map_observations(runtime, obs, reference, progress)
     radar = reference.sensor.radar
-    quiet = observe(scene, obs.tilts_deg, radar=radar, seed=obs.seed, noise_rms=0.0, adc=None, physics=obs.physics)
+    if obs.poses.ndim == 4:                  # a spinning radar on a vehicle: one pose per beam (scene.streets)
+        quiet = streets.observe(scene, radar, reference.sensor.lattice(), len(obs.poses), seed=obs.seed, noise_rms=0.0,
+                                adc=None, poses=obs.poses)
+    else:
+        quiet = observe(scene, obs.tilts_deg, radar=radar, seed=obs.seed, noise_rms=0.0, adc=None, physics=obs.physics,
+                        offsets_m=obs.offsets_m)
     if quiet.rays_per_beam != obs.rays_per_beam or not np.allclose(quiet.poses, obs.poses):
         raise ConfigError(f"the recording (seed {obs.seed}, {obs.rays_per_beam} echoes per beam) was not simulated "
                           f"from this scene with radarcl's defaults ({quiet.rays_per_beam} echoes per beam): its "
@@ -141,17 +170,19 @@ def instrument(runtime, scene, obs, reference, progress=None):
     return Instrument(ref_map.spec, truth, objects, hidden, reference, ref_map, power, noise)
 
 
-def radar_score(inst, log_odds):
-    """``metrics.radar_scores`` of ``log_odds`` on ``inst``, NaN as None (JSON)."""
-    out = radar_scores(log_odds, inst.truth, inst.objects)
+def radar_score(inst, log_odds, knowledge=None):
+    """``metrics.radar_scores`` of ``log_odds`` (and the map's ``knowledge`` [looks], when it has
+    one) on ``inst``, NaN as None (JSON)."""
+    out = radar_scores(log_odds, inst.truth, inst.objects, knowledge)
     return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in out.items()}
 
 
-def baselines(runtime, inst, obs):
+def baselines(runtime, inst, obs, ground_z_m=0.0):
     """The three baselines on ``inst``'s voxel set: {name: scores with ms_per_frame}; octomap
-    uses the reference map's CFAR detections. Without octomap-python, its entry says so."""
+    uses the reference map's CFAR detections; prior_only knows the ground plane z = ``ground_z_m``.
+    Without octomap-python, its entry says so."""
     out = {}
-    out["prior_only"] = dict(radar_score(inst, baseline.prior_only(inst.spec)), ms_per_frame=0.0)
+    out["prior_only"] = dict(radar_score(inst, baseline.prior_only(inst.spec, ground_z_m)), ms_per_frame=0.0)
     start = time.perf_counter()
     raw = baseline.raw_intensity(runtime, obs, inst.reference)
     out["raw_intensity"] = dict(radar_score(inst, raw), ms_per_frame=(time.perf_counter() - start) * 1e3 / len(obs.poses))

@@ -40,18 +40,18 @@ def raw_map(runtime, config, spec, scans, per_beam):
     return mapping.grid.snapshot()
 
 
-def predictions(runtime, config, spec, grid_int, scans, per_beam):
+def predictions(runtime, config, spec, grid_int, scans, per_beam, with_ranges=False):
     """(log-odds [nat] at each held-out bin, its CFAR detection) over the range window.
     ``config`` is the outcome detector's configuration (the sensor profile's own, the same for
     every map compared: the outcomes must not change with the map's CFAR). ``grid_int`` may
     carry trailing axes (several maps of one grid stacked): the log-odds then have them too, and
-    the scans are detected once for all."""
+    the scans are detected once for all. ``with_ranges``: also each bin's range [m] (a third array)."""
     mapping = Mapping.from_config(runtime, config=config, per_beam_poses=True)
     i = config.interpret_config()
     ranges = np.arange(scans[0].n_bins) * config.sensor.bin_spacing_m()
     window = (ranges >= i.range_min_m) & (ranges <= i.range_max_m)
     axes = config.sensor.lattice().beam_rotations()[:, :, 0]              # (n_az, 3) in the head frame
-    L, y = [], []
+    L, y, r = [], [], []
     for scan, poses in zip(scans, per_beam):
         detected = mapping.detection.cfar(scan.power()).mask.reshape(len(axes), -1)
         valid = np.asarray(scan.valid).reshape(-1)
@@ -64,7 +64,31 @@ def predictions(runtime, config, spec, grid_int, scans, per_beam):
         keep = np.repeat(valid, window.sum())
         L.append(values[keep])
         y.append(detected[:, window].reshape(-1)[keep])
-    return np.concatenate(L), np.concatenate(y).astype(bool)
+        r.append(np.tile(ranges[window], len(axes))[keep])
+    out = np.concatenate(L), np.concatenate(y).astype(bool)
+    return out + (np.concatenate(r),) if with_ranges else out
+
+
+def detection_probability(config, log_odds, ranges_m):
+    """What the detection-statistics model predicts a look at a bin detects, from a map: P_fa +
+    (1 - P_fa) delta(r) p, p the map's occupancy probability there and delta(r) the typical
+    target's detection opportunity on the beam's axis at the bin's range (``sensor_model``), with
+    the CFAR's achieved P_fa: a map says how likely a voxel is occupied, the model how likely an
+    occupied one is seen."""
+    from radarcl.pipeline import bin_model
+
+    bm = bin_model(config, config["grid.voxel_m"])
+    j = np.clip(np.rint(np.asarray(ranges_m) / config.bin_spacing_m).astype(np.int64), 0, len(bm.opportunity) - 1)
+    delta = bm.opportunity[j, 0, 0]
+    p = 1.0 / (1.0 + np.exp(-np.asarray(log_odds, np.float64)))
+    return bm.pfa + (1.0 - bm.pfa) * delta * p
+
+
+def score_probability(p, y):
+    """``score`` of predicted probabilities ``p`` (not log-odds)."""
+    p = np.clip(np.asarray(p, np.float64), P_CLIP, 1 - P_CLIP)
+    return dict(auc=roc_auc(p, y), log_likelihood=float(np.mean(np.where(y, np.log(p), np.log1p(-p)))),
+                coverage=1.0, bins=int(len(y)), detected=int(np.sum(y)))
 
 
 def score(L, y):

@@ -86,8 +86,9 @@ ECE_BINS = 10
 
 
 def probability(log_odds_nats):
-    """p = 1 / (1 + e^-L), in float64."""
-    return 1.0 / (1.0 + np.exp(-np.asarray(log_odds_nats, np.float64)))
+    """p = 1 / (1 + e^-L), in float64 (L below -709 nat gives 0, without a warning)."""
+    with np.errstate(over="ignore"):
+        return 1.0 / (1.0 + np.exp(-np.asarray(log_odds_nats, np.float64)))
 
 
 def auc_iou(log_odds_nats, positive, negative):
@@ -118,7 +119,10 @@ def calibration(p, y, bins=ECE_BINS):
     return ece, rows
 
 
-def radar_scores(log_odds_nats, truth, objects=()):
+KNOWN_LOOKS = 0.5               # a voxel whose knowledge reaches this many looks is known (detstats)
+
+
+def radar_scores(log_odds_nats, truth, objects=(), knowledge=None):
     """The metrics of issue 15 on one fixed voxel set (``truth``, a ``VisibilityTruth``):
 
     - ``auc_detectable``, ``iou_detectable``: DETECTABLE vs FREE-visible (where the radar has signal);
@@ -133,6 +137,10 @@ def radar_scores(log_odds_nats, truth, objects=()):
       DETECTABLE, WEAK), occupied = surface voxel;
     - ``objects_found`` / ``objects_total`` and per object its range and peak log-odds
       (``objects``: ``visibility.object_surfaces``).
+    With ``knowledge`` (dense [looks], a map of the detection-statistics model) also:
+    ``shadow_unknown_k``, the share of SHADOWED voxels the map does not know (knowledge below
+    ``KNOWN_LOOKS``); ``known_visible``, the share of visible voxels it knows; ``ece_known`` and
+    ``brier_known``, calibration on the visible voxels it knows (where it claims a probability).
     Voxel counts of each class come with them."""
     L = np.asarray(log_odds_nats, np.float32)
     c = truth.classes
@@ -155,6 +163,14 @@ def radar_scores(log_odds_nats, truth, objects=()):
     p, y = probability(L[visible]), (det | weak)[visible]
     out["brier"] = float(np.mean((p - y) ** 2)) if len(p) else float("nan")
     out["ece"], out["reliability"] = calibration(p, y)
+    if knowledge is not None:
+        k = np.asarray(knowledge, np.float32)
+        known = k >= KNOWN_LOOKS
+        out["shadow_unknown_k"] = float(np.count_nonzero(~known[shadow]) / n_sh) if n_sh else float("nan")
+        out["known_visible"] = float(np.count_nonzero(known[visible]) / max(1, np.count_nonzero(visible)))
+        kv = known[visible]
+        out["ece_known"] = calibration(p[kv], y[kv])[0] if kv.any() else float("nan")
+        out["brier_known"] = float(np.mean((p[kv] - y[kv]) ** 2)) if kv.any() else float("nan")
     found = []
     for obj in objects:
         near = L[obj["near"][:, 2], obj["near"][:, 1], obj["near"][:, 0]]

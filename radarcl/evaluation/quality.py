@@ -114,7 +114,7 @@ def run(runtime, scene, obs, reference_config, voxels=VOXELS, report=None):
         inst = instruments[v]
         say(f"{dim}: {config.label(reference_config)} ...")
         res = map_observations(runtime, obs, config)
-        m = radar_score(inst, res.log_odds)
+        m = radar_score(inst, res.log_odds, res.knowledge)
         dev, exact, compared = oracle_deviation(runtime, obs, config)
         label = ("reference: " + config.label()) if config is reference_config else config.label(reference_config)
         runs.append(dict(dimension=dim, label=label, voxel_m=v, config=config.as_dict(), ms_per_frame=res.ms_per_frame,

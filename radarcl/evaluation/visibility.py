@@ -117,13 +117,23 @@ def beam_bins(spec, voxels, poses, lattice, half_az_rad, half_el_rad, bin_spacin
     az, el = lattice.azimuths, lattice.elevations
     out = []
     for pose in np.asarray(poses, float):
+        beams = pose if pose.ndim == 3 else None     # one pose per beam (a spinning radar on a vehicle)
+        pose = pose if beams is None else pose[len(pose) // 2]
         local = (centres - pose[:3, 3]) @ pose[:3, :3] @ lattice.head_rotation()
-        r = np.linalg.norm(local, axis=1)
         a = np.arctan2(local[:, 1], local[:, 0])
         e = np.arctan2(local[:, 2], np.hypot(local[:, 0], local[:, 1]))
-        i = np.clip(np.rint((a - az[0]) / (lattice.az_step_rad or 1.0)).astype(np.int64), 0, len(az) - 1)
+        if lattice.wraps:                           # a full turn: the nearest azimuth, across the seam too
+            i = np.rint((a - az[0]) / lattice.az_step_rad).astype(np.int64) % len(az)
+            off = np.angle(np.exp(1j * (a - az[i])))
+        else:
+            i = np.clip(np.rint((a - az[0]) / (lattice.az_step_rad or 1.0)).astype(np.int64), 0, len(az) - 1)
+            off = a - az[i]
         k = np.clip(np.rint((e - el[0]) / (lattice.el_step_rad or 1.0)).astype(np.int64), 0, len(el) - 1)
-        inside = (np.abs(a - az[i]) <= half_az_rad) & (np.abs(e - el[k]) <= half_el_rad)
+        inside = (np.abs(off) <= half_az_rad) & (np.abs(e - el[k]) <= half_el_rad)
+        if beams is None:
+            r = np.linalg.norm(local, axis=1)
+        else:                                       # the range from the beam's own origin
+            r = np.linalg.norm(centres - beams[i * lattice.n_el + k, :3, 3], axis=1)
         b = np.rint(r / bin_spacing_m).astype(np.int64)
         inside &= b < n_bins
         out.append((np.where(inside, i * lattice.n_el + k, -1), np.where(inside, b, -1)))
@@ -150,7 +160,10 @@ def visibility_truth(scene, spec, observed, poses, noiseless_power=None, noise_p
     classes[observed & (labels == INTERIOR)] = INSIDE_SOLID
     cast = observed & (labels != INTERIOR)
     idx = np.argwhere(cast)[:, ::-1]                                   # (x, y, z)
-    origins = np.unique(np.asarray(poses, float)[:, :3, 3].round(9), axis=0)
+    P = np.asarray(poses, float)
+    # one pose per beam: each turn's middle beam's origin (the others lie within one turn's drive)
+    heads = P[:, P.shape[1] // 2] if P.ndim == 4 else P
+    origins = np.unique(heads[:, :3, 3].round(9), axis=0)
     seen = line_of_sight(scene, spec, idx, origins)
     occ = labels[idx[:, 2], idx[:, 1], idx[:, 0]] == OCCUPIED
     cls = np.where(~seen, SHADOWED, np.where(occ, DETECTABLE, FREE_VISIBLE)).astype(np.uint8)

@@ -99,7 +99,7 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
         report(f"fusing with the {name} ({config.label()}) ...")
         res = inst.reference_map if config is tuned else map_observations(runtime, obs, config,
                                                                          progress=tick("observations fused"))
-        maps[name] = (config, res, radar_score(inst, res.log_odds))
+        maps[name] = (config, res, radar_score(inst, res.log_odds, res.knowledge))
     config, res, _ = maps[shown]
     report(f"the map written, rendered and plotted is the {shown} one ({config.label()})")
     summary["shown"] = shown

@@ -98,6 +98,9 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
 
     if len(set(map(str, paths))) != len(paths):
         raise ConfigError("an input appears twice; each recording is fused once")
+    if config["interpret.model"] == "detstats":
+        raise ConfigError("fuse-many merges the maps' sums only: the detection-statistics model's knowledge channel "
+                          "is not merged yet; fuse such a recording with `radarcl fuse`")
     shapes = check_inputs(config, paths)
     spec = config.grid_spec()
     report(f"fusing {len(paths)} inputs ({sum(n for _, n in shapes.values())} frames) of sensor {config.sensor.name} "

@@ -16,12 +16,15 @@ direction or the odometry reversed.
 """
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import FrameFormatError
+from radarcl.evaluation.evaluate import read_map
+from radarcl.evaluation.metrics import KNOWN_LOOKS
 from radarcl.geometry import se2_pose
 from radarcl.grid import EvidenceGrid, GridSpec
 from radarcl.io import polar_png
@@ -45,7 +48,8 @@ def grid_for(poses, range_m, voxel_m):
 def build_map(runtime, config, spec, scans, per_beam, progress=None):
     """Fuse ``scans`` taken at ``per_beam`` poses (n, n_az, 4, 4) into a new grid of ``spec``
     with ``config`` (a ``mapconfig.Resolved``); returns the grid."""
-    mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec), per_beam_poses=True)
+    grid = EvidenceGrid(runtime, spec, knowledge=config["interpret.model"] == "detstats")
+    mapping = Mapping.from_config(runtime, config=config, grid=grid, per_beam_poses=True)
     source = polar_source(config.sensor, scans, per_beam, f"{len(scans)} polar scans")
     mapping.fuse_source(source, None if progress is None else lambda j, _: progress(j + 1, len(scans)))
     mapping.runtime.queue.finish()
@@ -123,7 +127,7 @@ def run(runtime, config, data_dir, report=print, progress=None, poses=None, pose
     spec = grid_for(true_beams, range_max_m, config["grid.voxel_m"])
 
     def build(sc, pb):
-        return build_map(runtime, config, spec, sc, pb).snapshot()
+        return logodds.to_fixed(read_map(build_map(runtime, config, spec, sc, pb), config)[0])
 
     half_a = build(scans[:split], true_beams[:split])
     # case -> (per-azimuth poses, whether the first half is rebuilt with them too)
@@ -156,8 +160,9 @@ def pulse_statistics(runtime, config, scans):
     """What the detector makes of the scans: detections and pulses per scan, pulse widths [m]
     (median, 90th percentile), the share of wide pulses; over the evidence interval."""
     spacing = config.sensor.bin_spacing_m()
+    # the pulses are the CFAR's runs whatever the interpreter: counted with eq. 12's, which needs no tables
     det = Detection(runtime, (scans[0].levels.shape[0],), scans[0].n_bins, spacing, config.cfar_config(),
-                    config.interpret_config())
+                    replace(config.interpret_config(), model="paper"))
     first, last = det.interpreter.first_bin, det.interpreter.last_bin
     detections, pulses, widths, wide = [], [], [], []
     for scan in scans:
@@ -178,12 +183,17 @@ def pulse_statistics(runtime, config, scans):
                 wide_bins=det.interpreter.wide_bins)
 
 
-def plot_map(grid, poses, path, results=None, title="Navtech"):
+def plot_map(grid, poses, path, results=None, title="Navtech", config=None):
     """Top-down PNG of a one-layer map (``jobs.figures.plane_map_figure``) with the half-map
-    check's result in the title."""
-    text = f"{title}, {len(poses)} scans fused at {grid.spec.voxel_m} m (eq. 9)"
+    check's result in the title; a map of the detection-statistics model as its reading says
+    (``config``), grey where it knows nothing."""
+    detstats = grid.has_knowledge
+    text = f"{title}, {len(poses)} scans fused at {grid.spec.voxel_m} m " + \
+        ("(detection statistics; grey: unknown)" if detstats else "(eq. 9)")
     if results:
         r = results["true poses"]["correlation"]
         worst = max(v["correlation"] for k, v in results.items() if k != "true poses")
         text += f"\nhalf-map correlation {r:.3f} with the true poses, at most {worst:.3f} altered"
-    figures.save(figures.plane_map_figure(grid.log_odds()[0], grid.spec, poses, text), path, dpi=120)
+    log_odds, knowledge = read_map(grid, config) if detstats else (grid.log_odds(), None)
+    unknown = None if knowledge is None else knowledge[0] < KNOWN_LOOKS
+    figures.save(figures.plane_map_figure(log_odds[0], grid.spec, poses, text, unknown=unknown), path, dpi=120)

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from radarcl.errors import FrameFormatError, ShapeError
+from radarcl import sensor_model
+from radarcl.errors import ConfigError, FrameFormatError, ShapeError
 from radarcl.grid import EvidenceGrid
 from radarcl.io import files
 from radarcl.maps import npz, store
@@ -40,15 +41,30 @@ def check_output(path, force=False, inputs=(), what="map"):
 def read(path):
     """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32) of a map file or store, without a
     device (numpy only, for the viewer), every structure checked before it is used. What is
-    not a radarcl map, or a damaged one, raises ``FrameFormatError`` saying what was wrong."""
-    return read_salvaged(path, salvage=False)[:3]
+    not a radarcl map, or a damaged one, raises ``FrameFormatError`` saying what was wrong.
+    ``data`` are the stored sums: a map with the knowledge channel is read through its reading
+    (``read_map``; ``maps.Map`` does)."""
+    return read_map(path, salvage=False)[:3]
 
 
 def read_salvaged(path, salvage=True):
-    """As ``read``, plus the bricks a damaged map store lost: (spec, keys, data, lost), lost a
-    list of {"reason", "keys"} (empty for an intact map). With ``salvage`` a store's damaged
-    bricks are left out (and listed) instead of refusing the store; an npz file has no part
-    that can be left out (its members are read whole and checked), so it is read or refused."""
+    """As ``read``, plus the bricks a damaged map store lost: (spec, keys, data, lost) (see ``read_map``)."""
+    return read_map(path, salvage)[:4]
+
+
+def read_channels(path):
+    """``read``'s (spec, keys, data) and the map's ``npz.Channels`` (knowledge, looks and
+    reading), or None for a map without the knowledge channel."""
+    spec, keys, data, _, channels = read_map(path)
+    return spec, keys, data, channels
+
+
+def read_map(path, salvage=False):
+    """(spec, keys, data, lost, channels) of a map file or store: ``lost`` a list of {"reason",
+    "keys"} (empty for an intact map), ``channels`` the knowledge channel (``npz.Channels``) or
+    None. With ``salvage`` a store's damaged bricks are left out (and listed) instead of refusing
+    the store; an npz file has no part that can be left out (its members are read whole and
+    checked), so it is read or refused."""
     if path is None or not isinstance(path, (str, Path)):
         raise FrameFormatError(f"a map is a path to an .npz file or a map store, got {path!r}")
     if format_of(path) == "store":
@@ -56,10 +72,30 @@ def read_salvaged(path, salvage=True):
         if manifest["incomplete"]:
             log.warning("%s: a save after version %d did not complete (%s left behind); read version %d",
                         path, manifest["version"], ", ".join(manifest["incomplete"]), manifest["version"])
-        return spec, keys, data, manifest["lost"]
+        knowledge = manifest["knowledge"]
+        channels = None if knowledge is None else npz.Channels(knowledge, manifest["looks"], manifest["reading"])
+        return spec, keys, data, manifest["lost"], channels
     if Path(path).is_dir():
         raise FrameFormatError(f"{path} is a directory that is not a radarcl map store (no radarcl manifest)")
-    return (*npz.read(path), [])
+    spec, keys, data, channels = npz.read_channels(path)
+    return spec, keys, data, [], channels
+
+
+def reading_of(config):
+    """The reading a map of ``config`` (a ``Resolved`` or its ``as_dict()``) keeps: its
+    [sensor_model] keys' (``sensor_model.READING``)."""
+    values = dict(config or {}) if config is None or isinstance(config, dict) else config.values
+    return sensor_model.ModelParams.of(values).reading
+
+
+def _channels(grid, reading):
+    """The grid's knowledge channel and reading (``npz.Channels``), or None for a grid without."""
+    if not getattr(grid, "has_knowledge", False):
+        return None
+    if reading is None:
+        raise ConfigError("a map with the knowledge channel is saved with its reading (the [sensor_model] keys "
+                          "look_limit, prior_nats, prior_looks)")
+    return npz.Channels(grid.knowledge_bricks(), grid.knowledge_bricks("looks"), reading)
 
 
 def lost_lines(lost):
@@ -105,50 +141,60 @@ class MapSaver:
         """Save ``grid`` (and the sensor ``poses`` (n, 4, 4) so far, when given); ``meta``
         (JSON-able values, e.g. a live stream's counts) goes into the manifest or the npz's
         ``meta`` (``read_meta`` reads either)."""
+        keys, data = grid.bricks()
+        channels = _channels(grid, reading_of(self.meta["config"]))
         if self.npz:
             kept = dict(sensor=self.meta["sensor_toml"] or None, config=self.meta["config"] or None)
-            npz.write(self.path, grid.spec, *grid.bricks(), poses=poses,
-                      meta={**{k: v for k, v in kept.items() if v}, **meta} or None)
+            npz.write(self.path, grid.spec, keys, data, poses=poses,
+                      meta={**{k: v for k, v in kept.items() if v}, **meta} or None, channels=channels)
             return
         if self.writer is None:
-            self.writer = store.StoreWriter(self.path, grid.spec, overwrite=True, **self.meta)
+            self.writer = store.StoreWriter(self.path, grid.spec, overwrite=True, **self.meta,
+                                            reading=None if channels is None else channels.reading)
         self.writer.meta.update(meta)
-        self.writer.save(*grid.bricks(), poses=poses)
+        self.writer.save(keys, data, poses=poses, knowledge=None if channels is None else channels.knowledge,
+                         looks=None if channels is None else channels.looks)
 
 
 def convert(source, target, salvage=False):
     """Copy a map between the npz and store formats (by ``target``'s name: ``.npz`` or a
     store directory) with its sensor poses, sensor profile and configuration; returns (spec,
     number of bricks, the bricks lost: see ``read_salvaged``)."""
-    spec, keys, data, lost = read_salvaged(source, salvage)
+    spec, keys, data, lost, channels = read_map(source, salvage)
     poses = read_poses(source)
     kept = {key: read_meta(source, key) for key in ("sensor", "config")}
     kept = dict(sensor=kept["sensor"] if isinstance(kept["sensor"], str) else None,
                 config=kept["config"] if isinstance(kept["config"], dict) else None)
     if output_format(target) == "npz":
-        npz.write(target, spec, keys, data, poses=poses, meta={k: v for k, v in kept.items() if v} or None)
+        npz.write(target, spec, keys, data, poses=poses, meta={k: v for k, v in kept.items() if v} or None,
+                  channels=channels)
     else:
         writer = store.StoreWriter(target, spec, kept["sensor"] or "", kept["config"], inputs=[source],
-                                   overwrite=True, poses=poses)
-        writer.save(keys, data)
+                                   overwrite=True, poses=poses, reading=None if channels is None else channels.reading)
+        writer.save(keys, data, knowledge=None if channels is None else channels.knowledge,
+                    looks=None if channels is None else channels.looks)
     return spec, len(keys), lost
 
 
-def save_grid(grid, path, poses=None):
+def save_grid(grid, path, poses=None, reading=None):
     """Write an ``EvidenceGrid`` (spec and allocated bricks, not the dense volume) to an npz
-    file, with the sensor's ``poses`` (n, 4, 4) when given (the viewer draws them)."""
-    npz.write(path, grid.spec, *grid.bricks(), poses=poses)
+    file, with the sensor's ``poses`` (n, 4, 4) when given (the viewer draws them); a grid with
+    the knowledge channel with it and its ``reading`` (``reading_of``)."""
+    npz.write(path, grid.spec, *grid.bricks(), poses=poses, channels=_channels(grid, reading))
 
 
 def load_grid(runtime, path):
     """An ``EvidenceGrid`` on ``runtime``'s device holding the map file or store at ``path``."""
     import pyopencl as cl
 
-    spec, keys, data = read(path)
-    grid = EvidenceGrid(runtime, spec)
+    spec, keys, data, channels = read_channels(path)
+    grid = EvidenceGrid(runtime, spec, knowledge=channels is not None)
     slots = grid.allocate(keys)
     if len(keys):
-        ordered = np.empty_like(data)
-        ordered[slots] = data
-        cl.enqueue_copy(runtime.queue, grid.pool, ordered, is_blocking=True)
+        planes = ((grid.pool, data),) if channels is None else ((grid.pool, data), (grid.knowledge, channels.knowledge),
+                                                                  (grid.looks, channels.looks))
+        for pool, values in planes:
+            ordered = np.empty_like(values)
+            ordered[slots] = values
+            cl.enqueue_copy(runtime.queue, pool, ordered, is_blocking=True)
     return grid

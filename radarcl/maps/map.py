@@ -12,22 +12,31 @@ occupancy threshold (``OCCUPIED_NATS``), FREE below the free threshold (``FREE_N
 UNDECIDED between them; a voxel no beam reached is UNOBSERVED. A 2D cell of a projection is
 occupied when some voxel of its column in the band is occupied, free when none is and some is
 free, and unknown otherwise (octomap_server's projected map does the same).
+
+A map of the detection-statistics model (``radarcl.sensor_model``) also holds the knowledge
+channel: per voxel the summed detection opportunity of its looks (``knowledge_at``, in looks)
+and their number, and is read through its reading (``sensor_model.read_log_odds``: correlated
+looks counted once, the prior where the radar looked). Every query, class and projection uses
+that reading, and a voxel is UNOBSERVED when its knowledge is below ``KNOWN_LOOKS`` ("never
+observed" apart from "observed, undecided"). A map without knowledge (eq. 12) reads its sums
+as they are, and a voxel no beam reached is its UNOBSERVED.
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl import logodds
+from radarcl import logodds, sensor_model
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.grid import BRICK, GridSpec
 from radarcl.io.files import memory_budget
-from radarcl.maps.disk import read_salvaged
+from radarcl.maps.disk import read_map
 
 UNKNOWN = -1          # a 2D cell that is neither occupied nor free (the ROS OccupancyGrid convention)
 OCCUPIED_NATS = 1.0   # occupied above this log-odds (p 0.73)
 FREE_NATS = -1.0      # free below this (p 0.27)
 UNOBSERVED, FREE, UNDECIDED, OCCUPIED = -1, 0, 1, 2       # voxel classes (``classes``)
+KNOWN_LOOKS = 0.5     # a voxel whose knowledge reaches this many looks is observed (detection statistics)
 
 
 def check_thresholds(occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
@@ -43,41 +52,51 @@ def check_thresholds(occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
     return occ, free
 
 
-def classes(units, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
-    """int8 classes of int32 ``units`` (logodds units): OCCUPIED, FREE, UNDECIDED, or UNOBSERVED
-    where no beam reached (0)."""
+def classes(units, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS, known=None):
+    """int8 classes of int32 ``units`` (logodds units, as the map reads them): OCCUPIED, FREE,
+    UNDECIDED, or UNOBSERVED where ``known`` is False (default: where no beam reached, 0)."""
     occ, free = check_thresholds(occupied_nats, free_nats)
     u = np.asarray(units)
     out = np.full(u.shape, UNDECIDED, np.int8)
     out[u > occ * logodds.SCALE] = OCCUPIED
     out[u < free * logodds.SCALE] = FREE
-    out[u == 0] = UNOBSERVED
+    out[(u == 0) if known is None else ~np.asarray(known, bool)] = UNOBSERVED
     return out
 
 
 @dataclass
 class Map:
     """A sparse map: ``spec`` (GridSpec), ``keys`` (n, 3) int32 bricks (bx, by, bz) and ``data``
-    (n, 8, 8, 8) int32 [z, y, x] in logodds units."""
+    (n, 8, 8, 8) int32 [z, y, x] in logodds units; a map of the detection-statistics model also
+    ``knowledge`` and ``looks`` (the same bricks) and its ``reading`` (``maps.npz.Channels``)."""
 
     spec: GridSpec
     keys: np.ndarray
     data: np.ndarray
-
-    lost: list = None          # bricks a salvaged store could not give (``maps.disk.read_salvaged``)
+    knowledge: np.ndarray = None
+    looks: np.ndarray = None
+    reading: dict = None
+    lost: list = None          # bricks a salvaged store could not give (``maps.disk.read_map``)
 
     @classmethod
     def open(cls, path, salvage=False):
-        """Read a map file or store (``maps.disk.read``; with ``salvage``, a damaged store's
+        """Read a map file or store (``maps.disk.read_map``; with ``salvage``, a damaged store's
         intact bricks, the lost ones listed in ``lost``)."""
-        spec, keys, data, lost = read_salvaged(path, salvage)
-        return cls(spec, keys, data, lost)
+        spec, keys, data, lost, channels = read_map(path, salvage)
+        if channels is None:
+            return cls(spec, keys, data, lost=lost)
+        return cls(spec, keys, data, channels.knowledge, channels.looks, channels.reading, lost)
 
     @classmethod
-    def of_grid(cls, grid):
-        """The map held by an ``EvidenceGrid`` (copied from the device)."""
+    def of_grid(cls, grid, reading=None):
+        """The map held by an ``EvidenceGrid`` (copied from the device); a grid with the knowledge
+        channel needs its ``reading`` (``maps.disk.reading_of``)."""
         keys, data = grid.bricks()
-        return cls(grid.spec, keys, data)
+        if not grid.has_knowledge:
+            return cls(grid.spec, keys, data)
+        if reading is None:
+            raise ConfigError("a grid with the knowledge channel is read with its reading: Map.of_grid(grid, reading)")
+        return cls(grid.spec, keys, data, grid.knowledge_bricks(), grid.knowledge_bricks("looks"), reading)
 
     def __post_init__(self):
         if not isinstance(self.spec, GridSpec):
@@ -88,14 +107,49 @@ class Map:
         if self.data.shape != (len(self.keys), BRICK, BRICK, BRICK) or self.data.dtype != np.int32:
             raise ShapeError(f"expected bricks ({len(self.keys)}, 8, 8, 8) int32, got {self.data.shape} "
                              f"{self.data.dtype}")
+        if not ((self.knowledge is None) == (self.looks is None) == (self.reading is None)):
+            raise ConfigError("a map's knowledge comes with its looks and its reading, and only with them")
+        for name in ("knowledge", "looks"):
+            if getattr(self, name) is not None and np.shape(getattr(self, name)) != self.data.shape:
+                raise ShapeError(f"expected {name} bricks {self.data.shape}, got {np.shape(getattr(self, name))}")
         k = self.keys.astype(np.int64)
         self._ids = (k[:, 2] << 42) | (k[:, 1] << 21) | k[:, 0]
         self._order = np.argsort(self._ids)
+        self._nats = None
+
+    @property
+    def has_knowledge(self):
+        """True for a map of the detection-statistics model (knowledge channel and reading)."""
+        return self.knowledge is not None
+
+    def nats(self):
+        """(n, 8, 8, 8) float64 log-odds of the bricks as the map reads them (computed once)."""
+        if self._nats is None:
+            self._nats = (sensor_model.read_log_odds(self.data, self.knowledge, self.looks, self.reading)
+                          if self.has_knowledge
+                          else logodds.to_nats(self.data))
+        return self._nats
+
+    def read_units(self):
+        """(n, 8, 8, 8) int32 log-odds units as the map reads them: the stored sums, or for a map
+        with knowledge its reading rounded to logodds units."""
+        return logodds.to_fixed(self.nats()) if self.has_knowledge else self.data
+
+    def known(self):
+        """(n, 8, 8, 8) bool: voxels the map observed (knowledge of ``KNOWN_LOOKS`` looks or
+        more; without knowledge: any evidence at all)."""
+        if self.has_knowledge:
+            return self.knowledge >= KNOWN_LOOKS * logodds.KNOWLEDGE_SCALE
+        return self.data != 0
 
     # -- point queries --------------------------------------------------------------------------------
-    def units_at(self, points):
-        """int32 logodds units at world points (..., 3) [m]: 0 where no beam reached, and for
-        points outside the grid (``inside`` tells them apart)."""
+    def units_at(self, points, channel="data"):
+        """int32 stored sums at world points (..., 3) [m] (logodds units; ``channel="knowledge"`` or
+        ``"looks"``: those channels'): 0 where no beam reached, and for points outside the grid
+        (``inside`` tells them apart)."""
+        source = {"data": self.data, "knowledge": self.knowledge, "looks": self.looks}[channel]
+        if source is None:
+            raise ConfigError("this map has no knowledge channel (made with eq. 12, not the detection-statistics model)")
         p = _points(points)
         if not np.isfinite(p).all():
             raise ConfigError("points must be finite")
@@ -111,7 +165,7 @@ class Map:
             hit = self._ids[row] == ids
             local = i[hit] % BRICK
             vals = np.zeros(len(i), np.int32)
-            vals[hit] = self.data[row[hit], local[:, 2], local[:, 1], local[:, 0]]
+            vals[hit] = source[row[hit], local[:, 2], local[:, 1], local[:, 0]]
             out[ok] = vals
         return out.reshape(p.shape[:-1])
 
@@ -120,42 +174,74 @@ class Map:
         return self.spec.contains(self.spec.world_to_index(_points(points)))
 
     def log_odds_at(self, points):
-        """Log-odds [nat] at world points (..., 3); NaN outside the grid."""
-        nats = logodds.to_nats(self.units_at(points))
+        """Log-odds [nat] at world points (..., 3), as the map reads them; NaN outside the grid."""
+        if self.has_knowledge:
+            nats = sensor_model.read_log_odds(self.units_at(points), self.units_at(points, "knowledge"),
+                                              self.units_at(points, "looks"), self.reading)
+        else:
+            nats = logodds.to_nats(self.units_at(points))
         return np.where(self.inside(points), nats, np.nan)
+
+    def knowledge_at(self, points):
+        """Knowledge [looks] at world points (..., 3): the summed detection opportunity of the
+        looks at the voxel (0: never observed); NaN outside the grid. A map without the knowledge
+        channel refuses (ConfigError)."""
+        looks = self.units_at(points, "knowledge") / float(logodds.KNOWLEDGE_SCALE)
+        return np.where(self.inside(points), looks, np.nan)
+
+    def state_at(self, points, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
+        """int8 class (``classes``) at world points (..., 3): UNOBSERVED where never observed (or
+        outside the grid), else OCCUPIED, FREE or UNDECIDED by the map's reading."""
+        nats = self.log_odds_at(points)
+        if self.has_knowledge:
+            known = self.units_at(points, "knowledge") >= KNOWN_LOOKS * logodds.KNOWLEDGE_SCALE
+        else:
+            known = self.units_at(points) != 0
+        units = logodds.to_fixed(np.nan_to_num(nats))
+        return classes(units, occupied_nats, free_nats, known=known & self.inside(points))
 
     def probability_at(self, points):
         """Occupancy probability at world points (..., 3); NaN outside the grid."""
         return 1.0 / (1.0 + np.exp(-self.log_odds_at(points)))
 
     # -- voxel sets --------------------------------------------------------------------------------------
-    def voxels(self, lo_nats=None, hi_nats=None):
-        """(indices (N, 3) int64 (x, y, z), units (N,) int32) of the observed voxels (non-zero)
-        whose log-odds lie in [lo_nats, hi_nats] (None: unbounded), inside the grid."""
+    def voxels(self, lo_nats=None, hi_nats=None, with_knowledge=False):
+        """(indices (N, 3) int64 (x, y, z), units (N,) int32) of the observed voxels (``known``)
+        whose log-odds as read lie in [lo_nats, hi_nats] (None: unbounded), inside the grid;
+        ``units`` are the read log-odds in logodds units (``read_units``). ``with_knowledge``
+        adds their knowledge [looks] (NaN for a map without the channel) as a third array."""
         lo_nats = None if lo_nats is None else _number(lo_nats, "lo_nats", infinite=True)
         hi_nats = None if hi_nats is None else _number(hi_nats, "hi_nats", infinite=True)
         if not len(self.keys):
-            return np.zeros((0, 3), np.int64), np.zeros(0, np.int32)
-        keep = self.data != 0
+            empty = (np.zeros((0, 3), np.int64), np.zeros(0, np.int32))
+            return empty + ((np.zeros(0),) if with_knowledge else ())
+        units = self.read_units()
+        keep = self.known()
         if lo_nats is not None:
-            keep &= self.data >= lo_nats * logodds.SCALE
+            keep &= units >= lo_nats * logodds.SCALE
         if hi_nats is not None:
-            keep &= self.data <= hi_nats * logodds.SCALE
+            keep &= units <= hi_nats * logodds.SCALE
         b, z, y, x = np.nonzero(keep)
         idx = self.keys[b].astype(np.int64) * BRICK + np.stack([x, y, z], axis=1)
         inside = self.spec.contains(idx)
-        return idx[inside], self.data[b, z, y, x][inside]
+        out = (idx[inside], units[b, z, y, x][inside])
+        if with_knowledge:
+            looks = (self.knowledge[b, z, y, x] / float(logodds.KNOWLEDGE_SCALE) if self.has_knowledge
+                     else np.full(len(b), np.nan))
+            out += (looks[inside],)
+        return out
 
     def decided(self, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
         """(indices (N, 3) int64 (x, y, z), units (N,) int32) of the occupied and the free voxels
-        (``classes``), found brick by brick without listing the undecided ones."""
+        (``classes``, as read), found brick by brick without listing the undecided ones."""
         occ, free = check_thresholds(occupied_nats, free_nats)
         if not len(self.keys):
             return np.zeros((0, 3), np.int64), np.zeros(0, np.int32)
-        b, z, y, x = np.nonzero((self.data > occ * logodds.SCALE) | (self.data < free * logodds.SCALE))
+        units = self.read_units()
+        b, z, y, x = np.nonzero(((units > occ * logodds.SCALE) | (units < free * logodds.SCALE)) & self.known())
         idx = self.keys[b].astype(np.int64) * BRICK + np.stack([x, y, z], axis=1)
         inside = self.spec.contains(idx)
-        return idx[inside], self.data[b, z, y, x][inside]
+        return idx[inside], units[b, z, y, x][inside]
 
     def occupied(self, threshold_nats=OCCUPIED_NATS):
         """(centres (N, 3) [m], log-odds (N,) [nat]) of the occupied voxels: strictly above
@@ -166,8 +252,18 @@ class Map:
         return self.spec.index_to_world(idx[above]), logodds.to_nats(units[above])
 
     def dense(self, band=None):
-        """Dense int32 (nz, ny, nx) units; ``band`` (z_min, z_max) [m] keeps only those layers.
-        Refused beyond the memory budget."""
+        """Dense int32 (nz, ny, nx) log-odds units as the map reads them (``read_units``); ``band``
+        (z_min, z_max) [m] keeps only those layers. Refused beyond the memory budget."""
+        return self._dense(self.read_units(), band)
+
+    def dense_knowledge(self, band=None):
+        """Dense float64 (nz, ny, nx) knowledge [looks] (0: never observed), or None for a map
+        without the knowledge channel; ``band`` as ``dense``."""
+        if not self.has_knowledge:
+            return None
+        return self._dense(self.knowledge, band) / float(logodds.KNOWLEDGE_SCALE)
+
+    def _dense(self, bricks, band):
         z0, z1 = self._band(band)
         nx, ny, _ = self.spec.shape
         nbx, nby, _ = self.spec.brick_shape
@@ -179,7 +275,7 @@ class Map:
         view = slab.reshape(b1 - b0, BRICK, nby, BRICK, nbx, BRICK).transpose(0, 2, 4, 1, 3, 5)
         sel = (self.keys[:, 2] >= b0) & (self.keys[:, 2] < b1)      # whole bricks, no voxel lists
         k = self.keys[sel]
-        view[k[:, 2] - b0, k[:, 1], k[:, 0]] = self.data[sel]
+        view[k[:, 2] - b0, k[:, 1], k[:, 0]] = bricks[sel]
         return np.ascontiguousarray(slab[z0 - b0 * BRICK:z1 - b0 * BRICK, :ny, :nx])
 
     def _band(self, band):
@@ -210,15 +306,15 @@ class Map:
         return logodds.to_nats(self.dense((top - 0.25 * self.spec.voxel_m, top + 0.25 * self.spec.voxel_m))[0])
 
     def _column_hi_lo(self):
-        """int64 (ny, nx) largest and smallest value of each column's voxels (0 for unobserved
-        ones), brick by brick: never the dense volume."""
+        """int64 (ny, nx) largest and smallest value as read of each column's voxels (0 for
+        unobserved ones), brick by brick: never the dense volume."""
         ny, nx = self.spec.shape[1], self.spec.shape[0]
         nby, nbx = -(-ny // BRICK), -(-nx // BRICK)
         hi = np.zeros((nby, nbx, BRICK, BRICK), np.int64)
         lo = np.zeros((nby, nbx, BRICK, BRICK), np.int64)
         if len(self.keys):
             inside = self.keys[:, 2, None] * BRICK + np.arange(BRICK) < self.spec.shape[2]     # a top brick's overhang
-            d = np.where(inside[:, :, None, None], self.data, 0).astype(np.int64)
+            d = np.where(inside[:, :, None, None] & self.known(), self.read_units(), 0).astype(np.int64)
             np.maximum.at(hi, (self.keys[:, 1], self.keys[:, 0]), d.max(axis=1))
             np.minimum.at(lo, (self.keys[:, 1], self.keys[:, 0]), d.min(axis=1))
         flat = [a.transpose(0, 2, 1, 3).reshape(nby * BRICK, nbx * BRICK)[:ny, :nx] for a in (hi, lo)]
@@ -235,7 +331,7 @@ class Map:
     def counts(self, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
         """Voxels of the grid by class: {"occupied", "free", "undecided", "unobserved"}."""
         _, units = self.voxels()
-        c = classes(units, occupied_nats, free_nats)
+        c = classes(units, occupied_nats, free_nats, known=np.ones(len(units), bool))
         seen = {"occupied": int((c == OCCUPIED).sum()), "free": int((c == FREE).sum()),
                 "undecided": int((c == UNDECIDED).sum())}
         return dict(seen, unobserved=self.spec.n_voxels - sum(seen.values()))
@@ -249,6 +345,8 @@ class Map:
             hi, lo = self._column_hi_lo()
         else:
             d = self.dense(band)
+            if self.has_knowledge:
+                d = np.where(self.dense_knowledge(band) >= KNOWN_LOOKS, d, 0)
             hi, lo = d.max(axis=0), d.min(axis=0)
         out = np.full(hi.shape, UNKNOWN, np.int8)
         out[lo < free * logodds.SCALE] = 0

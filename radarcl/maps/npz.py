@@ -3,12 +3,24 @@
 Members: ``version`` (``FILE_VERSION``), ``origin_m``, ``voxel_m``, ``shape`` (the ``GridSpec``),
 ``keys`` (n, 3) int32 bricks (bx, by, bz), ``data`` (n, 8, 8, 8) int32 [z, y, x] in
 ``radarcl.logodds`` units, optional ``poses`` (m, 4, 4) float64 and ``meta`` (a JSON object).
+A map of the detection-statistics model (``radarcl.sensor_model``) adds three members and is
+version ``KNOWLEDGE_VERSION`` (2): ``knowledge`` (n, 8, 8, 8) int32 [z, y, x], the summed
+detection opportunity in ``logodds.KNOWLEDGE_SCALE`` units per look (same bricks, same order as
+``data``; 0 where never observed), ``looks`` (n, 8, 8, 8) int32, the number of those looks, and
+``reading`` (a JSON object of ``sensor_model.READING``: look_limit, prior_nats, prior_looks): a
+voxel's log-odds is ``sensor_model.read_log_odds(data, knowledge, looks, reading)``, not
+``data`` itself. A map without
+them is written as version 1, byte for byte as before; version 1 files read as maps without
+knowledge. A radarcl that reads only version 1 refuses version 2 instead of showing unread sums
+as log-odds.
 Written through a temporary file renamed over the target, so a reader (``radarcl view --live``)
 sees the old map or the new one, never half of one. Read member by member with every size
 checked against its header and the memory budget (``io.files.safe_npz``), never unpickled.
 """
 
 import json
+import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -16,8 +28,11 @@ import numpy as np
 from radarcl.errors import FrameFormatError, ShapeError
 from radarcl.grid import BRICK, GRID_LIMIT, GridSpec
 from radarcl.io.files import atomic, safe_npz
+from radarcl.sensor_model import READING
 
 FILE_VERSION = 1
+KNOWLEDGE_VERSION = 2      # a file with the knowledge channel (see the module docstring)
+VERSIONS = (FILE_VERSION, KNOWLEDGE_VERSION)
 MAX_POSES = 10000          # a map keeps at most this many sensor poses (evenly subsampled)
 
 
@@ -26,14 +41,49 @@ def recognises(path):
     return Path(path).is_file()
 
 
-def write(path, spec, keys, data, poses=None, meta=None):
+@dataclass(frozen=True)
+class Channels:
+    """What a map of the detection-statistics model keeps beside its sums: ``knowledge``
+    (n, 8, 8, 8) int32 in ``logodds.KNOWLEDGE_SCALE`` units and ``looks`` (n, 8, 8, 8) int32
+    counts (the bricks of ``data``, in order), and ``reading`` (a dict of
+    ``sensor_model.READING``, checked by ``check_reading``)."""
+
+    knowledge: np.ndarray
+    looks: np.ndarray
+    reading: dict
+
+
+def check_reading(reading, where):
+    """A map's reading as a dict of floats, or FrameFormatError naming what is wrong."""
+    if not isinstance(reading, dict) or set(reading) != set(READING):
+        raise FrameFormatError(f"{where}: its reading must give exactly {', '.join(READING)}, got {reading!r}")
+    out = {}
+    for key, value in reading.items():
+        ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+        if not ok or (value > 0) != (key != "prior_nats") or (key == "prior_nats" and value > 0):
+            raise FrameFormatError(f"{where}: reading {key} = {value!r} is not a "
+                                   f"{'number <= 0' if key == 'prior_nats' else 'positive number'}")
+        out[key] = float(value)
+    return out
+
+
+def write(path, spec, keys, data, poses=None, meta=None, channels=None):
     """A map file: ``spec``, the bricks (``keys`` (n, 3) int32, ``data`` (n, 8, 8, 8) int32),
-    the sensor's ``poses`` and ``meta`` (a JSON-able dict) when given, written atomically."""
+    the sensor's ``poses`` and ``meta`` (a JSON-able dict) when given, and the knowledge
+    ``channels`` (``Channels``, version 2) when given, written atomically."""
     extra = {} if poses is None else dict(poses=check_trajectory(poses))
     if meta:
         extra["meta"] = np.str_(json.dumps(meta))
+    version = FILE_VERSION
+    if channels is not None:
+        for name in ("knowledge", "looks"):
+            if np.shape(getattr(channels, name)) != np.shape(data):
+                raise ShapeError(f"{name} bricks {np.shape(getattr(channels, name))} must match the data's {np.shape(data)}")
+            extra[name] = np.ascontiguousarray(getattr(channels, name), np.int32)
+        extra["reading"] = np.str_(json.dumps(check_reading(channels.reading, path)))
+        version = KNOWLEDGE_VERSION
     with atomic(path) as tmp, open(tmp, "wb") as f:
-        np.savez_compressed(f, version=FILE_VERSION, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
+        np.savez_compressed(f, version=version, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
                             shape=np.asarray(spec.shape), keys=keys, data=data, **extra)
 
 
@@ -41,6 +91,11 @@ def read(path):
     """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32) of a map file. A file that is not a
     radarcl map raises ``FrameFormatError`` saying what was wrong; array sizes are checked
     against their headers and the memory budget before they are read."""
+    return read_channels(path)[:3]
+
+
+def read_channels(path):
+    """``read``'s (spec, keys, data) and the map's ``Channels`` (None for a version 1 file)."""
     if not Path(path).is_file():
         raise FrameFormatError(f"{path} does not exist (yet)" if not Path(path).exists()
                                else f"{path} is not a map file or store")
@@ -51,8 +106,9 @@ def read(path):
                                    f"(expected an npz radarcl wrote, e.g. radarcl demo's map.npz)")
         try:
             version = int(f["version"])
-            if version != FILE_VERSION:
-                raise FrameFormatError(f"{path} has grid file version {version}, this radarcl reads {FILE_VERSION}")
+            if version not in VERSIONS:
+                raise FrameFormatError(f"{path} has grid file version {version}, this radarcl reads "
+                                       f"{' and '.join(map(str, VERSIONS))}")
             spec = GridSpec(tuple(f["origin_m"]), float(f["voxel_m"]), tuple(int(n) for n in f["shape"]))
         except (TypeError, ValueError) as exc:
             if isinstance(exc, FrameFormatError):
@@ -66,6 +122,23 @@ def read(path):
         if n_keys[0] > int(np.prod(spec.brick_shape, dtype=np.int64)):
             raise FrameFormatError(f"{path}: {n_keys[0]} bricks in a grid of only {spec.brick_shape} bricks")
         keys, data = f["keys"], f["data"]
+        channels = None
+        if version == KNOWLEDGE_VERSION:
+            missing = {"knowledge", "looks", "reading"} - set(f.files)
+            if missing:
+                raise FrameFormatError(f"{path}: a version {version} map lacks its {', '.join(sorted(missing))}")
+            planes = {}
+            for name in ("knowledge", "looks"):
+                if f.header(name)[0] != n_data:
+                    raise FrameFormatError(f"{path}: {name} bricks {f.header(name)[0]} do not match the data's {n_data}")
+                plane = planes[name] = f[name]
+                if plane.dtype != np.int32 or (plane.size and (plane.min() < 0 or plane.max() > GRID_LIMIT)):
+                    raise FrameFormatError(f"{path}: {name} must be int32 in [0, {GRID_LIMIT}] (radarcl writes nothing else)")
+            try:
+                reading = json.loads(str(f["reading"]))
+            except (ValueError, TypeError) as exc:
+                raise FrameFormatError(f"{path}: its reading is not JSON ({exc})") from exc
+            channels = Channels(planes["knowledge"], planes["looks"], check_reading(reading, path))
     if data.dtype != np.int32:
         raise FrameFormatError(f"{path}: expected bricks ({len(keys)}, 8, 8, 8) int32, got {data.shape} {data.dtype}")
     if keys.dtype != np.int32:
@@ -77,7 +150,7 @@ def read(path):
     if data.size and (data.max() > GRID_LIMIT or data.min() < -GRID_LIMIT):
         raise FrameFormatError(f"{path}: values beyond the grid's saturation +-{GRID_LIMIT} units; "
                                "radarcl never writes them")
-    return spec, keys, data
+    return spec, keys, data, channels
 
 
 def check_trajectory(poses):

@@ -10,6 +10,10 @@ Layout of ``map.rcmap/`` (any directory name):
   zarr.json               the zarr group, its attribute "radarcl" marking it as a store
   segment_<k>/            (n, 8, 8, 8) int32 bricks written by one save; never modified again
   index_<v>/              (n_bricks, 5) int32: bx, by, bz, segment, row of every brick in version v
+  knowledge_<k>/          only in a map of the detection-statistics model (store format 3): the
+  looks_<k>/              knowledge and looks bricks of segment k, row for row (``maps.npz`` says
+                          what they are), checksummed like the segments; its manifest adds
+                          "reading" (``sensor_model.READING``: how the sums are read)
   manifest.json           written last (temporary file + rename): the version, its index, its
                           segments, the grid spec, a CRC-32 of the index and of each chunk of
                           ``CHUNK_BRICKS`` bricks of every segment (format 2), the sensor profile,
@@ -44,13 +48,16 @@ import numpy as np
 
 from radarcl import __version__
 from radarcl.errors import ConfigError, FrameFormatError, RadarclError
-from radarcl.grid import BRICK, GRID_LIMIT, GridSpec
-from radarcl.maps.npz import check_trajectory
+from radarcl.grid import BRICK, GridSpec
+from radarcl.maps.npz import check_reading, check_trajectory
+from radarcl.maps.store_verify import _SUMS, CHUNK_BRICKS, _Arrays, _check_index, _Lost, _read_index, _read_segment
 
 log = logging.getLogger(__name__)
 FORMAT = "radarcl-map-store"
-FORMAT_VERSION = 2          # 2: a CRC-32 per chunk of every segment and of the index; 1 is still read
-CHUNK_BRICKS = 256
+FORMAT_VERSION = 3          # 2: a CRC-32 per chunk of every segment and of the index; 1 is still read
+PLAIN_FORMAT = 2            # what a map without the knowledge channel is written as (an older radarcl reads it)
+KNOWLEDGE_FORMAT = 3        # may hold knowledge_<k> and looks_<k> arrays, then with a "reading"
+KINDS = ("segment", "knowledge", "looks")
 COMPACT_SEGMENTS = 32
 MANIFEST = "manifest.json"
 _NAME = re.compile(r"^index_[0-9]{1,9}$")
@@ -123,6 +130,8 @@ def read_manifest(path):
                                f"{FORMAT_VERSION}: update radarcl")
     manifest["sealed"] = version < 2 or manifest.get("crc32") == seal(manifest)
     check_manifest(path, manifest)
+    if version >= KNOWLEDGE_FORMAT and "reading" in manifest:
+        manifest["reading"] = check_reading(manifest["reading"], path)
     return manifest
 
 
@@ -161,16 +170,27 @@ def check_manifest(path, m):
         crcs = m.get("checksums")
         if not isinstance(crcs, dict) or not isinstance(crcs.get("index"), int) or not isinstance(crcs.get("segments"), dict):
             bad("it has no checksums (format 2 keeps a CRC-32 of the index and of every chunk)")
-        for s in segments:
-            entry = crcs["segments"].get(str(s))
-            if not (isinstance(entry, dict) and isinstance(entry.get("rows"), int) and entry["rows"] >= 1
-                    and isinstance(entry.get("crc32"), list) and len(entry["crc32"]) == -(-entry["rows"] // CHUNK_BRICKS)
-                    and all(isinstance(c, int) for c in entry["crc32"])):
-                bad(f"segment {s} has no checksum entry")
+        for kind in kinds_of(m):
+            entries = crcs.get(_SUMS[kind])
+            for s in segments:
+                entry = entries.get(str(s)) if isinstance(entries, dict) else None
+                if not (isinstance(entry, dict) and isinstance(entry.get("rows"), int) and entry["rows"] >= 1
+                        and isinstance(entry.get("crc32"), list)
+                        and len(entry["crc32"]) == -(-entry["rows"] // CHUNK_BRICKS)
+                        and all(isinstance(c, int) for c in entry["crc32"])):
+                    bad(f"{kind} {s} has no checksum entry")
+
+
+def kinds_of(manifest):
+    """The arrays each segment of the store has: ``segment`` (the sums), and ``knowledge`` and
+    ``looks`` in a map of the detection-statistics model (format 3)."""
+    return KINDS if manifest["format_version"] >= KNOWLEDGE_FORMAT and "reading" in manifest else KINDS[:1]
 
 
 def read(path, salvage=False):
-    """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32, manifest) of the last complete save,
+    """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32, manifest) of the last complete save
+    (a map of the detection-statistics model: ``manifest["knowledge"]`` and ``["looks"]`` its
+    bricks of those channels, else None),
     verified before any byte reaches the map: the manifest's entries, the index (dtype, shape,
     CRC-32, keys unique and inside the grid, each naming a listed segment and a row it holds),
     every listed segment (present, int32 bricks, each chunk's CRC-32, values within the grid's
@@ -191,129 +211,27 @@ def read(path, salvage=False):
     index = _read_index(group, path, manifest)
     lost = _Lost(index[:, :3])
     _check_index(index, spec, manifest, lost)
-    data = np.zeros((len(index), BRICK, BRICK, BRICK), np.int32)      # never uninitialised memory
-    filled = np.zeros(len(index), bool)
-    for segment in manifest["segments"]:
-        _read_segment(group, path, manifest, segment, index, data, filled, lost)
-    lost.add(~filled & ~lost.mask, "no stored data")
+    kinds = kinds_of(manifest)
+    planes = {kind: np.zeros((len(index), BRICK, BRICK, BRICK), np.int32) for kind in kinds}  # never uninitialised
+    for kind in kinds:
+        filled = np.zeros(len(index), bool)
+        for segment in manifest["segments"]:
+            _read_segment(group, path, manifest, segment, index, planes[kind], filled, lost, kind)
+        lost.add(~filled & ~lost.mask, f"no stored {'data' if kind == 'segment' else kind}")
     if lost.mask.any() and not salvage:
         raise FrameFormatError(f"{path}: a damaged map store: {lost.summary(len(index))}; radarcl refuses it "
                                "(--salvage reads the rest and lists the lost bricks)")
     keep = ~lost.mask
     previous = manifest.get("previous")                 # only guides the next writer's clean-up
-    named = {manifest["index"]} | {f"segment_{s}" for s in manifest["segments"]} | \
+    named = {manifest["index"]} | {f"{kind}_{s}" for s in manifest["segments"] for kind in kinds} | \
         {p for p in (previous if isinstance(previous, list) else []) if isinstance(p, str)}
     stray = sorted(p.name for p in path.iterdir() if p.is_dir() and p.name not in named
-                   and p.name.startswith(("segment_", "index_")))
+                   and p.name.startswith(("segment_", "index_", "knowledge_", "looks_")))
     unsealed = [] if manifest["sealed"] else [dict(reason=UNSEALED, keys=[])]
     manifest["incomplete"], manifest["lost"] = stray, unsealed + lost.entries
-    return spec, np.ascontiguousarray(index[keep, :3], dtype=np.int32), data[keep], manifest
-
-
-class _Arrays:
-    """The store's arrays by name, each opened from its own directory (``group[name]`` would need
-    the group's zarr.json, which holds nothing the manifest does not)."""
-
-    def __init__(self, zarr, path):
-        self.zarr, self.path = zarr, path
-
-    def __getitem__(self, name):
-        return self.zarr.open_array(str(self.path / name), mode="r")
-
-
-class _Lost:
-    """Bricks (rows of the index) a damaged store cannot give, each with the reason."""
-
-    def __init__(self, keys):
-        self.keys, self.mask, self.entries = keys, np.zeros(len(keys), bool), []
-
-    def add(self, rows, reason):
-        rows = np.flatnonzero(rows) if np.asarray(rows).dtype == bool else np.asarray(rows, np.int64)
-        rows = rows[~self.mask[rows]]
-        if len(rows):
-            self.mask[rows] = True
-            self.entries.append(dict(reason=reason, keys=self.keys[rows].tolist()))
-
-    def summary(self, n):
-        lost = int(self.mask.sum())
-        reasons = "; ".join(f"{e['reason']} ({len(e['keys'])} bricks)" for e in self.entries[:4])
-        more = f"; and {len(self.entries) - 4} more" if len(self.entries) > 4 else ""
-        return f"{lost} of {n} bricks cannot be read: {reasons}{more}"
-
-
-def _read_index(group, path, manifest):
-    name = manifest["index"]
-    try:
-        stored = group[name]
-        ok = stored.dtype == np.int32 and stored.ndim == 2 and stored.shape[1] == 5
-        index = stored[:] if ok else None
-    except Exception as exc:
-        raise FrameFormatError(f"{path}: its index {name} cannot be read ({type(exc).__name__}: {exc}); "
-                               "the store is damaged") from exc
-    if index is None:
-        raise FrameFormatError(f"{path}: its index {name} holds {stored.shape} {stored.dtype}, expected (n, 5) int32")
-    if len(index) != manifest["bricks"]:
-        raise FrameFormatError(f"{path}: its index {name} lists {len(index)} bricks, the manifest {manifest['bricks']}")
-    if manifest["format_version"] >= 2 and zlib.crc32(np.ascontiguousarray(index, "<i4")) != manifest["checksums"]["index"]:
-        raise FrameFormatError(f"{path}: its index {name} does not match its checksum; the store is damaged "
-                               "and which brick is where cannot be known")
-    return index
-
-
-def _check_index(index, spec, manifest, lost):
-    keys = index[:, :3].astype(np.int64)
-    lost.add(((keys < 0) | (keys >= np.asarray(spec.brick_shape))).any(axis=1), "a key outside the grid")
-    ids = (keys[:, 2] << 42) | (keys[:, 1] << 21) | (keys[:, 0] & ((1 << 21) - 1))
-    _, inverse, counts = np.unique(ids, return_inverse=True, return_counts=True)
-    lost.add(counts[inverse] > 1, "a key listed more than once")
-    listed = np.isin(index[:, 3], manifest["segments"])
-    lost.add(~listed, "a segment the manifest does not list")
-    where = index[:, 3].astype(np.int64) << 32 | (index[:, 4].astype(np.int64) & 0xFFFFFFFF)
-    _, inverse, counts = np.unique(where, return_inverse=True, return_counts=True)
-    lost.add(counts[inverse] > 1, "a stored brick named by two keys")
-
-
-def _read_segment(group, path, manifest, segment, index, data, filled, lost):
-    """Copy the bricks of ``segment`` that the index names into ``data``, chunk by chunk, each
-    chunk checked (CRC-32 in format 2, saturation always); what cannot be read goes to ``lost``."""
-    uses = np.flatnonzero(index[:, 3] == segment)
-    if not len(uses):
-        return
-    rows = index[uses, 4].astype(np.int64)
-    entry = manifest["checksums"]["segments"][str(segment)] if manifest["format_version"] >= 2 else None
-    name = f"segment_{segment}"
-    try:
-        stored = group[name]
-        shape, dtype = stored.shape, stored.dtype
-    except Exception:
-        lost.add(uses, f"{name} is missing")
-        return
-    if dtype != np.int32 or len(shape) != 4 or tuple(shape[1:]) != (BRICK, BRICK, BRICK):
-        lost.add(uses, f"{name} holds {shape} {dtype}, not (n, 8, 8, 8) int32 bricks")
-        return
-    n = shape[0] if entry is None else entry["rows"]
-    if shape[0] != n:
-        lost.add(uses, f"{name} holds {shape[0]} bricks, its checksum entry {n}")
-        return
-    lost.add(uses[(rows < 0) | (rows >= n)], f"a row beyond the {n} bricks of {name}")
-    for c, start in enumerate(range(0, n, CHUNK_BRICKS)):
-        stop = min(n, start + CHUNK_BRICKS)
-        here = uses[(rows >= start) & (rows < stop)]
-        if not len(here):
-            continue
-        try:
-            chunk = np.ascontiguousarray(stored[start:stop], np.int32)
-        except Exception as exc:
-            lost.add(here, f"{name} chunk {c} cannot be read ({type(exc).__name__})")
-            continue
-        if entry is not None and zlib.crc32(np.ascontiguousarray(chunk, "<i4")) != entry["crc32"][c]:
-            lost.add(here, f"{name} chunk {c} does not match its checksum (zeroed, missing or damaged)")
-            continue
-        if chunk.size and (chunk.max() > GRID_LIMIT or chunk.min() < -GRID_LIMIT):
-            lost.add(here, f"{name} chunk {c} holds values beyond the grid's saturation")
-            continue
-        data[here] = chunk[index[here, 4] - start]
-        filled[here] = True
+    manifest["knowledge"], manifest["looks"] = ((planes["knowledge"][keep], planes["looks"][keep])
+                                                if "knowledge" in planes else (None, None))
+    return spec, np.ascontiguousarray(index[keep, :3], dtype=np.int32), planes["segment"][keep], manifest
 
 
 class StoreWriter:
@@ -324,7 +242,7 @@ class StoreWriter:
     made the map (kept in the manifest); inputs: paths whose SHA-256 goes into the provenance.
     """
 
-    def __init__(self, path, spec, sensor_toml="", config=None, inputs=(), overwrite=False, poses=None):
+    def __init__(self, path, spec, sensor_toml="", config=None, inputs=(), overwrite=False, poses=None, reading=None):
         zarr, self._codec = _zarr()
         self.path = Path(path)
         if self.path.exists() and not self.path.is_dir():
@@ -343,9 +261,11 @@ class StoreWriter:
                          provenance=dict(radarcl=__version__, created=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                                          inputs=[dict(path=str(p), sha256=file_digest(p)) for p in inputs]))
         self.version, self.segments, self.keys, self.data = 0, [], None, None
+        self.reading = reading                              # a map with the knowledge channel: its reading
+        self.kinds = KINDS if reading is not None else KINDS[:1]
         self.index = np.zeros((0, 5), np.int32)
         self.segment_rows = {}                              # segment -> bricks stored in it
-        self.crcs = {}                                      # segment -> CRC-32 of each of its chunks
+        self.crcs = {}                                      # (kind, segment) -> CRC-32 of each of its chunks
         self._legacy = False
         if (self.path / MANIFEST).is_file():                # continue an existing store (verified)
             spec0, keys, data, manifest = read(self.path)
@@ -353,10 +273,15 @@ class StoreWriter:
                 raise ConfigError(f"{self.path} holds a map of grid {spec0}, not {spec}; choose another name")
             self.version, self.segments = manifest["version"], list(manifest["segments"])
             self.index = self.group[manifest["index"]][:]
-            self.keys, self.data = keys, data
+            if (manifest["knowledge"] is None) != (reading is None):
+                raise ConfigError(f"{self.path} holds a map {'with' if reading is None else 'without'} the knowledge "
+                                  "channel; this map is the other kind: choose another name")
+            self.keys = keys
+            self.data = data if reading is None else np.stack([data, manifest["knowledge"], manifest["looks"]], 1)
             self.segment_rows = {s: self.group[f"segment_{s}"].shape[0] for s in self.segments}
             if manifest["format_version"] >= 2:
-                self.crcs = {s: manifest["checksums"]["segments"][str(s)]["crc32"] for s in self.segments}
+                self.crcs = {(kind, s): manifest["checksums"][_SUMS[kind]][str(s)]["crc32"]
+                             for s in self.segments for kind in self.kinds}
             else:
                 self._legacy = True                         # no checksums: the next save rewrites it whole
             if poses is None:
@@ -367,14 +292,20 @@ class StoreWriter:
         """Stored bricks no longer in the map (superseded by later saves)."""
         return sum(self.segment_rows[s] for s in self.segments) - len(self.index)
 
-    def save(self, keys, data, poses=None):
-        """Write the bricks (keys (n, 3), data (n, 8, 8, 8) int32) that differ from the last save,
-        and the sensor ``poses`` (n, 4, 4) so far when given; returns the number of bricks
-        written. Atomic for readers."""
+    def save(self, keys, data, poses=None, knowledge=None, looks=None):
+        """Write the bricks (keys (n, 3), data (n, 8, 8, 8) int32, and their ``knowledge`` and
+        ``looks`` bricks for a writer made with a ``reading``) that differ from the last save, and
+        the sensor ``poses`` (n, 4, 4) so far when given; returns the number of bricks written.
+        Atomic for readers."""
+        if (knowledge is None) != (self.reading is None):
+            raise ConfigError("a store made with a reading saves knowledge bricks with its data, and only it")
         if poses is not None:
             self.meta["poses"] = check_trajectory(poses).reshape(-1, 16).tolist()
         keys = np.ascontiguousarray(keys, np.int32)
         data = np.ascontiguousarray(data, np.int32)
+        if knowledge is not None:                           # compared and kept as one (n, 3, 8, 8, 8) array
+            data = np.ascontiguousarray(np.stack([data, np.asarray(knowledge, np.int32), np.asarray(looks, np.int32)],
+                                                 axis=1))
         self._clean()
         if self.keys is None:
             changed = np.arange(len(keys))
@@ -386,10 +317,12 @@ class StoreWriter:
         segment = (max(self.segments) + 1) if self.segments else 0
         if len(rows):
             self.segment_rows[segment] = len(rows)
-            arr = self.group.create_array(f"segment_{segment}", shape=(len(rows), 8, 8, 8), dtype="int32",
-                                          chunks=(CHUNK_BRICKS, 8, 8, 8), compressors=self._codec(level=1))
-            arr[:] = data[rows]
-            self.crcs[segment] = chunk_crcs(data[rows])
+            parts = (data,) if knowledge is None else (data[:, 0], data[:, 1], data[:, 2])
+            for kind, values in zip(self.kinds, parts):
+                arr = self.group.create_array(f"{kind}_{segment}", shape=(len(rows), 8, 8, 8), dtype="int32",
+                                              chunks=(CHUNK_BRICKS, 8, 8, 8), compressors=self._codec(level=1))
+                arr[:] = values[rows]
+                self.crcs[kind, segment] = chunk_crcs(values[rows])
         index = self._next_index(keys, rows, segment, compact)
         version = self.version + 1
         name = f"index_{version}"
@@ -399,14 +332,15 @@ class StoreWriter:
             arr[:] = index
         segments = sorted(set(index[:, 3].tolist()))
         previous = sorted(({f"index_{self.version}"} if self.version else set()) |
-                          {f"segment_{s}" for s in self.segments})
-        manifest = dict(format=FORMAT, format_version=FORMAT_VERSION, version=version, index=name, segments=segments,
-                        previous=previous,
+                          {f"{kind}_{s}" for s in self.segments for kind in self.kinds})
+        extra = {} if knowledge is None else dict(reading=check_reading(dict(self.reading), self.path))
+        sums = {_SUMS[kind]: {str(s): dict(rows=self.segment_rows[s], crc32=self.crcs[kind, s]) for s in segments}
+                for kind in self.kinds}
+        manifest = dict(format=FORMAT, format_version=PLAIN_FORMAT if knowledge is None else KNOWLEDGE_FORMAT,
+                        version=version, index=name, segments=segments, previous=previous, **extra,
                         grid=dict(origin_m=list(self.spec.origin_m), voxel_m=self.spec.voxel_m,
                                   shape=list(self.spec.shape)), bricks=len(keys), saved=time.strftime("%Y-%m-%dT%H:%M:%S"),
-                        checksums=dict(index=zlib.crc32(np.ascontiguousarray(index, "<i4")),
-                                       segments={str(s): dict(rows=self.segment_rows[s], crc32=self.crcs[s])
-                                                 for s in segments}),
+                        checksums=dict(index=zlib.crc32(np.ascontiguousarray(index, "<i4")), **sums),
                         **self.meta)
         manifest["crc32"] = seal(manifest)
         tmp = self.path / f".{MANIFEST}.{os.getpid()}.tmp"
@@ -417,7 +351,7 @@ class StoreWriter:
         self.version, self.index, self.keys, self.data = version, index, keys.copy(), data.copy()
         self.segments, self._legacy = segments, False
         self.segment_rows = {s: self.segment_rows[s] for s in segments}
-        self.crcs = {s: self.crcs[s] for s in segments}
+        self.crcs = {(kind, s): self.crcs[kind, s] for s in segments for kind in self.kinds}
         self._clean(keep=set(previous))                  # a reader may still be reading those
         return len(rows)
 
@@ -439,9 +373,9 @@ class StoreWriter:
     def _clean(self, keep=()):
         """Remove segments and indexes no manifest names (a killed writer's, or superseded ones
         beyond the previous version, which a reader may still be reading)."""
-        named = {f"index_{self.version}"} | {f"segment_{s}" for s in self.segments} | set(keep)
+        named = {f"index_{self.version}"} | {f"{kind}_{s}" for s in self.segments for kind in KINDS} | set(keep)
         for p in self.path.iterdir():
-            if p.is_dir() and p.name.startswith(("segment_", "index_")) and p.name not in named:
+            if p.is_dir() and p.name.startswith(("segment_", "index_", "knowledge_", "looks_")) and p.name not in named:
                 shutil.rmtree(p, ignore_errors=True)
         for p in self.path.glob(f".{MANIFEST}.*.tmp"):
             p.unlink(missing_ok=True)

@@ -221,17 +221,24 @@ def topdown_figure(log_odds, occupied_truth, spec, above_z_m=0.0):
     return fig
 
 
-def plane_map_figure(nats, spec, poses, title, pose_label="scan poses", label="log-odds [nat]"):
+def plane_map_figure(nats, spec, poses, title, pose_label="scan poses", label="log-odds [nat]", unknown=None):
     """A one-layer map (ny, nx) seen from above: log-odds from -L (free, blue) to +L (occupied,
-    red), L the 99th percentile of |log-odds|, unseen white; the poses (n, 4, 4) in black."""
+    red), L the 99th percentile of |log-odds|, unseen white; the poses (n, 4, 4) in black.
+    ``unknown`` (ny, nx) bool (a map with the knowledge channel): those cells grey, whatever
+    their log-odds (never observed is not "observed, undecided")."""
     plt = _pyplot()
     seen = nats[nats != 0]
     limit = float(np.percentile(np.abs(seen), 99)) if seen.size else 1.0
     shown = np.ma.masked_equal(nats, 0.0).T                     # rows = x, columns = y
+    if unknown is not None:
+        shown = np.ma.masked_where(np.asarray(unknown).T, shown)
     x0, y0, _ = spec.origin_m
     nx, ny, _ = spec.shape
     extent = (y0, y0 + ny * spec.voxel_m, x0, x0 + nx * spec.voxel_m)
     fig, ax = plt.subplots(figsize=(8.4, float(np.clip(8.4 * nx / ny, 4.0, 12.0))), dpi=120)
+    if unknown is not None:
+        ax.imshow(np.ma.masked_where(~np.asarray(unknown).T, np.ones(shown.shape)), origin="lower", extent=extent,
+                  cmap="Greys", vmin=0.0, vmax=2.5, interpolation="nearest")
     image = ax.imshow(shown, origin="lower", extent=extent, cmap="coolwarm", vmin=-limit, vmax=limit,
                       interpolation="nearest")
     if len(poses):
@@ -241,7 +248,7 @@ def plane_map_figure(nats, spec, poses, title, pose_label="scan poses", label="l
     ax.set_xlabel("y, left [m]")
     ax.set_ylabel("x, forward [m]")
     ax.set_title(title)
-    _colorbar(fig, image, ax, f"{label}; white: unseen")
+    _colorbar(fig, image, ax, f"{label}; white: unseen" + ("; grey: unknown" if unknown is not None else ""))
     fig.tight_layout()
     return fig
 

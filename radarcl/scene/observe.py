@@ -24,7 +24,7 @@ noise and the ADC's rounding and clipping, so the whole pipeline runs from raw s
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -62,6 +62,14 @@ class Observations:
     rays_per_beam: int
     n_clipped: int
     physics: int = 0             # SIDELOBES | MULTIPATH: the switches it was simulated with
+    offsets_m: np.ndarray = None  # (n_frames, 3) the sensor's offset from the scene's sensor_m per frame (moving), or None
+
+    def first(self, n):
+        """The first ``n`` frames, as the recording they would have been alone (the same seed,
+        so the same scatterers; the receiver noise of those frames)."""
+        offsets = None if self.offsets_m is None else self.offsets_m[:n]
+        return Observations(self.samples[:n], self.poses[:n], self.tilts_deg[:n], self.seed, self.rays_per_beam,
+                            self.n_clipped, self.physics, offsets)
 
 
 def _beam_frames(pose, lattice):
@@ -126,15 +134,22 @@ def pattern_amplitude(rho, sidelobes=False):
     return np.maximum(main, ring * (rho > SPAN))
 
 
-def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, salt=0, physics=0):
+def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, salt=0, physics=0, lattice=None):
     """Echoes of every beam of one frame: (amplitude, range_m, phase) arrays (n_beams, k).
 
     ``salt`` fixes the recording's scatterers: ray jitter and speckle phases are functions of
     the world direction and of the scatterer, not random draws (``lattice_rays``,
     ``hash_uniform``), so the same salt gives the same echoes at the same pose. ``physics``:
-    SIDELOBES | MULTIPATH (module constants), 0 for neither."""
-    lattice = BeamLattice.from_radar(radar)
-    frames = _beam_frames(pose, lattice)
+    SIDELOBES | MULTIPATH (module constants), 0 for neither. ``pose`` (4, 4) puts the head at the
+    scene's sensor position; (n_beams, 4, 4) gives each beam its own pose and origin (a spinning
+    radar on a moving vehicle: ``scene.spinning``; no point scatterers, no harder physics).
+    ``lattice``: the frame's ``BeamLattice`` (default: the radar's stacked lattice)."""
+    lattice = BeamLattice.from_radar(radar) if lattice is None else lattice
+    P = np.asarray(pose, float)
+    per_beam = P.ndim == 3
+    if per_beam and (scene.points or physics):
+        raise ConfigError("one pose per beam simulates surfaces only: no point scatterers, no harder physics")
+    frames = P[:, :3, :3] @ lattice.beam_rotations() if per_beam else _beam_frames(P, lattice)
     n_beams = len(frames)
     half_az, half_el = math.radians(radar.beamwidth_az_deg) / 2, math.radians(radar.beamwidth_el_deg) / 2
     origin = np.asarray(scene.sensor_m, float)
@@ -143,7 +158,8 @@ def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, salt=
     dirs, st, d_omega, used = lattice_rays(frames, half_az, half_el, rays_across, salt, span)
     k = dirs.shape[1]
     flat = dirs.reshape(-1, 3)
-    t, owner, normal = scene.first_hit(np.broadcast_to(origin, flat.shape), flat)
+    starts = np.repeat(P[:, :3, 3], k, axis=0) if per_beam else np.broadcast_to(origin, flat.shape)
+    t, owner, normal = scene.first_hit(starts, flat)
     hit = np.isfinite(t) & (t <= radar.range_max_m * 1.05) & used.reshape(-1)
     gamma = np.array([10 ** (o.material.gamma_db / 10) for o in scene.objects])
     cos_i = np.abs(np.einsum("ij,ij->i", normal, flat))
@@ -157,7 +173,7 @@ def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, salt=
     amp = A_1M2_AT_10M * np.sqrt(sigma) * (R_REF_M / r) ** 2 * pattern
     amp, rng_m = amp.reshape(n_beams, k), r.reshape(n_beams, k)
     # the scatterer's own phase: fixed per SPECKLE_CELL_M cell of the surface it sits on
-    cells = np.floor((origin + np.where(hit, t, 0.0)[:, None] * flat) / SPECKLE_CELL_M).astype(np.int64)
+    cells = np.floor((starts + np.where(hit, t, 0.0)[:, None] * flat) / SPECKLE_CELL_M).astype(np.int64)
     phase = 2 * np.pi * hash_uniform(cells, salt, 3).reshape(n_beams, k)
     if physics & MULTIPATH:              # the ground bounce: the echo of the object's mirror image below the terrain
         ghost_amp, ghost_r = _ground_bounce(scene, origin, flat, t, hit, owner, amp.reshape(-1))
@@ -208,26 +224,34 @@ def _point_echoes(scene, frames, origin, half_az, half_el):
 
 
 def observe(scene, tilts_deg, radar=PAPER_RADAR, seed=0, rays_across=RAYS_ACROSS, noise_rms=NOISE_RMS, adc=ADC,
-            progress=None, physics=0):
+            progress=None, physics=0, offsets_m=None):
     """Simulate one frame per tilt (``outdoor.PAPER_TILTS_DEG``); returns ``Observations``.
-    ``progress(done_frames, n_frames)`` is called after each frame."""
+    ``progress(done_frames, n_frames)`` is called after each frame. ``offsets_m`` (n_frames, 3):
+    a moving sensor, frame j taken at scene.sensor_m + offsets_m[j] (the same scatterers: speckle
+    changes only as the viewpoint does)."""
     tilts = np.asarray(tilts_deg, float).reshape(-1)
     if not len(tilts):
         raise ConfigError("observe needs at least one tilt")
+    if offsets_m is not None:
+        offsets_m = np.asarray(offsets_m, float)
+        if offsets_m.shape != (len(tilts), 3) or not np.isfinite(offsets_m).all():
+            raise ConfigError(f"offsets_m must be finite ({len(tilts)}, 3), one per tilt, got {offsets_m.shape}")
     if radar.complex_samples:
         raise ConfigError("the reference scene simulates a real-sampling radar like the paper's")
     rng = np.random.default_rng(seed)
     frames, poses, clipped = [], [], 0
     for j, tilt in enumerate(tilts):
-        pose = scene.stand_pose(float(tilt))
-        amp, r, phase = observe_frame(scene, pose, radar, rays_across, salt=seed, physics=physics)
+        here = scene if offsets_m is None else replace(scene, sensor_m=tuple(np.add(scene.sensor_m, offsets_m[j])))
+        pose = here.stand_pose(float(tilt))
+        amp, r, phase = observe_frame(here, pose, radar, rays_across, salt=seed, physics=physics)
         sim = simulate_beams(radar, amp, r, phase, noise_rms=noise_rms, adc=adc, seed=rng.integers(2 ** 63))
         frames.append(sim.samples.reshape(radar.n_azimuth, radar.n_elevation, radar.n_samples))
         poses.append(pose)
         clipped += sim.n_clipped
         if progress is not None:
             progress(j + 1, len(tilts))
-    return Observations(np.stack(frames), np.stack(poses), tilts, int(seed), int(amp.shape[1]), clipped, int(physics))
+    return Observations(np.stack(frames), np.stack(poses), tilts, int(seed), int(amp.shape[1]), clipped, int(physics),
+                        offsets_m)
 
 
 def load_observations(path):

@@ -29,6 +29,7 @@ from radarcl import logodds
 from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, BeamModel, check_poses
 from radarcl.grid import BRICK, EvidenceGrid
+from radarcl.sensor_model import NODE_SHAPE, unpack_nodes
 from radarcl.stages import Port, Stage, build, count, spacing, work_group_size
 from radarcl.stages.fusion_plan import BLOCK, FusionPlanner, HeadFrame, candidate_windows, nonempty
 
@@ -122,11 +123,17 @@ class Fusion(Stage):
     records a ``StillTable`` when a plan's pose comes back (a radar on a stand, a parked
     vehicle) and the table fits ``STILL_TABLE_SHARE`` of the device's memory, then fuses that
     pose's frames from it (``fusion_cached``, the same integers); True records on the first
-    repeat whatever its size, False never.
+    repeat whatever its size, False never. detstats: the detection-statistics model
+    (``radarcl.sensor_model``): a frame is not one update per bin but node pairs per bin
+    (``NODE_SHAPE``, from ``sensor_model.pack_nodes``), interpolated in the voxel's rho2, and the
+    grid must hold a knowledge pool (``EvidenceGrid(..., knowledge=True)``); a voxel whose centre
+    lies more than -``terrain_dz`` [m] below its beam's origin takes the terrain class's nodes
+    (-inf: none does); equivalent to ``oracle.fusion_at_points(..., nodes=..., terrain_dz=...)``.
     """
 
     def __init__(self, runtime, grid, lattice, model, n_bins, bin_spacing_m, first_bin=0, last_bin=None,
-                 *, per_beam_poses=False, still="auto", vector_width=8, rows=None, local_size=None):
+                 *, per_beam_poses=False, still="auto", vector_width=8, rows=None, local_size=None, detstats=False,
+                 terrain_dz=-math.inf):
         if not isinstance(grid, EvidenceGrid):
             raise ConfigError(f"grid must be an EvidenceGrid, got {type(grid).__name__}")
         if not isinstance(lattice, BeamLattice) or not isinstance(model, BeamModel):
@@ -152,9 +159,16 @@ class Fusion(Stage):
             raise ConfigError(f"rows must be 1, or 2 with vector_width 8; got rows={rows!r}, "
                               f"vector_width={self.vector_width}")
         self.rows = int(rows)
+        self.detstats = bool(detstats)
+        self.terrain_dz = float(terrain_dz)
+        if math.isnan(self.terrain_dz) or self.terrain_dz == math.inf:
+            raise ConfigError(f"terrain_dz must be a number of metres or -inf, got {terrain_dz!r}")
+        if self.detstats and not grid.has_knowledge:
+            raise ConfigError("the detection-statistics model writes the knowledge channel: give Fusion an "
+                              "EvidenceGrid(..., knowledge=True)")
         defines = dict(VEC=self.vector_width, ROWS=self.rows, N_AZ=lattice.n_az, N_EL=lattice.n_el, N_BINS=self.n_bins,
                        NEAR_FIELD=model.near_field, GAUSSIAN=model.gaussian,
-                       PER_BEAM_POSES=self.per_beam_poses, AZ_WRAP=lattice.wraps)
+                       PER_BEAM_POSES=self.per_beam_poses, AZ_WRAP=lattice.wraps, DETSTATS=self.detstats)
         self._defines = {k: v for k, v in defines.items() if v is not False}
         if still not in ("auto", True, False):
             raise ConfigError(f"still must be 'auto', True or False, got {still!r}")
@@ -172,17 +186,20 @@ class Fusion(Stage):
         self._supers = None              # the planner's coarse level: blocks of BLOCK^3 blocks of bricks
         # Evidence from a raw radar's detection comes as (n_az, n_el, n_bins) even for one
         # elevation; (n_beams, n_bins) is the same rows.
-        aliases = ((lattice.n_az, lattice.n_el, self.n_bins), (lattice.n_beams, self.n_bins))
-        self._allocate([Port("evidence", (*lattice.batch, self.n_bins), np.dtype(np.int32), "evidence", aliases)], [])
+        tail = NODE_SHAPE if self.detstats else ()
+        aliases = ((lattice.n_az, lattice.n_el, self.n_bins, *tail), (lattice.n_beams, self.n_bins, *tail))
+        self._allocate([Port("evidence", (*lattice.batch, self.n_bins, *tail), np.dtype(np.int32),
+                             "evidence nodes" if self.detstats else "evidence", aliases)], [])
         import pyopencl.array as cla
 
-        q = runtime.queue               # the RECORD buffers the plain gather ignores
+        q = runtime.queue               # the RECORD buffers the plain gather ignores, and the other model's
         self._no_table = (cla.zeros(q, (1,), np.uint8), cla.zeros(q, (1,), np.int32), cla.zeros(q, (1, 2), np.int32))
 
     @property
     def evidence_shape(self):
-        """Shape of one frame's evidence: (n_beams, n_bins) int32."""
-        return (self.lattice.n_beams, self.n_bins)
+        """Shape of one frame's evidence: (n_beams, n_bins) int32, or with detstats
+        (n_beams, n_bins, *NODE_SHAPE) int32 node pairs."""
+        return (self.lattice.n_beams, self.n_bins, *(NODE_SHAPE if self.detstats else ()))
 
     # -- host side: beams, head frame, bricks ---------------------------------------------------
     def plan(self, poses, cache=True):
@@ -348,8 +365,15 @@ class Fusion(Stage):
         (*batch, n_bins) array the kernel reads; ShapeError otherwise."""
         ev = np.asarray(evidence)
         if ev.shape == self.evidence_shape:
-            ev = ev.reshape(*self.lattice.batch, self.n_bins)
+            ev = ev.reshape(*self.lattice.batch, *self.evidence_shape[1:])
         ev = self.check_input(name, ev)
+        if self.detstats:
+            e, d = unpack_nodes(ev)
+            if e.size and (np.abs(e).max() > logodds.EVIDENCE_LIMIT or d.min() < 0 or d.max() > logodds.KNOWLEDGE_SCALE):
+                raise ConfigError(f"evidence nodes must lie within +-{logodds.EVIDENCE_LIMIT} units and their detection "
+                                  f"opportunity within [0, {logodds.KNOWLEDGE_SCALE}], got evidence up to "
+                                  f"{np.abs(e).max()} and opportunity in [{d.min()}, {d.max()}]")
+            return ev
         if ev.size and np.abs(ev.astype(np.int64)).max() > logodds.EVIDENCE_LIMIT:
             raise ConfigError(f"evidence must lie within +-{logodds.EVIDENCE_LIMIT} units (+-{logodds.EVIDENCE_LIMIT_NATS:g} "
                               f"nat per update, eq. 12 clamps there), got up to {np.abs(ev.astype(np.int64)).max()}: "
@@ -380,12 +404,25 @@ class Fusion(Stage):
             ls = self.local_size
             n_items = t.n_rows // 16
             return self._cached_kernel(self.runtime.queue, (-(-n_items // ls) * ls,), (ls,), wait_for=wait_for,
-                                       evidence=evidence, bricks=self._plan_device(plan)["bricks"], counts=t.counts,
+                                       bricks=self._plan_device(plan)["bricks"], counts=t.counts,
                                        row_start=t.row_start, first=t.first, extras=t.extras, n_items=n_items,
-                                       pool=self.grid.pool)
+                                       pool=self.grid.pool, **self._inputs(evidence, cached=True))
         none = self._no_table
         return self._launch(self._kernel, plan, evidence, wait_for=wait_for, counts=none[0], row_start=none[1],
                             first=none[2], extras=none[2])
+
+    def _inputs(self, evidence, cached=False):
+        """The kernels' evidence arguments: eq. 12's updates, or the node pairs and the knowledge
+        pool (the other model's get a placeholder); the still table keeps each entry's class."""
+        none = self._no_table[1]
+        if self.detstats:
+            out = dict(evidence=none, nodes=evidence, knowledge=self.grid.knowledge, looks=self.grid.looks,
+                       terrain_dz=self.terrain_dz)
+        else:
+            out = dict(evidence=evidence, nodes=self._no_table[2], knowledge=none, looks=none, terrain_dz=-math.inf)
+        if cached:
+            del out["terrain_dz"]
+        return out
 
     def _plan_device(self, plan):
         """The plan's arrays on the device (uploaded once per plan)."""
@@ -410,7 +447,7 @@ class Fusion(Stage):
         ls = self.local_size
         gsize = (-(-n_items // ls) * ls,)
         nx, ny, nz = self.grid.spec.shape
-        return kernel(rt.queue, gsize, (ls,), wait_for=wait_for, evidence=evidence, **self._plan_device(plan),
+        return kernel(rt.queue, gsize, (ls,), wait_for=wait_for, **self._inputs(evidence), **self._plan_device(plan),
                       voxel=self.grid.spec.voxel_m, inv_spacing=1.0 / self.bin_spacing_m,
                       first_bin=self.first_bin, last_bin=self.last_bin, nx=nx, ny=ny, nz=nz,
                       tan_half_az=math.tan(m.beamwidth_az_rad / 2), tan_half_el=math.tan(m.beamwidth_el_rad / 2),

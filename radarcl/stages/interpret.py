@@ -14,6 +14,7 @@ import numpy as np
 from radarcl import logodds, oracle
 from radarcl.config.stage_config import InterpretConfig
 from radarcl.errors import ConfigError
+from radarcl.sensor_model import N_CLASSES, NODE_SHAPE, NODES, BinModel, pack_nodes
 from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_group_size
 
 # Beams per work-group. One work-item walks one beam; any size is correct.
@@ -24,7 +25,7 @@ DEFAULT_LOCAL_SIZE = 16
 class InterpretResult:
     """Evidence and pulses of one frame; ``batch`` is the frame's beam shape."""
 
-    evidence: np.ndarray   # int32 (*batch, n_bins), logodds units
+    evidence: np.ndarray   # int32 (*batch, n_bins), logodds units; detstats: (*batch, n_bins, *NODE_SHAPE) node pairs
     pulses: np.ndarray     # int32 (*batch, max_pulses, 4): start, end, peak, wide; -1 unused
     n_pulses: np.ndarray   # int32 (*batch,): pulses found, may exceed max_pulses
     flags: np.ndarray      # uint8 (*batch,): oracle.FLAG_* bits
@@ -36,14 +37,19 @@ class InterpretResult:
 
 
 class Interpreter(Stage):
-    """A compiled eq. 12 plan for frames of one shape.
+    """A compiled interpreter plan for frames of one shape.
 
     runtime: a ``radarcl.cl.Runtime``; batch: the beam shape, e.g. (64, 4) or (400,);
     n_bins: bins per profile; bin_spacing_m: range between bins (bin j sits at j x spacing);
-    config: an ``InterpretConfig``; local_size: beams per work-group.
+    config: an ``InterpretConfig``; local_size: beams per work-group; bin_model: for
+    ``config.model == "detstats"``, the ``sensor_model.BinModel`` of this sensor, CFAR and voxel
+    (its tables go to the device once). With detstats the evidence is
+    (*batch, n_bins, *sensor_model.NODE_SHAPE) int32 node pairs (``sensor_model.unpack_nodes``),
+    equivalent to ``radarcl.oracle.interpret_detstats``: node values identical to the oracle's
+    until a beam's first pulse and within ``EVIDENCE_UNITS_TOL`` after it.
     """
 
-    def __init__(self, runtime, batch, n_bins, bin_spacing_m, config=None, *, local_size=None):
+    def __init__(self, runtime, batch, n_bins, bin_spacing_m, config=None, *, local_size=None, bin_model=None):
         self.runtime = runtime
         self.config = config if config is not None else InterpretConfig()
         if not isinstance(self.config, InterpretConfig):
@@ -55,19 +61,48 @@ class Interpreter(Stage):
         self.wide_bins = self.config.wide_bins(self.bin_spacing_m)
         self.e_high, self.e_low, self.e_high_far = (int(v) for v in logodds.to_fixed(
             [self.config.e_high, self.config.e_low, self.config.e_high_far]))
+        self.detstats = self.config.model == "detstats"
+        if self.detstats and not isinstance(bin_model, BinModel):
+            raise ConfigError("the detection-statistics interpreter needs its sensor_model.BinModel (bin_model=...)")
+        if self.detstats and bin_model.opportunity.shape != (self.n_bins, N_CLASSES, NODES):
+            raise ConfigError(f"the bin model has {bin_model.opportunity.shape[0]} bins; the profiles have {self.n_bins}")
+        self.bin_model = bin_model if self.detstats else None
         self._kernel = build(runtime, "interpret", dict(N_BINS=self.n_bins, MAX_PULSES=self.config.max_pulses,
-                                                        OCCLUSION=int(self.config.model == "occlusion")))["interpret"]
+                                                        OCCLUSION=int(self.config.model == "occlusion"),
+                                                        DETSTATS=int(self.detstats)))["interpret"]
         self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
         f32, u8, i32 = np.dtype(np.float32), np.dtype(np.uint8), np.dtype(np.int32)
         shape = self.input_shape
+        out_shape = (*shape, *NODE_SHAPE) if self.detstats else shape
         self._allocate([Port("profiles", shape, f32, "profiles"), Port("noise", shape, f32, "noise"),
                         Port("mask", shape, u8, "mask"), Port("flags_in", self.batch, u8, "flags")],
-                       [Port("evidence", shape, i32, "evidence"),
+                       [Port("evidence", out_shape, i32, "evidence nodes" if self.detstats else "evidence"),
                         Port("pulses", (*self.batch, self.config.max_pulses, 4), i32, "pulses"),
                         Port("n_pulses", self.batch, i32, "pulse counts"),
                         Port("flags_out", self.batch, u8, "flags")])
         self._no_flags = self.arrays["flags_in"].copy()     # all zero: "no flags from upstream"
         self._no_flags.fill(0)
+        self._tables = self._model_tables()
+
+    def _model_tables(self):
+        """The detstats tables on the device (placeholders for the other models)."""
+        import pyopencl.array as cla
+
+        q = self.runtime.queue
+        if not self.detstats:
+            one = cla.zeros(q, (1,), np.float32)
+            return dict(opportunity=one, miss=one, blocking=one, unblocked=cla.zeros(q, (1, 2), np.int32), c_det=1.0)
+        m = self.bin_model
+        first, last = self.first_bin, self.last_bin
+        unblocked = np.zeros((self.n_bins, N_CLASSES, NODES), np.int64), np.zeros((self.n_bins, N_CLASSES, NODES), np.int64)
+        if first <= last:
+            with np.errstate(divide="ignore"):
+                unblocked[0][first:last + 1] = logodds.to_fixed(np.log(m.miss[first:last + 1]))
+            unblocked[1][first:last + 1] = np.rint(m.opportunity[first:last + 1] * logodds.KNOWLEDGE_SCALE)
+        return dict(opportunity=cla.to_device(q, m.opportunity.astype(np.float32)),
+                    miss=cla.to_device(q, m.miss.astype(np.float32)),
+                    blocking=cla.to_device(q, m.blocking.astype(np.float32)),
+                    unblocked=cla.to_device(q, pack_nodes(*unblocked)), c_det=(1.0 - m.pfa) / m.pfa)
 
     @property
     def input_shape(self):
@@ -93,6 +128,7 @@ class Interpreter(Stage):
                             k_occ=float(self.config.k_occ), e_high=self.e_high, e_low=self.e_low,
                             first_bin=self.first_bin, last_bin=self.last_bin, wide_bins=self.wide_bins,
                             e_high_far=self.e_high_far, surface_decades=float(self.config.surface_db / 10.0),
+                            **self._tables,
                             n_beams=self.n_beams, evidence=a["evidence"], pulses=a["pulses"],
                             n_pulses=a["n_pulses"], flags_out=a["flags_out"])
 

@@ -1,0 +1,356 @@
+"""The detection-statistics sensor model (issue 27): evidence from the radar's own detection
+statistics, a knowledge channel, and correlated evidence counted once.
+
+For a voxel v that a beam covers, the update is the log-likelihood ratio of what the beam
+observed in v's range bin, occupied against free:
+
+    no detection:  e = ln((1 - P_v) / (1 - D))          detection:  e = ln(P_v / D)
+
+with P_v = D + (1 - D) delta_v the probability that the bin detects when v holds a typical target,
+D the probability that it detects when v is free, and delta_v the voxel's *detection opportunity*:
+
+    delta_v = tau_j (P_d(S_j g(rho2)) - P_fa) / (1 - P_fa)
+
+- P_d(S) is the CFAR's Swerling-1 detection probability at SNR S, P_fa(alpha / (1 + S)) for every
+  kind (``cfar_theory``), with the false-alarm rate the pipeline *achieves*: x4 zero padding and
+  the Hann window correlate the training cells, so a 1e-3 design CA-CFAR alarms about 8.5e-3 of
+  the time (``cfar_theory.achieved_statistics``);
+- S_j is the SNR of a typical target at bin j's range on the beam's axis (the radar equation of
+  ``scene.observe``: a 1 m^2 target at 10 m gives ``snr_1m2_at_10m_db``), g(rho2) = 4^-kappa rho2
+  the two-way gain at the voxel's offset from the axis (kappa < 1 for a target wider than the
+  footprint);
+- tau_j = exp(-X_j) the fraction of the beam not yet blocked by nearer echoes: X_j sums the
+  energy of the pulses that ended before bin j, in units of an opaque beam-filling surface's;
+- D = P_fa on a bin where nothing else is known, and close to 1 on the flanks of a pulse whose
+  peak lies elsewhere (its spread explains the detection whether or not v is occupied).
+
+So beam edges and far ranges give weak free evidence, shadows stay at 0 and a strong echo gives
+strong evidence. delta_v itself is the knowledge channel: the looks in which an object at v would
+have been seen; summed per voxel it tells "never observed" (0) from "observed, undecided".
+
+Correlated evidence: looks from one viewpoint share speckle and model error, so they are not
+independent. The grid keeps exact integer sums (order-independent), and the number of looks n;
+the reading divides the evidence E of a voxel looked at more than ``look_limit`` times by
+n / look_limit (``read_log_odds``): at most that many looks' worth of mean evidence, however
+many scans.
+
+Node tables (what the interpreter writes and the fusion reads, ``pack_nodes``): per (beam, bin)
+the update and delta at rho2 = 0, 1/4, ..., 1, packed as SEGMENTS int2 pairs of 16-bit halves;
+the fusion interpolates them in integers (kernels/fusion.cl, DETSTATS; ``node_lerp`` here).
+"""
+
+import functools
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from radarcl import cfar_theory, logodds
+from radarcl.errors import ConfigError, ShapeError
+
+NODES = 5                        # node values over rho2 = 0, 1/4, ..., 1
+SEGMENTS = NODES - 1
+N_CLASSES = 2                    # target classes (``CLASSES``): upright, terrain
+NODE_SHAPE = (N_CLASSES, SEGMENTS, 2)   # per (beam, bin): int2 (evidence pair, opportunity pair) per class, segment
+Q_ONE = 1 << 14                  # rho2 = 1 in the fusion's quantisation steps (2^12 per segment)
+
+
+def pack_nodes(evidence, opportunity):
+    """(..., NODES) int evidence [logodds units] and detection opportunity [KNOWLEDGE_SCALE
+    units] -> (..., SEGMENTS, 2) int32: per segment s, (e_s | e_{s+1} << 16, d_s | d_{s+1} << 16)
+    (the low half as 16 bits, the high half signed)."""
+    e = np.asarray(evidence, np.int64)
+    d = np.asarray(opportunity, np.int64)
+    if e.shape[-1:] != (NODES,) or d.shape != e.shape:
+        raise ShapeError(f"expected evidence and opportunity nodes (..., {NODES}), got {e.shape} and {d.shape}")
+    if np.abs(e).max(initial=0) > logodds.EVIDENCE_LIMIT or d.min(initial=0) < 0 \
+            or d.max(initial=0) > logodds.KNOWLEDGE_SCALE:
+        raise ConfigError(f"node values out of range: evidence within +-{logodds.EVIDENCE_LIMIT}, opportunity within "
+                          f"[0, {logodds.KNOWLEDGE_SCALE}] units")
+    out = np.empty(e.shape[:-1] + (SEGMENTS, 2), np.int32)
+    for c, v in enumerate((e, d)):
+        word = (v[..., :-1] & 0xFFFF) | (v[..., 1:] << 16)
+        out[..., c] = ((word + (1 << 31)) % (1 << 32) - (1 << 31)).astype(np.int32)
+    return out
+
+
+def unpack_nodes(packed):
+    """The inverse of ``pack_nodes``: (evidence, opportunity), each (..., NODES) int64."""
+    p = np.asarray(packed).astype(np.int64)
+    if p.shape[-2:] != (SEGMENTS, 2):
+        raise ShapeError(f"expected packed nodes (..., {SEGMENTS}, 2), got {p.shape}")
+    out = []
+    for c in range(2):
+        w = p[..., c]
+        lo = ((w & 0xFFFF) ^ 0x8000) - 0x8000
+        hi = w >> 16
+        out.append(np.concatenate([lo, hi[..., -1:]], axis=-1))
+    return tuple(out)
+
+
+def quantised_rho2(rho2):
+    """rho2 in the fusion's steps: floor(min(rho2, 1) x 2^14), int64 (float64 here, float32 in
+    the kernel: they agree except where rho2 x 2^14 lies within float32 rounding of an integer)."""
+    return np.floor(np.minimum(np.asarray(rho2, np.float64), 1.0) * Q_ONE).astype(np.int64)
+
+
+def node_lerp(nodes, q):
+    """The fusion's interpolation of node values (..., NODES) int at quantised rho2 ``q``
+    (``quantised_rho2``), in integers: e_s + ((e_{s+1} - e_s) f + 2048) >> 12, s = q >> 12."""
+    nodes = np.asarray(nodes, np.int64)
+    q = np.asarray(q, np.int64)
+    seg = np.minimum(q >> 12, SEGMENTS - 1)
+    f = q - (seg << 12)
+    lo = np.take_along_axis(nodes, seg[..., None], axis=-1)[..., 0]
+    hi = np.take_along_axis(nodes, seg[..., None] + 1, axis=-1)[..., 0]
+    return lo + (((hi - lo) * f + 2048) >> 12)
+
+
+# -- the physical parameters ---------------------------------------------------------------------------------------
+# Each key's physical range: a value outside is refused with the key, the value and the range.
+RANGES = {
+    "snr_1m2_at_10m_db": (0.0, 120.0, "dB"),      # the sensor's sensitivity: SNR of 1 m^2 at 10 m on the axis
+    "target_gamma_db": (-40.0, 10.0, "dB"),       # reflectivity of a typical occupied voxel's (upright) surface
+    "target_spread_db": (0.0, 15.0, "dB"),        # log-normal spread of its mean RCS
+    "target_extent_m": (0.01, 10.0, "m"),         # side of the typical target's patch
+    "terrain_gamma_db": (-40.0, 10.0, "dB"),      # reflectivity of the terrain, seen at grazing incidence
+    "terrain_band_m": (0.0, 10.0, "m"),           # voxels whose centre lies below the ground plane + this are terrain
+    "block_gamma_db": (-40.0, 10.0, "dB"),        # an echo blocks the beam as a surface of this reflectivity
+    "look_limit": (0.5, 1e4, "looks"),            # correlated evidence: at most this many looks' worth
+    "prior_nats": (-10.0, 0.0, "nat"),            # log-odds of an occupied voxel before any look
+    "prior_looks": (0.01, 100.0, "looks"),        # the knowledge at which the prior applies in full
+    "false_alarm": (0.0, 0.5, ""),                # a measured false-alarm rate (0: the CFAR's statistics)
+}
+GROUND_RANGE = (0.0, 1000.0, "m")                 # ground_below_m: the sensor's height above the ground plane (0: none)
+DEFAULT_SNR_DB = 50.0                             # the sensitivity assumed for a profile that gives none
+READING = ("look_limit", "prior_nats", "prior_looks")   # what a map keeps to be read (``read_log_odds``)
+
+
+@dataclass(frozen=True)
+class ModelParams:
+    """The physical parameters of the detection-statistics model (``RANGES``; configuration keys
+    ``sensor_model.<name>``; the sensor's ``[sensitivity] snr_1m2_at_10m_db`` for the first).
+    ``ground_below_m``: the sensor's height above the ground plane (0: no terrain class, e.g. a
+    spinning radar's one horizontal beam)."""
+
+    snr_1m2_at_10m_db: float = DEFAULT_SNR_DB
+    # the typical target and the terrain: `radarcl calibrate --model detstats --voxel 0.4` (the
+    # likelihood of 216,766 looks at the occupied voxels of training scenes 101-104; jackknife SEs
+    # 8.5 dB, 0.75 dB, 0.08 m, 2.6 dB: README). A simulator's world: a real radar's may differ.
+    target_gamma_db: float = -20.0
+    target_spread_db: float = 10.0
+    target_extent_m: float = 0.4
+    terrain_gamma_db: float = -24.0
+    terrain_band_m: float = 0.3
+    block_gamma_db: float = -20.0
+    look_limit: float = 4.0
+    prior_nats: float = 0.0
+    prior_looks: float = 0.5
+    false_alarm: float = 0.0
+    ground_below_m: float = 0.0
+
+    def __post_init__(self):
+        for name, (lo, hi, unit) in RANGES.items():
+            check_range(f"sensor_model.{name}", getattr(self, name), lo, hi, unit)
+        check_range("sensor_model.ground_below_m", self.ground_below_m, *GROUND_RANGE)
+
+    @classmethod
+    def of(cls, values):
+        """From configuration values {"sensor_model.<name>": value} (what is missing: the defaults)."""
+        names = [f.name for f in fields(cls)]
+        return cls(**{n: values[f"sensor_model.{n}"] for n in names if f"sensor_model.{n}" in values})
+
+    @property
+    def reading(self):
+        """The parameters a map is read with (``read_log_odds``), as a dict."""
+        return {k: float(getattr(self, k)) for k in READING}
+
+
+DEFAULTS = {f.name: f.default for f in fields(ModelParams)}
+
+
+def terrain_dz(params):
+    """The fusion's terrain test: a voxel whose centre lies below its beam's origin by more than
+    ground_below_m - terrain_band_m is terrain (-inf without a ground plane)."""
+    return params.terrain_band_m - params.ground_below_m if params.ground_below_m else -math.inf
+
+
+def check_range(key, value, lo, hi, unit=""):
+    """``value`` as a float, or ConfigError naming the key, the value and its physical range."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+            or not math.isfinite(value) or not lo <= value <= hi:
+        raise ConfigError(f"{key} = {value!r} is outside its physical range [{lo:g}, {hi:g}]{' ' + unit if unit else ''}")
+    return float(value)
+
+
+# -- P_d of the CFAR against the SNR, with the prior over the target's RCS ------------------------------------------
+TABLE_X = (-7.0, 16.0)           # ln S from -30 to 70 dB
+TABLE_POINTS = 1024
+HERMITE_NODES = 32               # Gauss-Hermite nodes over the log-normal RCS spread
+HANN_ENBW = 1.5                  # equivalent noise bandwidth of the Hann window [bins of the unpadded FFT]
+
+
+def hann(n):
+    """The periodic Hann window (``oracle.window_coefficients("hann", n)``, which sits a layer up)."""
+    return 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)
+
+
+@dataclass(frozen=True)
+class DetectionTable:
+    """delta(x) = (P_d(e^x) - P_fa) / (1 - P_fa) on x = ln S (``TABLE_X``, ``TABLE_POINTS``
+    points): the CFAR's Swerling-1 P_d averaged over a log-normal mean RCS of ``spread_db``, with
+    the false-alarm rate the pipeline achieves (``pfa``: cells correlated by ``oversampling``
+    bins per resolution cell of a Hann-windowed FFT; ``oversampling`` None: independent cells)."""
+
+    x: np.ndarray
+    delta: np.ndarray
+    pfa: float
+
+    @classmethod
+    def build(cls, kind, factor, n_train, rank=None, oversampling=4.0, spread_db=0.0):
+        """The table of a CFAR (``CfarConfig``'s kind, factor, n_train, rank); built once per
+        set of arguments (``_detection_table``)."""
+        return _detection_table(kind, float(factor), int(n_train), rank, oversampling, float(spread_db))
+
+    def __call__(self, ln_snr):
+        """delta at ln S (array), linear in x between points; 0 below the table, its last value above."""
+        return np.interp(ln_snr, self.x, self.delta, left=0.0, right=float(self.delta[-1]))
+
+
+@functools.lru_cache(maxsize=32)
+def _detection_table(kind, factor, n_train, rank, oversampling, spread_db):
+    corr = None if oversampling is None else cfar_theory.training_correlation(
+        hann(256), oversampling, _guard_for(oversampling), n_train // 2)
+    x = np.linspace(*TABLE_X, TABLE_POINTS)
+    # P_d of one SNR on a wider grid (the spread reaches 3.4 of its widths either side), then the
+    # log-normal average over Gauss-Hermite nodes by interpolation in ln S: the correlated
+    # kinds' Monte Carlo is evaluated at TABLE_POINTS SNRs, not at every node of every point
+    z, w = np.polynomial.hermite_e.hermegauss(HERMITE_NODES)
+    w = w / w.sum()
+    reach = spread_db * math.log(10.0) / 10.0 * float(np.abs(z).max())
+    base = np.linspace(TABLE_X[0] - reach, TABLE_X[1] + reach, TABLE_POINTS + int(TABLE_POINTS * 2 * reach / 23.0))
+    curve = cfar_theory.detection_curve(kind, factor, n_train, np.exp(base), rank, corr)
+    ln_s = x[:, None] + spread_db * math.log(10.0) / 10.0 * z[None, :]
+    pd = (np.interp(ln_s, base, curve) * w).sum(axis=1)
+    pfa = float(cfar_theory.detection_curve(kind, factor, n_train, [0.0], rank, corr)[0])
+    return DetectionTable(x, np.clip((pd - pfa) / (1.0 - pfa), 0.0, 1.0), pfa)
+
+
+def _guard_for(oversampling):
+    # The guard only has to keep the cell under test out of the training cells' correlation
+    # (two resolution cells); the training cells' own correlation does not depend on it.
+    return int(math.ceil(2 * oversampling))
+
+
+# -- the radar equation per bin ---------------------------------------------------------------------------------------
+R_REF_M = 10.0
+CLASSES = ("upright", "terrain")  # the typical target of a voxel: chosen per voxel by its height (kernels/fusion.cl)
+assert len(CLASSES) == N_CLASSES
+
+
+def beam_solid_angle(half_az_rad, half_el_rad):
+    """Effective solid angle of the two-way pattern 4^-rho2 over the plane: pi h_az h_el / ln 4 [sr]."""
+    return math.pi * half_az_rad * half_el_rad / math.log(4.0)
+
+
+def upright_snr(params, ranges_m, half_az_rad, half_el_rad):
+    """Per range (array [m]): (ln S, kappa) of the typical upright target on the beam's axis: a
+    square patch of side ``target_extent_m`` and reflectivity ``target_gamma_db`` seen through the
+    two-way Gaussian pattern. Per axis, a patch of angular std a = extent / (r sqrt 12) against
+    the pattern's std s = h / sqrt(2 ln 4) keeps s / sqrt(s^2 + a^2) of a point's gain and falls
+    off the axis as 4^-(kappa rho2), kappa = s^2 / (s^2 + a^2) (a point: kappa 1; a wall wider
+    than the footprint: kappa -> 0, its echo no longer depends on where in the beam v lies).
+    kappa is the mean of the two axes' (the fusion knows rho2, not its parts)."""
+    r = np.maximum(np.asarray(ranges_m, np.float64), 1e-3)
+    s1 = 10.0 ** (params.snr_1m2_at_10m_db / 10.0)
+    gamma = 10.0 ** (params.target_gamma_db / 10.0)
+    ell = params.target_extent_m
+    gain, kappa = 1.0, 0.0
+    for h in (half_az_rad, half_el_rad):
+        s2 = h * h / (2.0 * math.log(4.0))
+        a2 = (ell / r) ** 2 / 12.0
+        gain = gain * np.sqrt(s2 / (s2 + a2))
+        kappa = kappa + 0.5 * s2 / (s2 + a2)
+    return np.log(s1 * gamma * ell * ell * gain * (R_REF_M / r) ** 4), kappa
+
+
+def terrain_snr(params, ranges_m, voxel_m):
+    """Per range: ln S of a voxel's patch of terrain (``terrain_gamma_db``, horizontal area
+    voxel^2) seen at the grazing angle psi from ``ground_below_m`` (sin psi = h / r): a point in
+    angle (kappa 1). -inf everywhere without a ground plane (``ground_below_m`` 0)."""
+    r = np.maximum(np.asarray(ranges_m, np.float64), 1e-3)
+    if not params.ground_below_m:
+        return np.full(r.shape, -np.inf)
+    s1 = 10.0 ** (params.snr_1m2_at_10m_db / 10.0)
+    gamma = 10.0 ** (params.terrain_gamma_db / 10.0)
+    grazing = np.minimum(1.0, params.ground_below_m / r)
+    return np.log(s1 * gamma * voxel_m * voxel_m * grazing * (R_REF_M / r) ** 4)
+
+
+def block_snr(params, ranges_m, half_az_rad, half_el_rad):
+    """Per range: the SNR of an opaque beam-filling surface of ``block_gamma_db``: the energy
+    that blocks the whole beam (the unit of the occlusion walk)."""
+    r = np.maximum(np.asarray(ranges_m, np.float64), 1e-3)
+    s1 = 10.0 ** (params.snr_1m2_at_10m_db / 10.0)
+    return s1 * 10.0 ** (params.block_gamma_db / 10.0) * r * r * beam_solid_angle(half_az_rad, half_el_rad) \
+        * (R_REF_M / r) ** 4
+
+
+@dataclass(frozen=True)
+class BinModel:
+    """What the interpreter needs of the model for one sensor, CFAR, range grid and voxel size:
+    ``opportunity`` (n_bins, CLASSES, NODES) delta at tau = 1 (no blocking yet) per bin, class and
+    node rho2 = k / 4; ``blocking`` (n_bins,) 1 / (S_block x noise_bins): a pulse's summed
+    (r/n - 1)+ times the blocking at its peak is its share of an opaque beam-filling surface
+    (``noise_bins``, the bins one echo's power spreads over: the window's equivalent noise
+    bandwidth times the bins per resolution cell, 6 for the paper's Hann window padded x4);
+    ``miss`` 1 - opportunity (kept apart: in float32 1 - delta would lose the digits that matter
+    when delta is close to 1); ``pfa`` the achieved false-alarm rate."""
+
+    opportunity: np.ndarray
+    miss: np.ndarray
+    blocking: np.ndarray
+    pfa: float
+
+    @classmethod
+    def build(cls, params, cfar, n_bins, bin_spacing_m, oversampling, half_az_rad, half_el_rad, voxel_m):
+        """For ``params`` (``ModelParams``), a ``CfarConfig``, bins j at j x ``bin_spacing_m``,
+        ``oversampling`` bins per resolution cell (None: treat the cells as independent), the
+        beam's half-power half-widths [rad] and the grid's voxel [m]."""
+        table = DetectionTable.build(cfar.kind, cfar.alpha, cfar.n_train, cfar.rank, oversampling,
+                                     params.target_spread_db)
+        ranges = np.arange(n_bins) * float(bin_spacing_m)
+        t = np.arange(NODES) / (NODES - 1) * math.log(4.0)
+        ln_up, kappa = upright_snr(params, ranges, half_az_rad, half_el_rad)
+        ln_ter = terrain_snr(params, ranges, voxel_m)
+        opportunity = np.stack([table(ln_up[:, None] - kappa[:, None] * t[None, :]),
+                                table(ln_ter[:, None] - t[None, :])], axis=1)
+        cells = 1.0 if oversampling is None else float(oversampling)
+        blocking = 1.0 / (block_snr(params, ranges, half_az_rad, half_el_rad) * HANN_ENBW * cells)
+        pfa = table.pfa
+        if params.false_alarm > pfa:
+            # a measured rate above the statistics' (profiles whose noise is not exponential, clutter):
+            # the same P_d, less of it beyond what noise alone gives
+            pd = table.pfa + (1.0 - table.pfa) * opportunity
+            pfa = params.false_alarm
+            opportunity = np.clip((pd - pfa) / (1.0 - pfa), 0.0, 1.0)
+        return cls(opportunity, 1.0 - opportunity, blocking, pfa)
+
+
+# -- the reading: correlated evidence and the prior ---------------------------------------------------------------------
+def read_log_odds(evidence, knowledge, looks, reading):
+    """Log-odds [nat] of stored sums, order-independent (a function of the exact integer sums):
+
+        L = E / max(1, n / look_limit) + prior_nats x min(1, K / prior_looks)
+
+    with E = ``evidence`` [logodds units], K = ``knowledge`` [KNOWLEDGE_SCALE units] in looks and
+    n = ``looks`` the number of looks with an opportunity, ``reading`` a dict of ``READING``.
+    Correlated looks (one viewpoint, one speckle, a partial blocker seen again) count at most
+    ``look_limit`` looks' worth of their mean evidence, however many scans; the prior applies
+    where the radar looked, so a voxel never observed (K = 0) reads 0: unknown."""
+    e = np.asarray(evidence, np.float64) / logodds.SCALE
+    k = np.asarray(knowledge, np.float64) / logodds.KNOWLEDGE_SCALE
+    out = e / np.maximum(1.0, np.asarray(looks, np.float64) / float(reading["look_limit"]))
+    if reading.get("prior_nats", 0.0):
+        out = out + float(reading["prior_nats"]) * np.minimum(1.0, k / float(reading["prior_looks"]))
+    return out
