@@ -68,7 +68,7 @@ def test_newer_or_foreign_stores_are_refused(tmp_path):
     manifest = json.loads((path / "manifest.json").read_text())
     manifest["format_version"] = 99
     (path / "manifest.json").write_text(json.dumps(manifest))
-    with pytest.raises(FrameFormatError, match="written in store format 99; this radarcl reads formats 1 to 2"):
+    with pytest.raises(FrameFormatError, match="written in store format 99; this radarcl reads formats 1 to 3"):
         read(path)
     (path / "manifest.json").write_text("{ torn")
     with pytest.raises(FrameFormatError, match="manifest.json is not readable"):

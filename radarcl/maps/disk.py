@@ -10,7 +10,6 @@ store?".
 import logging
 from pathlib import Path
 
-import numpy as np
 
 from radarcl.errors import FrameFormatError, ShapeError
 from radarcl.grid import EvidenceGrid
@@ -142,13 +141,9 @@ def save_grid(grid, path, poses=None):
 
 def load_grid(runtime, path):
     """An ``EvidenceGrid`` on ``runtime``'s device holding the map file or store at ``path``."""
-    import pyopencl as cl
-
     spec, keys, data = read(path)
     grid = EvidenceGrid(runtime, spec)
     slots = grid.allocate(keys)
     if len(keys):
-        ordered = np.empty_like(data)
-        ordered[slots] = data
-        cl.enqueue_copy(runtime.queue, grid.pool, ordered, is_blocking=True)
+        grid.write_slots(slots, data)
     return grid

@@ -1,7 +1,8 @@
 """The map as one ``.npz`` file: the grid spec, the allocated bricks, the sensor's poses.
 
-Members: ``version`` (``FILE_VERSION``), ``origin_m``, ``voxel_m``, ``shape`` (the ``GridSpec``),
-``keys`` (n, 3) int32 bricks (bx, by, bz), ``data`` (n, 8, 8, 8) int32 [z, y, x] in
+Members: ``version`` (1; 2 for planar bricks, which adds ``brick_z``), ``origin_m``, ``voxel_m``,
+``shape`` (the ``GridSpec``), ``keys`` (n, 3) int32 bricks (bx, by, bz), ``data`` (n, *brick) int32
+[z, y, x] (brick (8, 8, 8), or (1, 8, 8) planar) in
 ``radarcl.logodds`` units, optional ``poses`` (m, 4, 4) float64 and ``meta`` (a JSON object).
 Written through a temporary file renamed over the target, so a reader (``radarcl view --live``)
 sees the old map or the new one, never half of one. Read member by member with every size
@@ -17,7 +18,8 @@ from radarcl.errors import FrameFormatError, ShapeError
 from radarcl.grid import BRICK, GRID_LIMIT, GridSpec
 from radarcl.io.files import atomic, safe_npz
 
-FILE_VERSION = 1
+FILE_VERSION = 2            # the newest this radarcl reads; a cubic map is still written as 1
+PLANAR_VERSION = 2          # adds brick_z: an older reader refuses such a file naming both versions
 MAX_POSES = 10000          # a map keeps at most this many sensor poses (evenly subsampled)
 
 
@@ -27,18 +29,21 @@ def recognises(path):
 
 
 def write(path, spec, keys, data, poses=None, meta=None):
-    """A map file: ``spec``, the bricks (``keys`` (n, 3) int32, ``data`` (n, 8, 8, 8) int32),
+    """A map file: ``spec``, the bricks (``keys`` (n, 3) int32, ``data`` (n, *brick) int32),
     the sensor's ``poses`` and ``meta`` (a JSON-able dict) when given, written atomically."""
     extra = {} if poses is None else dict(poses=check_trajectory(poses))
+    planar = spec.brick_z != BRICK
+    if planar:
+        extra["brick_z"] = spec.brick_z
     if meta:
         extra["meta"] = np.str_(json.dumps(meta))
     with atomic(path) as tmp, open(tmp, "wb") as f:
-        np.savez_compressed(f, version=FILE_VERSION, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
+        np.savez_compressed(f, version=PLANAR_VERSION if planar else 1, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
                             shape=np.asarray(spec.shape), keys=keys, data=data, **extra)
 
 
 def read(path):
-    """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32) of a map file. A file that is not a
+    """(spec, keys (n, 3) int32, data (n, *brick) int32) of a map file. A file that is not a
     radarcl map raises ``FrameFormatError`` saying what was wrong; array sizes are checked
     against their headers and the memory budget before they are read."""
     if not Path(path).is_file():
@@ -51,23 +56,26 @@ def read(path):
                                    f"(expected an npz radarcl wrote, e.g. radarcl demo's map.npz)")
         try:
             version = int(f["version"])
-            if version != FILE_VERSION:
-                raise FrameFormatError(f"{path} has grid file version {version}, this radarcl reads {FILE_VERSION}")
-            spec = GridSpec(tuple(f["origin_m"]), float(f["voxel_m"]), tuple(int(n) for n in f["shape"]))
+            if not 1 <= version <= FILE_VERSION:
+                raise FrameFormatError(f"{path} has grid file version {version}, this radarcl reads versions 1 to "
+                                       f"{FILE_VERSION}" + (": update radarcl" if version > FILE_VERSION else ""))
+            brick_z = int(f["brick_z"]) if version >= PLANAR_VERSION and "brick_z" in f.files else BRICK
+            spec = GridSpec(tuple(f["origin_m"]), float(f["voxel_m"]), tuple(int(n) for n in f["shape"]), brick_z)
         except (TypeError, ValueError) as exc:
             if isinstance(exc, FrameFormatError):
                 raise
             raise FrameFormatError(f"{path}: a bad grid description ({exc})") from exc
         n_keys = f.header("keys")[0]
         n_data = f.header("data")[0]
-        if len(n_keys) != 2 or n_keys[1:] != (3,) or n_data != (n_keys[0], BRICK, BRICK, BRICK):
-            raise FrameFormatError(f"{path}: expected brick keys (n, 3) and bricks (n, 8, 8, 8), got {n_keys} "
-                                   f"and {n_data}")
+        if len(n_keys) != 2 or n_keys[1:] != (3,) or n_data != (n_keys[0], *spec.brick_data_shape):
+            raise FrameFormatError(f"{path}: expected brick keys (n, 3) and bricks (n, "
+                                   f"{', '.join(map(str, spec.brick_data_shape))}), got {n_keys} and {n_data}")
         if n_keys[0] > int(np.prod(spec.brick_shape, dtype=np.int64)):
             raise FrameFormatError(f"{path}: {n_keys[0]} bricks in a grid of only {spec.brick_shape} bricks")
         keys, data = f["keys"], f["data"]
     if data.dtype != np.int32:
-        raise FrameFormatError(f"{path}: expected bricks ({len(keys)}, 8, 8, 8) int32, got {data.shape} {data.dtype}")
+        raise FrameFormatError(f"{path}: expected bricks ({len(keys)}, {', '.join(map(str, spec.brick_data_shape))}) "
+                               f"int32, got {data.shape} {data.dtype}")
     if keys.dtype != np.int32:
         raise FrameFormatError(f"{path}: expected brick keys (n, 3) int32, got {keys.shape} {keys.dtype}")
     if len(keys) and ((keys < 0).any() or (keys >= np.asarray(spec.brick_shape)).any()):

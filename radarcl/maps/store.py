@@ -8,7 +8,8 @@ modified in place is torn by a killed writer.
 
 Layout of ``map.rcmap/`` (any directory name):
   zarr.json               the zarr group, its attribute "radarcl" marking it as a store
-  segment_<k>/            (n, 8, 8, 8) int32 bricks written by one save; never modified again
+  segment_<k>/            (n, *brick) int32 bricks written by one save (brick (8, 8, 8), or (1, 8, 8)
+                          for a planar grid: format 3); never modified again
   index_<v>/              (n_bricks, 5) int32: bx, by, bz, segment, row of every brick in version v
   manifest.json           written last (temporary file + rename): the version, its index, its
                           segments, the grid spec, a CRC-32 of the index and of each chunk of
@@ -44,13 +45,14 @@ import numpy as np
 
 from radarcl import __version__
 from radarcl.errors import ConfigError, FrameFormatError, RadarclError
-from radarcl.grid import BRICK, GRID_LIMIT, GridSpec
+from radarcl.grid import BRICK, GridSpec
 from radarcl.maps.npz import check_trajectory
+from radarcl.maps.store_verify import CHUNK_BRICKS, _Arrays, _check_index, _Lost, _read_index, _read_segment
 
 log = logging.getLogger(__name__)
 FORMAT = "radarcl-map-store"
-FORMAT_VERSION = 2          # 2: a CRC-32 per chunk of every segment and of the index; 1 is still read
-CHUNK_BRICKS = 256
+FORMAT_VERSION = 3          # 2: a CRC-32 per chunk of every segment and of the index; 1 is still read
+PLANAR_FORMAT = 3           # the grid names its brick depth (planar bricks); cubic maps are still written as 2
 COMPACT_SEGMENTS = 32
 MANIFEST = "manifest.json"
 _NAME = re.compile(r"^index_[0-9]{1,9}$")
@@ -152,7 +154,8 @@ def check_manifest(path, m):
         bad(f"segments {str(segments)[:80]} is not a list of distinct segment numbers")
     grid = m.get("grid")
     try:
-        m["spec"] = GridSpec(tuple(grid["origin_m"]), grid["voxel_m"], tuple(grid["shape"]))
+        m["spec"] = GridSpec(tuple(grid["origin_m"]), grid["voxel_m"], tuple(grid["shape"]),
+                             grid.get("brick_z", 8) if m["format_version"] >= PLANAR_FORMAT else 8)
     except (TypeError, KeyError, ValueError, RadarclError) as exc:
         bad(f"grid {str(grid)[:120]} does not describe a grid ({exc})")
     if not isinstance(m.get("bricks"), int) or isinstance(m["bricks"], bool) or m["bricks"] < 0:
@@ -170,7 +173,7 @@ def check_manifest(path, m):
 
 
 def read(path, salvage=False):
-    """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32, manifest) of the last complete save,
+    """(spec, keys (n, 3) int32, data (n, *brick) int32, manifest) of the last complete save,
     verified before any byte reaches the map: the manifest's entries, the index (dtype, shape,
     CRC-32, keys unique and inside the grid, each naming a listed segment and a row it holds),
     every listed segment (present, int32 bricks, each chunk's CRC-32, values within the grid's
@@ -191,7 +194,7 @@ def read(path, salvage=False):
     index = _read_index(group, path, manifest)
     lost = _Lost(index[:, :3])
     _check_index(index, spec, manifest, lost)
-    data = np.zeros((len(index), BRICK, BRICK, BRICK), np.int32)      # never uninitialised memory
+    data = np.zeros((len(index), *spec.brick_data_shape), np.int32)      # never uninitialised memory
     filled = np.zeros(len(index), bool)
     for segment in manifest["segments"]:
         _read_segment(group, path, manifest, segment, index, data, filled, lost)
@@ -208,112 +211,6 @@ def read(path, salvage=False):
     unsealed = [] if manifest["sealed"] else [dict(reason=UNSEALED, keys=[])]
     manifest["incomplete"], manifest["lost"] = stray, unsealed + lost.entries
     return spec, np.ascontiguousarray(index[keep, :3], dtype=np.int32), data[keep], manifest
-
-
-class _Arrays:
-    """The store's arrays by name, each opened from its own directory (``group[name]`` would need
-    the group's zarr.json, which holds nothing the manifest does not)."""
-
-    def __init__(self, zarr, path):
-        self.zarr, self.path = zarr, path
-
-    def __getitem__(self, name):
-        return self.zarr.open_array(str(self.path / name), mode="r")
-
-
-class _Lost:
-    """Bricks (rows of the index) a damaged store cannot give, each with the reason."""
-
-    def __init__(self, keys):
-        self.keys, self.mask, self.entries = keys, np.zeros(len(keys), bool), []
-
-    def add(self, rows, reason):
-        rows = np.flatnonzero(rows) if np.asarray(rows).dtype == bool else np.asarray(rows, np.int64)
-        rows = rows[~self.mask[rows]]
-        if len(rows):
-            self.mask[rows] = True
-            self.entries.append(dict(reason=reason, keys=self.keys[rows].tolist()))
-
-    def summary(self, n):
-        lost = int(self.mask.sum())
-        reasons = "; ".join(f"{e['reason']} ({len(e['keys'])} bricks)" for e in self.entries[:4])
-        more = f"; and {len(self.entries) - 4} more" if len(self.entries) > 4 else ""
-        return f"{lost} of {n} bricks cannot be read: {reasons}{more}"
-
-
-def _read_index(group, path, manifest):
-    name = manifest["index"]
-    try:
-        stored = group[name]
-        ok = stored.dtype == np.int32 and stored.ndim == 2 and stored.shape[1] == 5
-        index = stored[:] if ok else None
-    except Exception as exc:
-        raise FrameFormatError(f"{path}: its index {name} cannot be read ({type(exc).__name__}: {exc}); "
-                               "the store is damaged") from exc
-    if index is None:
-        raise FrameFormatError(f"{path}: its index {name} holds {stored.shape} {stored.dtype}, expected (n, 5) int32")
-    if len(index) != manifest["bricks"]:
-        raise FrameFormatError(f"{path}: its index {name} lists {len(index)} bricks, the manifest {manifest['bricks']}")
-    if manifest["format_version"] >= 2 and zlib.crc32(np.ascontiguousarray(index, "<i4")) != manifest["checksums"]["index"]:
-        raise FrameFormatError(f"{path}: its index {name} does not match its checksum; the store is damaged "
-                               "and which brick is where cannot be known")
-    return index
-
-
-def _check_index(index, spec, manifest, lost):
-    keys = index[:, :3].astype(np.int64)
-    lost.add(((keys < 0) | (keys >= np.asarray(spec.brick_shape))).any(axis=1), "a key outside the grid")
-    ids = (keys[:, 2] << 42) | (keys[:, 1] << 21) | (keys[:, 0] & ((1 << 21) - 1))
-    _, inverse, counts = np.unique(ids, return_inverse=True, return_counts=True)
-    lost.add(counts[inverse] > 1, "a key listed more than once")
-    listed = np.isin(index[:, 3], manifest["segments"])
-    lost.add(~listed, "a segment the manifest does not list")
-    where = index[:, 3].astype(np.int64) << 32 | (index[:, 4].astype(np.int64) & 0xFFFFFFFF)
-    _, inverse, counts = np.unique(where, return_inverse=True, return_counts=True)
-    lost.add(counts[inverse] > 1, "a stored brick named by two keys")
-
-
-def _read_segment(group, path, manifest, segment, index, data, filled, lost):
-    """Copy the bricks of ``segment`` that the index names into ``data``, chunk by chunk, each
-    chunk checked (CRC-32 in format 2, saturation always); what cannot be read goes to ``lost``."""
-    uses = np.flatnonzero(index[:, 3] == segment)
-    if not len(uses):
-        return
-    rows = index[uses, 4].astype(np.int64)
-    entry = manifest["checksums"]["segments"][str(segment)] if manifest["format_version"] >= 2 else None
-    name = f"segment_{segment}"
-    try:
-        stored = group[name]
-        shape, dtype = stored.shape, stored.dtype
-    except Exception:
-        lost.add(uses, f"{name} is missing")
-        return
-    if dtype != np.int32 or len(shape) != 4 or tuple(shape[1:]) != (BRICK, BRICK, BRICK):
-        lost.add(uses, f"{name} holds {shape} {dtype}, not (n, 8, 8, 8) int32 bricks")
-        return
-    n = shape[0] if entry is None else entry["rows"]
-    if shape[0] != n:
-        lost.add(uses, f"{name} holds {shape[0]} bricks, its checksum entry {n}")
-        return
-    lost.add(uses[(rows < 0) | (rows >= n)], f"a row beyond the {n} bricks of {name}")
-    for c, start in enumerate(range(0, n, CHUNK_BRICKS)):
-        stop = min(n, start + CHUNK_BRICKS)
-        here = uses[(rows >= start) & (rows < stop)]
-        if not len(here):
-            continue
-        try:
-            chunk = np.ascontiguousarray(stored[start:stop], np.int32)
-        except Exception as exc:
-            lost.add(here, f"{name} chunk {c} cannot be read ({type(exc).__name__})")
-            continue
-        if entry is not None and zlib.crc32(np.ascontiguousarray(chunk, "<i4")) != entry["crc32"][c]:
-            lost.add(here, f"{name} chunk {c} does not match its checksum (zeroed, missing or damaged)")
-            continue
-        if chunk.size and (chunk.max() > GRID_LIMIT or chunk.min() < -GRID_LIMIT):
-            lost.add(here, f"{name} chunk {c} holds values beyond the grid's saturation")
-            continue
-        data[here] = chunk[index[here, 4] - start]
-        filled[here] = True
 
 
 class StoreWriter:
@@ -368,7 +265,7 @@ class StoreWriter:
         return sum(self.segment_rows[s] for s in self.segments) - len(self.index)
 
     def save(self, keys, data, poses=None):
-        """Write the bricks (keys (n, 3), data (n, 8, 8, 8) int32) that differ from the last save,
+        """Write the bricks (keys (n, 3), data (n, *brick) int32) that differ from the last save,
         and the sensor ``poses`` (n, 4, 4) so far when given; returns the number of bricks
         written. Atomic for readers."""
         if poses is not None:
@@ -386,10 +283,7 @@ class StoreWriter:
         segment = (max(self.segments) + 1) if self.segments else 0
         if len(rows):
             self.segment_rows[segment] = len(rows)
-            arr = self.group.create_array(f"segment_{segment}", shape=(len(rows), 8, 8, 8), dtype="int32",
-                                          chunks=(CHUNK_BRICKS, 8, 8, 8), compressors=self._codec(level=1))
-            arr[:] = data[rows]
-            self.crcs[segment] = chunk_crcs(data[rows])
+            self.crcs[segment] = write_segment(self.group, segment, data[rows], self._codec)
         index = self._next_index(keys, rows, segment, compact)
         version = self.version + 1
         name = f"index_{version}"
@@ -400,20 +294,7 @@ class StoreWriter:
         segments = sorted(set(index[:, 3].tolist()))
         previous = sorted(({f"index_{self.version}"} if self.version else set()) |
                           {f"segment_{s}" for s in self.segments})
-        manifest = dict(format=FORMAT, format_version=FORMAT_VERSION, version=version, index=name, segments=segments,
-                        previous=previous,
-                        grid=dict(origin_m=list(self.spec.origin_m), voxel_m=self.spec.voxel_m,
-                                  shape=list(self.spec.shape)), bricks=len(keys), saved=time.strftime("%Y-%m-%dT%H:%M:%S"),
-                        checksums=dict(index=zlib.crc32(np.ascontiguousarray(index, "<i4")),
-                                       segments={str(s): dict(rows=self.segment_rows[s], crc32=self.crcs[s])
-                                                 for s in segments}),
-                        **self.meta)
-        manifest["crc32"] = seal(manifest)
-        tmp = self.path / f".{MANIFEST}.{os.getpid()}.tmp"
-        tmp.write_text(json.dumps(manifest, indent=1))
-        with open(tmp, "rb") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, self.path / MANIFEST)             # the save happens here
+        write_manifest(self.path, self.spec, version, name, index, self.segment_rows, self.crcs, previous, self.meta)
         self.version, self.index, self.keys, self.data = version, index, keys.copy(), data.copy()
         self.segments, self._legacy = segments, False
         self.segment_rows = {s: self.segment_rows[s] for s in segments}
@@ -445,6 +326,38 @@ class StoreWriter:
                 shutil.rmtree(p, ignore_errors=True)
         for p in self.path.glob(f".{MANIFEST}.*.tmp"):
             p.unlink(missing_ok=True)
+
+
+def write_segment(group, segment, data, codec):
+    """Write ``data`` (n, *brick) int32 as array ``segment_<segment>`` of the zarr ``group``
+    (zstd-1, ``CHUNK_BRICKS`` bricks per chunk); returns the CRC-32 of each chunk."""
+    arr = group.create_array(f"segment_{segment}", shape=data.shape, dtype="int32",
+                             chunks=(CHUNK_BRICKS, *data.shape[1:]), compressors=codec(level=1))
+    arr[:] = data
+    return chunk_crcs(data)
+
+
+def write_manifest(path, spec, version, index_name, index, segment_rows, crcs, previous, meta):
+    """Write the manifest of save ``version`` (its index array ``index_name`` holding ``index``,
+    the segments it names with their rows and chunk CRCs) through a temporary file renamed into
+    place: the save happens at the rename. Format 2, or 3 for planar bricks (an older reader
+    then refuses the store naming both formats)."""
+    segments = sorted(set(index[:, 3].tolist()))
+    grid = dict(origin_m=list(spec.origin_m), voxel_m=spec.voxel_m, shape=list(spec.shape))
+    if spec.brick_z != BRICK:
+        grid["brick_z"] = spec.brick_z
+    manifest = dict(format=FORMAT, format_version=PLANAR_FORMAT if spec.brick_z != BRICK else 2, version=version,
+                    index=index_name, segments=segments, previous=previous, grid=grid, bricks=len(index),
+                    saved=time.strftime("%Y-%m-%dT%H:%M:%S"),
+                    checksums=dict(index=zlib.crc32(np.ascontiguousarray(index, "<i4")),
+                                   segments={str(s): dict(rows=segment_rows[s], crc32=crcs[s]) for s in segments}),
+                    **meta)
+    manifest["crc32"] = seal(manifest)
+    tmp = Path(path) / f".{MANIFEST}.{os.getpid()}.tmp"
+    tmp.write_text(json.dumps(manifest, indent=1))
+    with open(tmp, "rb") as f:
+        os.fsync(f.fileno())
+    os.replace(tmp, Path(path) / MANIFEST)
 
 
 def _ids(keys):
