@@ -215,7 +215,9 @@ class EvidenceGrid:
         self.pools = {name: [] for name in self.CHANNELS}       # channel -> its chunks (device buffers)
         self.backing = backing
         self.generation = 0                                     # bumped when slots change (clear, evict)
-        self.stats = dict(chunks=0, evicted=0, restored=0)
+        self.stats = dict(chunks=0, evicted=0, restored=0, chunks_ahead=0, chunks_waited=0)
+        self._ahead, self._pending, self._ahead_pool, self._ahead_queue, self._ahead_bricks = 0, None, None, None, 0
+        self._largest = 0                                       # the most bricks one allocation added
         if dense:
             self._check_fits(n_total)
             bz, by, bx = np.indices(self.table.shape).reshape(3, -1)
@@ -252,9 +254,10 @@ class EvidenceGrid:
     def memory(self):
         """Bytes of the grid stored densely and as allocated here, and the brick counts."""
         table = self.table.nbytes
+        spare = self._ahead_bricks if self._pending is not None else 0       # chunks grown ahead count
         return {"dense_bytes": self.spec.dense_bytes,
                 "sparse_bytes": len(self.CHANNELS) * self.n_bricks * self.spec.brick_bytes + table,
-                "device_bytes": len(self.CHANNELS) * self.capacity * self.spec.brick_bytes,
+                "device_bytes": len(self.CHANNELS) * (self.capacity + spare) * self.spec.brick_bytes,
                 "bricks": self.n_bricks, "bricks_total": int(self.table.size)}
 
     def _check_fits(self, needed):
@@ -278,12 +281,73 @@ class EvidenceGrid:
         self._check_fits(needed)
         q = self.runtime.queue
         size = self.chunk_bricks * self.spec.brick_bytes
+        ready = []
         while self.capacity < needed:
-            for chunks in self.pools.values():
-                buf = self.runtime.empty(size)
-                cl.enqueue_fill_buffer(q, buf, np.int32(0), 0, size)
-                chunks.append(buf)
+            if not ready and self._pending is not None:     # grown ahead: ready, or nearly
+                ready, self._pending = self._pending.result(), None
+            if ready:
+                bufs = ready.pop(0)
+            else:                                           # grown here: the caller waits for it
+                self.stats["chunks_waited"] += 1
+                bufs = {}
+                for name in self.pools:
+                    bufs[name] = self.runtime.empty(size)
+                    cl.enqueue_fill_buffer(q, bufs[name], np.int32(0), 0, size)
+            for name, chunks in self.pools.items():
+                chunks.append(bufs[name])
             self.stats["chunks"] += 1
+        for bufs in ready:                                  # grown ahead beyond the need: kept
+            for name, chunks in self.pools.items():
+                chunks.append(bufs[name])
+            self.stats["chunks"] += 1
+
+    def grow_ahead(self, spare_slots=None):
+        """Keep free slots ready: whenever fewer than ``spare_slots`` (default: a chunk's), or
+        than the most bricks one allocation has added so far, remain, the chunks that make them up are allocated and zeroed on a thread and a queue
+        of their own, so a frame that reaches new ground takes ready chunks instead of waiting
+        for them (a stream's latency; ``radarcl live`` asks for a frame's worth). 0 turns it off."""
+        self._ahead = self.chunk_bricks if spare_slots is None else max(0, int(spare_slots))
+        if self._ahead and self._ahead_pool is None:          # made now: the first frame should not wait for them
+            import pyopencl as cl
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._ahead_pool = ThreadPoolExecutor(1, thread_name_prefix="radarcl-grow")
+            self._ahead_queue = cl.CommandQueue(self.runtime.context)
+            self._ahead_pool.submit(lambda: None).result()    # the thread started
+        self._kick()
+
+    def _kick(self):
+        """Start growing the next chunk ahead when the free slots run low (``grow_ahead``)."""
+        want = max(self._ahead, self._largest) if self._ahead else 0        # what the greediest frame took
+        if not want or self._pending is not None or self.capacity - self.n_slots >= want:
+            return
+        n = -(-(want - (self.capacity - self.n_slots)) // self.chunk_bricks)
+        self._check_fits(self.capacity + n * self.chunk_bricks)
+        self._pending = self._ahead_pool.submit(self._zeroed_chunks, n)
+        self._ahead_bricks = n * self.chunk_bricks
+        self.stats["chunks_ahead"] += n
+
+    def _zeroed_chunks(self, n):
+        """On the grow-ahead thread: ``n`` chunks, each a buffer per channel, zeroed, finished."""
+        import pyopencl as cl
+
+        size = self.chunk_bricks * self.spec.brick_bytes
+        out = []
+        for _ in range(n):
+            bufs = {}
+            for name in self.pools:
+                bufs[name] = self.runtime.empty(size)
+                cl.enqueue_fill_buffer(self._ahead_queue, bufs[name], np.int32(0), 0, size)
+            out.append(bufs)
+        self._ahead_queue.finish()
+        return out
+
+    def reserve(self, slots):
+        """Grow the pools now (a chunk at a time) so that ``slots`` slots fit: before a stream,
+        so its first frame does not wait for the allocation."""
+        if slots > self.capacity:
+            self._grow(int(slots))
+        self.runtime.queue.finish()
 
     def allocate(self, bricks):
         """Slots of bricks (n, 3) (bx, by, bz), allocating the missing ones in the order of their
@@ -310,6 +374,7 @@ class EvidenceGrid:
         missing = slots < 0
         if missing.any():
             new_index = np.unique(index[missing])
+            self._largest = max(self._largest, len(new_index))
             reuse = min(len(new_index), len(self.free))
             fresh = len(new_index) - reuse
             needed = self.n_slots + fresh
@@ -327,6 +392,7 @@ class EvidenceGrid:
                     self.write_slots(new_slots[rows], data)
                     self.stats["restored"] += len(rows)
             slots = flat[index]
+            self._kick()
         return slots
 
     def _runs(self, slots):
@@ -445,6 +511,7 @@ class EvidenceGrid:
         self.free = np.empty(0, np.int32)
         self.pools = {name: [] for name in self.CHANNELS}
         self.generation += 1
+        self._kick()
 
 
 def assemble(spec, keys, data):

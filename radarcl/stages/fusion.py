@@ -190,10 +190,13 @@ class Fusion(Stage):
         return (self.lattice.n_beams, self.n_bins)
 
     # -- host side: beams, head frame, bricks ---------------------------------------------------
-    def plan(self, poses, cache=True):
+    def plan(self, poses, cache=True, record=True):
         """Prepare a frame taken at ``poses``: one 4x4 pose, or (n_beams, 4, 4) with
         per_beam_poses. Allocates the bricks the beams may reach. The last plan is reused for
-        a repeated pose unless ``cache`` is False."""
+        a repeated pose unless ``cache`` is False; a reused plan gets its ``StillTable`` (see
+        ``still``) unless ``record`` is False: a frame fused in parts (``restrict``, a live
+        stream) plans the same pose once per part, and a part never reads the whole plan's
+        table, so recording it there would only stall the stream."""
         P = check_poses(poses, self.lattice.n_beams)
         if len(P) > 1 and not self.per_beam_poses:
             raise ConfigError("this Fusion takes one pose per frame; build it with per_beam_poses=True "
@@ -204,7 +207,7 @@ class Fusion(Stage):
         if cache and key in self._plans:
             plan = self._plans.pop(key)
             self._plans[key] = plan                              # the most recent last
-            if self.still and not plan._table:
+            if self.still and record and not plan._table:
                 self.record(plan)
             return plan
         spec = self.grid.spec
@@ -227,6 +230,15 @@ class Fusion(Stage):
             while len(self._plans) > PLAN_CACHE:
                 self._plans.popitem(last=False)                  # the oldest, and its table
         return plan
+
+    def warm_up(self):
+        """Build the planner (its kernel compiles) before the first frame, so a stream's first
+        frame does not wait for it. Returns the number of bricks a frame at the grid's centre
+        reaches (what to ``reserve`` for a first frame)."""
+        spec = self.grid.spec
+        centre = 0.5 * np.asarray(spec.shape, np.float64) * spec.voxel_m         # [m, grid coordinates]
+        index, _, _ = self._reached_bricks(HeadFrame(np.eye(3), centre, 0.0, 0.0))     # nothing allocated
+        return len(index)
 
     def record(self, plan):
         """Record ``plan``'s ``StillTable`` (two passes of the gather that write instead of
