@@ -106,3 +106,42 @@ def test_a_window_smaller_than_a_frame_and_a_store_that_cannot_be_written(runtim
     assert len(calls) == 3, "the drive stops at the first failed write"
     spec, keys, _ = disk.read(tmp_path / "full.rcmap")
     assert spec == SPEC and len(keys) == backing.bricks_stored >= 60
+
+
+OXFORD = ["--sensor", "navtech-cts350x", "--voxel", "0.4", "--set", "interpret.range_max_m=20", "--no-report",
+          "--no-progress"]
+
+
+def test_radarcl_fuse_window_on_the_oxford_scans(shared_data, tmp_path, capsys):
+    """`radarcl fuse --window`: the 11 Oxford scans (about 20 m of road) mapped out to 20 m in a
+    26 m window give the unbounded map bit for bit; the default window is said; a window a frame
+    does not fit, an .npz output and a store that cannot be written are refused with a sentence
+    before anything is written."""
+    from radarcl.cli import main
+
+    scans = str(shared_data / "navtech_oxford")
+    grid = ["--set", "grid.origin_m=[-20, -20, -0.2]", "--set", "grid.size_m=[60.4, 40.8, 0.4]"]
+    assert main(["fuse", scans, *OXFORD, *grid, "--out", str(tmp_path / "all.npz")]) == 0
+    assert main(["fuse", scans, *OXFORD, *grid, "--window", "26", "--out", str(tmp_path / "w.rcmap")]) == 0
+    out = capsys.readouterr().out
+    left = int(out.split(" bricks left the window")[0].rsplit(" ", 1)[1])
+    assert "within 26 m of the sensor" in out and left > 20
+    spec, keys, data = disk.read(tmp_path / "all.npz")
+    spec_w, keys_w, data_w = disk.read(tmp_path / "w.rcmap")
+    a, b = np.lexsort(keys.T[::-1]), np.lexsort(keys_w.T[::-1])
+    assert spec == spec_w and len(keys) > 100
+    assert np.array_equal(keys[a], keys_w[b]) and np.array_equal(data[a], data_w[b])
+    assert len(disk.read_poses(tmp_path / "w.rcmap")) == 11
+    # --window alone: 1.5 x the mapped range, said; the grid spans the drive
+    assert main(["fuse", scans, *OXFORD, "--window", "--out", str(tmp_path / "d.rcmap")]) == 0
+    assert "within 30 m of the sensor (the default, 1.5 x the mapped range)" in capsys.readouterr().out
+    # refused before the drive, nothing written
+    for args, said in ((["--window", "10"], "smaller than one frame's reach"), (["--window", "far"], "distance"),
+                       (["--window", "-3"], "positive distance")):
+        assert main(["fuse", scans, *OXFORD, *args, "--out", str(tmp_path / "bad.rcmap")]) == 2
+        assert said in capsys.readouterr().err and not (tmp_path / "bad.rcmap").exists()
+    assert main(["fuse", scans, *OXFORD, "--window", "--out", str(tmp_path / "m.npz")]) == 2
+    assert "give --out a store name" in capsys.readouterr().err
+    (tmp_path / "file").write_text("x")
+    assert main(["fuse", scans, *OXFORD, "--window", "--out", str(tmp_path / "file" / "m.rcmap")]) == 2
+    assert "cannot create the directory of map" in capsys.readouterr().err
