@@ -38,6 +38,7 @@ MAX_TABLE_BRICKS = 2 ** 28          # the host brick table (int32) stays below 1
 MAX_EXTENT_M = 1e7                  # as far as a pose may lie (geometry.MAX_TRANSLATION_M)
 MIN_VOXEL_M, MAX_VOXEL_M = 1e-4, 1e4
 CHUNK_BYTES = 32 * 2 ** 20          # a pool chunk: growing the grid adds one, copying nothing
+PAGE_BYTES = 4096                   # a CPU device's chunk starts on a page (PoCL uses it in place)
 
 
 @dataclass(frozen=True)
@@ -276,8 +277,6 @@ class EvidenceGrid:
         """Add chunks until ``needed`` slots fit, in every channel's pool: a new chunk is
         allocated and zeroed, and nothing already stored is copied (a whole-pool copy stalled
         the stream when the map reached new ground)."""
-        import pyopencl as cl
-
         self._check_fits(needed)
         q = self.runtime.queue
         size = self.chunk_bricks * self.spec.brick_bytes
@@ -289,10 +288,7 @@ class EvidenceGrid:
                 bufs = ready.pop(0)
             else:                                           # grown here: the caller waits for it
                 self.stats["chunks_waited"] += 1
-                bufs = {}
-                for name in self.pools:
-                    bufs[name] = self.runtime.empty(size)
-                    cl.enqueue_fill_buffer(q, bufs[name], np.int32(0), 0, size)
+                bufs = {name: self._zeroed_buffer(size, q) for name in self.pools}
             for name, chunks in self.pools.items():
                 chunks.append(bufs[name])
             self.stats["chunks"] += 1
@@ -329,18 +325,26 @@ class EvidenceGrid:
 
     def _zeroed_chunks(self, n):
         """On the grow-ahead thread: ``n`` chunks, each a buffer per channel, zeroed, finished."""
-        import pyopencl as cl
-
         size = self.chunk_bricks * self.spec.brick_bytes
-        out = []
-        for _ in range(n):
-            bufs = {}
-            for name in self.pools:
-                bufs[name] = self.runtime.empty(size)
-                cl.enqueue_fill_buffer(self._ahead_queue, bufs[name], np.int32(0), 0, size)
-            out.append(bufs)
+        out = [{name: self._zeroed_buffer(size, self._ahead_queue) for name in self.pools} for _ in range(n)]
         self._ahead_queue.finish()
         return out
+
+    def _zeroed_buffer(self, size, queue):
+        """A new device buffer of ``size`` bytes, all zero. On a CPU device it is the memory of
+        a fresh host array (the OS hands out zeroed pages when they are first touched: nothing
+        to fill, so growing the pool costs no device time that a frame would wait behind);
+        elsewhere a buffer filled with zeros on ``queue``."""
+        import pyopencl as cl
+
+        if self.runtime.is_cpu:
+            raw = np.zeros(size + PAGE_BYTES, np.uint8)            # calloc: pages untouched until used
+            start = (-raw.ctypes.data) % PAGE_BYTES
+            return cl.Buffer(self.runtime.context, cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR,
+                             hostbuf=raw[start:start + size])      # the buffer keeps the array alive
+        buf = self.runtime.empty(size)
+        cl.enqueue_fill_buffer(queue, buf, np.int32(0), 0, size)
+        return buf
 
     def reserve(self, slots):
         """Grow the pools now (a chunk at a time) so that ``slots`` slots fit: before a stream,
