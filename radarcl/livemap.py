@@ -143,6 +143,7 @@ class LiveMapper:
         grid = self.mapping.grid
         frame_bricks = self.mapping.fusion.warm_up()          # a frame at the grid's centre, level
         grid.reserve(FIRST_FRAME_RESERVE * frame_bricks)        # a tilted one reaches more
+        self.mapping.fusion.warm_up()                           # now the gather too, on the pool
         grid.grow_ahead(max(frame_bricks, grid.chunk_bricks))
         fft = self.mapping.range_fft
         self._paired = fft is not None and not fft.complex_input      # real beams share an FFT in pairs

@@ -233,11 +233,22 @@ class Fusion(Stage):
 
     def warm_up(self):
         """Build the planner (its kernel compiles) before the first frame, so a stream's first
-        frame does not wait for it. Returns the number of bricks a frame at the grid's centre
-        reaches (what to ``reserve`` for a first frame)."""
+        frame does not wait for it, and, when the pool has a chunk, the gather's kernel (launched
+        over a brick that no beam reaches: nothing changes). Returns the number of bricks a frame
+        at the grid's centre reaches (what to ``reserve`` for a first frame)."""
         spec = self.grid.spec
         centre = 0.5 * np.asarray(spec.shape, np.float64) * spec.voxel_m         # [m, grid coordinates]
         index, _, _ = self._reached_bricks(HeadFrame(np.eye(3), centre, 0.0, 0.0))     # nothing allocated
+        if self.grid.capacity:
+            # the gather too (the device compiles a kernel's work-group function on its first
+            # launch): over one brick with no candidate beam, which leaves it as it is
+            n = self.lattice.n_beams
+            plan = FramePlan(np.zeros((n, 3, 4), np.float32), np.zeros((1, 4), np.int32),
+                             np.array([[0, -1, 0, -1]], np.int32), self, self.grid.generation)
+            self._launch(self._kernel, plan, self.arrays["evidence"], counts=self._no_table[0],
+                         row_start=self._no_table[1], first=self._no_table[2], extras=self._no_table[2])
+            self.runtime.queue.finish()
+            self._uploaded = self._plan_arrays = None
         return len(index)
 
     def record(self, plan):
