@@ -150,7 +150,7 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
         mapping.fuse(scan.power(), poses, flags=flags)
         runtime.queue.finish()
         latencies.append(time.perf_counter() - t0)
-        trajectory.append(poses[n_az // 2])
+        trajectory.append(poses[n_az // 2].copy())               # a copy: a view would keep the frame's poses
         device_max = max(device_max, grid.memory()["device_bytes"] + stage)
         bricks_max = max(bricks_max, grid.n_bricks)
         host_max = max(host_max, _rss_bytes())
