@@ -8,8 +8,9 @@
  * A gather: each voxel is owned by one work-item, which tests each candidate beam once, sums
  * its updates in registers and writes the sum once. So each voxel gets at most one update per
  * beam, no atomics are needed, and the integer grid does not depend on any ordering.
- *   get_global_id(0) = listed brick * SUBS + sub-brick, a VEC x 4 x 4 block of the 8x8x8 brick;
- *   the work-item walks its 16 rows of VEC voxels along x, ROWS rows at a time as the lanes of
+ *   get_global_id(0) = listed brick * SUBS + sub-brick, a VEC x SUB_Y x SUB_Z block of the brick
+ *   (VEC x 4 x 4 of an 8^3 brick; VEC x 8 x 1 of an 8 x 8 x 1 brick, BRICK_Z 1);
+ *   the work-item walks its BLOCK_ROWS rows of VEC voxels along x, ROWS rows at a time as the lanes of
  *   one vector (a unit: LN = VEC x ROWS voxels; ROWS = 2 fills AVX-512's 16 lanes with rows
  *   y, y + 1, which are contiguous in the brick). Any local size is correct.
  * Candidates: the host gives each listed brick a conservative window of beams (i, k)
@@ -18,7 +19,8 @@
  * in elevation) means no point of the sphere is inside, since |y| is 1-Lipschitz and W grows
  * with d.
  *
- * -D: VEC (4 or 8), ROWS (1, or 2 with VEC 8), N_AZ, N_EL, N_BINS (frame shape); NEAR_FIELD (cylinder of the antenna's cross-section),
+ * -D: VEC (4 or 8), ROWS (1, or 2 with VEC 8), N_AZ, N_EL, N_BINS (frame shape); BRICK_Z (voxels per brick
+ *     along z: 8, or 1 for a planar sensor's bricks; default 8); NEAR_FIELD (cylinder of the antenna's cross-section),
  *     GAUSSIAN (two-way weight), PER_BEAM_POSES (each beam measures range from its own origin),
  *     AZ_WRAP (the azimuths span a full turn, windows may run past either end),
  *     RECORD (1 or 2: instead of fusing, record what each voxel takes, for fusion_cached below;
@@ -45,15 +47,33 @@
  * fusion_cached: a still radar's frame from the recorded table: each voxel sums
  * rint(evidence[entry] * weight) over its entries, the same integers the gather gives (the
  * weights are the gather's own float32 values), streaming the table instead of testing beams.
- * Table rows are the gather's: row t = work-item t / 16, row t % 16 of its VEC x 4 x 4 block
+ * Table rows are the gather's: row t = work-item t / BLOCK_ROWS, row t % BLOCK_ROWS of its block
  * (whatever ROWS the recording gather used: a unit's lanes are consecutive voxels of the table).
  * The first entries are dense (one per voxel, read as vectors: on a regular lattice almost every
  * voxel lies in one beam), the weight's sign bit set where more follow; the rest follow per row.
  */
 #include "radarcl_common.h"
 
-#define SUB 4                                 /* sub-brick edge along y and z */
+#ifndef BRICK_Z
+#define BRICK_Z 8
+#endif
+#if BRICK_Z == 8
+#define SUB_Y 4                               /* a work-item's block along y and z */
+#define SUB_Z 4
 #define SUBS ((8 / VEC) * 4)                  /* sub-bricks per brick */
+#define CORNER(sub) ((int3)(((sub) >> 2) * VEC, ((sub) & 1) * SUB_Y, (((sub) >> 1) & 1) * SUB_Z))
+#elif BRICK_Z == 1
+#define SUB_Y 8
+#define SUB_Z 1
+#define SUBS (8 / VEC)
+#define CORNER(sub) ((int3)((sub) * VEC, 0, 0))
+#else
+#error "BRICK_Z must be 8 or 1"
+#endif
+#define BLOCK_ROWS (SUB_Y * SUB_Z)            /* rows of VEC voxels per work-item: 16 or 8 */
+#define BRICK_CELLS (64 * BRICK_Z)            /* voxels per brick */
+#define ROW_DY(r) ((r) % SUB_Y)               /* row r of a block: y offset, z offset */
+#define ROW_DZ(r) ((r) / SUB_Y)
 #define CAT_(a, b) a##b
 #define CAT(a, b) CAT_(a, b)
 #define floatV CAT(float, VEC)
@@ -93,7 +113,7 @@
 #else
 #error "ROWS must be 1, or 2 with VEC 8"
 #endif
-#define UNITS (SUB * SUB / ROWS)              /* units per block */
+#define UNITS (BLOCK_ROWS / ROWS)             /* units per block */
 #define floatL CAT(float, LN)
 #define intL CAT(int, LN)
 #define convert_floatL CAT(convert_float, LN)
@@ -138,9 +158,15 @@ static inline int or_unit(int16 v)
 #define LAST CAT(s, CAT(VEC, _LAST))
 #define s4_LAST s3
 #define s8_LAST s7
-/* row r of a sub-brick is y offset r & 3, z offset r >> 2 */
+/* row r of a sub-brick is y offset ROW_DY(r), z offset ROW_DZ(r); a block of 8 rows repeats
+ * them in lanes 8-15 (whose bits no unit reads) */
+#if BLOCK_ROWS == 16
 #define ROW_Y ((float16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3))
 #define ROW_Z ((float16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3))
+#else
+#define ROW_Y ((float16)(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7))
+#define ROW_Z ((float16)0)
+#endif
 /* bit r set where lane r of an int16 mask is true */
 #ifdef DETSTATS
 /* one 8-byte node pair per lane: its evidence half into pe, its opportunity half into pk */
@@ -199,8 +225,8 @@ __kernel void fusion(
     const float a_az,                 // half apertures [m] (0 without NEAR_FIELD)
     const float a_el,
     const int n_items,                // listed bricks x SUBS: work-items past it do nothing
-    __global uchar *counts,           // RECORD: (n_items * 16 * VEC,) beams per voxel (out with 1)
-    const __global int *row_start,    // RECORD 2: (n_items * 16,) first extra entry of each table row
+    __global uchar *counts,           // RECORD: (n_items * BLOCK_ROWS * VEC,) beams per voxel (out with 1)
+    const __global int *row_start,    // RECORD 2: (n_items * BLOCK_ROWS,) first extra entry of each table row
     __global int2 *first,             // RECORD 2: out, per voxel its first (beam * N_BINS + bin,
                                       //   as_int(weight)); (0, 0) where no beam reaches
     __global int2 *extras,            // RECORD 2: out, the voxels' further entries, row by row
@@ -216,11 +242,11 @@ __kernel void fusion(
     const int4 brick = bricks[id / SUBS];
     const int4 w = windows[id / SUBS];
     const int sub = id % SUBS;
-    const int3 corner = (int3)((sub >> 2) * VEC, (sub & 1) * SUB, ((sub >> 1) & 1) * SUB);   /* in the brick */
-    const int3 base = brick.xyz * 8 + corner;                                                /* in the grid */
-    const float3 centre = (convert_float3(base) + (float3)(0.5f * VEC, 0.5f * SUB, 0.5f * SUB)) * voxel;
-    const float radius = 0.5f * sqrt((float)(VEC * VEC + 2 * SUB * SUB)) * voxel;
-    /* unit u holds rows ROWS u .. ROWS u + ROWS - 1: y offset (ROWS u) & 3 + LY, z offset (ROWS u) >> 2 */
+    const int3 corner = CORNER(sub);                                                         /* in the brick */
+    const int3 base = brick.xyz * (int3)(8, 8, BRICK_Z) + corner;                            /* in the grid */
+    const float3 centre = (convert_float3(base) + (float3)(0.5f * VEC, 0.5f * SUB_Y, 0.5f * SUB_Z)) * voxel;
+    const float radius = 0.5f * sqrt((float)(VEC * VEC + SUB_Y * SUB_Y + SUB_Z * SUB_Z)) * voxel;
+    /* unit u holds rows ROWS u .. ROWS u + ROWS - 1: y offset ROW_DY(ROWS u) + LY, z offset ROW_DZ(ROWS u) */
     const floatL px = (convert_floatL(base.x + LX) + 0.5f) * voxel;
     const floatL ly = convert_floatL(LY);
     const intL in_x = base.x + LX < nx;
@@ -266,12 +292,12 @@ __kernel void fusion(
                 const floatL qx0 = px - o0.x;
                 for (int u = 0; u < UNITS; ++u) {
                     const int r0 = ROWS * u;
-                    const floatL qy = ((float)(base.y + (r0 & 3)) + 0.5f + ly) * voxel - o0.y;
-                    const float qz = (base.z + (r0 >> 2) + 0.5f) * voxel - o0.z;
+                    const floatL qy = ((float)(base.y + ROW_DY(r0)) + 0.5f + ly) * voxel - o0.y;
+                    const float qz = (base.z + ROW_DZ(r0) + 0.5f) * voxel - o0.z;
                     /* clamped below 2^22 for RINT_INTL: a bin that far is past last_bin anyway */
                     const floatL x = MINF(sqrt(qx0 * qx0 + (qy * qy + qz * qz)) * inv_spacing, (floatL)4194303.0f);
                     const intL bin = RINT_INTL(x);
-                    const intL ok = in_x & (base.y + (r0 & 3) + LY < ny) & (base.z + (r0 >> 2) < nz ? -1 : 0);
+                    const intL ok = in_x & (base.y + ROW_DY(r0) + LY < ny) & (base.z + ROW_DZ(r0) < nz ? -1 : 0);
                     bins[u] = ok & (bin >= first_bin) & (bin <= last_bin) ? bin : (intL)-1;
                 }
             }
@@ -313,12 +339,12 @@ __kernel void fusion(
                 const int r0 = ROWS * u;
                 if (!(rows & (1u << r0)))
                     continue;
-                const floatL qy = ((float)(base.y + (r0 & 3)) + 0.5f + ly) * voxel - o.y;
-                const float qz = (base.z + (r0 >> 2) + 0.5f) * voxel - o.z;
+                const floatL qy = ((float)(base.y + ROW_DY(r0)) + 0.5f + ly) * voxel - o.y;
+                const float qz = (base.z + ROW_DZ(r0) + 0.5f) * voxel - o.z;
 #ifdef PER_BEAM_POSES
                 const floatL x = MINF(sqrt(qx * qx + (qy * qy + qz * qz)) * inv_spacing, (floatL)4194303.0f);
                 const intL raw = RINT_INTL(x);
-                const intL ok = in_x & (base.y + (r0 & 3) + LY < ny) & (base.z + (r0 >> 2) < nz ? -1 : 0);
+                const intL ok = in_x & (base.y + ROW_DY(r0) + LY < ny) & (base.z + ROW_DZ(r0) < nz ? -1 : 0);
                 const intL bin = ok & (raw >= first_bin) & (raw <= last_bin) ? raw : (intL)-1;
 #else
                 const intL bin = bins[u];
@@ -354,7 +380,7 @@ __kernel void fusion(
   #else
                 const floatL wt = (floatL)1.0f;
   #endif
-                const size_t v0 = ((size_t)id * 16 + r0) * VEC;  /* the unit's first voxel in the table */
+                const size_t v0 = ((size_t)id * BLOCK_ROWS + r0) * VEC;  /* the unit's first voxel in the table */
                 for (int lane = 0; lane < LN; ++lane) {
                     if (((const int *)&inside)[lane]) {
                         const int written = ((const int *)&acc[u])[lane];
@@ -363,7 +389,7 @@ __kernel void fusion(
                             first[v0 + lane] = counts[v0 + lane] > 1 ? (int2)(entry.x, entry.y | (int)0x80000000) : entry;
                         } else {                              /* the row's extras, lane by lane */
                             const int row_lane0 = lane - lane % VEC;
-                            int at = row_start[(size_t)id * 16 + r0 + lane / VEC];
+                            int at = row_start[(size_t)id * BLOCK_ROWS + r0 + lane / VEC];
                             for (int l = row_lane0; l < lane; ++l)
                                 at += max((int)counts[v0 + l] - 1, 0);
                             extras[at + written - 1] = entry;
@@ -398,29 +424,29 @@ __kernel void fusion(
     }
 #if RECORD == 1
     for (int u = 0; u < UNITS; ++u)
-        vstore_ucharL(convert_ucharL_sat(acc[u]), 0, counts + ((size_t)id * 16 + ROWS * u) * VEC);
+        vstore_ucharL(convert_ucharL_sat(acc[u]), 0, counts + ((size_t)id * BLOCK_ROWS + ROWS * u) * VEC);
     return;
 #elif RECORD == 2
     return;
 #endif
     if (!touched)
         return;
-    __global int *cells = pool + brick.w * 512 + (corner.z * 8 + corner.y) * 8 + corner.x;
+    __global int *cells = pool + brick.w * BRICK_CELLS + (corner.z * 8 + corner.y) * 8 + corner.x;
     for (int u = 0; u < UNITS; ++u) {
         if (or_unit(acc[u])) {
             /* |acc| < n_beams x 2^14 <= 2^31 - 2^30 - 1 (Fusion refuses larger lattices) and |cell| <=
              * GRID_LIMIT = 2^30: the sum cannot overflow int32, so no add_sat. A unit's rows are
              * contiguous in the brick (ROWS 2 comes with VEC 8, the brick's edge). */
             const int r0 = ROWS * u;
-            __global int *cell = cells + ((r0 >> 2) * 8 + (r0 & 3)) * 8;
+            __global int *cell = cells + (ROW_DZ(r0) * 8 + ROW_DY(r0)) * 8;
             const intL v = vloadL(0, cell) + acc[u];
             vstoreL(v > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : (v < (intL)-GRID_LIMIT ? (intL)-GRID_LIMIT : v), 0, cell);
         }
 #if defined(DETSTATS) && !RECORD
         if (or_unit(kacc[u])) {       /* non-negative, saturating at GRID_LIMIT: order does not matter */
             const int r0 = ROWS * u;
-            __global int *cell = knowledge + brick.w * 512 + (corner.z * 8 + corner.y) * 8 + corner.x
-                                 + ((r0 >> 2) * 8 + (r0 & 3)) * 8;
+            __global int *cell = knowledge + brick.w * BRICK_CELLS + (corner.z * 8 + corner.y) * 8 + corner.x
+                                 + (ROW_DZ(r0) * 8 + ROW_DY(r0)) * 8;
             const intL v = vloadL(0, cell) + kacc[u];
             vstoreL(v > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : v, 0, cell);
             __global int *count = looks + (cell - knowledge);
@@ -435,9 +461,9 @@ __kernel void fusion(
 __kernel void fusion_cached(
     const __global int *evidence,     // (n_beams, N_BINS) eq. 12 updates [logodds units]
     const __global int4 *bricks,      // (n_listed,) bx, by, bz, slot: the recorded plan's
-    const __global uchar *counts,     // (n_items * 16 * VEC,) entries per voxel (RECORD 1)
-    const __global int *row_start,    // (n_items * 16,) first extra entry of each table row
-    const __global int2 *first,       // (n_items * 16 * VEC,) each voxel's first entry (RECORD 2)
+    const __global uchar *counts,     // (n_items * BLOCK_ROWS * VEC,) entries per voxel (RECORD 1)
+    const __global int *row_start,    // (n_items * BLOCK_ROWS,) first extra entry of each table row
+    const __global int2 *first,       // (n_items * BLOCK_ROWS * VEC,) each voxel's first entry (RECORD 2)
     const __global int2 *extras,      // the further entries (RECORD 2)
     const int n_items,                // the gather's work-items: listed bricks x SUBS
     const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (the class
@@ -451,13 +477,13 @@ __kernel void fusion_cached(
         return;
     const int4 brick = bricks[id / SUBS];
     const int sub = id % SUBS;
-    const int3 corner = (int3)((sub >> 2) * VEC, (sub & 1) * SUB, ((sub >> 1) & 1) * SUB);
-    __global int *cells = pool + brick.w * 512 + (corner.z * 8 + corner.y) * 8 + corner.x;
+    const int3 corner = CORNER(sub);
+    __global int *cells = pool + brick.w * BRICK_CELLS + (corner.z * 8 + corner.y) * 8 + corner.x;
 #ifdef DETSTATS
-    __global int *kcells = knowledge + brick.w * 512 + (corner.z * 8 + corner.y) * 8 + corner.x;
+    __global int *kcells = knowledge + brick.w * BRICK_CELLS + (corner.z * 8 + corner.y) * 8 + corner.x;
 #endif
-    const __global int *dense = (const __global int *)first + (size_t)id * 16 * VEC * 2;
-    for (int row = 0; row < SUB * SUB; ++row) {
+    const __global int *dense = (const __global int *)first + (size_t)id * BLOCK_ROWS * VEC * 2;
+    for (int row = 0; row < BLOCK_ROWS; ++row) {
         const intV2 pairs = vloadV2(0, dense + row * VEC * 2);       /* idx, weight, idx, weight, ... */
         const intV bits = pairs.odd;
         if (!or_lanes(bits))                   /* no beam reaches the row */
@@ -483,7 +509,7 @@ __kernel void fusion_cached(
         intV sum = RINT_INTV(product);
 #endif
         if (or_lanes(bits) < 0) {              /* the few voxels several beams reach */
-            const size_t t = (size_t)id * 16 + row;
+            const size_t t = (size_t)id * BLOCK_ROWS + row;
             int extra[VEC];
 #ifdef DETSTATS
             int kextra[VEC], nextra[VEC];
@@ -524,7 +550,7 @@ __kernel void fusion_cached(
         }
 #ifdef DETSTATS
         if (or_lanes(ksum)) {
-            __global int *cell = kcells + ((row >> 2) * 8 + (row & 3)) * 8;
+            __global int *cell = kcells + (ROW_DZ(row) * 8 + ROW_DY(row)) * 8;
             const intV v = vloadV(0, cell) + ksum;
             vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : v, 0, cell);
             __global int *count = looks + (cell - knowledge);
@@ -535,7 +561,7 @@ __kernel void fusion_cached(
         if (or_lanes(sum)) {
             /* |sum| < 255 beams x 2^14 (RECORD refuses more) and |cell| <= GRID_LIMIT = 2^30: no
              * int32 overflow to saturate */
-            __global int *cell = cells + ((row >> 2) * 8 + (row & 3)) * 8;
+            __global int *cell = cells + (ROW_DZ(row) * 8 + ROW_DY(row)) * 8;
             const intV v = vloadV(0, cell) + sum;
             vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : (v < (intV)-GRID_LIMIT ? (intV)-GRID_LIMIT : v), 0, cell);
         }

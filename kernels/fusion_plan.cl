@@ -16,8 +16,13 @@
  * Bricks beyond the grid get an empty window.
  *
  * -D N_AZ, N_EL (the lattice), AZ_WRAP (the azimuths span a full turn), WINDOW_SLACK [rad],
- *    BLOCK (bricks per block edge; BLOCK^3 a multiple of PVEC), PVEC (1 or 8).
+ *    BLOCK (bricks per block edge; BLOCK^3 a multiple of PVEC), PVEC (1 or 8), BRICK_Z (voxels per
+ *    brick along z, 8 or 1: a brick is brick_m x brick_m x brick_m BRICK_Z / 8; default 8).
  */
+#ifndef BRICK_Z
+#define BRICK_Z 8
+#endif
+#define Z_EDGE (BRICK_Z / 8.0f)               /* a brick's z edge over its x edge */
 
 #if PVEC == 1
 typedef float realv;
@@ -79,7 +84,7 @@ __kernel void fusion_plan(
     const int grid_bx,                // the grid's bricks along x, y, z
     const int grid_by,
     const int grid_bz,
-    const float brick_m,              // brick edge [m]
+    const float brick_m,              // brick edge along x and y [m]
     const __global float *head,       // 12: the head frame's rotation R (head -> grid axes) row-major,
                                       //   then its origin [m, grid coordinates]; q = R^T (c - origin)
     const float trans_margin,         // max |beam origin - origin| [m]
@@ -110,12 +115,12 @@ __kernel void fusion_plan(
     const intv outside = (bx >= grid_bx) | (by >= grid_by) | (bz >= grid_bz);
     const realv cx = (TO_REAL(bx) + 0.5f) * brick_m - head[9];
     const realv cy = (TO_REAL(by) + 0.5f) * brick_m - head[10];
-    const realv cz = (TO_REAL(bz) + 0.5f) * brick_m - head[11];
+    const realv cz = (TO_REAL(bz) + 0.5f) * (brick_m * Z_EDGE) - head[11];
     /* q = R^T c: column j of R dotted with c */
     const realv qx = head[0] * cx + head[3] * cy + head[6] * cz;
     const realv qy = head[1] * cx + head[4] * cy + head[7] * cz;
     const realv qz = head[2] * cx + head[5] * cy + head[8] * cz;
-    const float rs = 0.5f * sqrt(3.0f) * brick_m + trans_margin;
+    const float rs = 0.5f * sqrt(2.0f + Z_EDGE * Z_EDGE) * brick_m + trans_margin;
     const realv r = sqrt(qx * qx + qy * qy + qz * qz);
     const float half_pi = 0.5f * M_PI_F;
     const intv none = outside | (r + rs < r_lo) | (r - rs > r_hi);

@@ -11,12 +11,17 @@ order of frames or beams. Sums saturate at +-``GRID_LIMIT`` (2^30 units, about 1
 p = 1 in float64 anyway); only there would the order matter. Views (``log_odds``,
 ``probability``) are computed from the sums on read.
 
-Storage: bricks of 8 x 8 x 8 voxels (2 KiB), allocated the first time some beam reaches them
-("leave out what the scene does not need"). A host table maps brick -> slot in one device pool.
+Storage: bricks of 8 x 8 x ``brick_z`` voxels, allocated the first time some beam reaches them
+("leave out what the scene does not need"): 8^3 (2 KiB) in general, 8 x 8 x 1 (256 bytes) for a
+planar sensor (a spinning radar with one elevation maps a plane one voxel thick, so 7/8 of an
+8^3 brick would never be written; ``GridSpec.brick_z``, chosen by ``config.sensors.brick_depth``).
+A brick's data is (brick_z, 8, 8) [z, y, x]. A host table maps brick -> slot; the slots live in
+the device pools (``EvidenceGrid.pools``: one per channel, the same slots in each), each a list
+of fixed-size chunks, so growing the grid allocates a chunk and never copies what is there.
 A grid made with ``knowledge=True`` (the detection-statistics model, ``radarcl.sensor_model``)
-holds two more pools with the same slots: per voxel the summed detection opportunity of its looks
-(``knowledge``: int32, ``logodds.KNOWLEDGE_SCALE`` units per look, non-negative, saturating at
-``GRID_LIMIT``), so that "never observed" (0) differs from "observed, undecided" (evidence near
+has two more channels with the same slots: per voxel the summed detection opportunity of its
+looks (``knowledge``: int32, ``logodds.KNOWLEDGE_SCALE`` units per look, non-negative, saturating
+at ``GRID_LIMIT``), so that "never observed" (0) differs from "observed, undecided" (evidence near
 0), and the number of those looks (``looks``: the reading counts correlated looks once).
 This module holds the grid on the device only; ``radarcl.maps`` reads and writes it as files.
 """
@@ -29,23 +34,28 @@ import numpy as np
 from radarcl import logodds
 from radarcl.errors import ConfigError, DeviceCapabilityError, ShapeError
 
-BRICK = 8                           # voxels per brick edge
-BRICK_VOXELS = BRICK ** 3
+BRICK = 8                           # voxels per brick edge along x and y (and z for cubic bricks)
+BRICK_DEPTHS = (8, 1)               # voxels per brick along z: 8^3 bricks, or 8 x 8 x 1 (planar)
+BRICK_VOXELS = BRICK ** 3           # of a cubic brick (the default)
 BRICK_BYTES = 4 * BRICK_VOXELS
 GRID_LIMIT = 2 ** 30                # stored sums saturate here [units]
 MAX_TABLE_BRICKS = 2 ** 28          # the host brick table (int32) stays below 1 GiB
 MAX_EXTENT_M = 1e7                  # as far as a pose may lie (geometry.MAX_TRANSLATION_M)
 MIN_VOXEL_M, MAX_VOXEL_M = 1e-4, 1e4
+CHUNK_BYTES = 32 * 2 ** 20          # a pool chunk: growing the grid adds one, copying nothing
+PAGE_BYTES = 4096                   # a CPU device's chunk starts on a page (PoCL uses it in place)
 
 
 @dataclass(frozen=True)
 class GridSpec:
     """Where the grid lies: ``origin_m`` (x, y, z) of its low corner [m], cubic voxels of
-    ``voxel_m`` [m], ``shape`` (nx, ny, nz) voxels."""
+    ``voxel_m`` [m], ``shape`` (nx, ny, nz) voxels; ``brick_z``: voxels per brick along z (8, or
+    1 for a planar sensor's 8 x 8 x 1 bricks), which gives brick keys their meaning."""
 
     origin_m: tuple
     voxel_m: float
     shape: tuple
+    brick_z: int = BRICK
 
     def __post_init__(self):
         try:
@@ -66,6 +76,8 @@ class GridSpec:
         if len(shape) != 3 or not all(isinstance(n, (int, np.integer)) and not isinstance(n, (bool, np.bool_))
                                       and n >= 1 for n in shape):
             raise ConfigError(f"shape must be 3 positive integers (nx, ny, nz), got {self.shape!r}")
+        if isinstance(self.brick_z, (bool, np.bool_)) or self.brick_z not in BRICK_DEPTHS:
+            raise ConfigError(f"brick_z must be one of {BRICK_DEPTHS} voxels, got {self.brick_z!r}")
         if max(shape) > 2 ** 20:
             raise ConfigError(f"shape {shape} exceeds 2^20 voxels along an axis")
         far = np.abs(np.asarray(origin)) + np.asarray(shape, np.float64) * float(self.voxel_m)
@@ -75,9 +87,10 @@ class GridSpec:
         object.__setattr__(self, "origin_m", origin)
         object.__setattr__(self, "voxel_m", float(self.voxel_m))
         object.__setattr__(self, "shape", tuple(int(n) for n in shape))
+        object.__setattr__(self, "brick_z", int(self.brick_z))
 
     @classmethod
-    def around(cls, centre_m, size_m, voxel_m):
+    def around(cls, centre_m, size_m, voxel_m, brick_z=BRICK):
         """A grid of at least ``size_m`` (x, y, z) [m] centred on ``centre_m``."""
         try:
             size, centre, voxel = np.asarray(size_m, dtype=float), np.asarray(centre_m, dtype=float), float(voxel_m)
@@ -90,7 +103,22 @@ class GridSpec:
                               f"{centre_m!r}, {size_m!r}, {voxel_m!r}")
         shape = tuple(int(n) for n in np.clip(np.ceil(size / voxel - 1e-9), 1, 2 ** 21))
         origin = centre - 0.5 * np.asarray(shape) * voxel
-        return cls(tuple(origin), voxel, shape)
+        return cls(tuple(origin), voxel, shape, brick_z)
+
+    @property
+    def brick(self):
+        """Voxels per brick along (x, y, z)."""
+        return BRICK, BRICK, self.brick_z
+
+    @property
+    def brick_data_shape(self):
+        """Shape of one brick's data: (brick_z, 8, 8) [z, y, x]."""
+        return self.brick_z, BRICK, BRICK
+
+    @property
+    def brick_bytes(self):
+        """Bytes of one brick (int32)."""
+        return 4 * BRICK * BRICK * self.brick_z
 
     @property
     def array_shape(self):
@@ -106,7 +134,7 @@ class GridSpec:
     @property
     def brick_shape(self):
         """Bricks along (x, y, z); partial bricks at the high ends hold voxels outside the grid."""
-        return tuple(-(-n // BRICK) for n in self.shape)
+        return tuple(-(-n // b) for n, b in zip(self.shape, self.brick))
 
     def check_brick_table(self):
         """The number of bricks, or ConfigError when the host's brick table cannot hold them."""
@@ -136,8 +164,8 @@ class GridSpec:
         """(n, 3) int64 indices (x, y, z) of the voxels of ``bricks`` (m, >= 3) (bx, by, bz, ...)
         that lie inside the grid (partial bricks at the high ends hold voxels outside it)."""
         b = np.asarray(bricks)[:, :3].astype(np.int64)
-        offsets = np.stack(np.meshgrid(*[np.arange(BRICK)] * 3, indexing="ij"), -1).reshape(-1, 3)
-        index = (b[:, None, :] * BRICK + offsets[None]).reshape(-1, 3)
+        offsets = np.stack(np.meshgrid(*[np.arange(n) for n in self.brick], indexing="ij"), -1).reshape(-1, 3)
+        index = (b[:, None, :] * np.asarray(self.brick) + offsets[None]).reshape(-1, 3)
         return index[self.contains(index)]
 
     def contains(self, index):
@@ -165,10 +193,19 @@ class EvidenceGrid:
 
     runtime: a ``radarcl.cl.Runtime``; spec: a ``GridSpec``. ``dense=True`` allocates every
     brick at once (to compare memory, or when the whole grid will be seen anyway);
-    ``knowledge=True`` adds the knowledge pool (see the module docstring).
+    ``knowledge=True`` adds the knowledge and looks channels (see the module docstring);
+    ``chunk_bricks``: slots per pool chunk (default: ``CHUNK_BYTES`` worth, within the
+    device's largest buffer); ``backing``: where bricks that left the device live (``evict``),
+    an object whose ``restore(keys)`` gives (rows of ``keys`` it holds, their data per channel),
+    asked whenever a brick is allocated again (``radarcl.maps.rolling``).
+
+    Slots: ``keys[slot]`` is the brick in that slot, (-1, -1, -1) for a freed one; a slot lives
+    in chunk ``slot // chunk_bricks`` of every channel's pool at ``slot % chunk_bricks``.
     """
 
-    def __init__(self, runtime, spec, *, dense=False, knowledge=False):
+    KNOWLEDGE_CHANNELS = ("evidence", "knowledge", "looks")
+
+    def __init__(self, runtime, spec, *, dense=False, knowledge=False, chunk_bricks=None, backing=None):
         if not isinstance(spec, GridSpec):
             raise ConfigError(f"spec must be a GridSpec, got {type(spec).__name__}")
         self.runtime = runtime
@@ -176,57 +213,154 @@ class EvidenceGrid:
         nbx, nby, nbz = spec.brick_shape
         n_total = spec.check_brick_table()
         self.table = np.full((nbz, nby, nbx), -1, np.int32)     # brick (z, y, x) -> slot
-        self.keys = np.empty((0, 3), np.int32)                  # slot -> brick (bx, by, bz)
-        self.pool = None
+        self.keys = np.empty((0, 3), np.int32)                  # slot -> brick (bx, by, bz); -1 when free
+        self.free = np.empty(0, np.int32)                       # freed slots, reused lowest first
+        limit = int(runtime.device.max_mem_alloc_size)
+        self.chunk_bricks = int(chunk_bricks) if chunk_bricks else max(1, min(CHUNK_BYTES, limit) // spec.brick_bytes)
+        if self.chunk_bricks < 1 or self.chunk_bricks * spec.brick_bytes > limit:
+            raise ConfigError(f"chunk_bricks must be in [1, {limit // spec.brick_bytes}], got {chunk_bricks!r}")
         self.has_knowledge = bool(knowledge)
-        self.knowledge = None                                   # the knowledge pool (same slots)
-        self.looks = None                                       # the looks' count pool (same slots)
-        self.capacity = 0
-        self.generation = 0                                     # bumped by clear(): slots change
+        # pools with the same slots, grown and evicted together
+        self.channels = self.KNOWLEDGE_CHANNELS if self.has_knowledge else ("evidence",)
+        self.pools = {name: [] for name in self.channels}       # channel -> its chunks (device buffers)
+        self.backing = backing
+        self.generation = 0                                     # bumped when slots change (clear, evict)
+        self.stats = dict(chunks=0, evicted=0, restored=0, chunks_ahead=0, chunks_waited=0)
+        self._ahead, self._pending, self._ahead_pool, self._ahead_queue, self._ahead_bricks = 0, None, None, None, 0
+        self._largest = 0                                       # the most bricks one allocation added
         if dense:
             self._check_fits(n_total)
             bz, by, bx = np.indices(self.table.shape).reshape(3, -1)
             self.allocate(np.stack([bx, by, bz], axis=1))
 
     @property
-    def n_bricks(self):
-        """Bricks allocated so far."""
+    def n_slots(self):
+        """Slots handed out so far (live and freed): slot numbers lie below this."""
         return len(self.keys)
+
+    @property
+    def n_bricks(self):
+        """Bricks on the device now."""
+        return len(self.keys) - len(self.free)
+
+    @property
+    def capacity(self):
+        """Slots the pools hold."""
+        return len(self.pools[self.channels[0]]) * self.chunk_bricks
+
+    @property
+    def pool(self):
+        """The evidence pool's buffer while it is one chunk (a single-chunk grid's kernels take
+        it whole); with several chunks, use ``chunk``."""
+        chunks = self.pools["evidence"]
+        if len(chunks) > 1:
+            raise ConfigError(f"the grid's pool is {len(chunks)} chunks; launch per chunk (EvidenceGrid.chunk)")
+        return chunks[0] if chunks else None
+
+    def chunk(self, c, channel="evidence"):
+        """Chunk ``c`` of a channel's pool: slots c * chunk_bricks ... (c + 1) * chunk_bricks - 1."""
+        return self.pools[channel][c]
 
     def memory(self):
         """Bytes of the grid stored densely and as allocated here, and the brick counts."""
         table = self.table.nbytes
-        channels = 3 if self.has_knowledge else 1
-        return {"dense_bytes": self.spec.dense_bytes, "sparse_bytes": channels * self.n_bricks * BRICK_BYTES + table,
+        spare = self._ahead_bricks if self._pending is not None else 0       # chunks grown ahead count
+        return {"dense_bytes": self.spec.dense_bytes,
+                "sparse_bytes": len(self.channels) * self.n_bricks * self.spec.brick_bytes + table,
+                "device_bytes": len(self.channels) * (self.capacity + spare) * self.spec.brick_bytes,
                 "bricks": self.n_bricks, "bricks_total": int(self.table.size)}
 
     def _check_fits(self, needed):
         limit = int(self.runtime.device.max_mem_alloc_size)
-        if needed * BRICK_BYTES > limit:
-            factor = (needed * BRICK_BYTES / limit) ** (1 / 3)
+        total = int(self.runtime.device.global_mem_size)
+        if needed * self.spec.brick_bytes * len(self.channels) > total:
+            factor = (needed * self.spec.brick_bytes * len(self.channels) / total) ** (1 / 3)
             raise DeviceCapabilityError(
-                f"the grid needs {needed} bricks = {needed * BRICK_BYTES / 2**20:.0f} MiB but "
-                f"{self.runtime.name} allows buffers of {limit / 2**20:.0f} MiB; use voxels of at least "
-                f"{self.spec.voxel_m * factor:.3g} m, or a smaller grid (sparse bricks already leave out "
-                "space no beam reaches)")
+                f"the grid needs {needed} bricks = {needed * self.spec.brick_bytes / 2**20:.0f} MiB but "
+                f"{self.runtime.name} has {total / 2**20:.0f} MiB; use voxels of at least "
+                f"{self.spec.voxel_m * factor:.3g} m, a smaller grid, or a rolling window (sparse bricks already "
+                "leave out space no beam reaches)")
         return limit
 
     def _grow(self, needed):
+        """Add chunks until ``needed`` slots fit, in every channel's pool: a new chunk is
+        allocated and zeroed, and nothing already stored is copied (a whole-pool copy stalled
+        the stream when the map reached new ground)."""
+        self._check_fits(needed)
+        q = self.runtime.queue
+        size = self.chunk_bricks * self.spec.brick_bytes
+        ready = []
+        while self.capacity < needed:
+            if not ready and self._pending is not None:     # grown ahead: ready, or nearly
+                ready, self._pending = self._pending.result(), None
+            if ready:
+                bufs = ready.pop(0)
+            else:                                           # grown here: the caller waits for it
+                self.stats["chunks_waited"] += 1
+                bufs = {name: self._zeroed_buffer(size, q) for name in self.pools}
+            for name, chunks in self.pools.items():
+                chunks.append(bufs[name])
+            self.stats["chunks"] += 1
+        for bufs in ready:                                  # grown ahead beyond the need: kept
+            for name, chunks in self.pools.items():
+                chunks.append(bufs[name])
+            self.stats["chunks"] += 1
+
+    def grow_ahead(self, spare_slots=None):
+        """Keep free slots ready: whenever fewer than ``spare_slots`` (default: a chunk's), or
+        than the most bricks one allocation has added so far, remain, the chunks that make them up are allocated and zeroed on a thread and a queue
+        of their own, so a frame that reaches new ground takes ready chunks instead of waiting
+        for them (a stream's latency; ``radarcl live`` asks for a frame's worth). 0 turns it off."""
+        self._ahead = self.chunk_bricks if spare_slots is None else max(0, int(spare_slots))
+        if self._ahead and self._ahead_pool is None:          # made now: the first frame should not wait for them
+            import pyopencl as cl
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._ahead_pool = ThreadPoolExecutor(1, thread_name_prefix="radarcl-grow")
+            self._ahead_queue = cl.CommandQueue(self.runtime.context)
+            self._ahead_pool.submit(lambda: None).result()    # the thread started
+        self._kick()
+
+    def _kick(self):
+        """Start growing the next chunk ahead when the free slots run low (``grow_ahead``)."""
+        want = max(self._ahead, self._largest) if self._ahead else 0        # what the greediest frame took
+        if not want or self._pending is not None or self.capacity - self.n_slots >= want:
+            return
+        n = -(-(want - (self.capacity - self.n_slots)) // self.chunk_bricks)
+        self._check_fits(self.capacity + n * self.chunk_bricks)
+        self._pending = self._ahead_pool.submit(self._zeroed_chunks, n)
+        self._ahead_bricks = n * self.chunk_bricks
+        self.stats["chunks_ahead"] += n
+
+    def _zeroed_chunks(self, n):
+        """On the grow-ahead thread: ``n`` chunks, each a buffer per channel, zeroed, finished."""
+        size = self.chunk_bricks * self.spec.brick_bytes
+        out = [{name: self._zeroed_buffer(size, self._ahead_queue) for name in self.pools} for _ in range(n)]
+        self._ahead_queue.finish()
+        return out
+
+    def _zeroed_buffer(self, size, queue):
+        """A new device buffer of ``size`` bytes, all zero. On a CPU device it is the memory of
+        a fresh host array (the OS hands out zeroed pages when they are first touched: nothing
+        to fill, so growing the pool costs no device time that a frame would wait behind);
+        elsewhere a buffer filled with zeros on ``queue``."""
         import pyopencl as cl
 
-        limit = self._check_fits(needed)
-        capacity = max(needed, min(int(self.capacity * 1.5) + 64, limit // BRICK_BYTES))
-        q = self.runtime.queue
-        pools = []
-        for old in (self.pool, self.knowledge, self.looks) if self.has_knowledge else (self.pool,):
-            pool = self.runtime.empty(capacity * BRICK_BYTES)
-            cl.enqueue_fill_buffer(q, pool, np.int32(0), 0, capacity * BRICK_BYTES)
-            if old is not None and self.capacity:
-                cl.enqueue_copy(q, pool, old, byte_count=self.n_bricks * BRICK_BYTES)
-            pools.append(pool)
-        self.pool, self.capacity = pools[0], capacity
-        if self.has_knowledge:
-            self.knowledge, self.looks = pools[1], pools[2]
+        if self.runtime.is_cpu:
+            raw = np.zeros(size + PAGE_BYTES, np.uint8)            # calloc: pages untouched until used
+            start = (-raw.ctypes.data) % PAGE_BYTES
+            return cl.Buffer(self.runtime.context, cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR,
+                             hostbuf=raw[start:start + size])      # the buffer keeps the array alive
+        buf = self.runtime.empty(size)
+        cl.enqueue_fill_buffer(queue, buf, np.int32(0), 0, size)
+        return buf
+
+    def reserve(self, slots):
+        """Grow the pools now (a chunk at a time) so that ``slots`` slots fit: before a stream,
+        so its first frame does not wait for the allocation."""
+        if slots > self.capacity:
+            self._grow(int(slots))
+        self.runtime.queue.finish()
 
     def allocate(self, bricks):
         """Slots of bricks (n, 3) (bx, by, bz), allocating the missing ones in the order of their
@@ -240,8 +374,9 @@ class EvidenceGrid:
     def allocate_index(self, index):
         """Slots of the bricks at flat positions ``index`` of the brick table
         ((bz * nby + by) * nbx + bx, integers; Fusion's planner makes them), allocating the
-        missing ones in increasing index order, so a grid's layout depends only on the bricks
-        seen. Returns (n,) int32 slots."""
+        missing ones in increasing index order (freed slots first, lowest first), so a grid's
+        layout depends only on the bricks seen and left. A brick the ``backing`` holds comes
+        back with its data. Returns (n,) int32 slots."""
         flat = self.table.reshape(-1)
         index = np.asarray(index)
         if index.dtype.kind not in "iu":
@@ -252,13 +387,77 @@ class EvidenceGrid:
         missing = slots < 0
         if missing.any():
             new_index = np.unique(index[missing])
-            needed = self.n_bricks + len(new_index)
+            self._largest = max(self._largest, len(new_index))
+            reuse = min(len(new_index), len(self.free))
+            fresh = len(new_index) - reuse
+            needed = self.n_slots + fresh
             if needed > self.capacity:
                 self._grow(needed)
-            flat[new_index] = np.arange(self.n_bricks, needed, dtype=np.int32)
-            self.keys = np.concatenate([self.keys, self.brick_coords(new_index)])
+            new_slots = np.concatenate([self.free[:reuse], np.arange(self.n_slots, needed, dtype=np.int32)])
+            self.free = self.free[reuse:]
+            flat[new_index] = new_slots
+            keys = self.brick_coords(new_index)
+            self.keys = np.concatenate([self.keys, np.empty((fresh, 3), np.int32)])
+            self.keys[new_slots] = keys
+            if self.backing is not None:
+                rows, data = self.backing.restore(keys)
+                if len(rows):
+                    self.write_slots(new_slots[rows], data)
+                    self.stats["restored"] += len(rows)
             slots = flat[index]
+            self._kick()
         return slots
+
+    def _runs(self, slots):
+        """Sorted ``slots`` as runs (chunk, first slot in it, first row, end row) of consecutive
+        slots within one chunk."""
+        cut = np.flatnonzero((np.diff(slots) != 1) | (np.diff(slots // self.chunk_bricks) != 0)) + 1
+        starts = np.concatenate([[0], cut])
+        ends = np.concatenate([cut, [len(slots)]])
+        return [(int(slots[a]) // self.chunk_bricks, int(slots[a]) % self.chunk_bricks, int(a), int(b))
+                for a, b in zip(starts, ends)]
+
+    def write_slots(self, slots, data):
+        """Write bricks into pool ``slots`` (distinct): ``data`` a dict channel -> (n, *brick) int32
+        (an array alone is the evidence). Blocks until written."""
+        import pyopencl as cl
+
+        if not isinstance(data, dict):
+            data = {"evidence": data}
+        slots = np.asarray(slots, np.int64)
+        order = np.argsort(slots)
+        slots = slots[order]
+        size = self.spec.brick_bytes
+        for name, values in data.items():
+            values = np.ascontiguousarray(np.asarray(values, np.int32)[order])
+            for c, first, a, b in self._runs(slots):
+                cl.enqueue_copy(self.runtime.queue, self.pools[name][c], values[a:b], dst_offset=first * size,
+                                is_blocking=False)
+        self.runtime.queue.finish()
+
+    def evict(self, index):
+        """Take the bricks at flat positions ``index`` (allocated ones) off the device: returns
+        (keys (n, 3) int32, data: channel -> (n, *brick) int32) and frees their slots (zeroed
+        for their next bricks). Plans made before no longer hold (``generation``)."""
+        import pyopencl as cl
+
+        flat = self.table.reshape(-1)
+        index = np.unique(np.asarray(index, np.int64))
+        slots = flat[index]
+        if (slots < 0).any():
+            raise ConfigError("only allocated bricks can be evicted")
+        keys, data = self.read_slots(slots, channels=self.channels)
+        slots = np.sort(slots)
+        size = self.spec.brick_bytes
+        for chunks in self.pools.values():
+            for c, first, a, b in self._runs(slots):
+                cl.enqueue_fill_buffer(self.runtime.queue, chunks[c], np.int32(0), first * size, (b - a) * size)
+        flat[index] = -1
+        self.keys[slots] = -1
+        self.free = np.sort(np.concatenate([self.free, slots.astype(np.int32)]))
+        self.generation += 1
+        self.stats["evicted"] += len(slots)
+        return keys, data
 
     def brick_coords(self, index, out=None):
         """(n, 3) int32 bricks (bx, by, bz) at flat positions ``index`` of the brick table, or
@@ -276,51 +475,48 @@ class EvidenceGrid:
         out[:, 2] = bz
         return out
 
-    def bricks(self):
-        """Sparse snapshot: (keys (n, 3) int32 (bx, by, bz), data (n, 8, 8, 8) int32 [z, y, x])."""
-        import pyopencl as cl
+    def live_slots(self):
+        """The slots that hold a brick, ascending."""
+        return np.flatnonzero(self.keys[:, 0] >= 0) if len(self.free) else np.arange(self.n_slots)
 
-        data = np.zeros((self.n_bricks, BRICK, BRICK, BRICK), np.int32)
-        if self.n_bricks:
-            cl.enqueue_copy(self.runtime.queue, data, self.pool, is_blocking=True)
-        return self.keys.copy(), data
+    def bricks(self, channel="evidence"):
+        """Sparse snapshot: (keys (n, 3) int32 (bx, by, bz), data (n, *brick) int32 [z, y, x]) of
+        the bricks on the device, in slot order."""
+        keys, data = self.read_slots(self.live_slots(), channels=(channel,))
+        return keys, data[channel]
 
     def knowledge_bricks(self, channel="knowledge"):
-        """The knowledge pool's bricks (or ``channel="looks"``: the looks' counts) in the order of
-        ``bricks()``'s keys: (n, 8, 8, 8) int32 [z, y, x] in ``logodds.KNOWLEDGE_SCALE`` units
+        """The knowledge channel's bricks (or ``channel="looks"``: the looks' counts) in the order
+        of ``bricks()``'s keys: (n, *brick) int32 [z, y, x] in ``logodds.KNOWLEDGE_SCALE`` units
         (counts), or None for a grid without knowledge."""
-        import pyopencl as cl
-
-        if not self.has_knowledge:
-            return None
-        data = np.zeros((self.n_bricks, BRICK, BRICK, BRICK), np.int32)
-        if self.n_bricks:
-            cl.enqueue_copy(self.runtime.queue, data, {"knowledge": self.knowledge, "looks": self.looks}[channel],
-                            is_blocking=True)
-        return data
+        return self.bricks(channel)[1] if self.has_knowledge else None
 
     def knowledge_snapshot(self, channel="knowledge"):
         """Dense int32 (nz, ny, nx) copy of the knowledge channel (0 where never observed) or the
         looks' counts (``channel="looks"``), or None for a grid without knowledge."""
-        data = self.knowledge_bricks(channel)
-        return None if data is None else assemble(self.spec, self.keys.copy(), data)
+        if not self.has_knowledge:
+            return None
+        keys, data = self.bricks(channel)
+        return assemble(self.spec, keys, data)
 
-    def read_slots(self, slots):
-        """(keys (n, 3), data (n, 8, 8, 8)) of the bricks in pool ``slots`` (e.g. a plan's
-        bricks[:, 3]), read in contiguous runs: what changed, without the whole pool."""
+    def read_slots(self, slots, channels=None):
+        """(keys (n, 3), data (n, *brick)) of the bricks in pool ``slots`` (e.g. a plan's
+        slots), read in contiguous runs: what changed, without the whole pool. With
+        ``channels`` (names), data is a dict channel -> (n, *brick)."""
         import pyopencl as cl
 
         slots = np.unique(np.asarray(slots, np.int64))
-        if len(slots) and (slots[0] < 0 or slots[-1] >= self.n_bricks):
-            raise ConfigError(f"brick slots must lie in [0, {self.n_bricks}), got {slots[0]}..{slots[-1]}")
-        data = np.empty((len(slots), BRICK, BRICK, BRICK), np.int32)
-        if len(slots):
-            starts = np.concatenate([[0], np.flatnonzero(np.diff(slots) != 1) + 1, [len(slots)]])
-            for a, b in zip(starts[:-1], starts[1:]):
-                cl.enqueue_copy(self.runtime.queue, data[a:b], self.pool, src_offset=int(slots[a]) * BRICK_BYTES,
-                                is_blocking=False)
-            self.runtime.queue.finish()
-        return self.keys[slots].copy(), data
+        if len(slots) and (slots[0] < 0 or slots[-1] >= self.n_slots):
+            raise ConfigError(f"brick slots must lie in [0, {self.n_slots}), got {slots[0]}..{slots[-1]}")
+        out = {}
+        for name in channels or ("evidence",):
+            data = np.empty((len(slots), *self.spec.brick_data_shape), np.int32)
+            for c, first, a, b in (self._runs(slots) if len(slots) else []):
+                cl.enqueue_copy(self.runtime.queue, data[a:b], self.pools[name][c],
+                                src_offset=first * self.spec.brick_bytes, is_blocking=False)
+            out[name] = data
+        self.runtime.queue.finish()
+        return self.keys[slots].copy(), (out if channels else out["evidence"])
 
     def snapshot(self):
         """Dense int32 (nz, ny, nx) copy of the grid in logodds units; unseen voxels are 0."""
@@ -339,18 +535,51 @@ class EvidenceGrid:
         """Forget all evidence and free the bricks."""
         self.table.fill(-1)
         self.keys = np.empty((0, 3), np.int32)
-        self.pool, self.knowledge, self.looks, self.capacity = None, None, None, 0
+        self.free = np.empty(0, np.int32)
+        self.pools = {name: [] for name in self.channels}
         self.generation += 1
+        self._kick()
 
 
 def assemble(spec, keys, data):
-    """Dense int32 (nz, ny, nx) array from bricks (keys (n, 3) (bx, by, bz), data (n, 8, 8, 8))."""
-    if data.shape != (len(keys), BRICK, BRICK, BRICK):
-        raise ShapeError(f"expected bricks of shape ({len(keys)}, 8, 8, 8), got {data.shape}")
+    """Dense int32 (nz, ny, nx) array from bricks (keys (n, 3) (bx, by, bz), data (n, *brick))."""
+    check_bricks(spec, keys, data)
     nbx, nby, nbz = spec.brick_shape
-    full = np.zeros((nbz * BRICK, nby * BRICK, nbx * BRICK), np.int32)
-    view = full.reshape(nbz, BRICK, nby, BRICK, nbx, BRICK).transpose(0, 2, 4, 1, 3, 5)
+    bz = spec.brick_z
+    full = np.zeros((nbz * bz, nby * BRICK, nbx * BRICK), np.int32)
+    view = full.reshape(nbz, bz, nby, BRICK, nbx, BRICK).transpose(0, 2, 4, 1, 3, 5)
     if len(keys):
         view[keys[:, 2], keys[:, 1], keys[:, 0]] = data
     nz, ny, nx = spec.array_shape
     return np.ascontiguousarray(full[:nz, :ny, :nx])
+
+
+def check_bricks(spec, keys, data):
+    """ShapeError unless ``data`` holds one brick of ``spec``'s shape per key."""
+    if np.shape(data) != (len(keys), *spec.brick_data_shape):
+        raise ShapeError(f"expected bricks of shape ({len(keys)}, {', '.join(map(str, spec.brick_data_shape))}), "
+                         f"got {np.shape(data)}")
+
+
+def rebrick(spec, keys, data, brick_z):
+    """The same map in bricks of depth ``brick_z``: (spec', keys', data') holding the same
+    voxels (a planar map read as 8^3 bricks, or back). Voxels beyond the grid stay 0."""
+    check_bricks(spec, keys, data)
+    target = GridSpec(spec.origin_m, spec.voxel_m, spec.shape, brick_z)
+    if brick_z == spec.brick_z:
+        return target, keys, data
+    keys = np.asarray(keys, np.int64)
+    z0 = keys[:, 2] * spec.brick_z                              # first voxel layer of each brick
+    if brick_z > spec.brick_z:                                  # many thin bricks into one deep one
+        new_keys, inverse = np.unique(np.column_stack([keys[:, :2], z0 // brick_z]), axis=0, return_inverse=True)
+        out = np.zeros((len(new_keys), brick_z, BRICK, BRICK), np.int32)
+        for layer in range(spec.brick_z):
+            out[inverse.reshape(-1), (z0 + layer) % brick_z] = data[:, layer]
+        return target, new_keys.astype(np.int32), out
+    parts = spec.brick_z // brick_z                             # one deep brick into thin ones
+    new_keys = np.repeat(keys, parts, axis=0)
+    new_keys[:, 2] = (z0[:, None] // brick_z + np.arange(parts)[None]).reshape(-1)
+    out = np.ascontiguousarray(data).reshape(len(keys) * parts, brick_z, BRICK, BRICK)
+    inside = new_keys[:, 2] * brick_z < spec.shape[2]
+    keep = inside & (out.reshape(len(out), -1) != 0).any(axis=1)
+    return target, new_keys[keep].astype(np.int32), out[keep]

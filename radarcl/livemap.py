@@ -22,6 +22,8 @@ from radarcl.io import beam_protocol, ti_uart
 from radarcl.pipeline import Mapping
 
 KEPT_FRAMES = 8          # beams of this many frames back are still taken (and told from duplicates)
+FIRST_FRAME_RESERVE = 3  # slots made before the stream: this times a level frame's bricks at the grid's
+                         # centre (the paper's stand tilted reaches 2.4 times as many)
 
 
 @dataclass
@@ -104,6 +106,7 @@ class LiveMapper:
                           saved_beams=0, bad_poses=0, beams_missing=0)
         self.latencies = []                     # seconds from a beam's last byte to its evidence in the map
         self.latency_times = []                 # time.perf_counter() when each of those was fused
+        self.new_pose_latencies = []            # those of the beams fused in a frame's first fuse (a new pose planned)
         self.fused_log = None                   # a list: (frame, azimuth, elevation) of every beam fused
         self.trajectory = []                    # one pose per frame
         self._frame_poses = {}
@@ -135,6 +138,13 @@ class LiveMapper:
                               "(a turn cannot be fused azimuth range by azimuth range)")
         self.config, self._want = config, want
         self.mapping = Mapping.from_config(self.runtime, config=config)
+        # what a frame would otherwise wait for: the planner's kernel, the pool's first chunk, and
+        # (as the map reaches new ground) the next chunk, grown ahead on a thread of its own
+        grid = self.mapping.grid
+        frame_bricks = self.mapping.fusion.warm_up()          # a frame at the grid's centre, level
+        grid.reserve(FIRST_FRAME_RESERVE * frame_bricks)        # a tilted one reaches more
+        self.mapping.fusion.warm_up()                           # now the gather too, on the pool
+        grid.grow_ahead(max(frame_bricks, grid.chunk_bricks))
         fft = self.mapping.range_fft
         self._paired = fft is not None and not fft.complex_input      # real beams share an FFT in pairs
         self._frame = np.zeros(self.mapping.frame_shape, fft.dtype if fft is not None else np.float32)
@@ -246,16 +256,19 @@ class LiveMapper:
             late_pair = alone and any(o is not b and self._pair(o)[0] == self._pair(b)[0] for _, o in passes[0])
             passes[1 if late_pair else 0].append((index, b))
         fused = 0
+        new = {f for f in groups if f not in self._frame_poses}
         for frame_id, passes in groups.items():
             for items in passes:
                 if items:
                     fused += self._fuse(frame_id, items)
         self.runtime.queue.finish()
         done = time.perf_counter()
-        for passes in groups.values():
+        for frame_id, passes in groups.items():
             for items in passes:
                 self.latencies.extend(done - b.arrived for _, b in items)
                 self.latency_times.extend(done for _ in items)
+                if frame_id in new:
+                    self.new_pose_latencies.extend(done - b.arrived for _, b in items)
         return fused
 
     def recent_latencies(self, now=None):

@@ -11,7 +11,6 @@ import numpy as np
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import check_poses
-from radarcl.sensor_model import NODES as NODES_PER_BIN
 from radarcl.sensor_model import node_lerp, quantised_rho2
 
 WINDOWS = ("hann", "rect")

@@ -168,7 +168,7 @@ class Mapping:
             self.detection.cfar.check(frame)
             if flags is not None:
                 flags = self.detection.interpreter.check_flags(flags)
-        plan = self.fusion.plan(poses)                  # checks the poses; allocates bricks
+        plan = self.fusion.plan(poses, record=azimuths is None)        # checks the poses; allocates bricks
         if azimuths is not None:
             plan = self.fusion.restrict(plan, *azimuths)
         if self.range_fft is not None:
@@ -186,14 +186,18 @@ class Mapping:
         self.frames += 1
         return plan
 
-    def fuse_source(self, source, after_frame=None):
+    def fuse_source(self, source, after_frame=None, before_frame=None):
         """Fuse every frame of ``source`` (an ``io.inputs.FrameSource``: frames, their poses and,
         for range profiles, their flags) in order; ``after_frame(j, trajectory)`` runs after
-        frame j (progress, checkpoints). Returns (the sensor's trajectory (n, 4, 4): each frame's
-        pose, or its middle beam's, the number of beams that reached no voxel of the grid)."""
+        frame j (progress, checkpoints), ``before_frame(j, position)`` before it, with the
+        sensor's position (3,) [m] (a rolling window's eviction). Returns (the sensor's trajectory
+        (n, 4, 4): each frame's pose, or its middle beam's, the number of beams that reached no
+        voxel of the grid)."""
         trajectory, outside = [], 0
         for j in range(len(source)):
             poses = np.asarray(source.poses[j])
+            if before_frame is not None:
+                before_frame(j, (poses if poses.ndim == 2 else poses[len(poses) // 2])[:3, 3])
             plan = self.fuse(source.frames[j], poses, flags=None if self.range_fft is not None else source.flags[j])
             trajectory.append(poses if poses.ndim == 2 else poses[len(poses) // 2])
             outside += plan.beams_outside

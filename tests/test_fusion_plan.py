@@ -15,7 +15,7 @@ import pytest
 from radarcl.config.stage_config import RadarConfig
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
 from radarcl.grid import BRICK, GridSpec
-from radarcl.stages.fusion_plan import BLOCK, FusionPlanner, HeadFrame, candidate_windows
+from radarcl.stages.fusion_plan import BLOCK, FusionPlanner, HeadFrame, brick_geometry, candidate_windows
 
 RADAR = RadarConfig()
 WINDOWS_DIFFERING_MAX = 0.02     # share of bricks whose device window is wider (by one index) than float64's
@@ -34,24 +34,37 @@ CASES = {
 @pytest.mark.parametrize("case", CASES.values(), ids=CASES.keys())
 @pytest.mark.parametrize("near_field", [True, False])
 def test_windows_match_the_float64_oracle(runtime, case, near_field, vector_width):
+    check_windows(runtime, case, near_field, vector_width, GridSpec((-30.0, -30.0, -6.0), 0.1, (600, 600, 120)))
+
+
+@pytest.mark.parametrize("case", CASES.values(), ids=CASES.keys())
+def test_planar_bricks_windows_match_the_float64_oracle(runtime, case):
+    """-D BRICK_Z=1: bricks 8 x 8 x 1 voxels (a brick's z edge an eighth of its x edge), against
+    the oracle at the same bricks' centres and radius (``brick_geometry``)."""
+    check_windows(runtime, case, True, 8, GridSpec((-30.0, -30.0, -1.0), 0.1, (600, 600, 20), brick_z=1))
+
+
+def check_windows(runtime, case, near_field, vector_width, spec):
     lattice, pose, trans_margin, rot_margin = case
     model = BeamModel.from_radar(RADAR, near_field=near_field)
-    spec = GridSpec((-30.0, -30.0, -6.0), 0.1, (600, 600, 120))
     origin = pose[:3, 3] - np.asarray(spec.origin_m)
     frame = HeadFrame(pose[:3, :3] @ lattice.head_rotation(), origin, trans_margin, rot_margin)
     r_lo, r_hi = 1.0, 28.0
     shape = np.asarray(spec.brick_shape)
     blocks = np.stack(np.meshgrid(*[np.arange(0, n, BLOCK) for n in shape], indexing="ij"), -1).reshape(-1, 3)
-    got = FusionPlanner(runtime, lattice, model, r_lo, r_hi, vector_width).windows(blocks, shape, BRICK * spec.voxel_m,
-                                                                                frame)
+    got = FusionPlanner(runtime, lattice, model, r_lo, r_hi, vector_width, spec.brick_z).windows(
+        blocks, shape, BRICK * spec.voxel_m, frame)
     bricks = FusionPlanner.bricks_of(blocks)
     inside = (bricks < shape).all(axis=1)
     assert (got[~inside] == (0, -1, 0, -1)).all(), "bricks past the grid get empty windows"
     index = FusionPlanner.brick_index(blocks, np.flatnonzero(inside), shape)
     assert np.array_equal(index, (bricks[inside, 2] * shape[1] + bricks[inside, 1]) * shape[0] + bricks[inside, 0])
     got, bricks = got[inside], bricks[inside]
-    centres = (bricks + 0.5) * BRICK * spec.voxel_m
-    want = candidate_windows(centres, 0.5 * math.sqrt(3) * BRICK * spec.voxel_m, frame, r_lo, r_hi, lattice, model)
+    centres, radius = brick_geometry(bricks, BRICK * spec.voxel_m, spec.brick_z)
+    if spec.brick_z == BRICK:
+        assert np.allclose(centres, (bricks + 0.5) * BRICK * spec.voxel_m)
+        assert radius == pytest.approx(0.5 * math.sqrt(3) * BRICK * spec.voxel_m)
+    want = candidate_windows(centres, radius, frame, r_lo, r_hi, lattice, model)
     empty = lambda w: (w[:, 0] > w[:, 1]) | (w[:, 2] > w[:, 3])          # noqa: E731
     both_empty = empty(got) & empty(want)
     same = both_empty | (got == want).all(axis=1)

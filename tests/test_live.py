@@ -4,6 +4,7 @@ a replay of its recording must give the same map bit for bit, and bad radars, lo
 Ctrl-C must end with the map saved."""
 
 import os
+import time
 
 import numpy as np
 import pytest
@@ -313,3 +314,39 @@ def test_radarcl_emulate_plays_a_recording_onto_a_pty(tmp_path, scene):
     got = parser.take()
     assert len(got) == 256 and parser.counters.bytes_dropped > 0          # the noise bursts, dropped
     assert np.array_equal(got[5].samples, frames[0][1, 1])
+
+
+def test_the_first_frame_of_a_new_pose_waits_for_no_planner_growth_or_recording(runtime, scene, monkeypatch):
+    """What stalled the stream at a new pose, asserted on the work done, not on wall time: the
+    planner's kernel is built and the pool's first chunks are there before the first beam; a
+    frame fused in parts never records a still table (each part plans the same pose again);
+    the pool grows during the stream only by chunks grown ahead on their own thread. The
+    beams of each frame's first fuse are in the latencies, and the map is the offline one."""
+    import radarcl.grid
+    from radarcl.stages.fusion import Fusion
+
+    monkeypatch.setattr(radarcl.grid, "CHUNK_BYTES", 1 << 17)         # 64 bricks a chunk: the stream grows
+    frames, poses = scene
+    config = paper_config()
+    mapper = livemap.LiveMapper(runtime, config)
+    mapper.prepare()
+    grid, fusion = mapper.mapping.grid, mapper.mapping.fusion
+    assert fusion._planner is not None and grid.capacity > 0
+    before = dict(grid.stats)
+
+    def no_recording(self, plan):
+        raise AssertionError("a still table was recorded in the stream")
+
+    monkeypatch.setattr(Fusion, "record", no_recording)
+    n_az, n_el = frames.shape[1:3]
+    for j, (frame, pose) in enumerate(zip(frames, poses)):
+        beams = [livemap.Beam(j, i, k, 0, frame[i, k], pose, time.perf_counter()) for i in range(n_az) for k in range(n_el)]
+        for lo in range(0, len(beams), 16):
+            mapper.add(beams[lo:lo + 16])
+    mapper.flush()
+    runtime.queue.finish()
+    assert grid.stats["chunks_waited"] == before["chunks_waited"], "a frame waited for the pool to grow"
+    assert grid.stats["chunks"] > before["chunks"], "the stream reached new ground"
+    assert len(mapper.new_pose_latencies) == 2 * 16 and len(mapper.latencies) == len(frames) * n_az * n_el
+    keep = np.ones(frames.shape[:3], bool)
+    assert np.array_equal(mapper.mapping.snapshot(), offline(runtime, config, frames, poses, keep))

@@ -19,7 +19,7 @@ import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
-from radarcl.grid import BRICK, GridSpec, assemble
+from radarcl.grid import BRICK, GridSpec, assemble, rebrick
 from radarcl.maps.disk import read
 
 TEXTURE_LIMIT_NATS = 1000.0        # texture values are clamped here: float16 holds them to 0.5 nat
@@ -236,9 +236,11 @@ def load_map(path, max_size=2048, budget=None):
 
 def from_bricks(spec, keys, bricks, max_size=2048, budget=None):
     """A ``Volume`` from a sparse snapshot (``maps.disk.read``'s keys and bricks), pooled as
-    ``load_map`` says."""
+    ``load_map`` says. A planar map's 8 x 8 x 1 bricks are read as the 8^3 bricks the texture
+    code walks (``grid.rebrick``: the same voxels)."""
     from radarcl.io.files import memory_budget
 
+    spec, keys, bricks = rebrick(spec, keys, bricks, BRICK)
     budget = memory_budget() if budget is None else budget
     factor = pool_factor(spec, max_size, budget)
     if factor == 1:

@@ -5,7 +5,8 @@ measured in the same run (interleaved, medians: ``timing``). Each benchmark modu
 import json
 import sys
 
-from radarcl.bench import cfar, frames, fusion, heldout_scans, live, polar_read, quality, range_fft, scenes, store, viewer
+from radarcl.bench import (cfar, drive, frames, fusion, heldout_scans, live, polar_read, quality, range_fft, scenes,
+                           store, viewer)
 from radarcl.commands.options import runtime
 
 SUMMARY = "benchmarks, each against a baseline measured in the same run"
@@ -29,6 +30,8 @@ BENCHES = {
     "live": (live, "the reference scene streamed beam by beam over a pty into the live engine: throughput, latency, "
                    "faults, vs waiting for whole frames"),
     "viewer": (viewer, "the paper's full grid rendered at 512 x 512 through EGL vs a plain ray march, same run"),
+    "drive": (drive, "the 11 Oxford scans replayed cyclically along the 37-minute odometry into a rolling map: "
+                     "scans/s vs real time, memory high-water marks, latency, vs today's unbounded grid, same run"),
     "polar-read": (polar_read, "reading polar scans (RADIATE, Oxford) with their layout vs decoding the PNG with PIL "
                                "alone, same run"),
 }

@@ -33,6 +33,9 @@ def stream_once(runtime, config, packets, baud, faults=None):
     from radarcl.jobs import live
 
     mapper, s, _, intact = live.over_pty(runtime, config, packets, faults, baud)
+    first = np.asarray(mapper.new_pose_latencies) * 1e3
+    s["new_pose_first_fuse_max_ms"] = float(first.max()) if first.size else None
+    s["latency_max_ms"] = float(np.max(mapper.latencies)) * 1e3 if mapper.latencies else None
     sizes = [len(d) for d in (faults.apply(packets)[0] if faults else packets)]
     return s, intact, mapper.fused_log, sizes
 
@@ -57,7 +60,8 @@ def run(voxel_m=0.1, frames=2, report=None):
         say(f"streaming {frames} frames at {label} baud ...")
         s, _, _, _ = stream_once(runtime, config, packets, baud)
         result[label] = {k: s[k] for k in ("beams", "beams_per_s", "bytes_per_s", "latency_p50_ms", "latency_p99_ms",
-                                           "parser_cpu_share", "wall_s")}
+                                           "latency_max_ms", "new_pose_first_fuse_max_ms", "parser_cpu_share",
+                                           "wall_s")}
     # the baseline: wait for a whole frame, then fuse it (same run, same device)
     whole = Mapping.from_config(runtime, config=config)
     whole.fuse(samples[0], poses[0])
@@ -97,6 +101,7 @@ def run(voxel_m=0.1, frames=2, report=None):
             packet_ms=len(packets[0]) * 10 / BAUD * 1e3)
     r = result["921600"]
     result.update(beams_per_s=r["beams_per_s"], latency_p50_ms=r["latency_p50_ms"], latency_p99_ms=r["latency_p99_ms"],
+                  latency_max_ms=r["latency_max_ms"], new_pose_first_fuse_max_ms=r["new_pose_first_fuse_max_ms"],
                   intact_delivered_share={k: result[f"ber_{k}"]["intact_delivered_share"] for k in ("0.0001", "0.001")})
     return result
 
@@ -107,7 +112,8 @@ def format_table(r):
     for label in ("921600", "max"):
         x = r[label]
         lines.append(f"  {label:>7} baud: {x['beams_per_s']:7.0f} beams/s, {x['bytes_per_s'] / 1e3:8.1f} kB/s, latency "
-                     f"p50 {x['latency_p50_ms']:6.1f} ms p99 {x['latency_p99_ms']:6.1f} ms, parser CPU "
+                     f"p50 {x['latency_p50_ms']:6.1f} ms p99 {x['latency_p99_ms']:6.1f} ms max {x['latency_max_ms']:6.1f} ms "
+                     f"(a new pose's first fuse: {x['new_pose_first_fuse_max_ms']:.1f} ms at most), parser CPU "
                      f"{100 * x['parser_cpu_share']:.1f} %")
     w = r["whole_frame"]
     lines.append(f"  baseline, whole frames: airtime {w['airtime_ms']:.0f} ms + fuse {w['fuse_ms']:.1f} ms: a beam waits "
@@ -116,9 +122,13 @@ def format_table(r):
         x = r[f"ber_{float(ber):g}"]
         lines.append(f"  BER {ber}: {x['intact']} beams intact, {x['intact_delivered']} of them delivered "
                      f"(share {x['intact_delivered_share']:.3f}), {x['delivered_not_intact']} damaged delivered, "
-                     f"damage to the next delivery p50 {x['resync_ms_p50']:.1f} ms p99 {x['resync_ms_p99']:.1f} ms at 921600 "
+                     f"damage to the next delivery p50 {_ms(x['resync_ms_p50'])} p99 {_ms(x['resync_ms_p99'])} at 921600 "
                      f"baud (one packet: {x['packet_ms']:.1f} ms)")
     return lines
+
+
+def _ms(x):
+    return "-" if x is None else f"{x:.1f} ms"
 
 
 def add_arguments(parser):

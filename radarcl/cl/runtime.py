@@ -415,7 +415,6 @@ class Runtime:
 
     def kernels(self, stem, defines=None):
         """Build ``kernels/<stem>.cl`` with ``-D`` ``defines`` (memoised) and return its KernelSet."""
-        cl = _cl()
         directory = kernels_dir()
         path = directory / f"{stem}.cl"
         options = [f"-I{directory}"] + [_define(k, v) for k, v in sorted((defines or {}).items())]

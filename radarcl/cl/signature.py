@@ -156,7 +156,7 @@ class KernelFunction:
         self._convert = tuple(None if a.pointer else _converter(a, self.name) for a in self.args)
         kernel.set_scalar_arg_dtypes([None if a.pointer else a.dtype for a in self.args])
 
-    def __call__(self, queue, global_size, local_size, *, wait_for=None, **arguments):
+    def __call__(self, queue, global_size, local_size, *, wait_for=None, global_offset=None, **arguments):
         given = arguments.keys()
         if given != self._name_set:
             missing = [n for n in self.names if n not in given]
@@ -167,4 +167,4 @@ class KernelFunction:
                               + (f"unknown {unknown}" if unknown else ""))
         values = [device_array(arguments[name], f"{self.name}: {name}") if convert is None else convert(arguments[name])
                   for name, convert in zip(self.names, self._convert)]
-        return self.kernel(queue, global_size, local_size, *values, wait_for=wait_for)
+        return self.kernel(queue, global_size, local_size, *values, global_offset=global_offset, wait_for=wait_for)

@@ -18,6 +18,7 @@ from radarcl.errors import ConfigError
 from radarcl.io import files
 from radarcl.io.inputs import open_input
 from radarcl.maps import disk
+from radarcl.maps.rolling import WINDOW_RANGE_FACTOR
 
 SUMMARY = "fuse any sensor's frames into a map file (rewritten every --every frames for radarcl view --live)"
 DESCRIPTION = ("Reads INPUT as the sensor's reader says (a radarcl recording; a directory of polar PNG scans in "
@@ -42,7 +43,30 @@ def add_arguments(parser):
                         help="the run's HTML page: numbers, the map from above, the viewer's render, the configuration "
                              "(default: the map's name with .html, e.g. map.html)")
     parser.add_argument("--no-report", action="store_true", help="write no HTML page")
+    parser.add_argument("--window", nargs="?", const="default", default=None, metavar="R",
+                        help="a rolling map for a drive of any length: the device keeps the bricks within R metres of "
+                             "the sensor and writes the others into the map store (--out, a store) as they leave, "
+                             "reading them back when the sensor returns; the grid spans the whole trajectory unless "
+                             "[grid] origin_m and size_m are set. --window alone: "
+                             f"{WINDOW_RANGE_FACTOR:g} x the sensor's mapped range (interpret.range_max_m)")
     add_progress(parser)
+
+
+def window_of(args, config):
+    """(--window in metres or None, whether it is the default): a sentence for what is not a distance."""
+    if args.window is None:
+        return None, False
+    if args.window == "default":
+        from radarcl.jobs import fuse
+
+        return fuse.default_window_m(config), True
+    try:
+        value = float(args.window)
+    except ValueError:
+        raise ConfigError(f"--window must be a distance in metres, got {args.window!r}") from None
+    if not (0 < value < float("inf")):
+        raise ConfigError(f"--window must be a positive distance in metres, got {args.window}")
+    return value, False
 
 
 def run(args):
@@ -67,5 +91,7 @@ def run(args):
     if source.sensor is not config.sensor:                   # the reader learnt the bin count
         config = config.for_sensor(source.sensor)
         say_notes(config.notes, said)
-    fuse.run(runtime(), source, config, out, every=args.every, progress=progress(args), inputs=[args.input], page=page)
+    window, default = window_of(args, config)
+    fuse.run(runtime(), source, config, out, every=args.every, progress=progress(args), inputs=[args.input], page=page,
+             window_m=window, window_default=default, overwrite=args.force)
     return 0

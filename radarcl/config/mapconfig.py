@@ -154,10 +154,11 @@ class Resolved:
         return sensor_model.ModelParams.of(self.values)
 
     def grid_spec(self):
-        """The ``GridSpec`` of [grid]: origin_m, ceil(size_m / voxel_m) voxels."""
+        """The ``GridSpec`` of [grid]: origin_m, ceil(size_m / voxel_m) voxels, bricks shaped
+        to the sensor (``sensors.brick_depth``)."""
         voxel = self["grid.voxel_m"]
         shape = tuple(max(1, math.ceil(s / voxel - 1e-9)) for s in self["grid.size_m"])
-        return GridSpec(self["grid.origin_m"], voxel, shape)
+        return GridSpec(self["grid.origin_m"], voxel, shape, sensors.brick_depth(self.sensor))
 
     def rounding(self):
         """Sentences saying how the windows in metres became bins."""

@@ -431,6 +431,13 @@ def missing_sensitivity(sensor):
             f"the beam's axis); using {sensor_model.DEFAULT_SNR_DB:g} dB; `radarcl calibrate-scans` fits it")
 
 
+def brick_depth(sensor):
+    """Voxels per grid brick along z for ``sensor``'s maps: 1 for a spinning radar with one
+    elevation (it maps a plane one voxel thick, so 8 x 8 x 1 bricks: an 8^3 brick would leave
+    7/8 of its memory unwritten), else 8 (8^3 bricks)."""
+    return 1 if sensor.spinning and sensor.n_elevation == 1 else 8
+
+
 def field_of_view_box(sensor, voxel_m, range_max_m):
     """(origin_m, size_m) of the grid that holds the field of view around a sensor at the
     origin: the bounding box of its beams out to ``range_max_m``; one voxel thick in z for a

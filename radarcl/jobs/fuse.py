@@ -6,36 +6,99 @@ with their odometry, a TI raw ADC capture. The map configuration comes from
 ``mapconfig.resolve`` (sensor defaults, ``--config`` file, ``--set`` flags). With ``every`` the
 map file is rewritten every that many frames (atomically), so ``radarcl view --live`` shows the
 map growing; a store output makes each rewrite cost the changed bricks only.
+
+With ``window_m`` the map rolls (``maps.rolling``): the device keeps the bricks within that
+distance of the sensor, the others go into the map store as they leave and come back when the
+sensor returns, so a drive of any length maps in bounded memory; the grid then spans the
+whole trajectory plus the sensor's range (unless [grid] origin and size were given).
 """
 
+import math
 import time
 from pathlib import Path
 
 import numpy as np
 
+from radarcl.errors import ConfigError
+from radarcl.grid import EvidenceGrid, GridSpec
 from radarcl.io.files import scratch
-from radarcl.maps.disk import MapSaver
+from radarcl.maps.disk import MapSaver, output_format
 from radarcl.maps.map import Map
+from radarcl.maps.rolling import WINDOW_RANGE_FACTOR, RollingStore, RollingWindow
 from radarcl.pipeline import Mapping
+
+
+def default_window_m(config):
+    """The window a rolling map keeps on the device by default [m]: ``WINDOW_RANGE_FACTOR``
+    times the range the configuration maps to (interpret.range_max_m)."""
+    return WINDOW_RANGE_FACTOR * float(config["interpret.range_max_m"])
+
+
+def drive_spec(config, positions):
+    """The grid of a drive: [grid] as configured when its origin or size was given, else the
+    configured box widened in x and y to every sensor position (n, 3) plus the mapped range
+    (bricks shaped to the sensor as ``grid_spec`` says)."""
+    spec = config.grid_spec()
+    if not all(str(config.origins.get(k, "")).endswith("field of view") for k in ("grid.origin_m", "grid.size_m")):
+        return spec
+    reach = float(config["interpret.range_max_m"])
+    lo = np.minimum(positions[:, :2].min(axis=0) - reach, spec.origin_m[:2])
+    hi = positions[:, :2].max(axis=0) + reach
+    v = spec.voxel_m
+    shape = tuple(max(1, math.ceil(float(x) / v)) for x in hi - lo) + (spec.shape[2],)
+    return GridSpec((float(lo[0]), float(lo[1]), spec.origin_m[2]), v, shape, spec.brick_z)
+
+
+def frame_positions(source):
+    """Each frame's sensor position (n, 3) [m] (its middle beam's with one pose per beam)."""
+    out = np.zeros((len(source), 3))
+    for j in range(len(source)):
+        p = np.asarray(source.poses[j])
+        out[j] = (p if p.ndim == 2 else p[len(p) // 2])[:3, 3]
+    return out
 from radarcl.report import figures, html
 from radarcl.report.summary import map_summary
 
 
-def run(runtime, source, config, out, every=None, progress=None, report=print, inputs=(), page=None):
+def run(runtime, source, config, out, every=None, progress=None, report=print, inputs=(), page=None, window_m=None,
+        window_default=False, overwrite=False):
     """Fuse every frame of ``source`` (an ``io.inputs.FrameSource``) with ``config`` (a
     ``mapconfig.Resolved``) and write the map to ``out``: an ``.npz`` file, or a map store
     (``maps.store``, any other name: only changed bricks are written after the first save).
     ``inputs`` go into the store's provenance; ``page`` names the HTML report to write
-    (``write_report``). Returns a dict with the frame count, milliseconds per frame of fusion
-    (the device's work included) and seconds of saving, timed apart."""
-    saver = MapSaver(out, config.sensor.toml(), config.as_dict(), inputs)
-    mapping = Mapping.from_config(runtime, config=config)
+    (``write_report``). ``window_m``: a rolling map (see the module docstring; ``out`` must be
+    a store, replaced when ``overwrite``; ``window_default`` says the window was the default).
+    Returns a dict with the frame count, milliseconds per frame of fusion (the device's work
+    included) and seconds of saving, timed apart (and, rolling, the device's high-water mark
+    and the bricks that left and came back)."""
+    rolling = None
+    if window_m is not None:
+        if output_format(out) == "npz":
+            raise ConfigError(f"--window writes the map into a map store as the sensor drives; {out} is an .npz "
+                              "file: give --out a store name (e.g. drive.rcmap)")
+        if every:
+            raise ConfigError("--every and --window: a rolling map is written as it drives (each segment of "
+                              "bricks that leave the window); leave out --every")
+        spec = drive_spec(config, frame_positions(source))
+        # before the drive: a window a frame does not fit, a store that cannot be written
+        mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec))
+        rolling = RollingWindow(mapping.grid, None, window_m)
+        rolling.check_reach(mapping.fusion.r_hi)
+        backing = RollingStore(out, spec, config.sensor.toml(), config.as_dict(), inputs, overwrite=overwrite)
+        rolling.backing = mapping.grid.backing = backing
+    else:
+        saver = MapSaver(out, config.sensor.toml(), config.as_dict(), inputs)
+        mapping = Mapping.from_config(runtime, config=config)
     spec = mapping.grid.spec
     report(f"fusing {source.summary} with sensor {config.sensor.name} ({config.label()}) into a "
-           f"{' x '.join(map(str, spec.shape))} grid of {spec.voxel_m:g} m -> {out}")
+           f"{' x '.join(map(str, spec.shape))} grid of {spec.voxel_m:g} m -> {out}"
+           + (f"; a rolling map: the device keeps the bricks within {rolling.window_m:g} m of the sensor"
+              + (" (the default, {:g} x the mapped range)".format(WINDOW_RANGE_FACTOR) if window_default else "")
+              + ", the others go to the store as they leave" if rolling else ""))
     start = time.perf_counter()
     n = len(source)
     saving = [0.0]
+    device_max = [0]
 
     def save(poses):
         mapping.runtime.queue.finish()                  # the device's work counts as fusion, not saving
@@ -43,24 +106,49 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
         saver(mapping.grid, poses)
         saving[0] += time.perf_counter() - t0
 
+    def before_frame(j, position):
+        rolling.update(position)
+        device_max[0] = max(device_max[0], mapping.grid.memory()["device_bytes"])
+
     def after_frame(j, trajectory):
         if every and (j + 1) % every == 0 and j + 1 < n:
             save(np.array(trajectory))
         if progress is not None:
             progress(j + 1, n, "frames fused")
 
-    trajectory, outside = mapping.fuse_source(source, after_frame)
-    save(trajectory if len(trajectory) else None)
+    if rolling is None:
+        trajectory, outside = mapping.fuse_source(source, after_frame)
+        save(trajectory if len(trajectory) else None)
+        mem = mapping.grid.memory()
+        bricks, mib = mem["bricks"], mem["sparse_bytes"] / 2 ** 20
+    else:
+        try:
+            trajectory, outside = mapping.fuse_source(source, after_frame, before_frame)
+            mapping.runtime.queue.finish()
+        except ConfigError as exc:               # the store failed mid-drive: it holds the map up to there
+            backing.close()
+            raise ConfigError(f"the drive stopped: {exc}") from None
+        device_max[0] = max(device_max[0], mapping.grid.memory()["device_bytes"])
+        t0 = time.perf_counter()
+        bricks = rolling.finish(dict(poses=np.asarray(trajectory).reshape(-1, 16).tolist()))
+        saving[0] += time.perf_counter() - t0
+        mib = bricks * spec.brick_bytes / 2 ** 20
     save_s = saving[0]
     ms = ((time.perf_counter() - start) - save_s) * 1e3 / n
-    mem = mapping.grid.memory()
-    report(f"wrote {out}: {mem['bricks']} bricks ({mem['sparse_bytes'] / 2 ** 20:.0f} MiB); fusion {ms:.0f} ms per "
+    report(f"wrote {out}: {bricks} bricks ({mib:.0f} MiB); fusion {ms:.0f} ms per "
            f"frame, saving {save_s:.2f} s" + (f" ({-(-n // every)} saves, one every {every} frames)" if every else "")
            + (f"; {outside} beam(s) reached no voxel of the grid" if outside else ""))
-    result = dict(frames=n, ms_per_frame=ms, save_s=save_s, bricks=mem["bricks"], beams_outside=outside,
-                  memory_mib=mem["sparse_bytes"] / 2 ** 20, every=every, device=runtime.name)
+    result = dict(frames=n, ms_per_frame=ms, save_s=save_s, bricks=bricks, beams_outside=outside,
+                  memory_mib=mib, every=every, device=runtime.name)
+    if rolling is not None:
+        st = backing.stats
+        result.update(window_m=rolling.window_m, device_mib_max=device_max[0] / 2 ** 20, evicted=rolling.evicted,
+                      restored=st["restored"], restored_from_disk=st["restored_from_disk"], segments=st["segments"])
+        report(f"rolling map: the device held at most {result['device_mib_max']:.0f} MiB; {rolling.evicted} bricks "
+               f"left the window, {st['restored']} came back ({st['restored_from_disk']} read from the store)")
     if page is not None:
-        write_report(page, out, source, config, result, Map.of_grid(mapping.grid), trajectory)
+        map_ = Map.of_grid(mapping.grid) if rolling is None else Map.open(out)
+        write_report(page, out, source, config, result, map_, trajectory)
         report(f"wrote {page}")
     return result
 

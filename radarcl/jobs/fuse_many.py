@@ -61,11 +61,11 @@ def merge(parts):
     (keys sorted by (bz, by, bx), data int32)."""
     keys = np.concatenate([k for k, _ in parts]) if parts else np.zeros((0, 3), np.int32)
     if not len(keys):
-        return keys.astype(np.int32), np.zeros((0, 8, 8, 8), np.int32)
+        return keys.astype(np.int32), np.zeros((0, *(parts[0][1].shape[1:] if parts else (8, 8, 8))), np.int32)
     k = keys.astype(np.int64)
     ids = (k[:, 2] << 42) | (k[:, 1] << 21) | k[:, 0]
     unique, inverse = np.unique(ids, return_inverse=True)
-    total = np.zeros((len(unique), 8, 8, 8), np.int64)
+    total = np.zeros((len(unique), *parts[0][1].shape[1:]), np.int64)
     start = 0
     for _, d in parts:                  # a part's keys are unique: a plain indexed add is exact
         rows = inverse[start:start + len(d)]
@@ -136,7 +136,7 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
             client = own = Client(cluster)
     try:
         start = time.perf_counter()
-        spec_tuple = (spec.origin_m, spec.voxel_m, spec.shape)
+        spec_tuple = (spec.origin_m, spec.voxel_m, spec.shape, spec.brick_z)
         futures = [client.submit(fuse_one, config.as_dict(), config.sensor.toml(), str(p), spec_tuple, pure=False)
                    for p in paths]
         results = client.gather(futures)

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from radarcl import logodds
+from radarcl.config import sensors
 from radarcl.errors import FrameFormatError
 from radarcl.evaluation.evaluate import read_map
 from radarcl.evaluation.metrics import KNOWN_LOOKS
@@ -37,12 +38,13 @@ from radarcl.report import figures
 OCCUPIED_NATS = 1.0                 # occupied in the consistency overlap: log-odds above this
 
 
-def grid_for(poses, range_m, voxel_m):
-    """A one-voxel-thick grid in the radar's plane covering every pose plus ``range_m``."""
+def grid_for(poses, range_m, voxel_m, brick_z=1):
+    """A one-voxel-thick grid in the radar's plane covering every pose plus ``range_m``, in
+    planar bricks (8 x 8 x 1) unless ``brick_z`` says 8."""
     xy = poses[..., :2, 3].reshape(-1, 2)
     lo, hi = xy.min(axis=0) - range_m, xy.max(axis=0) + range_m
     nx, ny = (int(math.ceil(v)) for v in (hi - lo) / voxel_m)
-    return GridSpec((lo[0], lo[1], -0.5 * voxel_m), voxel_m, (nx, ny, 1))
+    return GridSpec((lo[0], lo[1], -0.5 * voxel_m), voxel_m, (nx, ny, 1), brick_z)
 
 
 def build_map(runtime, config, spec, scans, per_beam, progress=None):
@@ -124,7 +126,7 @@ def run(runtime, config, data_dir, report=print, progress=None, poses=None, pose
     report(f"{len(scans)} scans, {n_az} azimuths x {scans[0].n_bins} bins; the car moves "
            f"{np.linalg.norm(poses[-1, :2, 3]):.1f} m and turns {math.degrees(math.atan2(poses[-1, 1, 0], poses[-1, 0, 0])):.1f} deg")
     true_beams = polar_png.beam_poses(scans, poses, n_az)
-    spec = grid_for(true_beams, range_max_m, config["grid.voxel_m"])
+    spec = grid_for(true_beams, range_max_m, config["grid.voxel_m"], sensors.brick_depth(config.sensor))
 
     def build(sc, pb):
         return logodds.to_fixed(read_map(build_map(runtime, config, spec, sc, pb), config)[0])

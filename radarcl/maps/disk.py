@@ -10,7 +10,6 @@ store?".
 import logging
 from pathlib import Path
 
-import numpy as np
 
 from radarcl import sensor_model
 from radarcl.errors import ConfigError, FrameFormatError, ShapeError
@@ -185,16 +184,10 @@ def save_grid(grid, path, poses=None, reading=None):
 
 def load_grid(runtime, path):
     """An ``EvidenceGrid`` on ``runtime``'s device holding the map file or store at ``path``."""
-    import pyopencl as cl
-
     spec, keys, data, channels = read_channels(path)
     grid = EvidenceGrid(runtime, spec, knowledge=channels is not None)
     slots = grid.allocate(keys)
     if len(keys):
-        planes = ((grid.pool, data),) if channels is None else ((grid.pool, data), (grid.knowledge, channels.knowledge),
-                                                                  (grid.looks, channels.looks))
-        for pool, values in planes:
-            ordered = np.empty_like(values)
-            ordered[slots] = values
-            cl.enqueue_copy(runtime.queue, pool, ordered, is_blocking=True)
+        grid.write_slots(slots, data if channels is None else
+                         dict(evidence=data, knowledge=channels.knowledge, looks=channels.looks))
     return grid

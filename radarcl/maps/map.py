@@ -67,8 +67,9 @@ def classes(units, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS, known=None)
 @dataclass
 class Map:
     """A sparse map: ``spec`` (GridSpec), ``keys`` (n, 3) int32 bricks (bx, by, bz) and ``data``
-    (n, 8, 8, 8) int32 [z, y, x] in logodds units; a map of the detection-statistics model also
-    ``knowledge`` and ``looks`` (the same bricks) and its ``reading`` (``maps.npz.Channels``)."""
+    (n, *brick) int32 [z, y, x] in logodds units (brick (8, 8, 8), or (1, 8, 8) for planar bricks);
+    a map of the detection-statistics model also ``knowledge`` and ``looks`` (the same bricks) and
+    its ``reading`` (``maps.npz.Channels``)."""
 
     spec: GridSpec
     keys: np.ndarray
@@ -104,9 +105,10 @@ class Map:
         self.keys, self.data = np.asarray(self.keys), np.asarray(self.data)
         if self.keys.ndim != 2 or self.keys.shape[1:] != (3,) or self.keys.dtype.kind not in "iu":
             raise ShapeError(f"expected brick keys (n, 3) integers, got {self.keys.shape} {self.keys.dtype}")
-        if self.data.shape != (len(self.keys), BRICK, BRICK, BRICK) or self.data.dtype != np.int32:
-            raise ShapeError(f"expected bricks ({len(self.keys)}, 8, 8, 8) int32, got {self.data.shape} "
-                             f"{self.data.dtype}")
+        if self.data.shape != (len(self.keys), *self.spec.brick_data_shape) or self.data.dtype != np.int32:
+            raise ShapeError(f"expected bricks ({len(self.keys)}, {', '.join(map(str, self.spec.brick_data_shape))}) "
+                             f"int32, got {self.data.shape} {self.data.dtype}")
+        self._brick = np.asarray(self.spec.brick, np.int64)         # voxels per brick along x, y, z
         if not ((self.knowledge is None) == (self.looks is None) == (self.reading is None)):
             raise ConfigError("a map's knowledge comes with its looks and its reading, and only with them")
         for name in ("knowledge", "looks"):
@@ -158,12 +160,12 @@ class Map:
         ok = self.spec.contains(idx)
         if ok.any() and len(self.keys):
             i = idx[ok]
-            b = i // BRICK
+            b = i // self._brick
             ids = (b[:, 2] << 42) | (b[:, 1] << 21) | b[:, 0]
             pos = np.minimum(np.searchsorted(self._ids[self._order], ids), len(self._order) - 1)
             row = self._order[pos]
             hit = self._ids[row] == ids
-            local = i[hit] % BRICK
+            local = i[hit] % self._brick
             vals = np.zeros(len(i), np.int32)
             vals[hit] = source[row[hit], local[:, 2], local[:, 1], local[:, 0]]
             out[ok] = vals
@@ -222,7 +224,7 @@ class Map:
         if hi_nats is not None:
             keep &= units <= hi_nats * logodds.SCALE
         b, z, y, x = np.nonzero(keep)
-        idx = self.keys[b].astype(np.int64) * BRICK + np.stack([x, y, z], axis=1)
+        idx = self.keys[b].astype(np.int64) * self._brick + np.stack([x, y, z], axis=1)
         inside = self.spec.contains(idx)
         out = (idx[inside], units[b, z, y, x][inside])
         if with_knowledge:
@@ -239,7 +241,7 @@ class Map:
             return np.zeros((0, 3), np.int64), np.zeros(0, np.int32)
         units = self.read_units()
         b, z, y, x = np.nonzero(((units > occ * logodds.SCALE) | (units < free * logodds.SCALE)) & self.known())
-        idx = self.keys[b].astype(np.int64) * BRICK + np.stack([x, y, z], axis=1)
+        idx = self.keys[b].astype(np.int64) * self._brick + np.stack([x, y, z], axis=1)
         inside = self.spec.contains(idx)
         return idx[inside], units[b, z, y, x][inside]
 
@@ -267,16 +269,17 @@ class Map:
         z0, z1 = self._band(band)
         nx, ny, _ = self.spec.shape
         nbx, nby, _ = self.spec.brick_shape
-        b0, b1 = z0 // BRICK, (z1 - 1) // BRICK + 1                 # the brick layers the band touches
-        if 4.0 * nbx * nby * (b1 - b0) * BRICK ** 3 > memory_budget():
+        bz = self.spec.brick_z
+        b0, b1 = z0 // bz, (z1 - 1) // bz + 1                       # the brick layers the band touches
+        if 4.0 * nbx * nby * (b1 - b0) * bz * BRICK ** 2 > memory_budget():
             raise ConfigError(f"a dense copy of {nx} x {ny} x {z1 - z0} voxels exceeds the memory budget; "
                               "narrow the band")
-        slab = np.zeros(((b1 - b0) * BRICK, nby * BRICK, nbx * BRICK), np.int32)
-        view = slab.reshape(b1 - b0, BRICK, nby, BRICK, nbx, BRICK).transpose(0, 2, 4, 1, 3, 5)
+        slab = np.zeros(((b1 - b0) * bz, nby * BRICK, nbx * BRICK), np.int32)
+        view = slab.reshape(b1 - b0, bz, nby, BRICK, nbx, BRICK).transpose(0, 2, 4, 1, 3, 5)
         sel = (self.keys[:, 2] >= b0) & (self.keys[:, 2] < b1)      # whole bricks, no voxel lists
         k = self.keys[sel]
         view[k[:, 2] - b0, k[:, 1], k[:, 0]] = bricks[sel]
-        return np.ascontiguousarray(slab[z0 - b0 * BRICK:z1 - b0 * BRICK, :ny, :nx])
+        return np.ascontiguousarray(slab[z0 - b0 * bz:z1 - b0 * bz, :ny, :nx])
 
     def _band(self, band):
         nz = self.spec.shape[2]
@@ -313,7 +316,8 @@ class Map:
         hi = np.zeros((nby, nbx, BRICK, BRICK), np.int64)
         lo = np.zeros((nby, nbx, BRICK, BRICK), np.int64)
         if len(self.keys):
-            inside = self.keys[:, 2, None] * BRICK + np.arange(BRICK) < self.spec.shape[2]     # a top brick's overhang
+            bz = self.spec.brick_z
+            inside = self.keys[:, 2, None] * bz + np.arange(bz) < self.spec.shape[2]     # a top brick's overhang
             d = np.where(inside[:, :, None, None] & self.known(), self.read_units(), 0).astype(np.int64)
             np.maximum.at(hi, (self.keys[:, 1], self.keys[:, 0]), d.max(axis=1))
             np.minimum.at(lo, (self.keys[:, 1], self.keys[:, 0]), d.min(axis=1))

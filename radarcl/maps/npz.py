@@ -1,12 +1,13 @@
 """The map as one ``.npz`` file: the grid spec, the allocated bricks, the sensor's poses.
 
-Members: ``version`` (``FILE_VERSION``), ``origin_m``, ``voxel_m``, ``shape`` (the ``GridSpec``),
-``keys`` (n, 3) int32 bricks (bx, by, bz), ``data`` (n, 8, 8, 8) int32 [z, y, x] in
+Members: ``version`` (1; 2 for planar bricks, which adds ``brick_z``, or the knowledge channel), ``origin_m``, ``voxel_m``,
+``shape`` (the ``GridSpec``), ``keys`` (n, 3) int32 bricks (bx, by, bz), ``data`` (n, *brick) int32
+[z, y, x] (brick (8, 8, 8), or (1, 8, 8) planar) in
 ``radarcl.logodds`` units, optional ``poses`` (m, 4, 4) float64 and ``meta`` (a JSON object).
 A map of the detection-statistics model (``radarcl.sensor_model``) adds three members and is
-version ``KNOWLEDGE_VERSION`` (2): ``knowledge`` (n, 8, 8, 8) int32 [z, y, x], the summed
+version ``KNOWLEDGE_VERSION`` (2): ``knowledge`` (n, *brick) int32 [z, y, x], the summed
 detection opportunity in ``logodds.KNOWLEDGE_SCALE`` units per look (same bricks, same order as
-``data``; 0 where never observed), ``looks`` (n, 8, 8, 8) int32, the number of those looks, and
+``data``; 0 where never observed), ``looks`` (n, *brick) int32, the number of those looks, and
 ``reading`` (a JSON object of ``sensor_model.READING``: look_limit, prior_nats, prior_looks): a
 voxel's log-odds is ``sensor_model.read_log_odds(data, knowledge, looks, reading)``, not
 ``data`` itself. A map without
@@ -30,9 +31,9 @@ from radarcl.grid import BRICK, GRID_LIMIT, GridSpec
 from radarcl.io.files import atomic, safe_npz
 from radarcl.sensor_model import READING
 
-FILE_VERSION = 1
-KNOWLEDGE_VERSION = 2      # a file with the knowledge channel (see the module docstring)
-VERSIONS = (FILE_VERSION, KNOWLEDGE_VERSION)
+FILE_VERSION = 2            # the newest this radarcl reads; a cubic map without knowledge is still written as 1
+PLANAR_VERSION = 2          # adds brick_z: an older reader refuses such a file naming both versions
+KNOWLEDGE_VERSION = 2       # adds the knowledge channel (see the module docstring); with or without brick_z
 MAX_POSES = 10000          # a map keeps at most this many sensor poses (evenly subsampled)
 
 
@@ -68,13 +69,16 @@ def check_reading(reading, where):
 
 
 def write(path, spec, keys, data, poses=None, meta=None, channels=None):
-    """A map file: ``spec``, the bricks (``keys`` (n, 3) int32, ``data`` (n, 8, 8, 8) int32),
+    """A map file: ``spec``, the bricks (``keys`` (n, 3) int32, ``data`` (n, *brick) int32),
     the sensor's ``poses`` and ``meta`` (a JSON-able dict) when given, and the knowledge
     ``channels`` (``Channels``, version 2) when given, written atomically."""
     extra = {} if poses is None else dict(poses=check_trajectory(poses))
+    planar = spec.brick_z != BRICK
+    if planar:
+        extra["brick_z"] = spec.brick_z
     if meta:
         extra["meta"] = np.str_(json.dumps(meta))
-    version = FILE_VERSION
+    version = PLANAR_VERSION if planar else 1
     if channels is not None:
         for name in ("knowledge", "looks"):
             if np.shape(getattr(channels, name)) != np.shape(data):
@@ -88,7 +92,7 @@ def write(path, spec, keys, data, poses=None, meta=None, channels=None):
 
 
 def read(path):
-    """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32) of a map file. A file that is not a
+    """(spec, keys (n, 3) int32, data (n, *brick) int32) of a map file. A file that is not a
     radarcl map raises ``FrameFormatError`` saying what was wrong; array sizes are checked
     against their headers and the memory budget before they are read."""
     return read_channels(path)[:3]
@@ -106,24 +110,25 @@ def read_channels(path):
                                    f"(expected an npz radarcl wrote, e.g. radarcl demo's map.npz)")
         try:
             version = int(f["version"])
-            if version not in VERSIONS:
-                raise FrameFormatError(f"{path} has grid file version {version}, this radarcl reads "
-                                       f"{' and '.join(map(str, VERSIONS))}")
-            spec = GridSpec(tuple(f["origin_m"]), float(f["voxel_m"]), tuple(int(n) for n in f["shape"]))
+            if not 1 <= version <= FILE_VERSION:
+                raise FrameFormatError(f"{path} has grid file version {version}, this radarcl reads versions 1 to "
+                                       f"{FILE_VERSION}" + (": update radarcl" if version > FILE_VERSION else ""))
+            brick_z = int(f["brick_z"]) if version >= PLANAR_VERSION and "brick_z" in f.files else BRICK
+            spec = GridSpec(tuple(f["origin_m"]), float(f["voxel_m"]), tuple(int(n) for n in f["shape"]), brick_z)
         except (TypeError, ValueError) as exc:
             if isinstance(exc, FrameFormatError):
                 raise
             raise FrameFormatError(f"{path}: a bad grid description ({exc})") from exc
         n_keys = f.header("keys")[0]
         n_data = f.header("data")[0]
-        if len(n_keys) != 2 or n_keys[1:] != (3,) or n_data != (n_keys[0], BRICK, BRICK, BRICK):
-            raise FrameFormatError(f"{path}: expected brick keys (n, 3) and bricks (n, 8, 8, 8), got {n_keys} "
-                                   f"and {n_data}")
+        if len(n_keys) != 2 or n_keys[1:] != (3,) or n_data != (n_keys[0], *spec.brick_data_shape):
+            raise FrameFormatError(f"{path}: expected brick keys (n, 3) and bricks (n, "
+                                   f"{', '.join(map(str, spec.brick_data_shape))}), got {n_keys} and {n_data}")
         if n_keys[0] > int(np.prod(spec.brick_shape, dtype=np.int64)):
             raise FrameFormatError(f"{path}: {n_keys[0]} bricks in a grid of only {spec.brick_shape} bricks")
         keys, data = f["keys"], f["data"]
         channels = None
-        if version == KNOWLEDGE_VERSION:
+        if version >= KNOWLEDGE_VERSION and {"knowledge", "looks", "reading"} & set(f.files):
             missing = {"knowledge", "looks", "reading"} - set(f.files)
             if missing:
                 raise FrameFormatError(f"{path}: a version {version} map lacks its {', '.join(sorted(missing))}")
@@ -140,7 +145,8 @@ def read_channels(path):
                 raise FrameFormatError(f"{path}: its reading is not JSON ({exc})") from exc
             channels = Channels(planes["knowledge"], planes["looks"], check_reading(reading, path))
     if data.dtype != np.int32:
-        raise FrameFormatError(f"{path}: expected bricks ({len(keys)}, 8, 8, 8) int32, got {data.shape} {data.dtype}")
+        raise FrameFormatError(f"{path}: expected bricks ({len(keys)}, {', '.join(map(str, spec.brick_data_shape))}) "
+                               f"int32, got {data.shape} {data.dtype}")
     if keys.dtype != np.int32:
         raise FrameFormatError(f"{path}: expected brick keys (n, 3) int32, got {keys.shape} {keys.dtype}")
     if len(keys) and ((keys < 0).any() or (keys >= np.asarray(spec.brick_shape)).any()):

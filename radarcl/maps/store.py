@@ -8,7 +8,8 @@ modified in place is torn by a killed writer.
 
 Layout of ``map.rcmap/`` (any directory name):
   zarr.json               the zarr group, its attribute "radarcl" marking it as a store
-  segment_<k>/            (n, 8, 8, 8) int32 bricks written by one save; never modified again
+  segment_<k>/            (n, *brick) int32 bricks written by one save (brick (8, 8, 8), or (1, 8, 8)
+                          for a planar grid: format 3); never modified again
   index_<v>/              (n_bricks, 5) int32: bx, by, bz, segment, row of every brick in version v
   knowledge_<k>/          only in a map of the detection-statistics model (store format 3): the
   looks_<k>/              knowledge and looks bricks of segment k, row for row (``maps.npz`` says
@@ -55,8 +56,9 @@ from radarcl.maps.store_verify import _SUMS, CHUNK_BRICKS, _Arrays, _check_index
 log = logging.getLogger(__name__)
 FORMAT = "radarcl-map-store"
 FORMAT_VERSION = 3          # 2: a CRC-32 per chunk of every segment and of the index; 1 is still read
-PLAIN_FORMAT = 2            # what a map without the knowledge channel is written as (an older radarcl reads it)
+PLAIN_FORMAT = 2            # what a cubic map without knowledge is written as (an older radarcl reads it)
 KNOWLEDGE_FORMAT = 3        # may hold knowledge_<k> and looks_<k> arrays, then with a "reading"
+PLANAR_FORMAT = 3           # the grid may name its brick depth (planar bricks)
 KINDS = ("segment", "knowledge", "looks")
 COMPACT_SEGMENTS = 32
 MANIFEST = "manifest.json"
@@ -161,7 +163,8 @@ def check_manifest(path, m):
         bad(f"segments {str(segments)[:80]} is not a list of distinct segment numbers")
     grid = m.get("grid")
     try:
-        m["spec"] = GridSpec(tuple(grid["origin_m"]), grid["voxel_m"], tuple(grid["shape"]))
+        m["spec"] = GridSpec(tuple(grid["origin_m"]), grid["voxel_m"], tuple(grid["shape"]),
+                             grid.get("brick_z", 8) if m["format_version"] >= PLANAR_FORMAT else 8)
     except (TypeError, KeyError, ValueError, RadarclError) as exc:
         bad(f"grid {str(grid)[:120]} does not describe a grid ({exc})")
     if not isinstance(m.get("bricks"), int) or isinstance(m["bricks"], bool) or m["bricks"] < 0:
@@ -188,7 +191,7 @@ def kinds_of(manifest):
 
 
 def read(path, salvage=False):
-    """(spec, keys (n, 3) int32, data (n, 8, 8, 8) int32, manifest) of the last complete save
+    """(spec, keys (n, 3) int32, data (n, *brick) int32, manifest) of the last complete save
     (a map of the detection-statistics model: ``manifest["knowledge"]`` and ``["looks"]`` its
     bricks of those channels, else None),
     verified before any byte reaches the map: the manifest's entries, the index (dtype, shape,
@@ -212,7 +215,7 @@ def read(path, salvage=False):
     lost = _Lost(index[:, :3])
     _check_index(index, spec, manifest, lost)
     kinds = kinds_of(manifest)
-    planes = {kind: np.zeros((len(index), BRICK, BRICK, BRICK), np.int32) for kind in kinds}  # never uninitialised
+    planes = {kind: np.zeros((len(index), *spec.brick_data_shape), np.int32) for kind in kinds}  # never uninitialised
     for kind in kinds:
         filled = np.zeros(len(index), bool)
         for segment in manifest["segments"]:
@@ -293,7 +296,7 @@ class StoreWriter:
         return sum(self.segment_rows[s] for s in self.segments) - len(self.index)
 
     def save(self, keys, data, poses=None, knowledge=None, looks=None):
-        """Write the bricks (keys (n, 3), data (n, 8, 8, 8) int32, and their ``knowledge`` and
+        """Write the bricks (keys (n, 3), data (n, *brick) int32, and their ``knowledge`` and
         ``looks`` bricks for a writer made with a ``reading``) that differ from the last save, and
         the sensor ``poses`` (n, 4, 4) so far when given; returns the number of bricks written.
         Atomic for readers."""
@@ -319,10 +322,7 @@ class StoreWriter:
             self.segment_rows[segment] = len(rows)
             parts = (data,) if knowledge is None else (data[:, 0], data[:, 1], data[:, 2])
             for kind, values in zip(self.kinds, parts):
-                arr = self.group.create_array(f"{kind}_{segment}", shape=(len(rows), 8, 8, 8), dtype="int32",
-                                              chunks=(CHUNK_BRICKS, 8, 8, 8), compressors=self._codec(level=1))
-                arr[:] = values[rows]
-                self.crcs[kind, segment] = chunk_crcs(values[rows])
+                self.crcs[kind, segment] = write_segment(self.group, segment, values[rows], self._codec, kind)
         index = self._next_index(keys, rows, segment, compact)
         version = self.version + 1
         name = f"index_{version}"
@@ -333,21 +333,8 @@ class StoreWriter:
         segments = sorted(set(index[:, 3].tolist()))
         previous = sorted(({f"index_{self.version}"} if self.version else set()) |
                           {f"{kind}_{s}" for s in self.segments for kind in self.kinds})
-        extra = {} if knowledge is None else dict(reading=check_reading(dict(self.reading), self.path))
-        sums = {_SUMS[kind]: {str(s): dict(rows=self.segment_rows[s], crc32=self.crcs[kind, s]) for s in segments}
-                for kind in self.kinds}
-        manifest = dict(format=FORMAT, format_version=PLAIN_FORMAT if knowledge is None else KNOWLEDGE_FORMAT,
-                        version=version, index=name, segments=segments, previous=previous, **extra,
-                        grid=dict(origin_m=list(self.spec.origin_m), voxel_m=self.spec.voxel_m,
-                                  shape=list(self.spec.shape)), bricks=len(keys), saved=time.strftime("%Y-%m-%dT%H:%M:%S"),
-                        checksums=dict(index=zlib.crc32(np.ascontiguousarray(index, "<i4")), **sums),
-                        **self.meta)
-        manifest["crc32"] = seal(manifest)
-        tmp = self.path / f".{MANIFEST}.{os.getpid()}.tmp"
-        tmp.write_text(json.dumps(manifest, indent=1))
-        with open(tmp, "rb") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, self.path / MANIFEST)             # the save happens here
+        write_manifest(self.path, self.spec, version, name, index, self.segment_rows, self.crcs, previous, self.meta,
+                       self.reading if knowledge is not None else None)
         self.version, self.index, self.keys, self.data = version, index, keys.copy(), data.copy()
         self.segments, self._legacy = segments, False
         self.segment_rows = {s: self.segment_rows[s] for s in segments}
@@ -379,6 +366,41 @@ class StoreWriter:
                 shutil.rmtree(p, ignore_errors=True)
         for p in self.path.glob(f".{MANIFEST}.*.tmp"):
             p.unlink(missing_ok=True)
+
+
+def write_segment(group, segment, data, codec, kind="segment"):
+    """Write ``data`` (n, *brick) int32 as array ``<kind>_<segment>`` of the zarr ``group``
+    (zstd-1, ``CHUNK_BRICKS`` bricks per chunk); returns the CRC-32 of each chunk."""
+    arr = group.create_array(f"{kind}_{segment}", shape=data.shape, dtype="int32",
+                             chunks=(CHUNK_BRICKS, *data.shape[1:]), compressors=codec(level=1))
+    arr[:] = data
+    return chunk_crcs(data)
+
+
+def write_manifest(path, spec, version, index_name, index, segment_rows, crcs, previous, meta, reading=None):
+    """Write the manifest of save ``version`` (its index array ``index_name`` holding ``index``,
+    the segments it names with their rows and chunk CRCs, ``crcs[kind, segment]``) through a
+    temporary file renamed into place: the save happens at the rename. Format 2, or 3 for planar
+    bricks or a map with the knowledge channel (``reading`` given; an older reader then refuses
+    the store naming both formats)."""
+    segments = sorted(set(index[:, 3].tolist()))
+    grid = dict(origin_m=list(spec.origin_m), voxel_m=spec.voxel_m, shape=list(spec.shape))
+    if spec.brick_z != BRICK:
+        grid["brick_z"] = spec.brick_z
+    kinds = KINDS if reading is not None else KINDS[:1]
+    sums = {_SUMS[kind]: {str(s): dict(rows=segment_rows[s], crc32=crcs[kind, s]) for s in segments} for kind in kinds}
+    extra = {} if reading is None else dict(reading=check_reading(dict(reading), path))
+    newer = spec.brick_z != BRICK or reading is not None
+    manifest = dict(format=FORMAT, format_version=FORMAT_VERSION if newer else PLAIN_FORMAT, version=version,
+                    index=index_name, segments=segments, previous=previous, **extra, grid=grid, bricks=len(index),
+                    saved=time.strftime("%Y-%m-%dT%H:%M:%S"),
+                    checksums=dict(index=zlib.crc32(np.ascontiguousarray(index, "<i4")), **sums), **meta)
+    manifest["crc32"] = seal(manifest)
+    tmp = Path(path) / f".{MANIFEST}.{os.getpid()}.tmp"
+    tmp.write_text(json.dumps(manifest, indent=1))
+    with open(tmp, "rb") as f:
+        os.fsync(f.fileno())
+    os.replace(tmp, Path(path) / MANIFEST)
 
 
 def _ids(keys):

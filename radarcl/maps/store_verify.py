@@ -7,9 +7,9 @@ import zlib
 import numpy as np
 
 from radarcl.errors import FrameFormatError
-from radarcl.grid import BRICK, GRID_LIMIT
+from radarcl.grid import GRID_LIMIT
 
-CHUNK_BRICKS = 256
+CHUNK_BRICKS = 256          # bricks per zarr chunk (and per CRC-32)
 _SUMS = dict(segment="segments", knowledge="knowledge", looks="looks")   # array kind -> its checksums entry
 
 
@@ -93,8 +93,9 @@ def _read_segment(group, path, manifest, segment, index, data, filled, lost, kin
     except Exception:
         lost.add(uses, f"{name} is missing")
         return
-    if dtype != np.int32 or len(shape) != 4 or tuple(shape[1:]) != (BRICK, BRICK, BRICK):
-        lost.add(uses, f"{name} holds {shape} {dtype}, not (n, 8, 8, 8) int32 bricks")
+    brick = manifest["spec"].brick_data_shape
+    if dtype != np.int32 or len(shape) != 4 or tuple(shape[1:]) != brick:
+        lost.add(uses, f"{name} holds {shape} {dtype}, not (n, {', '.join(map(str, brick))}) int32 bricks")
         return
     n = shape[0] if entry is None else entry["rows"]
     if shape[0] != n:

@@ -31,7 +31,7 @@ from radarcl.geometry import BeamLattice, BeamModel, check_poses
 from radarcl.grid import BRICK, EvidenceGrid
 from radarcl.sensor_model import NODE_SHAPE, unpack_nodes
 from radarcl.stages import Port, Stage, build, count, spacing, work_group_size
-from radarcl.stages.fusion_plan import BLOCK, FusionPlanner, HeadFrame, candidate_windows, nonempty
+from radarcl.stages.fusion_plan import BLOCK, FusionPlanner, HeadFrame, brick_geometry, candidate_windows, nonempty
 
 # A work-item per block of rows of 8 voxels (as float8), its beams' windows planned on the
 # host per brick: the shape that measured fastest of those tried (README, "Why the code is
@@ -166,7 +166,12 @@ class Fusion(Stage):
         if self.detstats and not grid.has_knowledge:
             raise ConfigError("the detection-statistics model writes the knowledge channel: give Fusion an "
                               "EvidenceGrid(..., knowledge=True)")
-        defines = dict(VEC=self.vector_width, ROWS=self.rows, N_AZ=lattice.n_az, N_EL=lattice.n_el, N_BINS=self.n_bins,
+        self.brick_z = grid.spec.brick_z
+        # a work-item's block: VEC x 4 x 4 voxels of an 8^3 brick (16 rows), VEC x 8 x 1 of a planar one (8)
+        self._block_rows = 16 if self.brick_z == 8 else 8
+        self._subs = (8 // self.vector_width) * (4 if self.brick_z == 8 else 1)
+        defines = dict(VEC=self.vector_width, ROWS=self.rows, BRICK_Z=self.brick_z, N_AZ=lattice.n_az, N_EL=lattice.n_el,
+                       N_BINS=self.n_bins,
                        NEAR_FIELD=model.near_field, GAUSSIAN=model.gaussian,
                        PER_BEAM_POSES=self.per_beam_poses, AZ_WRAP=lattice.wraps, DETSTATS=self.detstats)
         self._defines = {k: v for k, v in defines.items() if v is not False}
@@ -202,10 +207,13 @@ class Fusion(Stage):
         return (self.lattice.n_beams, self.n_bins, *(NODE_SHAPE if self.detstats else ()))
 
     # -- host side: beams, head frame, bricks ---------------------------------------------------
-    def plan(self, poses, cache=True):
+    def plan(self, poses, cache=True, record=True):
         """Prepare a frame taken at ``poses``: one 4x4 pose, or (n_beams, 4, 4) with
         per_beam_poses. Allocates the bricks the beams may reach. The last plan is reused for
-        a repeated pose unless ``cache`` is False."""
+        a repeated pose unless ``cache`` is False; a reused plan gets its ``StillTable`` (see
+        ``still``) unless ``record`` is False: a frame fused in parts (``restrict``, a live
+        stream) plans the same pose once per part, and a part never reads the whole plan's
+        table, so recording it there would only stall the stream."""
         P = check_poses(poses, self.lattice.n_beams)
         if len(P) > 1 and not self.per_beam_poses:
             raise ConfigError("this Fusion takes one pose per frame; build it with per_beam_poses=True "
@@ -216,7 +224,7 @@ class Fusion(Stage):
         if cache and key in self._plans:
             plan = self._plans.pop(key)
             self._plans[key] = plan                              # the most recent last
-            if self.still and not plan._table:
+            if self.still and record and not plan._table:
                 self.record(plan)
             return plan
         spec = self.grid.spec
@@ -228,7 +236,7 @@ class Fusion(Stage):
         slots = self.grid.allocate_index(index)
         # listed in pool order: the kernel's reads and writes of the pool then stream, and the
         # CPU's prefetchers follow
-        order = _pool_order(slots, self.grid.n_bricks)
+        order = _pool_order(slots, self.grid.n_slots)
         listed = np.empty((len(slots), 4), np.int32)
         self.grid.brick_coords(index[order], out=listed)
         listed[:, 3] = slots[order]
@@ -239,6 +247,26 @@ class Fusion(Stage):
             while len(self._plans) > PLAN_CACHE:
                 self._plans.popitem(last=False)                  # the oldest, and its table
         return plan
+
+    def warm_up(self):
+        """Build the planner (its kernel compiles) before the first frame, so a stream's first
+        frame does not wait for it, and, when the pool has a chunk, the gather's kernel (launched
+        over a brick that no beam reaches: nothing changes). Returns the number of bricks a frame
+        at the grid's centre reaches (what to ``reserve`` for a first frame)."""
+        spec = self.grid.spec
+        centre = 0.5 * np.asarray(spec.shape, np.float64) * spec.voxel_m         # [m, grid coordinates]
+        index, _, _ = self._reached_bricks(HeadFrame(np.eye(3), centre, 0.0, 0.0))     # nothing allocated
+        if self.grid.capacity:
+            # the gather too (the device compiles a kernel's work-group function on its first
+            # launch): over one brick with no candidate beam, which leaves it as it is
+            n = self.lattice.n_beams
+            plan = FramePlan(np.zeros((n, 3, 4), np.float32), np.zeros((1, 4), np.int32),
+                             np.array([[0, -1, 0, -1]], np.int32), self, self.grid.generation)
+            self._launch(self._kernel, plan, self.arrays["evidence"], counts=self._no_table[0],
+                         row_start=self._no_table[1], first=self._no_table[2], extras=self._no_table[2])
+            self.runtime.queue.finish()
+            self._uploaded = self._plan_arrays = None
+        return len(index)
 
     def record(self, plan):
         """Record ``plan``'s ``StillTable`` (two passes of the gather that write instead of
@@ -253,7 +281,7 @@ class Fusion(Stage):
         if plan.table is not None:
             return plan.table
         q = self.runtime.queue
-        n_rows = self._n_items(plan) * 16
+        n_rows = self._n_items(plan) * self._block_rows
         device = q.device
         held = sum(p.table.nbytes for p in self._plans.values() if p.table is not None)
         budget = STILL_TABLE_SHARE * device.global_mem_size - held if self.still == "auto" else float("inf")
@@ -319,8 +347,7 @@ class Fusion(Stage):
         return FramePlan(plan.beams, plan.bricks[keep], windows, self, plan.generation, [plan.beams_outside])
 
     def _windows(self, brick_index, edge, frame):
-        centres = (brick_index + 0.5) * edge * self.grid.spec.voxel_m
-        radius = 0.5 * math.sqrt(3) * edge * self.grid.spec.voxel_m
+        centres, radius = brick_geometry(brick_index, edge * self.grid.spec.voxel_m, self.brick_z)
         return candidate_windows(centres, radius, frame, self.r_lo, self.r_hi, self.lattice, self.model)
 
     def _reached_bricks(self, frame):
@@ -330,13 +357,21 @@ class Fusion(Stage):
         bricks of those blocks."""
         shape = np.asarray(self.grid.spec.brick_shape)
         coarse = -(-shape // BLOCK)
+        edge = BRICK * self.grid.spec.voxel_m
         if self._planner is None:
-            self._planner = FusionPlanner(self.runtime, self.lattice, self.model, self.r_lo, self.r_hi)
+            self._planner = FusionPlanner(self.runtime, self.lattice, self.model, self.r_lo, self.r_hi,
+                                          brick_z=self.brick_z)
             supers = [np.arange(0, n, BLOCK) for n in coarse]       # blocks of BLOCK^3 blocks
             self._supers = np.stack(np.meshgrid(*supers, indexing="ij"), -1).reshape(-1, 3)
-        edge = BRICK * self.grid.spec.voxel_m
-        coarse_windows = self._planner.windows(self._supers, coarse, edge * BLOCK, frame)
-        kept = FusionPlanner.bricks_of(self._supers, np.flatnonzero(nonempty(coarse_windows))) * BLOCK
+            # each one's centre and bounding radius [m, grid coordinates]: a grid much larger than
+            # the sensor's reach (a drive) plans only those the reach can meet
+            self._super_centres, self._super_radius = brick_geometry(self._supers / BLOCK, edge * BLOCK * BLOCK,
+                                                                     self.brick_z)
+        reach = self.r_hi + frame.trans_margin + self._super_radius + 0.01      # 1 cm over the device reach
+        near = ((self._super_centres - frame.origin) ** 2).sum(axis=1) <= reach * reach
+        supers = self._supers if near.all() else self._supers[near]
+        coarse_windows = self._planner.windows(supers, coarse, edge * BLOCK, frame)
+        kept = FusionPlanner.bricks_of(supers, np.flatnonzero(nonempty(coarse_windows))) * BLOCK
         windows = self._planner.windows(kept, shape, edge, frame)
         keep = np.flatnonzero(nonempty(windows))
         return FusionPlanner.brick_index(kept, keep, shape), windows, keep
@@ -401,27 +436,47 @@ class Fusion(Stage):
             return None
         if plan.table is not None and not gather:
             t = plan.table
-            ls = self.local_size
-            n_items = t.n_rows // 16
-            return self._cached_kernel(self.runtime.queue, (-(-n_items // ls) * ls,), (ls,), wait_for=wait_for,
-                                       bricks=self._plan_device(plan)["bricks"], counts=t.counts,
-                                       row_start=t.row_start, first=t.first, extras=t.extras, n_items=n_items,
-                                       pool=self.grid.pool, **self._inputs(evidence, cached=True))
+            event = None
+            for offset, gsize, n_items, c in self._chunk_launches(plan):
+                event = self._cached_kernel(self.runtime.queue, gsize, (self.local_size,), wait_for=wait_for,
+                                            global_offset=offset, bricks=self._plan_device(plan)["bricks"],
+                                            counts=t.counts, row_start=t.row_start, first=t.first, extras=t.extras,
+                                            n_items=n_items, pool=self.grid.chunk(c),
+                                            **self._inputs(evidence, c, cached=True))
+            return event
         none = self._no_table
         return self._launch(self._kernel, plan, evidence, wait_for=wait_for, counts=none[0], row_start=none[1],
                             first=none[2], extras=none[2])
 
-    def _inputs(self, evidence, cached=False):
-        """The kernels' evidence arguments: eq. 12's updates, or the node pairs and the knowledge
-        pool (the other model's get a placeholder); the still table keeps each entry's class."""
+    def _inputs(self, evidence, c, cached=False):
+        """The kernels' evidence arguments for pool chunk ``c``: eq. 12's updates, or the node
+        pairs and the chunk of the knowledge and looks pools (the other model's get a
+        placeholder); the still table keeps each entry's class."""
         none = self._no_table[1]
         if self.detstats:
-            out = dict(evidence=none, nodes=evidence, knowledge=self.grid.knowledge, looks=self.grid.looks,
-                       terrain_dz=self.terrain_dz)
+            out = dict(evidence=none, nodes=evidence, knowledge=self.grid.chunk(c, "knowledge"),
+                       looks=self.grid.chunk(c, "looks"), terrain_dz=self.terrain_dz)
         else:
             out = dict(evidence=evidence, nodes=self._no_table[2], knowledge=none, looks=none, terrain_dz=-math.inf)
         if cached:
             del out["terrain_dz"]
+        return out
+
+    def _chunk_launches(self, plan):
+        """(global offset, global size, n_items, chunk) of each launch over ``plan``: one per
+        pool chunk its bricks lie in (they are listed in slot order, so each chunk's are a run),
+        as work-items offset to the run's first brick (``get_global_id`` keeps counting the
+        plan's work-items, so table rows and brick rows stay where one launch puts them)."""
+        ls, per = self.local_size, self._subs
+        if not len(plan.bricks):
+            return []
+        chunk = plan.bricks[:, 3] // self.grid.chunk_bricks
+        cut = np.flatnonzero(np.diff(chunk)) + 1
+        starts, ends = np.concatenate([[0], cut]), np.concatenate([cut, [len(chunk)]])
+        out = []
+        for a, b in zip(starts, ends):
+            first, n = int(a) * per, (int(b) - int(a)) * per
+            out.append(((first,) if first else None, (-(-n // ls) * ls,), int(b) * per, int(chunk[a])))
         return out
 
     def _plan_device(self, plan):
@@ -430,28 +485,32 @@ class Fusion(Stage):
             import pyopencl.array as cla
 
             q = self.runtime.queue
-            self._plan_arrays = dict(beams=cla.to_device(q, plan.beams), bricks=cla.to_device(q, plan.bricks),
+            bricks = plan.bricks.copy()
+            bricks[:, 3] %= self.grid.chunk_bricks          # the kernel reads a slot within its chunk
+            self._plan_arrays = dict(beams=cla.to_device(q, plan.beams), bricks=cla.to_device(q, bricks),
                                      windows=cla.to_device(q, plan.windows))
             self._uploaded = plan
         return self._plan_arrays
 
     def _n_items(self, plan):
-        """The gather's work-items for ``plan``: one per VEC x 4 x 4 block of its bricks."""
-        return len(plan.bricks) * (8 // self.vector_width) * 4
+        """The gather's work-items for ``plan``: one per block of its bricks (VEC x 4 x 4 voxels
+        of an 8^3 brick, VEC x 8 x 1 of a planar one)."""
+        return len(plan.bricks) * self._subs
 
     def _launch(self, kernel, plan, evidence, wait_for=None, **record):
         """One gather launch over ``plan`` (the fusion, or a RECORD pass with its buffers)."""
         rt, m = self.runtime, self.model
         a_az, a_el = m.apertures
-        n_items = self._n_items(plan)
-        ls = self.local_size
-        gsize = (-(-n_items // ls) * ls,)
         nx, ny, nz = self.grid.spec.shape
-        return kernel(rt.queue, gsize, (ls,), wait_for=wait_for, **self._inputs(evidence), **self._plan_device(plan),
-                      voxel=self.grid.spec.voxel_m, inv_spacing=1.0 / self.bin_spacing_m,
-                      first_bin=self.first_bin, last_bin=self.last_bin, nx=nx, ny=ny, nz=nz,
-                      tan_half_az=math.tan(m.beamwidth_az_rad / 2), tan_half_el=math.tan(m.beamwidth_el_rad / 2),
-                      a_az=a_az, a_el=a_el, n_items=n_items, pool=self.grid.pool, **record)
+        event = None
+        for offset, gsize, n_items, c in self._chunk_launches(plan):
+            event = kernel(rt.queue, gsize, (self.local_size,), wait_for=wait_for, global_offset=offset,
+                           **self._inputs(evidence, c), **self._plan_device(plan),
+                           voxel=self.grid.spec.voxel_m, inv_spacing=1.0 / self.bin_spacing_m,
+                           first_bin=self.first_bin, last_bin=self.last_bin, nx=nx, ny=ny, nz=nz,
+                           tan_half_az=math.tan(m.beamwidth_az_rad / 2), tan_half_el=math.tan(m.beamwidth_el_rad / 2),
+                           a_az=a_az, a_el=a_el, n_items=n_items, pool=self.grid.chunk(c), **record)
+        return event
 
     def download(self, wait_for=None):
         """Fusion writes the grid, not arrays of its own: read the map with ``grid.snapshot()``."""

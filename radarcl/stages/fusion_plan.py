@@ -101,9 +101,10 @@ def nonempty(windows):
 class FusionPlanner:
     """Windows (i_lo, i_hi, k_lo, k_hi) of every brick of a list of blocks of BLOCK^3 bricks,
     for one lattice and beam model and the range interval [r_lo, r_hi] that carries evidence;
-    vector_width: bricks per work-item (default 8 on a CPU, 1 elsewhere)."""
+    vector_width: bricks per work-item (default 8 on a CPU, 1 elsewhere); brick_z: voxels per
+    brick along z (8, or 1: bricks of brick_m x brick_m x brick_m / 8)."""
 
-    def __init__(self, runtime, lattice, model, r_lo, r_hi, vector_width=None):
+    def __init__(self, runtime, lattice, model, r_lo, r_hi, vector_width=None, brick_z=8):
         import pyopencl.array as cla
 
         self.runtime, self.lattice, self.model = runtime, lattice, model
@@ -113,8 +114,11 @@ class FusionPlanner:
         if vector_width not in (1, PVEC_CPU):
             raise ConfigError(f"vector_width must be 1 or {PVEC_CPU}, got {vector_width!r}")
         self.vector_width = vector_width
+        if brick_z not in (8, 1):
+            raise ConfigError(f"brick_z must be 8 or 1, got {brick_z!r}")
+        self.brick_z = int(brick_z)
         defines = dict(N_AZ=lattice.n_az, N_EL=lattice.n_el, WINDOW_SLACK=WINDOW_SLACK, BLOCK=BLOCK,
-                       PVEC=self.vector_width)
+                       PVEC=self.vector_width, BRICK_Z=self.brick_z)
         if lattice.wraps:
             defines["AZ_WRAP"] = True
         self._kernel = build(runtime, "fusion_plan", defines)["fusion_plan"]
@@ -123,8 +127,10 @@ class FusionPlanner:
 
     def windows(self, blocks, grid_bricks, brick_m, frame):
         """(n_blocks * BLOCK^3, 4) int32 windows of the bricks of ``blocks`` ((n, 3) first
-        brick of each block; bricks x fastest within a block), seen from ``frame`` (a
-        ``HeadFrame``); (0, -1, 0, -1) where no beam can reach or past ``grid_bricks``."""
+        brick of each block; bricks x fastest within a block) of edge ``brick_m`` along x and y
+        (``brick_m * brick_z / 8`` along z), seen from ``frame`` (a ``HeadFrame``); (0, -1, 0,
+        -1) where no beam can reach or past ``grid_bricks``. Equivalent to ``candidate_windows``
+        at the bricks' centres with ``brick_radius``."""
         import pyopencl as cl
         import pyopencl.array as cla
 
@@ -184,3 +190,12 @@ class FusionPlanner:
         offset = ((local // (BLOCK * BLOCK)) * nby + (local // BLOCK) % BLOCK) * nbx + local % BLOCK
         which = np.asarray(which, np.int64)
         return first[which >> (3 * BLOCK_BITS)] + offset[which & (BLOCK ** 3 - 1)]
+
+
+def brick_geometry(bricks, brick_m, brick_z=8):
+    """(centres (n, 3) [m, grid coordinates], bounding radius [m]) of bricks (n, 3) of edge
+    ``brick_m`` along x and y and ``brick_m * brick_z / 8`` along z: what ``FusionPlanner``
+    evaluates, for ``candidate_windows``."""
+    edge = np.array([brick_m, brick_m, brick_m * brick_z / 8.0])
+    centres = (np.asarray(bricks, np.float64) + 0.5) * edge
+    return centres, 0.5 * float(np.linalg.norm(edge))
