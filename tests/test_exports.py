@@ -181,6 +181,8 @@ def test_unknown_stays_unknown_in_the_costmap_occupancy_grid_and_octomap(known, 
     from rosbags.typesys import Stores, get_typestore
 
     grid = known.projection((-0.5, 2.0), 1.0)
+    columns = known.known_columns()                            # what the top-down pictures draw grey
+    assert np.array_equal(columns, known.projection(None, 1.0) != -1) and not columns[2:14, 13:20].any()
     assert (grid[2:14, 13:20] == -1).all() and (grid[2:14, 2:12] == 0).all() and (grid[2:14, 12] == 100).all()
     exports.costmap(known, tmp_path / "c.pgm", band=(-0.5, 2.0), threshold_nats=1.0)
     pixels = np.frombuffer((tmp_path / "c.pgm").read_bytes().split(b"\n", 4)[4], np.uint8).reshape(16, 24)[::-1]

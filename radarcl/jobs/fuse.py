@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from radarcl.maps.disk import MapSaver
+from radarcl.maps.disk import MapSaver, reading_of
 from radarcl.maps.map import Map
 from radarcl.pipeline import Mapping
 from radarcl.report import figures, html
@@ -51,7 +51,8 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
     result = dict(frames=n, ms_per_frame=ms, bricks=mem["bricks"], beams_outside=outside,
                   memory_mib=mem["sparse_bytes"] / 2 ** 20, every=every, device=runtime.name)
     if page is not None:
-        write_report(page, out, source, config, result, Map.of_grid(mapping.grid), trajectory)
+        reading = reading_of(config) if mapping.grid.has_knowledge else None
+        write_report(page, out, source, config, result, Map.of_grid(mapping.grid, reading), trajectory)
         report(f"wrote {page}")
     return result
 
@@ -70,10 +71,12 @@ def write_report(page, out, source, config, result, map_, trajectory):
     title = f"{config.sensor.name}: {result['frames']} frames fused at {spec.voxel_m:g} m, seen from above"
     with tempfile.TemporaryDirectory() as tmp:
         top = Path(tmp) / "top.png"
+        unknown = ~map_.known_columns() if map_.has_knowledge else None
         figures.save(figures.plane_map_figure(map_.column_extremes(), spec, trajectory, title, "sensor path",
-                                          "most telling log-odds of the column [nat]"), top)
+                                          "most telling log-odds of the column [nat]", unknown=unknown), top)
         shown = [html.Figure(top.read_bytes(), "Each column's largest log-odds where positive, else its "
-                                                 "smallest: red occupied, blue free, white unseen")]
+                                                 "smallest: red occupied, blue free, white unseen"
+                                                 + ("; grey: never observed (unknown)" if unknown is not None else ""))]
         shown.append(_render(out, Path(tmp) / "view.png"))
     html.write(page, f"radarcl fuse: {Path(str(out)).name}", [
         ("Run", [html.Pairs(run)]), ("Map", shown),

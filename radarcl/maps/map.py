@@ -273,6 +273,17 @@ class Map:
         best = np.where(hi > 0, hi, lo).transpose(0, 2, 1, 3).reshape(nby * BRICK, nbx * BRICK)[:ny, :nx]
         return logodds.to_nats(best)
 
+    def known_columns(self):
+        """bool (ny, nx): the columns holding a voxel the map knows (``known``), brick by brick;
+        for the top-down pictures, which draw the others as unknown, apart from free."""
+        ny, nx = self.spec.shape[1], self.spec.shape[0]
+        nby, nbx = -(-ny // BRICK), -(-nx // BRICK)
+        out = np.zeros((nby, nbx, BRICK, BRICK), bool)
+        if len(self.keys):
+            inside = self.keys[:, 2, None] * BRICK + np.arange(BRICK) < self.spec.shape[2]
+            np.logical_or.at(out, (self.keys[:, 1], self.keys[:, 0]), (inside[:, :, None, None] & self.known()).any(axis=1))
+        return out.transpose(0, 2, 1, 3).reshape(nby * BRICK, nbx * BRICK)[:ny, :nx]
+
     def projection(self, band=None, threshold_nats=1.0):
         """A 2D occupancy grid over a height band, int8 (ny, nx) in the ROS map_server
         convention: 100 occupied (some observed voxel of the column above ``threshold_nats``), 0
