@@ -138,6 +138,7 @@ def test_a_profile_without_sensitivity_says_which_figure_and_the_default():
     config = mapconfig.resolve("navtech-cts350x")
     why = config.origins["sensor_model.snr_1m2_at_10m_db"]
     assert "has no [sensitivity] snr_1m2_at_10m_db" in why and f"using {sm.DEFAULT_SNR_DB:g} dB" in why
+    assert "--set sensor_model.snr_1m2_at_10m_db=" in why                 # and how to give it
     assert why.endswith(sensors.missing_sensitivity(config.sensor))
     assert mapconfig.resolve("paper").origins["sensor_model.snr_1m2_at_10m_db"].endswith("[sensitivity]")
 
