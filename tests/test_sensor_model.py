@@ -139,6 +139,7 @@ def test_a_profile_without_sensitivity_says_which_figure_and_the_default():
     why = config.origins["sensor_model.snr_1m2_at_10m_db"]
     assert "has no [sensitivity] snr_1m2_at_10m_db" in why and f"using {sm.DEFAULT_SNR_DB:g} dB" in why
     assert "--set sensor_model.snr_1m2_at_10m_db=" in why                 # and how to give it
+    assert config["sensor_model.snr_1m2_at_10m_db"] == sm.DEFAULT_SNR_DB   # the default it names is the one used
     assert why.endswith(sensors.missing_sensitivity(config.sensor))
     assert mapconfig.resolve("paper").origins["sensor_model.snr_1m2_at_10m_db"].endswith("[sensitivity]")
 
