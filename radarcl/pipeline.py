@@ -231,7 +231,7 @@ def bin_model(config, voxel_m):
     half_az = math.radians(sensor.get("beams", "beamwidth_az_deg")) / 2
     half_el = math.radians(sensor.get("beams", "beamwidth_el_deg")) / 2
     return sensor_model.BinModel.build(config.model_params(), config.cfar_config(), n_bins, config.bin_spacing_m,
-                                       oversampling, half_az, half_el, voxel_m)
+                                       oversampling, half_az, half_el, voxel_m, config["interpret.range_min_m"])
 
 
 _WARNED = set()

@@ -313,10 +313,12 @@ class BinModel:
     pfa: float
 
     @classmethod
-    def build(cls, params, cfar, n_bins, bin_spacing_m, oversampling, half_az_rad, half_el_rad, voxel_m):
+    def build(cls, params, cfar, n_bins, bin_spacing_m, oversampling, half_az_rad, half_el_rad, voxel_m,
+              range_min_m=0.0):
         """For ``params`` (``ModelParams``), a ``CfarConfig``, bins j at j x ``bin_spacing_m``,
         ``oversampling`` bins per resolution cell (None: treat the cells as independent), the
-        beam's half-power half-widths [rad] and the grid's voxel [m]."""
+        beam's half-power half-widths [rad] and the grid's voxel [m]; ``range_min_m``: the
+        nearest range the interpreter reads (where a measured false-alarm rate is checked)."""
         table = DetectionTable.build(cfar.kind, cfar.alpha, cfar.n_train, cfar.rank, oversampling,
                                      params.target_spread_db)
         ranges = np.arange(n_bins) * float(bin_spacing_m)
@@ -328,6 +330,16 @@ class BinModel:
         cells = 1.0 if oversampling is None else float(oversampling)
         blocking = 1.0 / (block_snr(params, ranges, half_az_rad, half_el_rad) * HANN_ENBW * cells)
         pfa = table.pfa
+        if params.false_alarm:
+            # P_d must lie in (P_fa, 1): a measured rate at or above the best P_d the typical target
+            # reaches anywhere in the range window would make every look worthless (delta 0), silently
+            read = ranges >= range_min_m
+            best = float(table.pfa + (1.0 - table.pfa) * opportunity[read, 0, 0].max(initial=0.0))
+            if params.false_alarm >= best:
+                raise ConfigError(f"sensor_model.false_alarm = {params.false_alarm!r} leaves P_d outside (P_fa, 1): "
+                                  f"the typical target's P_d is at most {best:.3g} here (sensor_model.target_gamma_db "
+                                  f"= {params.target_gamma_db:g} dB at {params.snr_1m2_at_10m_db:g} dB sensitivity); "
+                                  f"expected a false-alarm rate in [0, {best:.3g})")
         if params.false_alarm > pfa:
             # a measured rate above the statistics' (profiles whose noise is not exponential, clutter):
             # the same P_d, less of it beyond what noise alone gives

@@ -156,3 +156,19 @@ def test_debug_shows_the_traceback(tmp_path, monkeypatch):
     monkeypatch.setenv("RADARCL_DEBUG", "1")
     with pytest.raises(FrameFormatError):
         main(["fuse", missing, "--out", str(tmp_path / "m.npz")])
+
+
+def test_fuse_report_of_the_detection_statistics_model_draws_unknown(tmp_path, capsys):
+    """radarcl fuse --report with interpret.model = detstats: the map is read with its reading
+    (Map.of_grid refuses a knowledge grid without one) and the top-down says grey is unknown."""
+    from radarcl.io import recording
+    from radarcl.scene.observe import observe
+    from radarcl.scene.outdoor import paper_scene
+
+    rec = tmp_path / "rec.npz"
+    recording.save(rec, observe(paper_scene(), (-9.2,), seed=1))
+    page = tmp_path / "map.html"
+    assert main(["fuse", str(rec), "--out", str(tmp_path / "map.npz"), "--voxel", "0.4", "--no-progress",
+                 "--set", "interpret.model=detstats", "--report", str(page)]) == 0
+    assert f"wrote {page}" in capsys.readouterr().out
+    assert "grey: never observed (unknown)" in page.read_text()

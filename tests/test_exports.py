@@ -252,3 +252,59 @@ def test_every_format_counts_the_same_voxels_at_the_thresholds(tmp_path):
     got = np.rint(plyfile.PlyData.read(str(tmp_path / "p.ply"))["vertex"]["log_odds"] * 1024).astype(int)
     assert set(got.tolist()) == occupied
     assert m.counts(1.0, -1.0) == dict(occupied=2, free=2, undecided=2, unobserved=spec.n_voxels - 6)
+
+
+@pytest.fixture(scope="module")
+def known():
+    """A map with the knowledge channel (the detection-statistics model): free air (-2 nat, one
+    look), a wall at x = 1 m (+5 nat, two looks) and behind it, x >= 1.25 m, voxels whose sums
+    are as negative as the free air's but which the radar could not see (a quarter look):
+    never observed, whatever their sums say."""
+    dense = np.zeros(SPEC.array_shape, np.int32)
+    knowledge = np.zeros(SPEC.array_shape, np.int32)
+    dense[2:14, 2:14, 2:20] = -2048
+    knowledge[2:14, 2:14, 2:20] = 4096
+    dense[2:14, 2:14, 12] = 5 * 1024
+    knowledge[2:14, 2:14, 12] = 2 * 4096
+    knowledge[2:14, 2:14, 13:20] = 1024                        # a quarter look: below KNOWN_LOOKS
+    keys, blocks = [], []
+    for bz in range(2):
+        for by in range(2):
+            for bx in range(3):
+                s = np.s_[bz * 8:bz * 8 + 8, by * 8:by * 8 + 8, bx * 8:bx * 8 + 8]
+                if knowledge[s].any():
+                    keys.append((bx, by, bz))
+                    blocks.append((dense[s], knowledge[s]))
+    data, k = (np.array([b[i] for b in blocks], np.int32) for i in range(2))
+    return Map(SPEC, np.array(keys, np.int32), data, k, np.minimum(k // 4096, 2).astype(np.int32),
+               dict(look_limit=4.0, prior_nats=0.0, prior_looks=0.5))
+
+
+def test_unknown_stays_unknown_in_the_costmap_occupancy_grid_and_octomap(known, tmp_path):
+    """Columns the radar never observed are -1 in the OccupancyGrid and 205 in the costmap (not
+    free, though their sums are negative); free columns are free; OctoMap leaves them out."""
+    import octomap
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    grid = known.projection((-0.5, 2.0), 1.0, -1.0)
+    columns = known.known_columns()                            # what the top-down pictures draw grey
+    assert np.array_equal(columns, known.projection(None, 1.0, -1.0) != -1) and not columns[2:14, 13:20].any()
+    assert (grid[2:14, 13:20] == -1).all() and (grid[2:14, 2:12] == 0).all() and (grid[2:14, 12] == 100).all()
+    exports.costmap(known, tmp_path / "c.pgm", band=(-0.5, 2.0), occupied_nats=1.0, free_nats=-1.0)
+    pixels = np.frombuffer((tmp_path / "c.pgm").read_bytes().split(b"\n", 4)[4], np.uint8).reshape(16, 24)[::-1]
+    assert (pixels[2:14, 13:20] == 205).all() and (pixels[2:14, 2:12] == 254).all() and (pixels[2:14, 12] == 0).all()
+    exports.rosbag(known, tmp_path / "bag", band=(-0.5, 2.0))
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    with Reader(tmp_path / "bag") as reader:
+        msgs = {c.topic: ts.deserialize_cdr(raw, c.msgtype) for c, _, raw in reader.messages()}
+    assert np.array_equal(np.asarray(msgs["/map"].data).reshape(16, 24), grid)
+    written = exports.octomap(known, tmp_path / "k.ot")
+    n = written["occupied_voxels"] + written["free_voxels"]
+    tree = octomap.OcTree.read(str(tmp_path / "k.ot").encode())
+    assert n == 12 * 12 * 11                                   # free air and wall, not the 12 x 12 x 7 unseen
+    behind = SPEC.index_to_world(np.array([[15, 8, 8]]))[0]
+    before = SPEC.index_to_world(np.array([[8, 8, 8]]))[0]
+    boxes = [(np.asarray(leaf.getCoordinate()), leaf.getSize()) for leaf in tree.begin_leafs()]
+    inside = [any((np.abs(p - c) < size / 2).all() for c, size in boxes) for p in (behind, before)]
+    assert inside == [False, True]                             # OctoMap: absent means unknown

@@ -360,6 +360,9 @@ def test_detstats_matches_its_oracle(runtime, model, rows):
     clear = ~ambiguous
     assert (np.abs(got - sums)[clear] <= step * updates[clear]).all()
     assert (np.abs(known - knowledge)[clear] <= step * updates[clear]).all()
+    # the step is the rare float32/float64 disagreement on rho2's quantisation, not a licence: the
+    # integer interpolation itself (its rounding included) is exact on most voxels (98 % here)
+    assert (got == sums)[clear & reached].mean() > 0.95 and (known == knowledge)[clear & reached].mean() > 0.95
     assert not known[~reached & clear].any()
     # a look counts where its interpolated opportunity is above 0: the same as the oracle's except
     # where one quantisation step of rho2 moves a node value across 0 (then by one)

@@ -138,6 +138,8 @@ def test_a_profile_without_sensitivity_says_which_figure_and_the_default():
     config = mapconfig.resolve("navtech-cts350x")
     why = config.origins["sensor_model.snr_1m2_at_10m_db"]
     assert "has no [sensitivity] snr_1m2_at_10m_db" in why and f"using {sm.DEFAULT_SNR_DB:g} dB" in why
+    assert "--set sensor_model.snr_1m2_at_10m_db=" in why                 # and how to give it
+    assert config["sensor_model.snr_1m2_at_10m_db"] == sm.DEFAULT_SNR_DB   # the default it names is the one used
     assert why.endswith(sensors.missing_sensitivity(config.sensor))
     assert mapconfig.resolve("paper").origins["sensor_model.snr_1m2_at_10m_db"].endswith("[sensitivity]")
 
@@ -164,3 +166,15 @@ def test_node_packing_round_trips_and_interpolates():
     assert np.array_equal(sm.node_lerp(np.array([[0, 100, 200, 300, 400]] * 4), q), [0, 100, 50, 400])
     with pytest.raises(ConfigError, match="node values out of range"):
         sm.pack_nodes(e + logodds.EVIDENCE_LIMIT, d)
+
+
+def test_a_false_alarm_rate_that_leaves_pd_outside_pfa_to_1_is_refused():
+    """A measured false-alarm rate at or above the best P_d of the typical target would make
+    every look worthless: refused naming the key, the value and the range of P_d."""
+    args = (CA, 256, SPACING, 4.0, math.radians(0.5), math.radians(1.0), 0.2, 1.0)     # read from 1 m
+    weak = dict(snr_1m2_at_10m_db=0.0, target_gamma_db=-40.0, target_extent_m=0.01)
+    with pytest.raises(ConfigError, match=r"sensor_model.false_alarm = 0.3 leaves P_d outside \(P_fa, 1\): the typical "
+                                          r"target's P_d is at most 0\.\d+ .* expected a false-alarm rate in \[0, "):
+        sm.BinModel.build(sm.ModelParams(false_alarm=0.3, **weak), *args)
+    ok = sm.BinModel.build(sm.ModelParams(false_alarm=0.05), *args)     # the simulator's sensitivity: P_d reaches ~1
+    assert ok.pfa == 0.05 and ok.opportunity.max() > 0.9

@@ -403,3 +403,21 @@ def test_a_planar_map_is_coloured_by_log_odds_and_the_free_mode_shows_free_space
     px = camera.project(np.array([[5.0, 5.0, 0.0]]), 200, 200)[0].astype(int)
     r, g, b = free[px[1], px[0]].astype(int)
     assert b > r + 15 and b > np.asarray(_background_u8())[2] + 15                  # blue over the background
+
+
+def test_a_map_with_knowledge_is_drawn_as_it_reads_and_unknown_is_not_free(tmp_path):
+    """load_map of a detection-statistics map: the reading (16 looks of -0.5 nat with a look
+    limit of 4 read -2 nat, not the raw -8), and a voxel the radar never observed (a quarter look)
+    is 0, which no mode draws, though its raw sum says -3 nat."""
+    from radarcl.maps import npz
+
+    keys = np.array([[0, 0, 0]], np.int32)
+    data, knowledge, looks = (np.zeros((1, BRICK, BRICK, BRICK), np.int32) for _ in range(3))
+    data[0, 1, 1, 1], knowledge[0, 1, 1, 1], looks[0, 1, 1, 1] = -8 * 1024, 16 * 4096, 16
+    data[0, 2, 2, 2], knowledge[0, 2, 2, 2], looks[0, 2, 2, 2] = -3 * 1024, 1024, 1
+    data[0, 3, 3, 3], knowledge[0, 3, 3, 3], looks[0, 3, 3, 3] = 5 * 1024, 4096, 1
+    path = tmp_path / "k.npz"
+    npz.write(path, SPEC, keys, data, channels=npz.Channels(knowledge, looks,
+                                                            dict(look_limit=4.0, prior_nats=0.0, prior_looks=0.5)))
+    values = V.load_map(path).values.astype(np.float64)
+    assert [values[i, i, i] for i in (1, 2, 3)] == [-2.0, 0.0, 5.0]

@@ -20,7 +20,8 @@ import numpy as np
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.grid import BRICK, GridSpec, assemble, rebrick
-from radarcl.maps.disk import read
+from radarcl.maps.disk import read_channels, read_poses
+from radarcl.maps.map import Map
 
 TEXTURE_LIMIT_NATS = 1000.0        # texture values are clamped here: float16 holds them to 0.5 nat
 
@@ -221,14 +222,18 @@ def from_nats(spec, nats, max_size=2048):
 
 def load_map(path, max_size=2048, budget=None):
     """Read a map file (an npz or map store, e.g. ``radarcl demo``'s map.npz) into a
-    ``Volume``; anything else raises ``FrameFormatError`` with the reason. A grid over the GL
+    ``Volume`` (a map with the knowledge channel: its reading, unknown voxels 0); anything else raises ``FrameFormatError`` with the reason. A grid over the GL
     3D-texture limit ``max_size`` or whose volume would not fit the memory ``budget`` (bytes;
     default ``radarcl.io.files.memory_budget()``) is max-pooled by the smallest factor that fits,
     assembled a slab at a time from its bricks (a small file declaring 1000^3 voxels never
     becomes a 4 GB array), and the note says so."""
-    from radarcl.maps.disk import read_poses
-
-    spec, keys, bricks = read(path)
+    spec, keys, bricks, channels = read_channels(path)
+    if channels is not None:
+        # a map of the detection-statistics model is drawn as it reads (correlated looks counted
+        # once, not its raw sums), and what the radar never observed as 0, which no mode draws:
+        # unknown is not free
+        m = Map(spec, keys, bricks, channels.knowledge, channels.looks, channels.reading)
+        bricks = np.where(m.known(), m.read_units(), 0).astype(np.int32)
     volume = from_bricks(spec, keys, bricks, max_size, budget)
     volume.poses = read_poses(path)
     return volume

@@ -428,7 +428,8 @@ def derived_defaults(sensor):
 def missing_sensitivity(sensor):
     """The sentence for a profile without the figure the detection-statistics model needs."""
     return (f"sensor {sensor.name} has no [sensitivity] snr_1m2_at_10m_db (the SNR of a 1 m^2 target at 10 m on "
-            f"the beam's axis); using {sensor_model.DEFAULT_SNR_DB:g} dB; `radarcl calibrate-scans` fits it")
+            f"the beam's axis); using {sensor_model.DEFAULT_SNR_DB:g} dB; give it in the profile or with "
+            f"--set sensor_model.snr_1m2_at_10m_db=DB")
 
 
 def brick_depth(sensor):

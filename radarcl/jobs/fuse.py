@@ -22,7 +22,7 @@ import numpy as np
 from radarcl.errors import ConfigError
 from radarcl.grid import EvidenceGrid, GridSpec
 from radarcl.io.files import scratch
-from radarcl.maps.disk import MapSaver, output_format
+from radarcl.maps.disk import MapSaver, output_format, reading_of
 from radarcl.maps.map import Map
 from radarcl.maps.rolling import WINDOW_RANGE_FACTOR, RollingStore, RollingWindow
 from radarcl.pipeline import Mapping
@@ -147,7 +147,8 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
         report(f"rolling map: the device held at most {result['device_mib_max']:.0f} MiB; {rolling.evicted} bricks "
                f"left the window, {st['restored']} came back ({st['restored_from_disk']} read from the store)")
     if page is not None:
-        map_ = Map.of_grid(mapping.grid) if rolling is None else Map.open(out)
+        reading = reading_of(config) if mapping.grid.has_knowledge else None
+        map_ = Map.of_grid(mapping.grid, reading) if rolling is None else Map.open(out)
         write_report(page, out, source, config, result, map_, trajectory)
         report(f"wrote {page}")
     return result
@@ -168,10 +169,12 @@ def write_report(page, out, source, config, result, map_, trajectory):
     title = f"{config.sensor.name}: {result['frames']} frames fused at {spec.voxel_m:g} m, seen from above"
     with scratch(page) as tmp:                   # beside the page: a killed run's is removed by the next
         top = Path(tmp) / "top.png"
+        unknown = ~map_.known_columns() if map_.has_knowledge else None
         figures.save(figures.plane_map_figure(map_.column_extremes(), spec, trajectory, title, "sensor path",
-                                          "most telling log-odds of the column [nat]"), top)
+                                          "most telling log-odds of the column [nat]", unknown=unknown), top)
         shown = [html.Figure(top.read_bytes(), "Each column's largest log-odds where positive, else its "
-                                                 "smallest: red occupied, blue free, white unseen")]
+                                                 "smallest: red occupied, blue free, white unseen"
+                                                 + ("; grey: never observed (unknown)" if unknown is not None else ""))]
         shown.append(_render(out, Path(tmp) / "view.png"))
     html.write(page, f"radarcl fuse: {Path(str(out)).name}", [
         ("Summary", map_summary(map_, out)), ("Run", [html.Pairs(run)]), ("Map", shown),

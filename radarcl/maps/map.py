@@ -332,6 +332,18 @@ class Map:
         hi, lo = self._column_hi_lo()
         return logodds.to_nats(np.where(hi > 0, hi, lo))
 
+    def known_columns(self):
+        """bool (ny, nx): the columns holding a voxel the map knows (``known``), brick by brick;
+        for the top-down pictures, which draw the others as unknown, apart from free."""
+        ny, nx = self.spec.shape[1], self.spec.shape[0]
+        nby, nbx = -(-ny // BRICK), -(-nx // BRICK)
+        out = np.zeros((nby, nbx, BRICK, BRICK), bool)
+        if len(self.keys):
+            bz = self.spec.brick_z
+            inside = self.keys[:, 2, None] * bz + np.arange(bz) < self.spec.shape[2]     # a top brick's overhang
+            np.logical_or.at(out, (self.keys[:, 1], self.keys[:, 0]), (inside[:, :, None, None] & self.known()).any(axis=1))
+        return out.transpose(0, 2, 1, 3).reshape(nby * BRICK, nbx * BRICK)[:ny, :nx]
+
     def counts(self, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
         """Voxels of the grid by class: {"occupied", "free", "undecided", "unobserved"}."""
         _, units = self.voxels()
