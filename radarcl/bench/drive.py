@@ -183,7 +183,8 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
 
 def drive_picture(store, trajectory, png, n_frames):
     """The drive's map from above: one pixel per brick (its most telling voxel: the largest
-    log-odds where positive, else the smallest), the trajectory in black."""
+    log-odds where positive, else the smallest), the trajectory in black. The image is
+    (ny, nx), as ``figures.plane_map_figure`` takes it."""
     from radarcl import logodds
     from radarcl.grid import BRICK, GridSpec
     from radarcl.maps import disk
@@ -197,7 +198,7 @@ def drive_picture(store, trajectory, png, n_frames):
     image = np.zeros((nby, nbx))
     image[keys[:, 1], keys[:, 0]] = telling / logodds.SCALE
     coarse = GridSpec(spec.origin_m, spec.voxel_m * BRICK, (nbx, nby, 1))
-    fig = figures.plane_map_figure(image.T, coarse, trajectory[::20],
+    fig = figures.plane_map_figure(image, coarse, trajectory[::20],
                                    f"bench drive: {n_frames} Oxford scans (the 11 scans repeat)\nalong the "
                                    f"full_seq_1 odometry, {spec.voxel_m:g} m voxels;\none pixel per "
                                    f"{BRICK} x {BRICK} brick (its most telling voxel)", "sensor path (every 20th scan)",
