@@ -5,7 +5,7 @@ measured in the same run (interleaved, medians: ``timing``). Each benchmark modu
 import json
 import sys
 
-from radarcl.bench import cfar, fusion, heldout_scans, live, polar_read, quality, range_fft, scenes, store, viewer
+from radarcl.bench import cfar, fusion, heldout_scans, live, merge, polar_read, quality, range_fft, scenes, store, viewer
 from radarcl.commands.options import runtime
 
 SUMMARY = "benchmarks, each against a baseline measured in the same run"
@@ -27,6 +27,8 @@ BENCHES = {
     "live": (live, "the reference scene streamed beam by beam over a pty into the live engine: throughput, latency, "
                    "faults, vs waiting for whole frames"),
     "viewer": (viewer, "the paper's full grid rendered at 512 x 512 through EGL vs a plain ray march, same run"),
+    "merge": (merge, "fuse-many's merge partitioned by brick key on 1, 2 and 3 Dask workers, many overlapping partial "
+                     "maps, vs the one-process merge, same run"),
     "polar-read": (polar_read, "reading polar scans (RADIATE, Oxford) with their layout vs decoding the PNG with PIL "
                                "alone, same run"),
 }
