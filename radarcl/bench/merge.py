@@ -58,6 +58,20 @@ def one_process(paths, out):
     store.StoreWriter(out, spec).save(keys, data)
 
 
+def cpu_seconds(pids):
+    """CPU seconds (user + system) each of ``pids`` ("self" for this process) has used; NaN without /proc."""
+    hz = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+    out = []
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            out.append((int(fields[11]) + int(fields[12])) / hz)
+        except (OSError, ValueError, IndexError):
+            out.append(float("nan"))
+    return np.array(out)
+
+
 def _uptime():
     try:
         with open("/proc/loadavg") as f:
@@ -92,16 +106,18 @@ def command(args, runtime, say):
         load_before = _uptime()
         times = {name: [] for name in runs}
         others = {name: [] for name in runs}
+        cpus = {name: [] for name in runs}              # per run: [this process, each worker] CPU seconds
         want = None
         for r in range(args.repeat + 1):                       # round 0 warms the page cache and the workers
             for name, fn in runs.items():
                 out = work / f"out_{name.replace(' ', '_')}.rcmap"
                 shutil.rmtree(out, ignore_errors=True)
-                meter, t0 = OtherLoad(pids[name]), time.perf_counter()
+                meter, cpu0, t0 = OtherLoad(pids[name]), cpu_seconds(["self", *pids[name]]), time.perf_counter()
                 fn(out)
                 if r:
                     times[name].append(time.perf_counter() - t0)
                     others[name].append(meter.cores())
+                    cpus[name].append((cpu_seconds(["self", *pids[name]]) - cpu0).tolist())
                 got = store.read(out)[1:3]
                 if want is None:
                     want = got
@@ -122,16 +138,21 @@ def command(args, runtime, say):
                   repeat=args.repeat, nproc=cores, load_before=load_before, load_after=load_after,
                   seconds={k: v for k, v in med.items()}, runs={k: v for k, v in times.items()},
                   other_cores={k: float(np.nanmean(v)) for k, v in others.items()},
+                  cpu_s={k: v for k, v in cpus.items()},
                   speedup={f"{n} workers": base / med[f"{n} workers"] for n in counts},
                   ideal={f"{n} workers": float(min(n, cores)) / min(counts[0], cores) for n in counts},
                   bit_identical=True)
     lines = [f"merge of {args.inputs} partial maps x {args.bricks} bricks of 8^3 ({result['input_mib']:.0f} MiB) "
              f"into {result['merged_bricks']} bricks; nproc {cores}; load {load_before} before, {load_after} after; "
              f"median of {args.repeat} interleaved rounds",
-             f"{'':14s} {'seconds':>8s} {'vs ' + str(counts[0]) + ' worker':>12s} {'ideal':>6s} {'others (cores)':>15s}"]
+             f"{'':14s} {'seconds':>8s} {'vs ' + str(counts[0]) + ' worker':>12s} {'ideal':>6s} {'others (cores)':>15s} "
+             f"{'CPU s: coordinator':>19s} {'workers':>8s} {'busiest':>8s}"]
     for name, t in med.items():
         ratio = base / t
         ideal = f"{result['ideal'][name]:.2f}" if name in result["ideal"] else ""
-        lines.append(f"{name:14s} {t:8.2f} {ratio:11.2f}x {ideal:>6s} {result['other_cores'][name]:15.2f}")
-    lines.append("every output is the one-process map, bit for bit; 'ideal' is min(workers, nproc): the cores there are")
+        cpu = np.median(np.array(cpus[name]), axis=0)
+        lines.append(f"{name:14s} {t:8.2f} {ratio:11.2f}x {ideal:>6s} {result['other_cores'][name]:15.2f} "
+                     f"{cpu[0]:19.2f} {cpu[1:].sum():8.2f} {cpu[1:].max() if len(cpu) > 1 else 0:8.2f}")
+    lines += ["every output is the one-process map, bit for bit; 'ideal' is min(workers, nproc): the cores there are;",
+              "'others': cores other processes used meanwhile; CPU s: medians, this process and the workers (all, busiest)"]
     return result, lines
