@@ -170,17 +170,19 @@ def _worker_name():
         return "local"
 
 
-def merge_stores(client, paths, out, sensor_toml="", config=None, provenance=None, partitions=None):
+def merge_stores(client, paths, out, sensor_toml="", config=None, provenance=(), partitions=None):
     """Merge the map stores ``paths`` into ``out`` (a map store, or an ``.npz`` file) on the Dask
     ``client``'s workers, partitioned by brick key (see the module docstring); the manifest keeps
-    ``sensor_toml``, ``config`` and the SHA-256 of ``provenance`` (default: the inputs). Every
-    input is checked before any work. Returns dict(bricks, partitions, workers used, seconds)."""
+    ``sensor_toml``, ``config`` and the paths and SHA-256 of ``provenance`` (fuse-many's
+    recordings; none by default: hashing the inputs would be a pass over all their bytes in the
+    coordinator alone). Every input is checked before any work. Returns dict(bricks, partitions,
+    workers used, seconds)."""
     start = time.perf_counter()
     inputs = open_inputs(paths)
     spec = inputs[0].spec
     workers = sorted(client.nthreads())
     ids, parts = plan(inputs, partitions or PARTITIONS_PER_WORKER * max(1, len(workers)))
-    meta = store.manifest_meta(sensor_toml, config, paths if provenance is None else provenance)
+    meta = store.manifest_meta(sensor_toml, config, provenance)
     npz_out = output_format(out) == "npz"
     with files.atomic(out) as tmp:
         if not npz_out:
