@@ -3,13 +3,14 @@
 
 The input: ``inputs`` partial map stores of ``bricks`` random 8^3 bricks each, drawn from a pool of
 ``pool`` brick keys so that they overlap (a fleet driving the same streets), stored in key order
-as fuse-many's partials are; 70 % of the voxels zero, the rest random log-odds. Each worker count
-has its own cluster, started before any timing; the merges then take turns, round after round
-(interleaved), and the median of ``repeat`` rounds is kept, beside the one-process merge of the
+as fuse-many's partials are; 70 % of the voxels zero, the rest random log-odds. The merges take
+turns, round after round (interleaved), each worker count on a cluster started for it before the
+clock starts and closed after, and the median of ``repeat`` rounds is kept, beside the one-process merge of the
 same inputs (every store read whole, ``merge``, one ``StoreWriter`` save: fuse-many's merge before
 it was partitioned). Every output is checked to be the one-process map, bit for bit.
 """
 
+import contextlib
 import os
 import shutil
 import tempfile
@@ -80,44 +81,54 @@ def _uptime():
         return "?"
 
 
+@contextlib.contextmanager
+def _cluster(workers, directory, warm):
+    """A LocalCluster of ``workers`` processes (one thread each), warmed by merging the map store
+    ``warm`` alone (imports, zarr's first use), alive only for one timed merge: an idle cluster's
+    scheduler costs the coordinator about 5 % of a core, which would fall on every other
+    measurement. None for the one-process merge."""
+    if workers is None:
+        yield None
+        return
+    from dask.distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                      local_directory=str(directory)) as cluster, Client(cluster) as client:
+        merge_maps.merge_stores(client, [warm], Path(directory) / "warm.rcmap", partitions=3 * workers)
+        shutil.rmtree(Path(directory) / "warm.rcmap")
+        yield client
+
+
 def command(args, runtime, say):
     import logging
-
-    from dask.distributed import Client, LocalCluster
 
     for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.worker"):
         logging.getLogger(name).setLevel(logging.ERROR)
     counts = [int(w) for w in args.workers.split(",")]
     work = Path(tempfile.mkdtemp(prefix="radarcl-bench-merge-"))
-    clusters = {}
     try:
         start = time.perf_counter()
         spec, paths = synthesise(work, args.inputs, args.bricks, args.pool)
         say(f"synthesised {args.inputs} partial maps of {args.bricks} bricks in {time.perf_counter() - start:.1f} s")
-        for n in counts:
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                                   local_directory=str(work))
-            clusters[n] = (cluster, Client(cluster))
-        pids = {"one process": []}
-        pids.update({f"{n} workers": list(clusters[n][1].run(os.getpid).values()) for n in counts})
-        runs = {"one process": lambda out: one_process(paths, out)}
-        runs.update({f"{n} workers": (lambda out, c=clusters[n][1]: merge_maps.merge_stores(c, paths, out))
-                     for n in counts})
+        names = ["one process", *(f"{n} workers" for n in counts)]
         load_before = _uptime()
-        times = {name: [] for name in runs}
-        others = {name: [] for name in runs}
-        cpus = {name: [] for name in runs}              # per run: [this process, each worker] CPU seconds
+        times, others, cpus = ({name: [] for name in names} for _ in range(3))   # cpus: [this process, each worker]
         want = None
-        for r in range(args.repeat + 1):                       # round 0 warms the page cache and the workers
-            for name, fn in runs.items():
+        for r in range(args.repeat + 1):                       # round 0 warms the page cache
+            for name in names:
                 out = work / f"out_{name.replace(' ', '_')}.rcmap"
                 shutil.rmtree(out, ignore_errors=True)
-                meter, cpu0, t0 = OtherLoad(pids[name]), cpu_seconds(["self", *pids[name]]), time.perf_counter()
-                fn(out)
-                if r:
-                    times[name].append(time.perf_counter() - t0)
-                    others[name].append(meter.cores())
-                    cpus[name].append((cpu_seconds(["self", *pids[name]]) - cpu0).tolist())
+                with _cluster(None if name == "one process" else int(name.split()[0]), work, paths[0]) as client:
+                    pids = list(client.run(os.getpid).values()) if client else []
+                    meter, cpu0, t0 = OtherLoad(pids), cpu_seconds(["self", *pids]), time.perf_counter()
+                    if client:
+                        merge_maps.merge_stores(client, paths, out)
+                    else:
+                        one_process(paths, out)
+                    if r:
+                        times[name].append(time.perf_counter() - t0)
+                        others[name].append(meter.cores())
+                        cpus[name].append((cpu_seconds(["self", *pids]) - cpu0).tolist())
                 got = store.read(out)[1:3]
                 if want is None:
                     want = got
@@ -126,9 +137,6 @@ def command(args, runtime, say):
             say(f"round {r}: " + ", ".join(f"{k} {v[-1]:.2f} s" for k, v in times.items() if v and r))
         load_after = _uptime()
     finally:
-        for cluster, client in clusters.values():
-            client.close()
-            cluster.close()
         shutil.rmtree(work, ignore_errors=True)
     med = {k: float(np.median(v)) for k, v in times.items()}
     base = med[f"{counts[0]} workers"]
