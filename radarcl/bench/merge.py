@@ -102,8 +102,10 @@ def _cluster(workers, directory, warm):
 def command(args, runtime, say):
     import logging
 
-    for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.worker"):
-        logging.getLogger(name).setLevel(logging.ERROR)
+    import distributed  # noqa: F401  (its loggers exist once it is imported)
+
+    for name in [n for n in logging.root.manager.loggerDict if n.startswith("distributed")] + ["distributed"]:
+        logging.getLogger(name).setLevel(logging.CRITICAL)      # a closing cluster's INFO lines and comm errors
     counts = [int(w) for w in args.workers.split(",")]
     work = Path(tempfile.mkdtemp(prefix="radarcl-bench-merge-"))
     try:
