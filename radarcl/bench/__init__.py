@@ -5,8 +5,8 @@ measured in the same run (interleaved, medians: ``timing``). Each benchmark modu
 import json
 import sys
 
-from radarcl.bench import (cfar, drive, frames, fusion, heldout_scans, live, polar_read, quality, range_fft, scenes,
-                           store, viewer)
+from radarcl.bench import (cfar, drive, frames, fusion, heldout_scans, live, merge, polar_read, quality, range_fft,
+                           scenes, store, viewer)
 from radarcl.commands.options import runtime
 
 SUMMARY = "benchmarks, each against a baseline measured in the same run"
@@ -32,6 +32,8 @@ BENCHES = {
     "viewer": (viewer, "the paper's full grid rendered at 512 x 512 through EGL vs a plain ray march, same run"),
     "drive": (drive, "the 11 Oxford scans replayed cyclically along the 37-minute odometry into a rolling map: "
                      "scans/s vs real time, memory high-water marks, latency, vs today's unbounded grid, same run"),
+    "merge": (merge, "fuse-many's merge partitioned by brick key on 1, 2 and 3 Dask workers, many overlapping partial "
+                     "maps, vs the one-process merge, same run"),
     "polar-read": (polar_read, "reading polar scans (RADIATE, Oxford) with their layout vs decoding the PNG with PIL "
                                "alone, same run"),
 }

@@ -45,19 +45,23 @@ def interleaved_medians(functions, repeat, block=10, warmup=3, load=None, max_ot
 
 class OtherLoad:
     """CPU used by other processes since creation, in cores (Linux /proc; NaN elsewhere): all
-    CPUs' busy time less this process's (its threads, PoCL's included), per second of wall."""
+    CPUs' busy time less this process's (its threads, PoCL's included) and that of ``pids`` (the
+    benchmark's own workers, e.g. Dask's), per second of wall."""
 
-    def __init__(self):
+    def __init__(self, pids=()):
+        self.pids = ["self", *map(str, pids)]
         self.start = (time.perf_counter(), *self._ticks())
 
-    @staticmethod
-    def _ticks():
+    def _ticks(self):
         try:
             with open("/proc/stat") as f:
                 cpu = [int(v) for v in f.readline().split()[1:]]
-            with open("/proc/self/stat") as f:
-                own = f.read().rsplit(")", 1)[1].split()
-            return sum(cpu) - cpu[3] - cpu[4], int(own[11]) + int(own[12])      # busy - (idle, iowait); utime + stime
+            own = 0
+            for pid in self.pids:
+                with open(f"/proc/{pid}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+                own += int(fields[11]) + int(fields[12])                       # utime + stime
+            return sum(cpu) - cpu[3] - cpu[4], own                              # busy - (idle, iowait)
         except (OSError, ValueError, IndexError):
             return float("nan"), float("nan")
 

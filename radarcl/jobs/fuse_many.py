@@ -2,15 +2,17 @@
 
 Each input is fused on a worker into its own sparse grid (its own OpenCL context; PoCL limited to
 one thread per worker, ``POCL_MAX_PTHREAD_COUNT=1``, so workers do not fight over cores), and
-only its bricks travel back (keys and int32 values, never a dense grid: moving a dense 448 MB
-grid between processes cost 1-4 s). The maps merge brick by brick with exact integer sums,
-clamped at the grid's saturation (+-2^30), so the result is bit-identical to fusing every input
-in one process, in any order and on any number of workers, as long as no voxel saturates on
-the way (the single-process map clamps at every write, which at +-2^30 units, a million nats,
-only a corrupted input reaches).
+written beside the output as a partial map store, its bricks in key order (never a dense grid:
+moving a dense 448 MB grid between processes cost 1-4 s). The partial maps are then merged on
+the same workers (``jobs.merge_maps``): a Dask reduction partitioned by brick key, exact integer
+sums clamped at the grid's saturation (+-2^30), the merged store's chunks written by the
+workers. The result is bit-identical to fusing every input in one process, in any order and on
+any number of workers, as long as no voxel saturates on the way (the single-process map clamps
+at every write, which at +-2^30 units, a million nats, only a corrupted input reaches).
 
-Cost model of the merge: the coordinator adds every worker's bricks, O(bricks x inputs); the
-fusion itself scales with the workers until the inputs run out.
+With ``--scheduler``, the output's directory must be one the workers see under the same path (a
+shared filesystem): they write the partial maps and the merged store there; that is checked
+before any fusion.
 """
 
 import contextlib
@@ -21,15 +23,16 @@ import time
 import numpy as np
 
 from radarcl.errors import ConfigError
-from radarcl.grid import GRID_LIMIT
 from radarcl.io.files import scratch
 from radarcl.io.inputs import open_input
+from radarcl.jobs.merge_maps import key_ids, merge_stores
 
 SCHEDULER_TIMEOUT_S = 10
 
 
-def fuse_one(config_values, sensor_toml, path, spec_tuple):
-    """On a worker: fuse every frame of ``path``; returns (keys, data, frames, seconds)."""
+def fuse_one(config_values, sensor_toml, path, spec_tuple, partial):
+    """On a worker: fuse every frame of ``path`` and write its map, bricks in key order, as the
+    map store ``partial``; returns (bricks, frames, seconds)."""
     os.environ.setdefault("POCL_MAX_PTHREAD_COUNT", "1")
     if os.environ["POCL_MAX_PTHREAD_COUNT"] == "1":
         os.environ["POCL_AFFINITY"] = "0"       # one thread per worker: pinned, all would share CPU 0
@@ -38,6 +41,7 @@ def fuse_one(config_values, sensor_toml, path, spec_tuple):
     from radarcl.cl import Runtime
     from radarcl.config import mapconfig
     from radarcl.grid import EvidenceGrid, GridSpec
+    from radarcl.maps.store import StoreWriter
     from radarcl.pipeline import Mapping
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -53,29 +57,9 @@ def fuse_one(config_values, sensor_toml, path, spec_tuple):
     mapping.fuse_source(source)
     runtime.queue.finish()
     keys, data = grid.bricks()
-    return keys, data, len(source), time.perf_counter() - start
-
-
-def merge(parts):
-    """Sum sparse maps [(keys, data), ...] brick by brick (int64), clamped at +-GRID_LIMIT:
-    (keys sorted by (bz, by, bx), data int32)."""
-    keys = np.concatenate([k for k, _ in parts]) if parts else np.zeros((0, 3), np.int32)
-    if not len(keys):
-        return keys.astype(np.int32), np.zeros((0, *(parts[0][1].shape[1:] if parts else (8, 8, 8))), np.int32)
-    k = keys.astype(np.int64)
-    ids = (k[:, 2] << 42) | (k[:, 1] << 21) | k[:, 0]
-    unique, inverse = np.unique(ids, return_inverse=True)
-    total = np.zeros((len(unique), *parts[0][1].shape[1:]), np.int64)
-    start = 0
-    for _, d in parts:                  # a part's keys are unique: a plain indexed add is exact
-        rows = inverse[start:start + len(d)]
-        if len(np.unique(rows)) != len(rows):
-            raise ConfigError("a map to merge lists a brick twice")
-        total[rows] += d
-        start += len(d)
-    mask = (1 << 21) - 1
-    out_keys = np.stack([unique & mask, (unique >> 21) & mask, unique >> 42], axis=1).astype(np.int32)
-    return out_keys, np.clip(total, -GRID_LIMIT, GRID_LIMIT).astype(np.int32)
+    order = np.argsort(key_ids(keys), kind="stable")          # key order: a partition reads contiguous chunks
+    StoreWriter(partial, grid.spec).save(keys[order], data[order])
+    return len(keys), len(source), time.perf_counter() - start
 
 
 def check_inputs(config, paths):
@@ -92,10 +76,8 @@ def check_inputs(config, paths):
 
 def run(config, paths, out, scheduler=None, workers=2, report=print, client=None):
     """Fuse ``paths`` on a Dask cluster (``client``, a ``scheduler`` address, or a local
-    cluster of ``workers`` processes) into ``out`` (.npz or a map store); returns a dict of
-    timings. The grid is the configuration's."""
-    from radarcl.maps.disk import MapSaver
-
+    cluster of ``workers`` processes) into ``out`` (.npz or a map store), merged on the same
+    workers; returns a dict of timings. The grid is the configuration's."""
     if len(set(map(str, paths))) != len(paths):
         raise ConfigError("an input appears twice; each recording is fused once")
     if config["interpret.model"] == "detstats":
@@ -106,43 +88,48 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
     report(f"fusing {len(paths)} inputs ({sum(n for _, n in shapes.values())} frames) of sensor {config.sensor.name} "
            f"into a {' x '.join(map(str, spec.shape))} grid of {spec.voxel_m:g} m")
     own, spill = None, contextlib.ExitStack()
-    if client is None:
-        import logging
-
-        from dask.distributed import Client, LocalCluster
-
-        for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.worker"):
-            logging.getLogger(name).setLevel(logging.ERROR)      # its INFO lines are not ours to show
-
-        os.environ["POCL_MAX_PTHREAD_COUNT"] = "1"          # the workers inherit it
-        os.environ["POCL_AFFINITY"] = "0"                   # and each its one thread unpinned
-        if scheduler:
-            try:
-                client = own = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
-            except (ValueError, OSError, TimeoutError, TypeError) as exc:
-                raise ConfigError(f"cannot reach the Dask scheduler {scheduler!r} ({exc}); give its address as "
-                                  "tcp://HOST:PORT, or leave --scheduler out for a local cluster") from None
-        else:
-            import dask
-
-            from radarcl.cl import choose_device
-
-            choose_device()               # the device check once, here, not in every worker at once
-
-            directory = str(spill.enter_context(scratch(out)))        # dask's scratch space, not the user's cwd
-            dask.config.set({"temporary-directory": directory})
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                                   local_directory=directory)
-            client = own = Client(cluster)
     try:
+        directory = str(spill.enter_context(scratch(out)))    # the partial maps and dask's scratch, not the user's cwd
+        if client is None:
+            import logging
+
+            from dask.distributed import Client, LocalCluster
+
+            for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.worker"):
+                logging.getLogger(name).setLevel(logging.ERROR)      # its INFO lines are not ours to show
+
+            os.environ["POCL_MAX_PTHREAD_COUNT"] = "1"          # the workers inherit it
+            os.environ["POCL_AFFINITY"] = "0"                   # and each its one thread unpinned
+            if scheduler:
+                try:
+                    client = own = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+                except (ValueError, OSError, TimeoutError, TypeError) as exc:
+                    raise ConfigError(f"cannot reach the Dask scheduler {scheduler!r} ({exc}); give its address as "
+                                      "tcp://HOST:PORT, or leave --scheduler out for a local cluster") from None
+            else:
+                import dask
+
+                from radarcl.cl import choose_device
+
+                choose_device()               # the device check once, here, not in every worker at once
+
+                dask.config.set({"temporary-directory": directory})
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       local_directory=directory)
+                client = own = Client(cluster)
+        blind = sorted(w for w, seen in client.run(os.path.isdir, directory).items() if not seen)
+        if blind:
+            raise ConfigError(f"the Dask workers {', '.join(blind)} do not see {directory}: they write the partial "
+                              "maps and the merged map beside the output, on a filesystem every worker shares under "
+                              "the same path; choose such an --out")
         start = time.perf_counter()
         spec_tuple = (spec.origin_m, spec.voxel_m, spec.shape, spec.brick_z)
-        futures = [client.submit(fuse_one, config.as_dict(), config.sensor.toml(), str(p), spec_tuple, pure=False)
-                   for p in paths]
+        partials = [os.path.join(directory, f"partial_{i}.rcmap") for i in range(len(paths))]
+        futures = [client.submit(fuse_one, config.as_dict(), config.sensor.toml(), str(p), spec_tuple, partial,
+                                 pure=False) for p, partial in zip(paths, partials)]
         results = client.gather(futures)
         fused = time.perf_counter() - start
-        keys, data = merge([(k, d) for k, d, _, _ in results])
-        merged = time.perf_counter() - start - fused
+        merged = merge_stores(client, partials, out, config.sensor.toml(), config.as_dict(), provenance=paths)
     finally:
         if own is not None:
             cluster = getattr(own, "cluster", None)
@@ -150,21 +137,8 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
             if cluster is not None:
                 cluster.close()
         spill.close()
-
-    class _Snapshot:                                        # what MapSaver reads of a grid
-        def __init__(self):
-            self.spec = spec
-
-        def bricks(self):
-            return keys, data
-
-        def save(self, path, poses=None):
-            from radarcl.maps import npz
-
-            npz.write(path, spec, keys, data, poses)
-
-    MapSaver(out, config.sensor.toml(), config.as_dict(), paths)(_Snapshot())
-    report(f"wrote {out}: {len(keys)} bricks; fused in {fused:.1f} s on the workers (busy "
-           f"{sum(r[3] for r in results):.1f} s), merged in {merged:.2f} s")
-    return dict(inputs=len(paths), bricks=len(keys), fuse_s=fused, merge_s=merged,
-                worker_busy_s=[r[3] for r in results])
+    report(f"wrote {out}: {merged['bricks']} bricks; fused in {fused:.1f} s on the workers (busy "
+           f"{sum(r[2] for r in results):.1f} s), merged in {merged['seconds']:.2f} s on "
+           f"{len(merged['workers_used'])} workers ({merged['partitions']} partitions by brick key)")
+    return dict(inputs=len(paths), bricks=merged["bricks"], fuse_s=fused, merge_s=merged["seconds"],
+                worker_busy_s=[r[2] for r in results], partitions=merged["partitions"])

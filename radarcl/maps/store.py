@@ -83,7 +83,8 @@ def recognises(path):
     return False
 
 
-def _zarr():
+def zarr_modules():
+    """(zarr, its ZstdCodec), or ConfigError naming what to install."""
     try:
         import zarr
         from zarr.codecs import ZstdCodec
@@ -200,7 +201,7 @@ def read(path, salvage=False):
     saturation). A damaged store raises ``FrameFormatError`` saying what is wrong; with
     ``salvage`` the damaged bricks are left out instead and ``manifest["lost"]`` lists them
     (reason and keys). ``manifest["incomplete"]`` names anything a killed writer left (ignored)."""
-    zarr, _ = _zarr()
+    zarr, _ = zarr_modules()
     path = Path(path)
     manifest = read_manifest(path)
     if not manifest["sealed"]:
@@ -246,7 +247,7 @@ class StoreWriter:
     """
 
     def __init__(self, path, spec, sensor_toml="", config=None, inputs=(), overwrite=False, poses=None, reading=None):
-        zarr, self._codec = _zarr()
+        zarr, self._codec = zarr_modules()
         self.path = Path(path)
         if self.path.exists() and not self.path.is_dir():
             raise ConfigError(f"{self.path} exists and is not a map store directory")
@@ -259,10 +260,7 @@ class StoreWriter:
         self.group = zarr.open_group(str(self.path), mode="a")
         if self.group.attrs.get("radarcl") != FORMAT:
             self.group.attrs["radarcl"] = FORMAT          # marks the directory ours before any save lands
-        self.meta = dict(sensor=sensor_toml, config=config or {},
-                         poses=[] if poses is None else check_trajectory(poses).reshape(-1, 16).tolist(),
-                         provenance=dict(radarcl=__version__, created=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                                         inputs=[dict(path=str(p), sha256=file_digest(p)) for p in inputs]))
+        self.meta = manifest_meta(sensor_toml, config, inputs, poses)
         self.version, self.segments, self.keys, self.data = 0, [], None, None
         self.reading = reading                              # a map with the knowledge channel: its reading
         self.kinds = KINDS if reading is not None else KINDS[:1]
@@ -326,10 +324,7 @@ class StoreWriter:
         index = self._next_index(keys, rows, segment, compact)
         version = self.version + 1
         name = f"index_{version}"
-        arr = self.group.create_array(name, shape=index.shape, dtype="int32", chunks=(max(1, min(len(index), 1 << 16)), 5),
-                                      compressors=self._codec(level=1))
-        if len(index):
-            arr[:] = index
+        write_index(self.group, name, index, self._codec)
         segments = sorted(set(index[:, 3].tolist()))
         previous = sorted(({f"index_{self.version}"} if self.version else set()) |
                           {f"{kind}_{s}" for s in self.segments for kind in self.kinds})
@@ -368,13 +363,36 @@ class StoreWriter:
             p.unlink(missing_ok=True)
 
 
+def manifest_meta(sensor_toml="", config=None, inputs=(), poses=None):
+    """What a store's manifest keeps beside its bricks: the sensor profile, configuration and
+    poses that made the map, and its provenance (radarcl version, inputs and their SHA-256)."""
+    return dict(sensor=sensor_toml, config=config or {},
+                poses=[] if poses is None else check_trajectory(poses).reshape(-1, 16).tolist(),
+                provenance=dict(radarcl=__version__, created=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                                inputs=[dict(path=str(p), sha256=file_digest(p)) for p in inputs]))
+
+
+def create_segment(group, segment, shape, codec, kind="segment"):
+    """Create array ``<kind>_<segment>`` of ``shape`` (n, *brick) int32 in the zarr ``group``
+    (zstd-1, ``CHUNK_BRICKS`` bricks per chunk: each chunk its own file, so writers of distinct
+    chunks, e.g. the workers of ``radarcl.jobs.merge_maps``, never touch one file)."""
+    return group.create_array(f"{kind}_{segment}", shape=tuple(shape), dtype="int32",
+                              chunks=(CHUNK_BRICKS, *shape[1:]), compressors=codec(level=1))
+
+
 def write_segment(group, segment, data, codec, kind="segment"):
     """Write ``data`` (n, *brick) int32 as array ``<kind>_<segment>`` of the zarr ``group``
-    (zstd-1, ``CHUNK_BRICKS`` bricks per chunk); returns the CRC-32 of each chunk."""
-    arr = group.create_array(f"{kind}_{segment}", shape=data.shape, dtype="int32",
-                             chunks=(CHUNK_BRICKS, *data.shape[1:]), compressors=codec(level=1))
-    arr[:] = data
+    (``create_segment``); returns the CRC-32 of each chunk."""
+    create_segment(group, segment, data.shape, codec, kind)[:] = data
     return chunk_crcs(data)
+
+
+def write_index(group, name, index, codec):
+    """Write the index ``index`` (n, 5) int32 (bx, by, bz, segment, row) as array ``name``."""
+    arr = group.create_array(name, shape=index.shape, dtype="int32", chunks=(max(1, min(len(index), 1 << 16)), 5),
+                             compressors=codec(level=1))
+    if len(index):
+        arr[:] = index
 
 
 def write_manifest(path, spec, version, index_name, index, segment_rows, crcs, previous, meta, reading=None):
