@@ -451,3 +451,26 @@ def test_planar_bricks_give_the_same_integers(runtime, case):
     one = EvidenceGrid(runtime, spec)
     Fusion(runtime, one, lattice, model, N_BINS, SPACING, FIRST, LAST, per_beam_poses=per_beam)(frames[1], poses)
     check_against_oracle(one.snapshot(), spec, lattice, model, frames[1], poses)
+
+
+@pytest.mark.parametrize("still", [False, True], ids=["gather", "still table"])
+def test_planar_bricks_and_chunks_give_the_same_knowledge(runtime, still):
+    """The detection-statistics model on 8 x 8 x 1 bricks and on a pool of many small chunks: the
+    sums, the knowledge and the looks equal those of 8^3 bricks over the same voxels, exactly."""
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
+    frames = [random_nodes(lattice, seed=s)[2] for s in (5, 6)]
+    got = {}
+    for brick_z, chunk in ((8, None), (1, None), (1, 5)):
+        spec = GridSpec((-1.0, -6.0, -2.0), 0.25, (48, 48, 11), brick_z=brick_z)
+        grid = EvidenceGrid(runtime, spec, knowledge=True, chunk_bricks=chunk)
+        f = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, detstats=True, terrain_dz=-0.8,
+                   still=still)
+        for packed in frames:
+            plan = f(packed, POSE)
+        assert (plan.table is not None) == still
+        got[brick_z, chunk] = [grid.snapshot(), grid.knowledge_snapshot(), grid.knowledge_snapshot("looks")]
+        if chunk:
+            assert len(grid.pools["knowledge"]) > 4, "the chunked grid must span several chunks"
+    assert got[8, None][1].sum() > 0 and got[8, None][2].sum() > 0
+    for other in ((1, None), (1, 5)):
+        assert all(np.array_equal(a, b) for a, b in zip(got[8, None], got[other]))

@@ -121,6 +121,20 @@ def test_a_map_on_another_lattice_is_refused_before_any_work(tmp_path, other):
         merge_maps.merge_stores(NoWork(), [paths[0], tmp_path], out)
 
 
+def test_a_map_with_the_knowledge_channel_is_refused_before_any_work(tmp_path):
+    """The merge adds sums; a detection-statistics map's knowledge and looks would be dropped, so
+    such an input is refused, naming it, before a worker is asked for anything."""
+    paths, _ = synthetic_maps(tmp_path, PLANAR, inputs=2, bricks=50)
+    knowing = tmp_path / "k.rcmap"
+    ones = np.ones((1, *PLANAR.brick_data_shape), np.int32)
+    store.StoreWriter(knowing, PLANAR, reading=dict(look_limit=4.0, prior_nats=0.0, prior_looks=0.5)).save(
+        np.zeros((1, 3), np.int32), ones, knowledge=ones, looks=ones)
+    out = tmp_path / "m.rcmap"
+    with pytest.raises(ConfigError, match=f"{knowing} holds a map of the detection-statistics model"):
+        merge_maps.merge_stores(NoWork(), [*paths, knowing], out)
+    assert not out.exists()
+
+
 def test_a_damaged_chunk_stops_the_merge_and_writes_nothing(clusters, tmp_path):
     paths, _ = synthetic_maps(tmp_path, PLANAR, inputs=3, bricks=800)
     first, second = sorted(p for p in (paths[1] / "segment_0").rglob("*") if p.is_file() and p.name != "zarr.json")[:2]

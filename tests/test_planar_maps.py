@@ -97,3 +97,27 @@ def test_queries_exports_and_the_viewer_read_both_shapes(tmp_path, spec):
     assert len(rows[0]) > 50 and np.array_equal(rows[0], rows[1])
     v_planar, v_cubic = volume.from_bricks(spec, keys, data), volume.from_bricks(*rebrick(spec, keys, data, 8))
     assert np.array_equal(v_planar.values, v_cubic.values) and np.array_equal(v_planar.coarse, v_cubic.coarse)
+
+
+@pytest.mark.parametrize("name", ["k.npz", "k.rcmap"])
+def test_a_planar_map_with_the_knowledge_channel_keeps_both(tmp_path, name):
+    """A spinning radar's map of the detection-statistics model: planar bricks and the knowledge
+    channel in one file (npz version 2, store format 3), read back and converted, brick for brick."""
+    keys, data = planar_map(THICK)
+    knowledge = np.abs(data) * 4
+    looks = (knowledge > 0).astype(np.int32)
+    reading = dict(look_limit=4.0, prior_nats=0.0, prior_looks=0.5)
+    path = tmp_path / name
+    if name.endswith(".npz"):
+        npz.write(path, THICK, keys, data, channels=npz.Channels(knowledge, looks, reading))
+    else:
+        store.StoreWriter(path, THICK, reading=reading).save(keys, data, knowledge=knowledge, looks=looks)
+    other = tmp_path / ("c.rcmap" if name.endswith(".npz") else "c.npz")
+    disk.convert(path, other)
+    for p in (path, other):
+        spec, k, d, channels = disk.read_channels(p)
+        assert spec == THICK and channels.reading == reading
+        for got, want in ((d, data), (channels.knowledge, knowledge), (channels.looks, looks)):
+            assert np.array_equal(assemble(spec, k, got), assemble(THICK, keys, want))
+    m = Map.open(other)
+    assert m.has_knowledge and m.known().shape == m.data.shape == (len(keys), 1, 8, 8)
