@@ -44,6 +44,7 @@ MAX_EXTENT_M = 1e7                  # as far as a pose may lie (geometry.MAX_TRA
 MIN_VOXEL_M, MAX_VOXEL_M = 1e-4, 1e4
 CHUNK_BYTES = 32 * 2 ** 20          # a pool chunk: growing the grid adds one, copying nothing
 PAGE_BYTES = 4096                   # a CPU device's chunk starts on a page (PoCL uses it in place)
+SPAN_GAP_BYTES = 64 * 2 ** 10       # reading bricks, slots this close are read in one copy, gap included
 
 
 @dataclass(frozen=True)
@@ -509,14 +510,32 @@ class EvidenceGrid:
         if len(slots) and (slots[0] < 0 or slots[-1] >= self.n_slots):
             raise ConfigError(f"brick slots must lie in [0, {self.n_slots}), got {slots[0]}..{slots[-1]}")
         out = {}
+        spans = self._spans(slots) if len(slots) else []
         for name in channels or ("evidence",):
             data = np.empty((len(slots), *self.spec.brick_data_shape), np.int32)
-            for c, first, a, b in (self._runs(slots) if len(slots) else []):
-                cl.enqueue_copy(self.runtime.queue, data[a:b], self.pools[name][c],
+            read = []
+            for c, first, a, b, n in spans:
+                # one copy per span of nearby slots (the bricks a window evicts are scattered;
+                # a copy per brick costs more than the few unwanted ones between them)
+                tmp = data[a:b] if n == b - a else np.empty((n, *self.spec.brick_data_shape), np.int32)
+                cl.enqueue_copy(self.runtime.queue, tmp, self.pools[name][c],
                                 src_offset=first * self.spec.brick_bytes, is_blocking=False)
+                if tmp.base is not data:
+                    read.append((tmp, a, b, first))
+            self.runtime.queue.finish()
+            for tmp, a, b, first in read:
+                data[a:b] = tmp[slots[a:b] % self.chunk_bricks - first]
             out[name] = data
-        self.runtime.queue.finish()
         return self.keys[slots].copy(), (out if channels else out["evidence"])
+
+    def _spans(self, slots):
+        """Sorted distinct ``slots`` as spans (chunk, first slot in it, first row, end row, slots
+        spanned) of slots within one chunk no more than ``SPAN_GAP_BYTES`` of bricks apart."""
+        gap = max(1, SPAN_GAP_BYTES // self.spec.brick_bytes)
+        cut = np.flatnonzero((np.diff(slots) > gap) | (np.diff(slots // self.chunk_bricks) != 0)) + 1
+        starts, ends = np.concatenate([[0], cut]), np.concatenate([cut, [len(slots)]])
+        return [(int(slots[a]) // self.chunk_bricks, int(slots[a]) % self.chunk_bricks, int(a), int(b),
+                 int(slots[b - 1] - slots[a]) + 1) for a, b in zip(starts, ends)]
 
     def snapshot(self):
         """Dense int32 (nz, ny, nx) copy of the grid in logodds units; unseen voxels are 0."""
