@@ -174,8 +174,14 @@ def test_fuse_many_leaves_no_dask_scratch_space(rec, tmp_path, monkeypatch):
     work = tmp_path / "work"
     work.mkdir()
     monkeypatch.chdir(work)
+    import dask
+
+    before = dask.config.get("temporary-directory", None)
     assert main(["fuse-many", str(rec), "--out", "m.npz", "--voxel", "0.4", "--workers", "1"]) == 0
     assert sorted(p.name for p in work.iterdir()) == ["m.npz"]
+    # the run's scratch setting does not outlive it: a later cluster, from another directory, would
+    # recreate the removed (relative) scratch there
+    assert dask.config.get("temporary-directory", None) == before
 
 
 def test_a_report_killed_mid_way_is_cleaned_by_the_next_run(rec, tmp_path):

@@ -89,7 +89,8 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
            f"into a {' x '.join(map(str, spec.shape))} grid of {spec.voxel_m:g} m")
     own, spill = None, contextlib.ExitStack()
     try:
-        directory = str(spill.enter_context(scratch(out)))    # the partial maps and dask's scratch, not the user's cwd
+        # the partial maps and dask's scratch, not the user's cwd; absolute, for workers and later runs alike
+        directory = os.path.abspath(spill.enter_context(scratch(out)))
         if client is None:
             import logging
 
@@ -113,7 +114,7 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
 
                 choose_device()               # the device check once, here, not in every worker at once
 
-                dask.config.set({"temporary-directory": directory})
+                spill.enter_context(dask.config.set({"temporary-directory": directory}))    # for this run only
                 cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                                        local_directory=directory)
                 client = own = Client(cluster)
