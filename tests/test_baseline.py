@@ -9,7 +9,7 @@ import pytest
 
 from radarcl import logodds
 from radarcl.evaluation import baseline
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 
 try:                                  # the OctoMap baseline is part of the suite: a broken install fails it
     import octomap  # noqa: F401 - radarcl.evaluation.baseline imports it where it is used

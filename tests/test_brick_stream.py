@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from radarcl.errors import ConfigError
-from radarcl.grid import BRICK, GridSpec
+from radarcl.gridspec import BRICK, GridSpec
 from radarcl.io import brick_stream as bs
 
 SPEC = GridSpec((-4.0, -3.0, -1.0), 0.25, (40, 32, 24))

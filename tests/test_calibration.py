@@ -67,7 +67,7 @@ def test_calibrate_saves_a_configuration_that_fuse_reads(runtime, tmp_path, caps
     the same integers as a pipeline built from the file's values, not those of the defaults."""
     from radarcl.cli import main
     from radarcl.config import mapconfig
-    from radarcl.grid import assemble
+    from radarcl.gridspec import assemble
     from radarcl.io import recording
     from radarcl.maps.disk import read
     from radarcl.pipeline import Mapping

@@ -4,9 +4,9 @@ import json
 import subprocess
 import sys
 
-from radarcl.cli import main
-
 from browser import open_in_browser
+
+from radarcl.cli import main
 
 
 def run_cli(*args, env=None):
@@ -126,7 +126,7 @@ def test_bench_fusion_has_the_issue_keys():
     """The fusion bench on a coarse grid (the paper's 0.1 m grid takes ~25 s): keys and sanity."""
     from radarcl.bench import fusion
     from radarcl.cl import Runtime
-    from radarcl.grid import GridSpec
+    from radarcl.gridspec import GridSpec
 
     r = fusion.run(Runtime(), repeat=2, spec=GridSpec((-8.0, -35.0, -10.0), 0.5, (160, 140, 40)),
                    spin_spec=GridSpec((-20.0, -20.0, -2.0), 0.5, (80, 80, 8)))

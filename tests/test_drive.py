@@ -9,7 +9,7 @@ import numpy as np
 
 import radarcl.grid
 from radarcl.bench import drive
-from radarcl.grid import BRICK
+from radarcl.gridspec import BRICK
 from radarcl.maps import disk
 
 FIRST, FRAMES, VOXEL, RANGE, WINDOW = 8361, 24, 0.4, 20.0, 27.0

@@ -7,7 +7,7 @@ import pytest
 
 from radarcl.cli import main
 from radarcl.errors import ConfigError
-from radarcl.grid import GridSpec, assemble
+from radarcl.gridspec import GridSpec, assemble
 from radarcl.maps import exports
 from radarcl.maps.map import Map
 

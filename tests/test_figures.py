@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from browser import open_in_browser
 
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 from radarcl.report import figures as plots
 from radarcl.report import html
 

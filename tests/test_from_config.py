@@ -136,7 +136,7 @@ def test_tune_save_feeds_fuse_config(runtime, tmp_path, capsys):
     obs = load_observations(rec)
     for frame, pose in zip(obs.samples, obs.poses):
         m.fuse(frame, pose)
-    from radarcl.grid import assemble
+    from radarcl.gridspec import assemble
 
     spec, keys, data = read(out)
     fused = assemble(spec, keys, data)
@@ -177,7 +177,8 @@ def test_the_paper_profile_rebuilds_the_pre_profile_pipeline_bit_for_bit(runtime
     from radarcl.config.presets import paper_config
     from radarcl.config.stage_config import PAPER_RADAR, PAPER_WIDE_PULSE_M, CfarConfig, InterpretConfig
     from radarcl.geometry import BeamLattice, BeamModel
-    from radarcl.grid import EvidenceGrid, GridSpec
+    from radarcl.grid import EvidenceGrid
+    from radarcl.gridspec import GridSpec
     from radarcl.scene.observe import observe
     from radarcl.scene.outdoor import paper_scene
 

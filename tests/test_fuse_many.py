@@ -7,7 +7,7 @@ import pytest
 
 from radarcl.config import mapconfig
 from radarcl.errors import ConfigError, FrameFormatError
-from radarcl.grid import assemble
+from radarcl.gridspec import assemble
 from radarcl.jobs import fuse_many
 from radarcl.maps.disk import read
 from radarcl.pipeline import Mapping

@@ -15,7 +15,8 @@ from radarcl import oracle
 from radarcl.config.stage_config import RadarConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
-from radarcl.grid import GRID_LIMIT, EvidenceGrid, GridSpec
+from radarcl.grid import EvidenceGrid
+from radarcl.gridspec import GRID_LIMIT, GridSpec
 from radarcl.maps.disk import load_grid
 from radarcl.stages.fusion import Fusion
 

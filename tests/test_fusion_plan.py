@@ -14,7 +14,7 @@ import pytest
 
 from radarcl.config.stage_config import RadarConfig
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
-from radarcl.grid import BRICK, GridSpec
+from radarcl.gridspec import BRICK, GridSpec
 from radarcl.stages.fusion_plan import BLOCK, FusionPlanner, HeadFrame, brick_geometry, candidate_windows
 
 RADAR = RadarConfig()
@@ -228,8 +228,9 @@ def test_the_sweep_finds_what_the_float64_oracle_fuses(model):
     to 22 m: the near-field cylinder and the cone beyond it) it finds every voxel
     ``oracle.fusion`` (every beam against every voxel centre) updates, and none that no float64
     decision could give."""
-    from radarcl import oracle
     from tolerances import FUSION_DECISION_MARGIN
+
+    from radarcl import oracle
 
     lattice = BeamLattice(12, 2, math.radians(-27.5), math.radians(5.0), math.radians(-2.0), math.radians(4.0),
                           math.radians(-5.0))
@@ -254,10 +255,11 @@ def test_the_plans_lose_no_voxel_at_the_papers_scale(runtime, near_field):
     (``candidate_windows`` of every brick) and of the device's plan (``Fusion.plan``) whose window
     holds that beam; and the device plan lists every brick the float64 plan lists (it may list
     more: its float32 bounds carry the slack, never less)."""
+    from tolerances import FUSION_DECISION_MARGIN
+
     from radarcl.config.stage_config import InterpretConfig
     from radarcl.grid import EvidenceGrid
     from radarcl.stages.fusion import Fusion
-    from tolerances import FUSION_DECISION_MARGIN
 
     lattice, model = BeamLattice.from_radar(RADAR, tilt_deg=-7.0), BeamModel.from_radar(RADAR, near_field=near_field)
     spec = GridSpec((-8.0, -35.0, -10.0), 0.1, (800, 700, 200))

@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from radarcl.errors import RadarclError
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 from radarcl.maps import store
 
 LONG = os.environ.get("RADARCL_FUZZ", "") == "long"

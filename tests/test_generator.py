@@ -5,7 +5,7 @@ end to end on one small scene."""
 import numpy as np
 import pytest
 
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 from radarcl.scene import generator
 from radarcl.scene.outdoor import GRASS, INTERIOR, OCCUPIED, Scene, SceneObject
 from radarcl.scene.shapes import Box, Slope

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from radarcl.errors import ConfigError, DeviceCapabilityError, FrameFormatError
-from radarcl.grid import BRICK, BRICK_BYTES, EvidenceGrid, GridSpec, assemble
+from radarcl.grid import EvidenceGrid
+from radarcl.gridspec import BRICK, BRICK_BYTES, GridSpec, assemble
 from radarcl.maps.disk import load_grid, save_grid
 
 SPEC = GridSpec((-2.0, -1.0, 0.5), 0.25, (20, 12, 9))

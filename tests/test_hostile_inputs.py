@@ -28,7 +28,7 @@ def rec(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def small_map(tmp_path_factory):
-    from radarcl.grid import GridSpec
+    from radarcl.gridspec import GridSpec
     from radarcl.maps import npz
 
     path = tmp_path_factory.mktemp("map") / "m.npz"
@@ -145,7 +145,7 @@ def api(fn):
 
 def test_absurd_api_arguments_get_a_sentence(runtime, small_map):
     from radarcl.config import mapconfig
-    from radarcl.grid import GridSpec
+    from radarcl.gridspec import GridSpec
     from radarcl.maps.map import Map
     from radarcl.pipeline import Mapping
     from radarcl.stages.range_fft import RangeFFT

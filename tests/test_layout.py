@@ -62,7 +62,7 @@ LAYERS = (
     ("io",),
     ("oracle",),
     ("geometry", "grid", "sensor_model"),
-    ("physics", "cfar_theory", "cl", "logodds"),
+    ("physics", "cfar_theory", "cl", "logodds", "gridspec"),
     ("errors", "__init__"),
 )
 

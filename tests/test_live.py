@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from conftest import SHARED_DATA
 
+from radarcl import livemap
 from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
-from radarcl.grid import assemble
+from radarcl.gridspec import assemble
 from radarcl.io import emulator
 from radarcl.io.inputs import open_input
 from radarcl.io.stream import PortReader, StreamRecorder, open_port
-from radarcl import livemap
 from radarcl.jobs import live
 from radarcl.maps.disk import MapSaver, read, read_meta
 from radarcl.pipeline import Mapping
@@ -226,10 +226,11 @@ def test_radarcl_live_serves_viewers_records_and_survives_kill_9(runtime, tmp_pa
     import signal
     import time
 
+    from radarcl.viewer.app import follow_engine
+
     from radarcl.io.beam_protocol import BeamParser
     from radarcl.io.files import check
     from radarcl.maps.store import StoreWriter
-    from radarcl.viewer.app import follow_engine
 
     frames, poses = scene
     master, name, slave = emulator.open_pty()

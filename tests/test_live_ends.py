@@ -18,7 +18,7 @@ import pytest
 
 from radarcl.cli import main
 from radarcl.config import mapconfig
-from radarcl.grid import assemble
+from radarcl.gridspec import assemble
 from radarcl.io import beam_protocol, emulator, recording
 from radarcl.io.stream import PortReader, open_port
 from radarcl.jobs import live
@@ -275,7 +275,7 @@ def test_socket_ports_are_read_by_buffers_not_bytes(scene):
 
 
 def test_viewers_that_never_read_do_not_hold_the_engine():
-    from radarcl.grid import GridSpec
+    from radarcl.gridspec import GridSpec
     from radarcl.io.brick_stream import BrickPublisher
 
     spec = GridSpec((0, 0, 0), 0.5, (64, 64, 64))

@@ -12,7 +12,7 @@ import pytest
 from dask.distributed import Client, LocalCluster
 
 from radarcl.errors import ConfigError, FrameFormatError
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 from radarcl.jobs import merge_maps
 from radarcl.maps import npz, store
 

@@ -8,7 +8,8 @@ from radarcl import oracle
 from radarcl.config.stage_config import PAPER_RADAR, InterpretConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
-from radarcl.grid import EvidenceGrid, GridSpec
+from radarcl.grid import EvidenceGrid
+from radarcl.gridspec import GridSpec
 from radarcl.pipeline import Detection, Mapping
 from radarcl.scene.echoes import paper_like_samples
 from radarcl.stages.fusion import Fusion

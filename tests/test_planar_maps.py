@@ -4,12 +4,12 @@ versions), the queries, the exports and the viewer give what the same voxels in 
 
 import numpy as np
 import pytest
+from radarcl.viewer import volume
 
 from radarcl.errors import FrameFormatError
-from radarcl.grid import GridSpec, assemble, rebrick
+from radarcl.gridspec import GridSpec, assemble, rebrick
 from radarcl.maps import disk, exports, npz, store
 from radarcl.maps.map import Map
-from radarcl.viewer import volume
 
 PLANAR = GridSpec((-2.0, -3.0, -0.125), 0.25, (40, 30, 1), brick_z=1)
 THICK = GridSpec((-2.0, -3.0, -1.0), 0.25, (40, 30, 11), brick_z=1)
@@ -91,7 +91,7 @@ def test_queries_exports_and_the_viewer_read_both_shapes(tmp_path, spec):
         exports.costmap(m, tmp_path / f"{name}.pgm")
         exports.ply_points(m, tmp_path / f"{name}.ply", occupied_nats=0.5)
     assert (tmp_path / "p.pgm").read_bytes() == (tmp_path / "c.pgm").read_bytes()
-    from plyfile import PlyData                                 # the same points, listed brick by brick
+    from plyfile import PlyData  # the same points, listed brick by brick
 
     rows = [np.sort(PlyData.read(str(tmp_path / f"{n}.ply"))["vertex"].data) for n in "pc"]
     assert len(rows[0]) > 50 and np.array_equal(rows[0], rows[1])

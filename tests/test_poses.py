@@ -12,8 +12,8 @@ from radarcl.cli import main
 from radarcl.config import sensors
 from radarcl.errors import FrameFormatError
 from radarcl.geometry import pose_from_xyz_rpy
-from radarcl.io import poses as pose_files
 from radarcl.io import polar_png, radiate
+from radarcl.io import poses as pose_files
 from radarcl.io.trajectory import Trajectory, quaternions, rotations
 
 T0 = 1_600_000_000_000_000_000

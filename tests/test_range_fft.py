@@ -2,11 +2,11 @@
 
 import numpy as np
 import pytest
+from tolerances import RANGE_FFT_RTOL, WEAK_TONE_RTOL
 
 from radarcl import oracle
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.stages.range_fft import RangeFFT
-from tolerances import RANGE_FFT_RTOL, WEAK_TONE_RTOL
 
 
 def make_samples(rng, shape, dtype):

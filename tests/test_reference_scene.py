@@ -8,7 +8,7 @@ import pytest
 
 from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.evaluation import metrics
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 from radarcl.io import recording
 from radarcl.scene import outdoor
 from radarcl.scene.observe import load_observations, observe

@@ -11,7 +11,8 @@ import pytest
 from radarcl.config.stage_config import RadarConfig
 from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
-from radarcl.grid import EvidenceGrid, GridSpec
+from radarcl.grid import EvidenceGrid
+from radarcl.gridspec import GridSpec
 from radarcl.maps import disk, store
 from radarcl.maps.rolling import RollingStore, RollingWindow
 from radarcl.stages.fusion import Fusion

@@ -7,14 +7,21 @@ import math
 import numpy as np
 import pytest
 from test_fusion import MODELS, check_against_oracle, evidence, fuse_frame
-from tolerances import (CFAR_RTOL, DECISION_MARGIN, EVIDENCE_UNITS_TOL, FUSION_AMBIGUOUS_MAX,
-                        FUSION_DECISION_MARGIN, FUSION_UNITS_PER_UPDATE)
+from tolerances import (
+    CFAR_RTOL,
+    DECISION_MARGIN,
+    EVIDENCE_UNITS_TOL,
+    FUSION_AMBIGUOUS_MAX,
+    FUSION_DECISION_MARGIN,
+    FUSION_UNITS_PER_UPDATE,
+)
 
 from radarcl import oracle
 from radarcl.config.stage_config import PAPER_RADAR, CfarConfig, InterpretConfig, RadarConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
-from radarcl.grid import GRID_LIMIT, EvidenceGrid, GridSpec
+from radarcl.grid import EvidenceGrid
+from radarcl.gridspec import GRID_LIMIT, GridSpec
 from radarcl.pipeline import Detection, Mapping
 from radarcl.scene.fmcw import simulate_beams
 from radarcl.stages.fusion import Fusion

@@ -12,7 +12,7 @@ import pytest
 
 from radarcl.cli import main
 from radarcl.errors import ConfigError, FrameFormatError
-from radarcl.grid import GridSpec, assemble
+from radarcl.gridspec import GridSpec, assemble
 from radarcl.maps import store
 from radarcl.maps.disk import read
 from radarcl.maps.map import UNKNOWN, Map
@@ -83,7 +83,7 @@ def test_newer_or_foreign_stores_are_refused(tmp_path):
 WRITER = """
 import sys, numpy as np
 from radarcl.maps import store
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 spec = GridSpec((-2.0, -3.0, -1.0), 0.25, (160, 120, 80))
 rng = np.random.default_rng(0)
 keys = np.array([(x, y, z) for x in range(20) for y in range(15) for z in range(10)], np.int32)

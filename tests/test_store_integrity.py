@@ -11,7 +11,7 @@ import zarr
 
 from radarcl.cli import main
 from radarcl.errors import FrameFormatError
-from radarcl.grid import GridSpec, assemble
+from radarcl.gridspec import GridSpec, assemble
 from radarcl.maps import disk, store
 from radarcl.maps.map import Map
 

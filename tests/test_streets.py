@@ -9,7 +9,7 @@ import numpy as np
 from radarcl.config.stage_config import RadarConfig
 from radarcl.evaluation import visibility as vis
 from radarcl.geometry import BeamLattice
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 from radarcl.scene import streets
 from radarcl.scene.outdoor import METAL, Scene, SceneObject
 from radarcl.scene.shapes import Box, Ground

@@ -12,7 +12,7 @@ from radarcl.viewer.modes import MODES, Settings
 from radarcl.viewer.renderer import Renderer, ViewerError, create_context
 
 from radarcl.errors import ConfigError, FrameFormatError, ShapeError
-from radarcl.grid import BRICK, GridSpec
+from radarcl.gridspec import BRICK, GridSpec
 from radarcl.maps.disk import read
 
 SIZE = (160, 120)
@@ -194,7 +194,7 @@ def test_partial_update_equals_a_fresh_upload(ctx, tmp_path):
     assert {tuple(k) for k in changed.tolist()} == {tuple(keys[3]), tuple(keys[-1]), tuple(keys[-2]), tuple(keys[-3])}
     boxes, coarse_box = V.update(old, new_keys, new_bricks, changed)
     renderer.update(boxes, coarse_box)
-    from radarcl.grid import assemble
+    from radarcl.gridspec import assemble
     fresh = V.from_units(spec, assemble(spec, new_keys, new_bricks))
     assert np.array_equal(old.values, fresh.values) and np.array_equal(old.coarse, fresh.coarse)
     camera = Camera.fit(spec)
@@ -316,7 +316,7 @@ def test_pooled_loading_equals_the_dense_downsample_and_bounds_memory(tmp_path):
     a small budget, pooled, with a note, its peak memory measured in a fresh process (peak_memory.py)."""
     from peak_memory import peak_growth
 
-    from radarcl.grid import assemble
+    from radarcl.gridspec import assemble
 
     rng = np.random.default_rng(4)
     spec = GridSpec((0.0, 0.0, 0.0), 0.5, (45, 30, 21))

@@ -12,7 +12,7 @@ from PIL import Image
 from radarcl.viewer.modes import Settings
 
 from radarcl import cli
-from radarcl.grid import BRICK, GridSpec
+from radarcl.gridspec import BRICK, GridSpec
 
 SPEC = GridSpec((-4.0, -3.0, -1.0), 0.25, (40, 32, 24))
 CUBE = (16, 24, 8, 16, 8, 16)   # brick-aligned: the view frames it in the middle

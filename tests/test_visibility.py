@@ -10,7 +10,7 @@ import pytest
 from radarcl.config.stage_config import PAPER_RADAR
 from radarcl.evaluation import visibility as vis
 from radarcl.geometry import BeamLattice
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 from radarcl.scene.outdoor import INTERIOR, OCCUPIED, Material, Scene, SceneObject
 from radarcl.scene.shapes import Box
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
-from radarcl.grid import BRICK, GridSpec, assemble, rebrick
+from radarcl.gridspec import BRICK, GridSpec, assemble, rebrick
 from radarcl.maps.disk import read_channels, read_poses
 from radarcl.maps.map import Map
 

@@ -125,7 +125,7 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
     n_az = config.sensor.n_azimuth
     spec = drive_spec(config, track.at(stamps[:n_frames + 1])[:, :3, 3])
     if brick_z != spec.brick_z:
-        from radarcl.grid import GridSpec
+        from radarcl.gridspec import GridSpec
 
         spec = GridSpec(spec.origin_m, spec.voxel_m, spec.shape, brick_z)
     grid = EvidenceGrid(runtime, spec)
@@ -186,7 +186,7 @@ def drive_picture(store, trajectory, png, n_frames):
     log-odds where positive, else the smallest), the trajectory in black. The image is
     (ny, nx), as ``figures.plane_map_figure`` takes it."""
     from radarcl import logodds
-    from radarcl.grid import BRICK, GridSpec
+    from radarcl.gridspec import BRICK, GridSpec
     from radarcl.maps import disk
     from radarcl.report import figures
 

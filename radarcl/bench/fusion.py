@@ -33,7 +33,8 @@ from radarcl import oracle
 from radarcl.bench.timing import interleaved_medians
 from radarcl.config.stage_config import PAPER_RADAR
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
-from radarcl.grid import EvidenceGrid, GridSpec
+from radarcl.grid import EvidenceGrid
+from radarcl.gridspec import GridSpec
 from radarcl.pipeline import Mapping
 from radarcl.scene.echoes import paper_like_samples
 from radarcl.stages.fusion import Fusion
@@ -52,7 +53,7 @@ def numpy_planning(fusion, pose):
     """The brick listing as radarcl did it before the device planner: numpy windows of the
     blocks of 8^3 bricks, then of every brick of the kept blocks (the baseline of planning_ms)."""
     from radarcl.geometry import check_poses
-    from radarcl.grid import BRICK
+    from radarcl.gridspec import BRICK
     from radarcl.stages.fusion_plan import nonempty
 
     frame = fusion.head_frame(check_poses(pose, fusion.lattice.n_beams))

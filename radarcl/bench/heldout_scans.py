@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
+from radarcl import logodds
 from radarcl.commands.options import add_config, default_data, resolve_config
 from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
-from radarcl import logodds
 from radarcl.evaluation.heldout import detection_probability, predictions, raw_map, score, score_probability
 from radarcl.io import polar_png
 from radarcl.jobs import navtech_map

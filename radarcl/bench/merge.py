@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from radarcl.bench.timing import OtherLoad
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 from radarcl.jobs import merge_maps
 from radarcl.maps import store
 

@@ -159,9 +159,8 @@ def add_arguments(parser):
 
 def command(args, runtime, say):
     """Run the bench; returns (result dict, table lines)."""
-    from radarcl.scene.generator import HELD_OUT_SEEDS, TRAIN_SEEDS
-
     from radarcl.scene import streets
+    from radarcl.scene.generator import HELD_OUT_SEEDS, TRAIN_SEEDS
 
     if args.radar == "spinning":
         seeds = args.seeds or (streets.HELD_OUT_SEEDS if args.split == "held-out" else streets.TRAIN_SEEDS)

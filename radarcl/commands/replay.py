@@ -3,7 +3,7 @@
 
 import sys
 
-from radarcl.commands.live import counts_text, add_pose_options, make_mapper, summary
+from radarcl.commands.live import add_pose_options, counts_text, make_mapper, summary
 from radarcl.commands.options import add_config, add_output, resolve_config
 from radarcl.errors import ConfigError
 from radarcl.maps import disk

@@ -33,7 +33,7 @@ from radarcl.config import sensors, tomlfile
 from radarcl.config.keys import BUILTIN, KEYS, SECTIONS, check_value
 from radarcl.config.stage_config import CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 
 # Metre-valued keys that follow from the sensor a configuration was made for (its resolution,
 # range and field of view): derived again when a configuration is forced onto another sensor.

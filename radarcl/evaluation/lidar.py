@@ -39,7 +39,8 @@ import numpy as np
 from radarcl import logodds
 from radarcl.errors import ConfigError
 from radarcl.evaluation.metrics import roc_auc
-from radarcl.grid import EvidenceGrid, GridSpec
+from radarcl.grid import EvidenceGrid
+from radarcl.gridspec import GridSpec
 from radarcl.pipeline import Mapping
 
 EGO_RADIUS_M = 3.0           # nearer the lidar: the vehicle that carries it (a car reaches ~2.5 m from its roof)

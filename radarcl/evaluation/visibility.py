@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarcl.errors import ShapeError
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 from radarcl.scene.outdoor import INTERIOR, OCCUPIED
 
 UNOBSERVED, FREE_VISIBLE, DETECTABLE, WEAK, SHADOWED, INSIDE_SOLID = range(6)

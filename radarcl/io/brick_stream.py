@@ -20,7 +20,7 @@ import threading
 import numpy as np
 
 from radarcl.errors import ConfigError, FrameFormatError
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 
 MAGIC = b"RCVS"
 HEAD = struct.Struct("<4sBI")

@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from radarcl.errors import FrameFormatError
-from radarcl.io import poses as pose_files
 from radarcl.io import polar_png, recording
+from radarcl.io import poses as pose_files
 from radarcl.io.ti_adc import load_capture
 from radarcl.io.trajectory import DEFAULT_MAX_SPEED_M_S
 from radarcl.oracle import FLAG_SILENT

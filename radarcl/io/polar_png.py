@@ -138,9 +138,9 @@ def load_scan(path, layout=PolarLayout(), time_ns=None, period_ns=None):
     Each azimuth's time comes from the timestamp column; without one, from ``time_ns`` (the
     scan's one time: the azimuth ``layout.timestamp_at`` names; default: the file name's time)
     and the azimuths spread evenly over ``period_ns`` (default: ``layout.scan_period_s``)."""
-    from PIL import Image
-
     import io
+
+    from PIL import Image
 
     path = Path(path)
     try:

@@ -19,7 +19,8 @@ from radarcl.config import mapconfig
 from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.evaluation import calibration, heldout, tuning
 from radarcl.evaluation import lidar as L
-from radarcl.grid import EvidenceGrid, GridSpec
+from radarcl.grid import EvidenceGrid
+from radarcl.gridspec import GridSpec
 from radarcl.io import radiate
 from radarcl.io.inputs import open_input
 from radarcl.pipeline import Mapping

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from radarcl.errors import ConfigError
-from radarcl.grid import EvidenceGrid, GridSpec
+from radarcl.grid import EvidenceGrid
+from radarcl.gridspec import GridSpec
 from radarcl.io.files import scratch
 from radarcl.maps.disk import MapSaver, output_format, reading_of
 from radarcl.maps.map import Map

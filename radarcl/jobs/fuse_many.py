@@ -40,7 +40,8 @@ def fuse_one(config_values, sensor_toml, path, spec_tuple, partial):
 
     from radarcl.cl import Runtime
     from radarcl.config import mapconfig
-    from radarcl.grid import EvidenceGrid, GridSpec
+    from radarcl.grid import EvidenceGrid
+    from radarcl.gridspec import GridSpec
     from radarcl.maps.store import StoreWriter
     from radarcl.pipeline import Mapping
 

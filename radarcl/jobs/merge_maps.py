@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from radarcl.errors import ConfigError, FrameFormatError, RadarclError
-from radarcl.grid import BRICK, GRID_LIMIT
+from radarcl.gridspec import BRICK, GRID_LIMIT
 from radarcl.io import files
 from radarcl.maps import npz, store
 from radarcl.maps.disk import output_format

@@ -27,7 +27,8 @@ from radarcl.errors import FrameFormatError
 from radarcl.evaluation.evaluate import read_map
 from radarcl.evaluation.metrics import KNOWN_LOOKS
 from radarcl.geometry import se2_pose
-from radarcl.grid import EvidenceGrid, GridSpec
+from radarcl.grid import EvidenceGrid
+from radarcl.gridspec import GridSpec
 from radarcl.io import polar_png
 from radarcl.io import poses as pose_files
 from radarcl.io.inputs import polar_source

@@ -10,7 +10,6 @@ store?".
 import logging
 from pathlib import Path
 
-
 from radarcl import sensor_model
 from radarcl.errors import ConfigError, FrameFormatError, ShapeError
 from radarcl.grid import EvidenceGrid

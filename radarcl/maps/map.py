@@ -28,7 +28,7 @@ import numpy as np
 
 from radarcl import logodds, sensor_model
 from radarcl.errors import ConfigError, ShapeError
-from radarcl.grid import BRICK, GridSpec
+from radarcl.gridspec import BRICK, GridSpec
 from radarcl.io.files import memory_budget
 from radarcl.maps.disk import read_map
 

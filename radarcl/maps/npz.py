@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from radarcl.errors import FrameFormatError, ShapeError
-from radarcl.grid import BRICK, GRID_LIMIT, GridSpec
+from radarcl.gridspec import BRICK, GRID_LIMIT, GridSpec
 from radarcl.io.files import atomic, safe_npz
 from radarcl.sensor_model import READING
 

@@ -49,7 +49,7 @@ import numpy as np
 
 from radarcl import __version__
 from radarcl.errors import ConfigError, FrameFormatError, RadarclError
-from radarcl.grid import BRICK, GridSpec
+from radarcl.gridspec import BRICK, GridSpec
 from radarcl.maps.npz import check_reading, check_trajectory
 from radarcl.maps.store_verify import _SUMS, CHUNK_BRICKS, _Arrays, _check_index, _Lost, _read_index, _read_segment
 

@@ -7,7 +7,7 @@ import zlib
 import numpy as np
 
 from radarcl.errors import FrameFormatError
-from radarcl.grid import GRID_LIMIT
+from radarcl.gridspec import GRID_LIMIT
 
 CHUNK_BRICKS = 256          # bricks per zarr chunk (and per CRC-32)
 _SUMS = dict(segment="segments", knowledge="knowledge", looks="looks")   # array kind -> its checksums entry

@@ -29,7 +29,7 @@ import numpy as np
 from radarcl.config.stage_config import PAPER_SENSOR_HEIGHT_M
 from radarcl.errors import ConfigError
 from radarcl.geometry import pose_from_xyz_rpy
-from radarcl.grid import GridSpec
+from radarcl.gridspec import GridSpec
 from radarcl.scene.shapes import Box, Cylinder, Ground, Sphere
 
 FREE, OCCUPIED, INTERIOR = 0, 1, 2

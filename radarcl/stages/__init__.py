@@ -18,7 +18,7 @@ import numpy as np
 
 from radarcl import logodds, oracle
 from radarcl.errors import ConfigError, DeviceCapabilityError, ShapeError
-from radarcl.grid import GRID_LIMIT
+from radarcl.gridspec import GRID_LIMIT
 
 COMMON_DEFINES = dict(
     FLAG_NONFINITE=oracle.FLAG_NONFINITE, FLAG_CLIPPED=oracle.FLAG_CLIPPED,

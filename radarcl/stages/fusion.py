@@ -28,7 +28,8 @@ import numpy as np
 from radarcl import logodds
 from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, BeamModel, check_poses
-from radarcl.grid import BRICK, EvidenceGrid
+from radarcl.grid import EvidenceGrid
+from radarcl.gridspec import BRICK
 from radarcl.sensor_model import NODE_SHAPE, unpack_nodes
 from radarcl.stages import Port, Stage, build, count, spacing, work_group_size
 from radarcl.stages.fusion_plan import BLOCK, FusionPlanner, HeadFrame, brick_geometry, candidate_windows, nonempty
