@@ -1,16 +1,6 @@
 """The evidence grid (paper §3.1, eq. 9): fixed-point log-odds in sparse bricks on the device
-(its spec, the voxel convention and the brick shapes: ``radarcl.gridspec``).
-
-Convention (one place, used everywhere): index (ix, iy, iz) covers world points p with
-``origin + i * voxel <= p < origin + (i + 1) * voxel``; its coordinates are those of its CENTRE,
-``origin + (i + 0.5) * voxel``. Index tuples and ``shape`` are (x, y, z). Dense numpy
-snapshots are (nz, ny, nx), x fastest: the layout of a GL 3D texture of size (nx, ny, nz).
-
-Values are int32 in ``radarcl.logodds`` units (1/1024 nat). The grid stores exact integer sums
-of eq. 9 updates (each update already clamped to +-16 nat), so a map does not depend on the
-order of frames or beams. Sums saturate at +-``GRID_LIMIT`` (2^30 units, about 1e6 nat, where
-p = 1 in float64 anyway); only there would the order matter. Views (``log_odds``,
-``probability``) are computed from the sums on read.
+(its spec, the voxel convention and the brick shapes: ``radarcl.gridspec``). It stores exact
+int32 sums of eq. 9 updates in ``radarcl.logodds`` units, saturating at +-``GRID_LIMIT``.
 
 Storage: bricks of 8 x 8 x ``brick_z`` voxels, allocated the first time some beam reaches them
 ("leave out what the scene does not need"): 8^3 (2 KiB) in general, 8 x 8 x 1 (256 bytes) for a

@@ -213,6 +213,17 @@ def profile_flags(profiles):
     return (np.where(bad, FLAG_BAD_PROFILE, 0) | np.where(silent, FLAG_SILENT, 0)).astype(np.uint8)
 
 
+def _profiles_noise_mask(profiles, noise, mask):
+    """The interpreters' inputs as float64, float64 and bool arrays of one shape (..., n_bins)."""
+    r = np.asarray(profiles, dtype=np.float64)
+    n = np.asarray(noise, dtype=np.float64)
+    m = np.asarray(mask).astype(bool)
+    if r.ndim < 1 or n.shape != r.shape or m.shape != r.shape:
+        raise ShapeError(f"profiles, noise and mask must share one shape (..., n_bins), got "
+                         f"{r.shape}, {n.shape}, {m.shape}")
+    return r, n, m
+
+
 def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
     """The down-range interpreter, eq. 12 (or, with ``config.model == "occlusion"``, radarcl's
     occlusion-aware variant: ``InterpretConfig``), on (..., n_bins) arrays, plainly, beam by beam.
@@ -225,12 +236,7 @@ def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
     FLAG_BAD_PROFILE / FLAG_SILENT added. Beams with a ``NO_EVIDENCE_FLAGS`` flag give 0
     evidence and no pulses. Pulses are runs of detections inside the evidence interval.
     """
-    r = np.asarray(profiles, dtype=np.float64)
-    n = np.asarray(noise, dtype=np.float64)
-    m = np.asarray(mask).astype(bool)
-    if r.ndim < 1 or n.shape != r.shape or m.shape != r.shape:
-        raise ShapeError(f"profiles, noise and mask must share one shape (..., n_bins), got "
-                         f"{r.shape}, {n.shape}, {m.shape}")
+    r, n, m = _profiles_noise_mask(profiles, noise, mask)
     batch, n_bins = r.shape[:-1], r.shape[-1]
     flags_in = np.zeros(batch, np.uint8) if flags is None else np.asarray(flags, np.uint8)
     if flags_in.shape != batch:
@@ -366,12 +372,7 @@ def interpret_detstats(profiles, noise, mask, config, bin_spacing_m, model, flag
     CLASSES, NODES) [logodds units, clamped to +-16 nat], opportunity int32 (same shape)
     [KNOWLEDGE_SCALE units], pulses, n_pulses and flags as ``interpret``'s. Beams with a
     ``NO_EVIDENCE_FLAGS`` flag give 0 and no pulses; bins outside the window give 0."""
-    r = np.asarray(profiles, dtype=np.float64)
-    n = np.asarray(noise, dtype=np.float64)
-    m = np.asarray(mask).astype(bool)
-    if r.ndim < 1 or n.shape != r.shape or m.shape != r.shape:
-        raise ShapeError(f"profiles, noise and mask must share one shape (..., n_bins), got "
-                         f"{r.shape}, {n.shape}, {m.shape}")
+    r, n, m = _profiles_noise_mask(profiles, noise, mask)
     _, pulses, n_pulses, flags_out = interpret(r, n, m, config, bin_spacing_m, flags)
     batch, n_bins = r.shape[:-1], r.shape[-1]
     if model.opportunity.shape[0] != n_bins:

@@ -208,3 +208,13 @@ def constant_lines(constants, held, parts, note_zero=""):
         lines.append(f"    {key:22s} {c['value']:9.4f}  {c['wald_se']:.4f}  {c['jackknife_se']:.4f}  "
                      f"[{c['ci95'][0]:.4f}, {c['ci95'][1]:.4f}]{why}")
     return lines
+
+
+def pool_reliability(row_sets):
+    """Reliability rows of several scenes pooled bin by bin (counts add; means weighted by count)."""
+    out = []
+    for rows in zip(*row_sets):
+        n = sum(r[2] for r in rows)
+        out.append((rows[0][0], rows[0][1], n, sum(r[2] * r[3] for r in rows) / n if n else 0.0,
+                    sum(r[2] * r[4] for r in rows) / n if n else 0.0))
+    return out

@@ -100,7 +100,7 @@ def run(runtime, model="occlusion", voxel_m=0.2, seeds=None, report=None, unknow
     for name, c in (("paper constants", base), ("tuned", paper_config(voxel_m, TUNED)), ("calibrated", calibrated)):
         scores = [radar_score(inst, map_observations(runtime, obs, c).log_odds)
                   for seed, obs, inst in scenes if seed in val_seeds]
-        reliability[name] = dict(rows=_pool([s["reliability"] for s in scores]),
+        reliability[name] = dict(rows=cal.pool_reliability([s["reliability"] for s in scores]),
                                  ece=float(np.mean([s["ece"] for s in scores])),
                                  brier=float(np.mean([s["brier"] for s in scores])))
     constants = cal.with_intervals(final, jack)
@@ -109,16 +109,6 @@ def run(runtime, model="occlusion", voxel_m=0.2, seeds=None, report=None, unknow
                   voxels=final.n, log_likelihood=final.log_likelihood, reliability=reliability,
                   config=calibrated.as_dict())
     return calibrated, result
-
-
-def _pool(row_sets):
-    """Reliability rows of several scenes pooled bin by bin (counts add; means weighted)."""
-    out = []
-    for rows in zip(*row_sets):
-        n = sum(r[2] for r in rows)
-        out.append((rows[0][0], rows[0][1], n, sum(r[2] * r[3] for r in rows) / n if n else 0.0,
-                    sum(r[2] * r[4] for r in rows) / n if n else 0.0))
-    return out
 
 
 def format_lines(r):

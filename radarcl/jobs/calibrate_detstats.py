@@ -21,6 +21,7 @@ import numpy as np
 
 from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
+from radarcl.evaluation import calibration as cal
 from radarcl.evaluation import detstats_fit as fit
 from radarcl.evaluation.evaluate import for_scene, instrument, map_observations, radar_score
 from radarcl.evaluation.tuning import TUNED
@@ -94,7 +95,7 @@ def run(runtime, voxel_m=0.4, seeds=None, report=None, radar="paper"):
             if seed in val_seeds:
                 res = map_observations(runtime, obs, for_scene(config, described))
                 rows.append(radar_score(inst, res.log_odds, res.knowledge))
-        validation[name] = dict(rows=_pool([r["reliability"] for r in rows]),
+        validation[name] = dict(rows=cal.pool_reliability([r["reliability"] for r in rows]),
                                 **{k: _mean([r.get(k) for r in rows]) for k in SCORES})
     constants = {key: dict(value=best[key], jackknife_se=float(s), ci95=[best[key] - 1.96 * float(s),
                                                                           best[key] + 1.96 * float(s)],
@@ -114,15 +115,6 @@ def _mean(values):
 
 def _kw(values):
     return {k.replace(".", "__"): v for k, v in values.items()}
-
-
-def _pool(row_sets):
-    out = []
-    for rows in zip(*row_sets):
-        n = sum(r[2] for r in rows)
-        out.append((rows[0][0], rows[0][1], n, sum(r[2] * r[3] for r in rows) / n if n else 0.0,
-                    sum(r[2] * r[4] for r in rows) / n if n else 0.0))
-    return out
 
 
 def format_lines(r):
