@@ -46,3 +46,12 @@ def shared_data():
     if not SHARED_DATA.is_dir():
         pytest.fail(f"shared data not found at {SHARED_DATA}; tests expect ../shared/data beside the checkout")
     return SHARED_DATA
+
+
+def interactive_signals():
+    """``preexec_fn`` for a child that is sent Ctrl-C: SIGINT delivered as a terminal delivers it.
+    A harness that starts the suite in the background (make, nohup) may hand it SIGINT ignored,
+    which every child would inherit and Python would keep, so a Ctrl-C test would test nothing."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

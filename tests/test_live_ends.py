@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 import pytest
+from conftest import interactive_signals
 
 from radarcl.cli import main
 from radarcl.config import mapconfig
@@ -41,7 +42,7 @@ def scene(tmp_path_factory):
 
 def radarcl(*args, **kwargs):
     return subprocess.Popen([sys.executable, "-m", "radarcl", *map(str, args)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, **kwargs)
+                            stderr=subprocess.PIPE, text=True, preexec_fn=interactive_signals, **kwargs)
 
 
 def start_live(port, *args):

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import pytest
+from conftest import interactive_signals
 
 from radarcl.errors import ConfigError
 from radarcl.io import files as outputs
@@ -106,7 +107,8 @@ def test_sigterm_and_ctrl_c_leave_no_temporary_file(tmp_path):
               "sys.exit(cli.main(['info']))\n")
     for sig, status in (("SIGTERM", 143), ("SIGINT", 130)):
         out = tmp_path / f"{sig}.npz"
-        run = subprocess.run([sys.executable, "-c", script, str(out), sig], capture_output=True, text=True, timeout=60)
+        run = subprocess.run([sys.executable, "-c", script, str(out), sig], capture_output=True, text=True, timeout=60,
+                             preexec_fn=interactive_signals)
         assert run.returncode == status, run.stderr
         assert "Traceback" not in run.stderr and not out.exists() and not list(tmp_path.glob(".*.tmp"))
     assert "radarcl: interrupted" in run.stderr
