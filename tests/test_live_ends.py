@@ -122,14 +122,19 @@ def test_the_emulator_stops_on_ctrl_c_at_once_and_removes_its_link(scene, tmp_pa
     path = scene[0]
     link = tmp_path / "radar"
     proc = radarcl("emulate", path, "--pty", "--link", link, "--loop")     # nobody reads: its writes block
-    deadline = time.monotonic() + 60
-    while not link.is_symlink() and time.monotonic() < deadline:
-        time.sleep(0.02)
-    time.sleep(0.5)
-    start = time.monotonic()
-    proc.send_signal(signal.SIGINT)
-    proc.communicate(timeout=10)
-    took = time.monotonic() - start
+    try:
+        deadline = time.monotonic() + 60
+        while not link.is_symlink() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        time.sleep(0.5)
+        start = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=10)
+        took = time.monotonic() - start
+    finally:
+        if proc.poll() is None:                  # it did not stop: a looping emulator must not outlive the test
+            proc.kill()
+            proc.wait()
     assert proc.returncode == 130 and took < 0.5 + 0.5, took     # 0.5 s, plus the interpreter's exit
     assert not os.path.lexists(link)
 
