@@ -21,7 +21,6 @@ integers, about a third of the gather's time for the paper's frame).
 
 import math
 from collections import OrderedDict
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -32,7 +31,8 @@ from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import BRICK
 from radarcl.sensor_model import NODE_SHAPE, unpack_nodes
 from radarcl.stages import Port, Stage, build, count, spacing, work_group_size
-from radarcl.stages.fusion_plan import BLOCK, FusionPlanner, HeadFrame, brick_geometry, candidate_windows, nonempty
+from radarcl.stages.fusion_plan import (BLOCK, FramePlan, FusionPlanner, HeadFrame, StillTable, brick_geometry,
+                                        candidate_windows, nonempty, pool_order, take_rows)
 
 # A work-item per block of rows of 8 voxels (as float8), its beams' windows planned on the
 # host per brick: the shape that measured fastest of those tried (README, "Why the code is
@@ -46,69 +46,6 @@ VECTOR_WIDTHS = (4, 8)             # voxels along x per row of a work-item's blo
 CPU_ROWS = 2
 STILL_TABLE_SHARE = 0.25           # the still tables held may take this share of the device's memory
 PLAN_CACHE = 16                    # plans kept for poses that come back (the paper's stand has 15 tilts)
-
-
-@dataclass(frozen=True)
-class FramePlan:
-    """What the kernel needs for one frame's pose(s), prepared on the host."""
-
-    beams: np.ndarray        # (n_beams, 3, 4) float32: u, v, w axes; [.., 3] = origin [m, grid coords]
-    bricks: np.ndarray       # (n, 4) int32: bx, by, bz, slot of every brick the beams may reach
-    windows: np.ndarray      # (n, 4) int32: candidate beams of each brick, i_lo, i_hi, k_lo, k_hi
-    owner: object = field(default=None, compare=False, repr=False)   # the Fusion that made it
-    generation: int = -1     # the grid's generation it was made for (slots die with grid.clear())
-    _outside: list = field(default_factory=list, compare=False, repr=False)
-    _table: list = field(default_factory=list, compare=False, repr=False)    # a StillTable, once recorded
-
-    @property
-    def table(self):
-        """The ``StillTable`` recorded for this plan (a still radar), or None."""
-        return self._table[0] if self._table else None       # [None]: recording was declined
-
-    @property
-    def beams_outside(self):
-        """Beams that reach no brick of the grid (they give nothing); counted when first asked
-        (a moving radar plans every frame, and few callers ask)."""
-        if not self._outside:
-            self._outside.append(self.owner._beams_outside(self.windows))
-        return self._outside[0]
-
-
-@dataclass
-class StillTable:
-    """What every voxel of a plan takes from a frame, recorded once for a still radar (the
-    kernel's RECORD passes), on the device: per voxel its count of beams and its first entry
-    (beam * n_bins + bin, the weight's float32 bits, whose sign bit says that more entries
-    follow), the further entries row by row."""
-
-    counts: object           # pyopencl Array uint8 (n_rows * VEC,): beams per voxel
-    row_start: object        # pyopencl Array int32 (n_rows,): first extra entry of each row
-    first: object            # pyopencl Array int32 (n_rows * VEC, 2): each voxel's first entry
-    extras: object           # pyopencl Array int32 (n, 2): the further entries
-    n_rows: int
-    n_entries: int
-
-    @property
-    def nbytes(self):
-        """Device memory the table takes."""
-        return sum(a.nbytes for a in (self.counts, self.row_start, self.first, self.extras))
-
-
-def _pool_order(slots, n_slots):
-    """The order that sorts ``slots`` (distinct, in [0, n_slots)): a scatter where the pool is
-    not much larger than the list (linear in the pool), else argsort."""
-    if n_slots > 4 * len(slots):
-        return np.argsort(slots)
-    position = np.full(n_slots, -1, np.int32)
-    position[slots] = np.arange(len(slots), dtype=np.int32)
-    return position[position >= 0]
-
-
-def _take_rows(a, order):
-    """Rows ``order`` of an (n, 4) int32 array, each moved as one 16-byte item (numpy's
-    fancy indexing of 2-D rows moves them element by element)."""
-    a = np.ascontiguousarray(a, np.int32)
-    return a.view(np.complex128)[:, 0][order].view(np.int32).reshape(-1, 4)
 
 
 class Fusion(Stage):
@@ -237,11 +174,11 @@ class Fusion(Stage):
         slots = self.grid.allocate_index(index)
         # listed in pool order: the kernel's reads and writes of the pool then stream, and the
         # CPU's prefetchers follow
-        order = _pool_order(slots, self.grid.n_slots)
+        order = pool_order(slots, self.grid.n_slots)
         listed = np.empty((len(slots), 4), np.int32)
         self.grid.brick_coords(index[order], out=listed)
         listed[:, 3] = slots[order]
-        plan = FramePlan(np.ascontiguousarray(beams, np.float32), listed, _take_rows(windows, keep[order]),
+        plan = FramePlan(np.ascontiguousarray(beams, np.float32), listed, take_rows(windows, keep[order]),
                          self, self.grid.generation)
         if cache:
             self._plans[key] = plan

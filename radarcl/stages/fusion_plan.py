@@ -8,6 +8,7 @@ builtin calls (``atan2_nb``: PoCL may call its builtins out of line and spill it
 """
 
 import math
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -199,3 +200,66 @@ def brick_geometry(bricks, brick_m, brick_z=8):
     edge = np.array([brick_m, brick_m, brick_m * brick_z / 8.0])
     centres = (np.asarray(bricks, np.float64) + 0.5) * edge
     return centres, 0.5 * float(np.linalg.norm(edge))
+
+
+@dataclass(frozen=True)
+class FramePlan:
+    """What the kernel needs for one frame's pose(s), prepared on the host."""
+
+    beams: np.ndarray        # (n_beams, 3, 4) float32: u, v, w axes; [.., 3] = origin [m, grid coords]
+    bricks: np.ndarray       # (n, 4) int32: bx, by, bz, slot of every brick the beams may reach
+    windows: np.ndarray      # (n, 4) int32: candidate beams of each brick, i_lo, i_hi, k_lo, k_hi
+    owner: object = field(default=None, compare=False, repr=False)   # the Fusion that made it
+    generation: int = -1     # the grid's generation it was made for (slots die with grid.clear())
+    _outside: list = field(default_factory=list, compare=False, repr=False)
+    _table: list = field(default_factory=list, compare=False, repr=False)    # a StillTable, once recorded
+
+    @property
+    def table(self):
+        """The ``StillTable`` recorded for this plan (a still radar), or None."""
+        return self._table[0] if self._table else None       # [None]: recording was declined
+
+    @property
+    def beams_outside(self):
+        """Beams that reach no brick of the grid (they give nothing); counted when first asked
+        (a moving radar plans every frame, and few callers ask)."""
+        if not self._outside:
+            self._outside.append(self.owner._beams_outside(self.windows))
+        return self._outside[0]
+
+
+@dataclass
+class StillTable:
+    """What every voxel of a plan takes from a frame, recorded once for a still radar (the
+    kernel's RECORD passes), on the device: per voxel its count of beams and its first entry
+    (beam * n_bins + bin, the weight's float32 bits, whose sign bit says that more entries
+    follow), the further entries row by row."""
+
+    counts: object           # pyopencl Array uint8 (n_rows * VEC,): beams per voxel
+    row_start: object        # pyopencl Array int32 (n_rows,): first extra entry of each row
+    first: object            # pyopencl Array int32 (n_rows * VEC, 2): each voxel's first entry
+    extras: object           # pyopencl Array int32 (n, 2): the further entries
+    n_rows: int
+    n_entries: int
+
+    @property
+    def nbytes(self):
+        """Device memory the table takes."""
+        return sum(a.nbytes for a in (self.counts, self.row_start, self.first, self.extras))
+
+
+def pool_order(slots, n_slots):
+    """The order that sorts ``slots`` (distinct, in [0, n_slots)): a scatter where the pool is
+    not much larger than the list (linear in the pool), else argsort."""
+    if n_slots > 4 * len(slots):
+        return np.argsort(slots)
+    position = np.full(n_slots, -1, np.int32)
+    position[slots] = np.arange(len(slots), dtype=np.int32)
+    return position[position >= 0]
+
+
+def take_rows(a, order):
+    """Rows ``order`` of an (n, 4) int32 array, each moved as one 16-byte item (numpy's
+    fancy indexing of 2-D rows moves them element by element)."""
+    a = np.ascontiguousarray(a, np.int32)
+    return a.view(np.complex128)[:, 0][order].view(np.int32).reshape(-1, 4)
