@@ -40,6 +40,13 @@ def scene(tmp_path_factory):
     return path, obs.samples, obs.poses, emulator.beam_packets(obs.samples, obs.poses)
 
 
+def wait_for_link(link, timeout_s=60):
+    """Until the emulator's pty link exists (or ``timeout_s`` passed)."""
+    deadline = time.monotonic() + timeout_s
+    while not link.is_symlink() and time.monotonic() < deadline:
+        time.sleep(0.02)
+
+
 def radarcl(*args, **kwargs):
     return subprocess.Popen([sys.executable, "-m", "radarcl", *map(str, args)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, preexec_fn=interactive_signals, **kwargs)
@@ -123,9 +130,7 @@ def test_the_emulator_stops_on_ctrl_c_at_once_and_removes_its_link(scene, tmp_pa
     link = tmp_path / "radar"
     proc = radarcl("emulate", path, "--pty", "--link", link, "--loop")     # nobody reads: its writes block
     try:
-        deadline = time.monotonic() + 60
-        while not link.is_symlink() and time.monotonic() < deadline:
-            time.sleep(0.02)
+        wait_for_link(link)
         time.sleep(0.5)
         start = time.monotonic()
         proc.send_signal(signal.SIGINT)
@@ -158,9 +163,7 @@ def test_emulate_at_max_baud_delivers_every_byte_before_it_closes(scene, tmp_pat
     path, _, _, packets = scene
     link = tmp_path / "radar"
     proc = radarcl("emulate", path, "--pty", "--link", link, "--baud", "max", "--delay", "1")
-    deadline = time.monotonic() + 60
-    while not link.is_symlink() and time.monotonic() < deadline:
-        time.sleep(0.02)
+    wait_for_link(link)
     got = []
     reader = PortReader(open_port(str(link)), lambda t, d: got.append(len(d))).start()
     try:
