@@ -117,7 +117,7 @@ class Map:
         k = self.keys.astype(np.int64)
         self._ids = (k[:, 2] << 42) | (k[:, 1] << 21) | k[:, 0]
         self._order = np.argsort(self._ids)
-        self._nats = None
+        self._nats = self._units = None
 
     @property
     def has_knowledge(self):
@@ -134,8 +134,13 @@ class Map:
 
     def read_units(self):
         """(n, 8, 8, 8) int32 log-odds units as the map reads them: the stored sums, or for a map
-        with knowledge its reading rounded to logodds units."""
-        return logodds.to_fixed(self.nats()) if self.has_knowledge else self.data
+        with knowledge its reading rounded to logodds units (computed once: every view and export
+        reads it)."""
+        if not self.has_knowledge:
+            return self.data
+        if self._units is None:
+            self._units = logodds.to_fixed(self.nats())
+        return self._units
 
     def known(self):
         """(n, 8, 8, 8) bool: voxels the map observed (knowledge of ``KNOWN_LOOKS`` looks or
