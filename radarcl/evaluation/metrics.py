@@ -30,6 +30,7 @@ import numpy as np
 from radarcl.errors import ShapeError
 from radarcl.evaluation import visibility as vis
 from radarcl.evaluation.visibility import dilate
+from radarcl.maps.map import KNOWN_LOOKS
 from radarcl.scene.outdoor import INTERIOR, OCCUPIED
 
 
@@ -117,9 +118,6 @@ def calibration(p, y, bins=ECE_BINS):
     ece = float((count * np.abs(freq - mean_p)).sum() / max(1, len(p)))
     rows = [(float(edges[b]), float(edges[b + 1]), int(count[b]), float(mean_p[b]), float(freq[b])) for b in range(bins)]
     return ece, rows
-
-
-KNOWN_LOOKS = 0.5               # a voxel whose knowledge reaches this many looks is known (detstats)
 
 
 def radar_scores(log_odds_nats, truth, objects=(), knowledge=None):

@@ -25,7 +25,6 @@ from radarcl import logodds
 from radarcl.config import sensors
 from radarcl.errors import FrameFormatError
 from radarcl.evaluation.evaluate import read_map
-from radarcl.evaluation.metrics import KNOWN_LOOKS
 from radarcl.geometry import se2_pose
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GridSpec
@@ -33,6 +32,7 @@ from radarcl.io import polar_png
 from radarcl.io import poses as pose_files
 from radarcl.io.inputs import polar_source
 from radarcl.io.trajectory import DEFAULT_MAX_SPEED_M_S
+from radarcl.maps.map import KNOWN_LOOKS
 from radarcl.pipeline import Detection, Mapping
 from radarcl.report import figures
 
