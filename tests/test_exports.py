@@ -5,6 +5,7 @@ map_server reads it, rosbags; an empty map gives valid empty files."""
 import numpy as np
 import pytest
 
+from radarcl import logodds, sensor_model
 from radarcl.cli import main
 from radarcl.errors import ConfigError
 from radarcl.gridspec import GridSpec, assemble
@@ -277,7 +278,26 @@ def known():
                     blocks.append((dense[s], knowledge[s]))
     data, k = (np.array([b[i] for b in blocks], np.int32) for i in range(2))
     return Map(SPEC, np.array(keys, np.int32), data, k, np.minimum(k // 4096, 2).astype(np.int32),
-               dict(look_limit=4.0, prior_nats=0.0, prior_looks=0.5))
+               sensor_model.ModelParams().reading)                # the default: the prior everywhere
+
+
+def test_a_known_map_reads_the_prior_where_unknown_and_vti_marks_only_what_it_knows(known, tmp_path):
+    """With the default reading a voxel never observed reads the prior (the base rate), in a
+    brick or outside every brick alike; the .vti's observed mask is the knowledge, not the value."""
+    import vtk
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    prior = known.reading["prior_nats"]
+    d = known.dense() / logodds.SCALE
+    assert d[0, 0, 0] == pytest.approx(prior, abs=1e-3)                 # no brick there
+    assert d[8, 8, 15] == pytest.approx(-2.0 + prior, abs=1e-3)         # behind the wall: a quarter look
+    assert known.probability_at(SPEC.index_to_world(np.array([0, 0, 0]))) == pytest.approx(1 / (1 + np.exp(-prior)))
+    exports.vti(known, tmp_path / "k.vti")
+    reader = vtk.vtkXMLImageDataReader()
+    reader.SetFileName(str(tmp_path / "k.vti"))
+    reader.Update()
+    observed = vtk_to_numpy(reader.GetOutput().GetPointData().GetArray("observed")).reshape(SPEC.array_shape)
+    assert observed.sum() == 12 * 12 * 11 and observed[8, 8, 8] == 1 and observed[8, 8, 15] == 0
 
 
 def test_unknown_stays_unknown_in_the_costmap_occupancy_grid_and_octomap(known, tmp_path):

@@ -74,6 +74,31 @@ def test_radar_scores_by_hand():
     assert s["voxels"] == dict(free_visible=3, detectable=2, weak=2, obstacles=1, shadowed=3, occupied=5)
 
 
+def test_a_map_with_knowledge_is_scored_by_what_it_claims():
+    """A map with the knowledge channel reads an unknown voxel as its prior (the base rate), so
+    its value says nothing of "unknown": false-free counts only voxels it knows and calls free,
+    and a shadowed voxel is left unknown when the map does not know it, whatever it reads."""
+    t = small_truth()
+    L = np.full((1, 2, 6), -3.5, np.float32)          # the prior everywhere
+    k = np.zeros((1, 2, 6), np.float32)
+    L[0, 0, 2], k[0, 0, 2] = 4.0, 3.0                # a known DETECTABLE voxel called occupied
+    L[0, 1, 1], k[0, 1, 1] = -2.0, 2.0               # the known obstacle voxel called free
+    k[0, 0, 4] = 1.0                                 # one SHADOWED voxel the map knows
+    s = metrics.radar_scores(L, t, knowledge=k)
+    # OCCUPIED and observed: (0,0,2) 4.0 known, (0,0,3) unknown, (0,0,4) known at -3.5, (0,1,1)
+    # known at -2.0, (0,1,5) unknown: two of five called free
+    assert s["false_free"] == pytest.approx(2 / 5)
+    assert s["false_free_obstacles"] == 1.0
+    assert s["shadow_unknown"] == pytest.approx(2 / 3)                   # (0,0,4) is known
+    assert s["known_visible"] == pytest.approx(2 / 7)
+    without = metrics.radar_scores(L, t)                                  # the same values read without knowledge
+    assert without["false_free"] == pytest.approx(4 / 5) and without["shadow_unknown"] == 0.0
+    # ECE is over every visible voxel at the probability it reads: unknown ones at the prior
+    visible = np.array([-3.5, -3.5, 4.0, -3.5, -3.5, -2.0, -3.5])
+    y = np.array([0, 0, 1, 1, 0, 1, 1], bool)
+    assert s["ece"] == pytest.approx(metrics.calibration(metrics.probability(visible), y)[0])
+
+
 def test_a_map_of_zeros_and_the_empty_cases():
     t = small_truth()
     s = metrics.radar_scores(np.zeros((1, 2, 6), np.float32), t)

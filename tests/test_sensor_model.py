@@ -152,6 +152,20 @@ def test_the_reading():
     assert np.allclose(sm.read_log_odds(e, k, n, reading), [2.0, -8.0, 0.0, 3.0, -0.04])   # 16 looks count as 4
     reading["prior_nats"] = -2.0
     assert np.allclose(sm.read_log_odds(e, k, n, reading), [0.0, -10.0, 0.0, 1.0, -1.04])  # never observed: still 0
+    reading["prior_looks"] = 0.0          # the default: the prior everywhere, never observed reads the base rate
+    assert np.allclose(sm.read_log_odds(e, k, n, reading), [0.0, -10.0, -2.0, 1.0, -2.04])
+
+
+def test_the_default_reading_puts_the_prior_everywhere_and_an_old_map_reads_as_it_did():
+    """The default reading: the prior is the base rate, everywhere (prior_looks 0), so a voxel never
+    observed reads it; a map saved by the last release (prior_looks 0.5, prior 0) reads 0 there."""
+    default = sm.ModelParams().reading
+    assert default["prior_looks"] == 0.0 and default["prior_nats"] < 0
+    never = sm.read_log_odds(0, 0, 0, default)
+    assert never == pytest.approx(default["prior_nats"])
+    assert sm.read_log_odds(0, 0, 0, dict(look_limit=4.0, prior_nats=0.0, prior_looks=0.5)) == 0.0
+    with pytest.raises(ConfigError, match=r"sensor_model.prior_looks = -1 is outside its physical range \[0, 100\]"):
+        sm.ModelParams(prior_looks=-1)
 
 
 def test_node_packing_round_trips_and_interpolates():

@@ -10,7 +10,8 @@ frames of a still radar and of a moving one, scored on one fixed voxel set per c
 Eq. 9 adds the looks as if they were independent, so a map that reads its sums as they are grows
 surer with every repeat; the detection-statistics model counts at most ``look_limit`` looks'
 worth (``sensor_model.read_log_odds``). The rows: the paper's constants, the tuned ones, the
-detection-statistics model with its reading and without the limit, on each held-out scene.
+detection-statistics model with its reading, without the limit, with a limit of one look and
+without the prior (unknown read as 1/2, the last release's reading), on each held-out scene.
 """
 
 import numpy as np
@@ -28,7 +29,7 @@ def configurations(voxel_m, extra=()):
 
     from radarcl.config import mapconfig
     from radarcl.config.presets import paper_config
-    from radarcl.evaluation.calibration import DETSTATS_CALIBRATED
+    from radarcl.evaluation.calibration import DETSTATS_NO_PRIOR
     from radarcl.evaluation.tuning import TUNED
 
     detstats = paper_config(voxel_m, {"interpret.model": "detstats"})
@@ -36,7 +37,7 @@ def configurations(voxel_m, extra=()):
            ("detection statistics", detstats),
            ("detection statistics, no look limit", detstats.replaced(sensor_model__look_limit=1e4)),
            ("detection statistics, look limit 1", detstats.replaced(sensor_model__look_limit=1.0)),
-           ("detection statistics, fitted reading", paper_config(voxel_m, DETSTATS_CALIBRATED))]
+           ("detection statistics, no prior", paper_config(voxel_m, DETSTATS_NO_PRIOR))]
     out += [(Path(f).stem, mapconfig.resolve(path=f, program={"grid.voxel_m": voxel_m}).replaced(grid__voxel_m=voxel_m))
             for f in extra]
     return out

@@ -13,13 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
-from radarcl import logodds
+from radarcl import logodds, sensor_model
 from radarcl.commands.options import add_config, default_data, resolve_config
 from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
 from radarcl.evaluation.heldout import detection_probability, predictions, raw_map, score, score_probability
 from radarcl.io import polar_png
 from radarcl.jobs import navtech_map
+from radarcl.maps.map import KNOWN_LOOKS
 
 
 def run(runtime, config, data_dir, report=None):
@@ -32,27 +33,32 @@ def run(runtime, config, data_dir, report=None):
     spec = navtech_map.grid_for(per_beam, config["interpret.range_max_m"], config["grid.voxel_m"])
     train, test = list(range(0, len(scans), 2)), list(range(1, len(scans), 2))
     say(f"{len(scans)} scans: map of scans {train}, held out {test}")
-    maps = {"map": _units(navtech_map.build_map(runtime, config, spec, [scans[k] for k in train], per_beam[train]),
-                          config)}
-    if config["interpret.model"] != "detstats":       # the detection-statistics model beside the configuration's
-        detstats = config.replaced(interpret__model="detstats")
-        maps["detection statistics"] = _units(navtech_map.build_map(runtime, detstats, spec, [scans[k] for k in train],
-                                                                    per_beam[train]), detstats)
+    maps, known = {}, {}
+    detstats = config if config["interpret.model"] == "detstats" else config.replaced(interpret__model="detstats")
+    for name, c in (("map", config), ("detection statistics", detstats)):
+        if name == "map" or c is not config:      # the detection-statistics model beside the configuration's
+            maps[name], known[name] = _units(navtech_map.build_map(runtime, c, spec, [scans[k] for k in train],
+                                                                   per_beam[train]), c)
     maps["baseline: raw_intensity"] = raw_map(runtime, config, spec, [scans[k] for k in train], per_beam[train])
     # the outcomes: the sensor profile's own detector, whatever the compared map's CFAR is
     outcome = mapconfig.resolve(config.sensor, program={"grid.voxel_m": config["grid.voxel_m"]})
-    stacked, y, ranges = predictions(runtime, outcome, spec, np.stack(list(maps.values()), axis=-1),
+    columns = list(maps.values()) + [k for k in known.values() if k is not None]
+    stacked, y, ranges = predictions(runtime, outcome, spec, np.stack(columns, axis=-1),
                                      [scans[k] for k in test], per_beam[test], with_ranges=True)
     out = {name: score(stacked[:, m], y) for m, name in enumerate(maps)}
-    if "detection statistics" in maps:
-        # the model's own prediction of a detection from the map, and the same with no map (p = 1/2
-        # everywhere: the detection opportunity's fall with range alone, the control it must beat)
-        detstats = config.replaced(interpret__model="detstats")
-        column = list(maps).index("detection statistics")
-        out["detection statistics, predictive"] = score_probability(
-            detection_probability(detstats, stacked[:, column] / logodds.SCALE, ranges), y)
-        out["control: P_d by range, no map"] = score_probability(
-            detection_probability(detstats, np.zeros(len(y)), ranges), y)
+    extra = len(maps)
+    for name in maps:
+        if known.get(name) is not None:           # a map with knowledge covers the bins whose voxel it knows
+            out[name]["coverage"] = float(np.mean(stacked[:, extra] > 0))
+            extra += 1
+    column = list(maps).index("detection statistics" if "detection statistics" in maps else "map")
+    # the model's own prediction of a detection from the map, and the same with no map (the prior
+    # everywhere: the detection opportunity's fall with range alone, the control it must beat)
+    prior = sensor_model.read_log_odds(0, 0, 0, detstats.model_params().reading)
+    out["detection statistics, predictive"] = score_probability(
+        detection_probability(detstats, stacked[:, column] / logodds.SCALE, ranges), y)
+    out["control: P_d by range, no map"] = score_probability(
+        detection_probability(detstats, np.full(len(y), float(prior)), ranges), y)
     out["baseline: no map"] = score(np.zeros(len(y)), y)
     # no radar data beyond one number: the held-out detection rate itself, as a constant log-odds
     rate = float(y.mean())
@@ -63,10 +69,13 @@ def run(runtime, config, data_dir, report=None):
 
 
 def _units(grid, config):
-    """A map's dense log-odds as read (``evaluate.read_map``), in logodds units."""
+    """A map's dense log-odds as read (``evaluate.read_map``), in logodds units, and for a map
+    with the knowledge channel its known voxels (``KNOWN_LOOKS``) as 1 nat (else None)."""
     from radarcl.evaluation.evaluate import read_map
 
-    return logodds.to_fixed(read_map(grid, config)[0])
+    log_odds, knowledge = read_map(grid, config)
+    known = None if knowledge is None else ((knowledge >= KNOWN_LOOKS) * logodds.SCALE).astype(np.int32)
+    return logodds.to_fixed(log_odds), known
 
 
 def format_table(r):

@@ -20,7 +20,7 @@ from radarcl.geometry import BEAM_MODELS
 
 KEYS = ("auc_detectable", "iou_detectable", "auc_obstacles", "iou_obstacles", "auc_weak", "false_free",
         "false_free_obstacles", "shadow_unknown", "ece", "brier")
-KNOWLEDGE_KEYS = ("ece_known", "shadow_unknown_k", "known_visible")     # maps with the knowledge channel
+KNOWLEDGE_KEYS = ("ece_known", "known_visible")     # maps with the knowledge channel
 
 
 RADARS = {"paper": "paper", "spinning": "spinning-sim"}      # --radar: the sensor profile it simulates
@@ -34,7 +34,7 @@ def configurations(voxel_m, extra=(), radar="paper"):
     from pathlib import Path
 
     from radarcl.config import mapconfig
-    from radarcl.evaluation.calibration import CALIBRATED, DETSTATS_CALIBRATED, DETSTATS_CALIBRATED_SPINNING
+    from radarcl.evaluation.calibration import CALIBRATED, DETSTATS_NO_PRIOR
     from radarcl.evaluation.tuning import TUNED
 
     def preset(values=None):
@@ -45,10 +45,8 @@ def configurations(voxel_m, extra=(), radar="paper"):
     if radar == "paper":
         out += [(f"tuned, beam {b}", tuned.replaced(beam__model=b)) for b in BEAM_MODELS if b != tuned["beam.model"]]
     out += [("calibrated, occlusion (last release)", preset(CALIBRATED)),
-            ("detection statistics", preset({"interpret.model": "detstats"}))]
-    calibrated = DETSTATS_CALIBRATED if radar == "paper" else DETSTATS_CALIBRATED_SPINNING
-    if calibrated:
-        out.append(("detection statistics, fitted reading", preset(calibrated)))
+            ("detection statistics", preset({"interpret.model": "detstats"})),
+            ("detection statistics, no prior", preset(DETSTATS_NO_PRIOR))]
     out += [(Path(f).stem, mapconfig.resolve(path=f, program={"grid.voxel_m": voxel_m}).replaced(grid__voxel_m=voxel_m))
             for f in extra]
     return out
@@ -126,7 +124,7 @@ def format_table(r):
              f"voxel set, means over the scenes",
              f"  {'map':36s} {'AUCdet':>6s} {'IoUdet':>6s} {'AUCobs':>6s} {'IoUobs':>6s} {'AUCwk':>6s} {'f-free':>6s} "
              f"{'ff-obs':>6s} {'shd-unk':>7s} {'ECE':>6s} {'Brier':>6s} {'objects':>8s} {'ms/frame':>8s} "
-             f"{'ECEknwn':>7s} {'shd-K':>6s} {'known':>6s}"]
+             f"{'ECEknwn':>7s} {'known':>7s}"]
     for name, m in r["mean"].items():
         if "error" in m:
             lines.append(f"  {name:36s} {m['error']}")

@@ -43,16 +43,9 @@ CHANNELS = ("occ", "near", "far", "after")
 CALIBRATED = {"cfar.kind": "ca", "cfar.pfa": 1e-3, "interpret.model": "occlusion", "interpret.surface_db": 15.0,
               "interpret.k_occ": 0.0811, "interpret.e_high": -1.1553, "interpret.e_high_far": -2.276,
               "interpret.e_low": -0.9791}
-# The detection-statistics model read as `radarcl calibrate --model detstats --voxel 0.4` fitted its
-# reading: by the likelihood of the visible voxels of training scenes 101-104, a prior of -6 nat
-# wherever a quarter look was taken and one look's worth of evidence (calibrated probabilities on
-# the voxels it knows, at the cost of obstacles called free: README). The physical parameters of
-# the same fit are sensor_model's defaults; the model's default reading adds no prior.
-DETSTATS_CALIBRATED = {"interpret.model": "detstats", "sensor_model.prior_nats": -6.0, "sensor_model.prior_looks": 0.25,
-                       "sensor_model.look_limit": 1.0}
-# the same on the generated streets (`radarcl calibrate --model detstats --radar spinning`, 301-304)
-DETSTATS_CALIBRATED_SPINNING = {"interpret.model": "detstats", "sensor_model.prior_nats": -5.5,
-                                "sensor_model.prior_looks": 0.25, "sensor_model.look_limit": 1.0}
+# The detection-statistics model read as the last release read it: no prior, so a voxel never
+# observed reads 0 (p 1/2) and the known free voxels read near it (the bench's comparison row).
+DETSTATS_NO_PRIOR = {"interpret.model": "detstats", "sensor_model.prior_nats": 0.0}
 NAMES = {"occlusion": ("interpret.k_occ", "interpret.e_high", "interpret.e_high_far", "interpret.e_low"),
          "paper": ("interpret.k_occ", "interpret.e_high", "interpret.e_low")}
 SIGNS = {"interpret.k_occ": 1, "interpret.e_high": -1, "interpret.e_high_far": -1, "interpret.e_low": -1}

@@ -16,7 +16,8 @@ Two likelihoods, each for what it can identify:
   gives its scores.)
 - The reading (``sensor_model.READING``) is how a map's sums become probabilities: fitted on the
   maps of the fitted model, by the Bernoulli log-likelihood of the visible voxels (DETECTABLE or
-  WEAK: 1, FREE-visible: 0; the set ECE is measured on), unknown voxels included at p = 1/2.
+  WEAK: 1, FREE-visible: 0; the set ECE is measured on), unknown voxels included at the value the
+  reading gives them (``prior_looks`` 0: the prior, the base rate; > 0: p = 1/2).
 
 The reading needs no new map: it is a grid search over ``READING_GRID`` on the stored sums. The
 physical parameters' standard errors come from the scene jackknife (each scene left out in turn
@@ -32,7 +33,7 @@ from radarcl.evaluation import visibility as vis
 
 READING_GRID = dict(look_limit=(1.0, 2.0, 4.0, 8.0, 16.0, 64.0, 1e4),
                     prior_nats=tuple(-0.5 * k for k in range(13)),
-                    prior_looks=(0.25, 0.5, 1.0, 2.0))
+                    prior_looks=(0.0, 0.25, 0.5, 1.0, 2.0))
 P_CLIP = 1e-6
 
 
@@ -50,7 +51,8 @@ def visible_sums(res, truth):
 def log_likelihood(e, k, n, y, reading):
     """Mean log p(y) per voxel under ``reading``."""
     L = sensor_model.read_log_odds(e * logodds.SCALE, k * logodds.KNOWLEDGE_SCALE, n, reading)
-    p = np.clip(1.0 / (1.0 + np.exp(-L)), P_CLIP, 1.0 - P_CLIP)
+    with np.errstate(over="ignore"):
+        p = np.clip(1.0 / (1.0 + np.exp(-L)), P_CLIP, 1.0 - P_CLIP)
     return float(np.mean(np.where(y, np.log(p), np.log1p(-p))))
 
 

@@ -10,7 +10,8 @@ prediction:
   unknown voxel 0);
 - ``log_likelihood``: mean log p(outcome) per bin [nat] with p = sigmoid(L) clipped to
   [1e-4, 1 - 1e-4]; a map that knows nothing scores log(1/2) = -0.693;
-- ``coverage``: the share of held-out bins whose voxel the map holds any evidence for.
+- ``coverage``: the share of held-out bins whose voxel the map holds any evidence for (for a map
+  with the knowledge channel, `radarcl bench heldout-scans` gives the share whose voxel it knows).
 
 ``raw_map`` is the raw-intensity baseline fused with the same beams and poses.
 """

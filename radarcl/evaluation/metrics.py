@@ -82,7 +82,7 @@ def evaluate(log_odds_nats, truth, observed):
 
 # -- metrics on the visibility truth (``evaluation.visibility``): what users of a radar map need ----------
 FREE_BELOW_P = 0.35             # false-free: an occupied voxel the map calls free (p below this)
-UNKNOWN_NATS = 0.2              # unknown where unknowable: a shadowed voxel within +-this of 0
+UNKNOWN_NATS = 0.2              # unknown where unknowable: a shadowed voxel within +-this of 0 (no knowledge channel)
 ECE_BINS = 10
 
 
@@ -127,18 +127,21 @@ def radar_scores(log_odds_nats, truth, objects=(), knowledge=None):
     - ``auc_weak``, ``iou_weak``: WEAK vs FREE-visible;
     - ``auc_obstacles``, ``iou_obstacles``: DETECTABLE voxels of every solid but the ground vs
       FREE-visible (the ground is predictable without a radar, obstacles are not);
-    - ``false_free``: the share of OCCUPIED voxels of any visibility with p < 0.35;
-      ``false_free_obstacles`` the same on the surface voxels of every solid but the ground
-      (most OCCUPIED voxels are ground at grazing incidence, whose echo is WEAK);
-    - ``shadow_unknown``: the share of SHADOWED voxels with |L| <= 0.2 nat;
+    - ``false_free``: the share of OCCUPIED voxels of any visibility the map calls free (p < 0.35
+      where it claims to know: every voxel of a map without the knowledge channel, the voxels it
+      knows of one with it); ``false_free_obstacles`` the same on the surface voxels of every
+      solid but the ground (most OCCUPIED voxels are ground at grazing incidence, whose echo is WEAK);
+    - ``shadow_unknown``: the share of SHADOWED voxels the map leaves unknown: |L| <= 0.2 nat, or
+      for a map with the knowledge channel, knowledge below ``KNOWN_LOOKS`` (such a map reads an
+      unknown voxel as its prior, the world's base rate, and says "unknown" with its knowledge:
+      the state its views and exports show);
     - ``brier``, ``ece`` (10 bins) and ``reliability`` rows on the visible voxels (FREE-visible,
-      DETECTABLE, WEAK), occupied = surface voxel;
+      DETECTABLE, WEAK), occupied = surface voxel, every voxel at the probability the map reads;
     - ``objects_found`` / ``objects_total`` and per object its range and peak log-odds
       (``objects``: ``visibility.object_surfaces``).
     With ``knowledge`` (dense [looks], a map of the detection-statistics model) also:
-    ``shadow_unknown_k``, the share of SHADOWED voxels the map does not know (knowledge below
-    ``KNOWN_LOOKS``); ``known_visible``, the share of visible voxels it knows; ``ece_known`` and
-    ``brier_known``, calibration on the visible voxels it knows (where it claims a probability).
+    ``known_visible``, the share of visible voxels it knows; ``ece_known`` and ``brier_known``,
+    calibration on the visible voxels it knows.
     Voxel counts of each class come with them."""
     L = np.asarray(log_odds_nats, np.float32)
     c = truth.classes
@@ -148,25 +151,24 @@ def radar_scores(log_odds_nats, truth, objects=(), knowledge=None):
     out = {}
     for key, pos in (("detectable", det), ("weak", weak), ("obstacles", det & truth.obstacle)):
         out[f"auc_{key}"], out[f"iou_{key}"] = auc_iou(L, pos, free)
+    claimed = np.ones(L.shape, bool) if knowledge is None else np.asarray(knowledge, np.float32) >= KNOWN_LOOKS
+    called_free = claimed & (probability(L) < FREE_BELOW_P)
     occupied = truth.observed & (truth.labels == OCCUPIED)
     n_occ = int(np.count_nonzero(occupied))
-    out["false_free"] = float(np.count_nonzero(probability(L[occupied]) < FREE_BELOW_P) / n_occ) if n_occ else float("nan")
+    out["false_free"] = float(np.count_nonzero(called_free[occupied]) / n_occ) if n_occ else float("nan")
     obst = occupied & truth.obstacle
     n_obst = int(np.count_nonzero(obst))
-    out["false_free_obstacles"] = float(np.count_nonzero(probability(L[obst]) < FREE_BELOW_P) / n_obst) if n_obst \
-        else float("nan")
+    out["false_free_obstacles"] = float(np.count_nonzero(called_free[obst]) / n_obst) if n_obst else float("nan")
     n_sh = int(np.count_nonzero(shadow))
-    out["shadow_unknown"] = float(np.count_nonzero(np.abs(L[shadow]) <= UNKNOWN_NATS) / n_sh) if n_sh else float("nan")
+    unknown = (np.abs(L[shadow]) <= UNKNOWN_NATS) if knowledge is None else ~claimed[shadow]
+    out["shadow_unknown"] = float(np.count_nonzero(unknown) / n_sh) if n_sh else float("nan")
     visible = free | det | weak
     p, y = probability(L[visible]), (det | weak)[visible]
     out["brier"] = float(np.mean((p - y) ** 2)) if len(p) else float("nan")
     out["ece"], out["reliability"] = calibration(p, y)
     if knowledge is not None:
-        k = np.asarray(knowledge, np.float32)
-        known = k >= KNOWN_LOOKS
-        out["shadow_unknown_k"] = float(np.count_nonzero(~known[shadow]) / n_sh) if n_sh else float("nan")
-        out["known_visible"] = float(np.count_nonzero(known[visible]) / max(1, np.count_nonzero(visible)))
-        kv = known[visible]
+        kv = claimed[visible]
+        out["known_visible"] = float(np.count_nonzero(kv) / max(1, len(kv)))
         out["ece_known"] = calibration(p[kv], y[kv])[0] if kv.any() else float("nan")
         out["brier_known"] = float(np.mean((p[kv] - y[kv]) ** 2)) if kv.any() else float("nan")
     found = []

@@ -11,8 +11,8 @@ reading by maximum likelihood on the training scenes (``evaluation.detstats_fit`
    refitted) for standard errors and 95 % intervals.
 4. The reading by the visible voxels' likelihood on maps of the fitted model (``fit_reading``).
 5. Reliability, ECE and the ranking scores on the validation scenes: the paper's constants, the
-   model's defaults, the fitted model read as a map that keeps unknown unknown and adds no prior
-   ("safe reading") and read with its fitted reading.
+   model's defaults, the fitted model read without a prior (a voxel never observed reads 1/2, as
+   the last release read it) and read with its fitted reading.
 """
 
 import math
@@ -83,12 +83,12 @@ def run(runtime, voxel_m=0.4, seeds=None, report=None, radar="paper"):
         del res
     reading, reading_loglik, _ = fit.fit_reading(sums)
     calibrated = fitted.replaced(**_kw({f"sensor_model.{k}": v for k, v in reading.items()}))
-    safe = fitted.replaced(sensor_model__prior_nats=0.0)
+    no_prior = fitted.replaced(sensor_model__prior_nats=0.0)
     say("validation scenes ...")
     validation = {}
     paper = mapconfig.resolve(SENSORS[radar], program={"grid.voxel_m": voxel_m})
     for name, config in (("paper constants", paper), ("detection statistics, defaults", base),
-                         ("detection statistics, fitted, safe reading", safe),
+                         ("detection statistics, fitted, no prior", no_prior),
                          ("detection statistics, fitted, fitted reading", calibrated)):
         rows = []
         for seed, described, obs, inst in scenes:

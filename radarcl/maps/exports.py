@@ -28,7 +28,7 @@ from radarcl import logodds
 from radarcl.errors import ConfigError
 from radarcl.io.files import atomic
 from radarcl.maps import octree, ros
-from radarcl.maps.map import FREE, FREE_NATS, OCCUPIED, OCCUPIED_NATS, check_thresholds, classes
+from radarcl.maps.map import FREE, FREE_NATS, KNOWN_LOOKS, OCCUPIED, OCCUPIED_NATS, check_thresholds, classes
 
 log = logging.getLogger(__name__)
 CLAMP_NATS = 13.8            # OctoMap keeps log-odds within its clamping thresholds: p in [1e-6, 1 - 1e-6]
@@ -220,13 +220,14 @@ def _vti_array(name, vtk_type, values):
 
 def vti(m, path, band=None):
     """Dense log-odds [nat] (float32) and an ``observed`` mask (uint8: some beam reached the
-    voxel) as VTK XML image data: origin at the first voxel centre, spacing the voxel size, x
-    fastest (VTK's point order)."""
+    voxel; with the knowledge channel: the map knows it, ``Map.known``) as VTK XML image data:
+    origin at the first voxel centre, spacing the voxel size, x fastest (VTK's point order)."""
     d = m.dense(band)
     z0 = 0 if band is None else m._band(band)[0]
     nz, ny, nx = d.shape
     nats = (d * np.float32(1.0 / logodds.SCALE)).astype("<f4")
-    observed = (d != 0).astype(np.uint8)
+    known = m.dense_knowledge(band)
+    observed = ((d != 0) if known is None else (known >= KNOWN_LOOKS)).astype(np.uint8)
     origin = np.asarray(m.spec.origin_m) + 0.5 * m.spec.voxel_m + np.array([0, 0, z0 * m.spec.voxel_m])
     s = m.spec.voxel_m
     extent = f"0 {nx - 1} 0 {ny - 1} 0 {nz - 1}"

@@ -5,7 +5,8 @@ and probability at world points, the occupied voxels as an (N, 3) array, a horiz
 2D occupancy projection over a height band (the costmap of a ground robot).
 
 Values are the grid's exact int32 sums in ``radarcl.logodds`` units; the views convert to
-nats or probabilities. A voxel no beam reached holds 0 (unknown: probability 0.5).
+nats or probabilities. A voxel no beam reached holds 0 (unknown: probability 0.5; with the
+knowledge channel, below, it reads the reading's prior instead).
 
 What a map says, in every view and export alike (``classes``): a voxel is OCCUPIED above the
 occupancy threshold (``OCCUPIED_NATS``), FREE below the free threshold (``FREE_NATS``) and
@@ -16,10 +17,11 @@ free, and unknown otherwise (octomap_server's projected map does the same).
 A map of the detection-statistics model (``radarcl.sensor_model``) also holds the knowledge
 channel: per voxel the summed detection opportunity of its looks (``knowledge_at``, in looks)
 and their number, and is read through its reading (``sensor_model.read_log_odds``: correlated
-looks counted once, the prior where the radar looked). Every query, class and projection uses
-that reading, and a voxel is UNOBSERVED when its knowledge is below ``KNOWN_LOOKS`` ("never
-observed" apart from "observed, undecided"). A map without knowledge (eq. 12) reads its sums
-as they are, and a voxel no beam reached is its UNOBSERVED.
+looks counted once, the prior: the world's base rate, so a voxel never observed reads a
+calibrated probability). Every query, dense copy, class and projection uses that reading, and a
+voxel is UNOBSERVED when its knowledge is below ``KNOWN_LOOKS`` ("never observed" apart from
+"observed, undecided"), which its value cannot say once the prior is not 0. A map without
+knowledge (eq. 12) reads its sums as they are, and a voxel no beam reached is its UNOBSERVED.
 """
 
 from dataclasses import dataclass
@@ -259,9 +261,13 @@ class Map:
         return self.spec.index_to_world(idx[above]), logodds.to_nats(units[above])
 
     def dense(self, band=None):
-        """Dense int32 (nz, ny, nx) log-odds units as the map reads them (``read_units``); ``band``
+        """Dense int32 (nz, ny, nx) log-odds units as the map reads them (``read_units``; a voxel
+        of no brick: 0, or with knowledge the reading of a voxel never observed); ``band``
         (z_min, z_max) [m] keeps only those layers. Refused beyond the memory budget."""
-        return self._dense(self.read_units(), band)
+        fill = 0
+        if self.has_knowledge:
+            fill = int(logodds.to_fixed(sensor_model.read_log_odds(0, 0, 0, self.reading)))
+        return self._dense(self.read_units(), band, fill)
 
     def dense_knowledge(self, band=None):
         """Dense float64 (nz, ny, nx) knowledge [looks] (0: never observed), or None for a map
@@ -270,7 +276,7 @@ class Map:
             return None
         return self._dense(self.knowledge, band) / float(logodds.KNOWLEDGE_SCALE)
 
-    def _dense(self, bricks, band):
+    def _dense(self, bricks, band, fill=0):
         z0, z1 = self._band(band)
         nx, ny, _ = self.spec.shape
         nbx, nby, _ = self.spec.brick_shape
@@ -279,7 +285,7 @@ class Map:
         if 4.0 * nbx * nby * (b1 - b0) * bz * BRICK ** 2 > memory_budget():
             raise ConfigError(f"a dense copy of {nx} x {ny} x {z1 - z0} voxels exceeds the memory budget; "
                               "narrow the band")
-        slab = np.zeros(((b1 - b0) * bz, nby * BRICK, nbx * BRICK), np.int32)
+        slab = np.full(((b1 - b0) * bz, nby * BRICK, nbx * BRICK), fill, np.int32)
         view = slab.reshape(b1 - b0, bz, nby, BRICK, nbx, BRICK).transpose(0, 2, 4, 1, 3, 5)
         sel = (self.keys[:, 2] >= b0) & (self.keys[:, 2] < b1)      # whole bricks, no voxel lists
         k = self.keys[sel]

@@ -54,6 +54,10 @@ class Channels:
     reading: dict
 
 
+READING_SIGNS = {"prior_nats": ("number <= 0", lambda v: v <= 0),         # the rest: positive
+                 "prior_looks": ("number >= 0", lambda v: v >= 0)}     # 0: the prior applies everywhere
+
+
 def check_reading(reading, where):
     """A map's reading as a dict of floats, or FrameFormatError naming what is wrong."""
     if not isinstance(reading, dict) or set(reading) != set(READING):
@@ -61,9 +65,9 @@ def check_reading(reading, where):
     out = {}
     for key, value in reading.items():
         ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
-        if not ok or (value > 0) != (key != "prior_nats") or (key == "prior_nats" and value > 0):
-            raise FrameFormatError(f"{where}: reading {key} = {value!r} is not a "
-                                   f"{'number <= 0' if key == 'prior_nats' else 'positive number'}")
+        wanted, test = READING_SIGNS.get(key, ("positive number", lambda v: v > 0))
+        if not ok or not test(value):
+            raise FrameFormatError(f"{where}: reading {key} = {value!r} is not a {wanted}")
         out[key] = float(value)
     return out
 
