@@ -215,6 +215,13 @@ class Mapping:
         return self.grid.snapshot()
 
 
+def evidence_config(config):
+    """The configuration a job fuses its own per-bin evidence with (raw intensity, counts, oracle
+    detections): ``config``'s sensor, grid, beams and beam model on eq. 12's fusion path, since
+    the detection-statistics path fuses node tables, not one evidence value per bin."""
+    return config.replaced(interpret__model="paper") if config["interpret.model"] == "detstats" else config
+
+
 def bin_model(config, voxel_m):
     """The ``sensor_model.BinModel`` of a detection-statistics configuration (a ``Resolved``) at
     ``voxel_m``: the correlated training cells of its x(n_fft / n_samples) zero padding (raw

@@ -74,3 +74,18 @@ def test_raw_evidence_is_one_nat_per_10_db_above_10_db():
     ev = baseline.raw_evidence(profile[None])[0] / logodds.SCALE
     assert ev[10] == pytest.approx(0.5, abs=1e-3) and ev[20] == pytest.approx(0.0, abs=1e-3)
     assert ev[30] == 1.0 and ev[0] == pytest.approx(-1.0)        # clipped; noise alone is -1 nat
+
+
+def test_raw_intensity_under_a_detection_statistics_configuration_is_the_same_map(runtime):
+    """The raw-intensity baseline fuses its own evidence per bin: a configuration of the
+    detection-statistics model (whose fusion reads node tables, not evidence) gives the same map
+    as eq. 12's, bit for bit, instead of a shape error (pipeline.evidence_config)."""
+    from radarcl.config.presets import paper_config
+    from radarcl.scene import generator
+    from radarcl.scene.observe import observe
+
+    scene, _ = generator.generate(201)
+    obs = observe(scene, [-5.2], seed=201)
+    eq12 = baseline.raw_intensity(runtime, obs, paper_config(0.8))
+    detstats = baseline.raw_intensity(runtime, obs, paper_config(0.8, {"interpret.model": "detstats"}))
+    assert np.array_equal(eq12, detstats) and (eq12 > 0).any() and (eq12 < 0).any()

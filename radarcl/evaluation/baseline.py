@@ -22,7 +22,7 @@ import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError
-from radarcl.pipeline import Mapping
+from radarcl.pipeline import Mapping, evidence_config
 
 GROUND_PRIOR_NATS = 2.0
 RAW_LEVEL_DB, RAW_DB_PER_NAT, RAW_LIMIT_NATS = 10.0, 10.0, 1.0
@@ -51,7 +51,7 @@ def raw_evidence(power):
 def raw_intensity(runtime, obs, config):
     """The raw-intensity map of ``obs`` with ``config``'s beams and beam model: (nz, ny, nx)
     float32 log-odds [nat]."""
-    mapping = Mapping.from_config(runtime, config=config)
+    mapping = Mapping.from_config(runtime, config=evidence_config(config))
     fusion = mapping.fusion
     for frame, pose in zip(obs.samples, obs.poses):
         profiles = mapping.range_fft(frame).profiles.reshape(fusion.evidence_shape)

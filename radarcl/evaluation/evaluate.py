@@ -22,7 +22,7 @@ from radarcl.evaluation.baseline import detection_scans, octree, read_back
 from radarcl.evaluation.metrics import evaluate, radar_scores
 from radarcl.evaluation.visibility import DETECTABLE_DB
 from radarcl.grid import EvidenceGrid
-from radarcl.pipeline import Mapping
+from radarcl.pipeline import Mapping, evidence_config
 from radarcl.scene import streets
 from radarcl.scene.observe import NOISE_RMS, observe
 from radarcl.stages.fusion import Fusion
@@ -201,7 +201,7 @@ def oracle_detections(runtime, inst, obs, free_nats=0.0):
     costs (free voxels beside a surface at the same range share its bins) and, with -1, what
     strong free evidence adds. Not an upper bound on AUC: graded evidence can rank better than
     +1/0, whose ties count one half."""
-    mapping = Mapping.from_config(runtime, config=inst.reference)
+    mapping = Mapping.from_config(runtime, config=evidence_config(inst.reference))
     fusion = mapping.fusion
     loud = inst.noiseless_power >= inst.noise_power * 10 ** (DETECTABLE_DB / 10)
     for frame_loud, pose in zip(loud, obs.poses):

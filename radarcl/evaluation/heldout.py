@@ -22,7 +22,7 @@ from radarcl import logodds
 from radarcl.evaluation.baseline import raw_evidence
 from radarcl.evaluation.metrics import roc_auc
 from radarcl.grid import EvidenceGrid
-from radarcl.pipeline import Mapping
+from radarcl.pipeline import Mapping, evidence_config
 
 P_CLIP = 1e-4
 
@@ -30,7 +30,8 @@ P_CLIP = 1e-4
 def raw_map(runtime, config, spec, scans, per_beam):
     """The raw-intensity baseline: each bin's power as evidence (``baseline.raw_evidence``),
     fused with the map's own beams and poses; a dense int32 snapshot of ``spec``."""
-    mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec), per_beam_poses=True)
+    mapping = Mapping.from_config(runtime, config=evidence_config(config), grid=EvidenceGrid(runtime, spec),
+                                  per_beam_poses=True)
     fusion = mapping.fusion
     for scan, poses in zip(scans, per_beam):
         evidence = raw_evidence(scan.power().reshape(fusion.evidence_shape))

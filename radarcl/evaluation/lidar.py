@@ -41,7 +41,7 @@ from radarcl.errors import ConfigError
 from radarcl.evaluation.metrics import roc_auc
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GridSpec
-from radarcl.pipeline import Mapping
+from radarcl.pipeline import Mapping, evidence_config
 
 EGO_RADIUS_M = 3.0           # nearer the lidar: the vehicle that carries it (a car reaches ~2.5 m from its roof)
 CLEARANCE_M = 0.3            # above the ground: kerbs and the road's own roughness are not obstacles
@@ -161,7 +161,8 @@ def count_map(runtime, config, spec, scans, per_beam):
     """The no-radar control: -1 nat for every valid range bin inside the interpreter's window,
     fused with the map's own beams and poses (it counts samples and uses nothing they hold); a
     dense int32 snapshot of ``spec``."""
-    mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec), per_beam_poses=True)
+    mapping = Mapping.from_config(runtime, config=evidence_config(config), grid=EvidenceGrid(runtime, spec),
+                                  per_beam_poses=True)
     fusion = mapping.fusion
     for scan, poses in zip(scans, per_beam):
         evidence = np.full(fusion.evidence_shape, -logodds.SCALE, np.int32)
