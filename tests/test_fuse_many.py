@@ -47,6 +47,30 @@ def test_merged_map_equals_one_process(runtime, recordings, tmp_path):
         assert np.array_equal(assemble(spec, keys, data), want), f"{workers} workers differ from one process"
 
 
+def test_a_detection_statistics_fleet_merges_its_knowledge_as_one_process(runtime, recordings, tmp_path):
+    """With the detection-statistics model each worker's map carries the knowledge channel and
+    the merge sums it too: the merged map's sums, knowledge and looks are one process's, bit for
+    bit, and it reads with the configuration's reading."""
+    from radarcl.io import recording
+    from radarcl.maps.map import Map
+
+    config = mapconfig.resolve("paper", flags={"grid.voxel_m": 0.5, "interpret.model": "detstats"})
+    single = Mapping.from_config(runtime, config=config)
+    for path in recordings:
+        rec = recording.load(path)
+        for frame, pose in zip(rec.frames, rec.poses):
+            single.fuse(frame, pose)
+    grid = single.grid
+    out = tmp_path / "fleet.rcmap"
+    fuse_many.run(config, recordings[::-1], out, workers=2, report=lambda _: None)
+    m = Map.open(out)
+    spec = config.grid_spec()
+    assert m.has_knowledge and m.reading == config.model_params().reading
+    for mine, theirs in ((m.data, grid.snapshot()), (m.knowledge, grid.knowledge_snapshot()),
+                         (m.looks, grid.knowledge_snapshot("looks"))):
+        assert np.array_equal(assemble(spec, m.keys, mine), theirs) and theirs.any()
+
+
 def test_mismatched_inputs_are_refused_before_any_work(recordings, tmp_path):
     config = mapconfig.resolve("ti-xwr-openradar")
     with pytest.raises(FrameFormatError, match="frames are \\(64, 4, 256\\) int16; sensor ti-xwr-openradar expects"):

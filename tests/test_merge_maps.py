@@ -121,17 +121,67 @@ def test_a_map_on_another_lattice_is_refused_before_any_work(tmp_path, other):
         merge_maps.merge_stores(NoWork(), [paths[0], tmp_path], out)
 
 
-def test_a_map_with_the_knowledge_channel_is_refused_before_any_work(tmp_path):
-    """The merge adds sums; a detection-statistics map's knowledge and looks would be dropped, so
-    such an input is refused, naming it, before a worker is asked for anything."""
+READING = dict(look_limit=4.0, prior_nats=-3.5, prior_looks=0.0)
+
+
+def knowing_maps(root, spec, inputs=3, bricks=700, seed=3, reading=READING):
+    """Map stores of the detection-statistics model: sums, knowledge and looks per brick, some
+    knowledge near saturation (it clamps at [0, 2^30])."""
+    rng = np.random.default_rng(seed)
+    paths, parts = [], []
+    for i in range(inputs):
+        keys = np.unique(np.stack([rng.choice(50, bricks), np.arange(bricks) % 50, np.zeros(bricks, int)], 1)
+                         .astype(np.int32), axis=0)            # overlapping across inputs
+        n = len(keys)
+        data = rng.integers(-100, 100, (n, *spec.brick_data_shape)).astype(np.int32)
+        knowledge = rng.integers(0, 5000, (n, *spec.brick_data_shape)).astype(np.int32)
+        knowledge[:10] = 2 ** 29 + 11 * i          # these sum beyond 2^30
+        looks = rng.integers(0, 3, (n, *spec.brick_data_shape)).astype(np.int32)
+        paths.append(Path(root) / f"k{i}.rcmap")
+        store.StoreWriter(paths[-1], spec, reading=reading).save(keys, data, knowledge=knowledge, looks=looks)
+        parts.append((keys, np.stack([data, knowledge, looks], axis=1)))
+    return paths, parts
+
+
+def test_maps_with_the_knowledge_channel_merge_file_for_file_with_their_reading(clusters, tmp_path):
+    """Knowledge and looks are sums too: merged like the sums (clamped at [0, 2^30]), written
+    with the inputs' reading, file for file the store one process writes, as .npz too."""
+    paths, parts = knowing_maps(tmp_path, PLANAR)
+    keys, data = merge_maps.merge(parts, channels=True)
+    assert (data[:, 1] == 2 ** 30).any() and (data[:, 1] >= 0).all()
+    reference = tmp_path / "one_process.rcmap"
+    store.StoreWriter(reference, PLANAR, reading=READING).save(keys, data[:, 0], knowledge=data[:, 1],
+                                                               looks=data[:, 2])
+    want = files_of(reference)
+    for workers in (1, 3):
+        out = tmp_path / f"merged{workers}.rcmap"
+        merge_maps.merge_stores(clusters[workers], paths, out)
+        _, got_keys, got_data, manifest = store.read(out)
+        assert manifest["lost"] == [] and manifest["reading"] == READING
+        assert np.array_equal(got_keys, keys) and np.array_equal(got_data, data[:, 0])
+        assert np.array_equal(manifest["knowledge"], data[:, 1]) and np.array_equal(manifest["looks"], data[:, 2])
+        got = files_of(out)
+        assert got.keys() == want.keys() and {k for k in want if got[k] != want[k]} <= {"manifest.json"}
+        assert untimed(got["manifest.json"]) == untimed(want["manifest.json"])
+    merge_maps.merge_stores(clusters[2], paths, tmp_path / "m.npz")
+    spec, got_keys, got_data, channels = npz.read_channels(tmp_path / "m.npz")
+    assert spec == PLANAR and np.array_equal(got_keys, keys) and np.array_equal(got_data, data[:, 0])
+    assert np.array_equal(channels.knowledge, data[:, 1]) and np.array_equal(channels.looks, data[:, 2])
+    assert channels.reading == READING
+
+
+def test_maps_of_two_readings_or_models_are_refused_before_any_work(tmp_path):
+    """A map with the knowledge channel beside one without, or two readings: the sums mean
+    different things, so the merge refuses, naming both inputs, before a worker is asked."""
     paths, _ = synthetic_maps(tmp_path, PLANAR, inputs=2, bricks=50)
-    knowing = tmp_path / "k.rcmap"
-    ones = np.ones((1, *PLANAR.brick_data_shape), np.int32)
-    store.StoreWriter(knowing, PLANAR, reading=dict(look_limit=4.0, prior_nats=0.0, prior_looks=0.5)).save(
-        np.zeros((1, 3), np.int32), ones, knowledge=ones, looks=ones)
+    knowing, _ = knowing_maps(tmp_path / "a", PLANAR, inputs=1, bricks=20)
+    other, _ = knowing_maps(tmp_path / "b", PLANAR, inputs=1, bricks=20, reading=dict(READING, prior_nats=-2.0))
     out = tmp_path / "m.rcmap"
-    with pytest.raises(ConfigError, match=f"{knowing} holds a map of the detection-statistics model"):
-        merge_maps.merge_stores(NoWork(), [*paths, knowing], out)
+    with pytest.raises(ConfigError, match=f"{knowing[0]} holds a map with the reading .*, {paths[0]} one with no "
+                                          "knowledge channel"):
+        merge_maps.merge_stores(NoWork(), [*paths, *knowing], out)
+    with pytest.raises(ConfigError, match="merge only with one sensor model and one reading"):
+        merge_maps.merge_stores(NoWork(), [*knowing, *other], out)
     assert not out.exists()
 
 

@@ -8,7 +8,9 @@ the same workers (``jobs.merge_maps``): a Dask reduction partitioned by brick ke
 sums clamped at the grid's saturation (+-2^30), the merged store's chunks written by the
 workers. The result is bit-identical to fusing every input in one process, in any order and on
 any number of workers, as long as no voxel saturates on the way (the single-process map clamps
-at every write, which at +-2^30 units, a million nats, only a corrupted input reaches).
+at every write, which at +-2^30 units, a million nats, only a corrupted input reaches). A map of
+the detection-statistics model merges its knowledge channel the same way (knowledge and looks
+are sums too), with its reading.
 
 With ``--scheduler``, the output's directory must be one the workers see under the same path (a
 shared filesystem): they write the partial maps and the merged store there; that is checked
@@ -52,14 +54,20 @@ def fuse_one(config_values, sensor_toml, path, spec_tuple, partial):
     runtime = Runtime()
     source = open_input(config.sensor, path)
     config = config.for_sensor(source.sensor) if source.sensor is not config.sensor else config
-    grid = EvidenceGrid(runtime, GridSpec(*spec_tuple))
+    detstats = config["interpret.model"] == "detstats"
+    grid = EvidenceGrid(runtime, GridSpec(*spec_tuple), knowledge=detstats)
     mapping = Mapping.from_config(runtime, config=config, grid=grid)
     start = time.perf_counter()
     mapping.fuse_source(source)
     runtime.queue.finish()
     keys, data = grid.bricks()
     order = np.argsort(key_ids(keys), kind="stable")          # key order: a partition reads contiguous chunks
-    StoreWriter(partial, grid.spec).save(keys[order], data[order])
+    if detstats:                                              # the knowledge channel, in the same order
+        StoreWriter(partial, grid.spec, reading=config.model_params().reading).save(
+            keys[order], data[order], knowledge=grid.knowledge_bricks()[order],
+            looks=grid.knowledge_bricks("looks")[order])
+    else:
+        StoreWriter(partial, grid.spec).save(keys[order], data[order])
     return len(keys), len(source), time.perf_counter() - start
 
 
@@ -81,9 +89,6 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
     workers; returns a dict of timings. The grid is the configuration's."""
     if len(set(map(str, paths))) != len(paths):
         raise ConfigError("an input appears twice; each recording is fused once")
-    if config["interpret.model"] == "detstats":
-        raise ConfigError("fuse-many merges the maps' sums only: the detection-statistics model's knowledge channel "
-                          "is not merged yet; fuse such a recording with `radarcl fuse`")
     shapes = check_inputs(config, paths)
     spec = config.grid_spec()
     report(f"fusing {len(paths)} inputs ({sum(n for _, n in shapes.values())} frames) of sensor {config.sensor.name} "

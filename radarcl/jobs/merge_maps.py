@@ -14,6 +14,10 @@ every worker has finished. So the store is, file for file, the one ``StoreWriter
 one-process merge (the manifest's time stamps aside), and a failed worker leaves nothing at the
 output.
 
+A map of the detection-statistics model carries its knowledge channel (``knowledge`` and
+``looks`` arrays beside each segment, ``maps.store``): those are sums too, merged the same way
+(clamped at [0, saturation]) and written with the inputs' reading, which must be one.
+
 Inputs are map stores on a filesystem every worker sees under the same path (``fuse-many``
 writes its partial maps beside the output). A store whose bricks lie in key order (fuse-many's
 partials, a merged map) gives each partition a contiguous run of chunks; any other store merges
@@ -42,9 +46,11 @@ def key_ids(keys):
     return (k[:, 2] << 42) | (k[:, 1] << 21) | k[:, 0]
 
 
-def merge(parts):
+def merge(parts, channels=False):
     """Sum sparse maps [(keys, data), ...] brick by brick (int64), clamped at +-GRID_LIMIT:
-    (keys sorted by (bz, by, bx), data int32). The one-process merge, and each partition's."""
+    (keys sorted by (bz, by, bx), data int32). The one-process merge, and each partition's.
+    ``channels``: data is (n, 3, *brick), the sums, knowledge and looks of a map with the
+    knowledge channel (those two clamped at [0, GRID_LIMIT])."""
     keys = np.concatenate([k for k, _ in parts]) if parts else np.zeros((0, 3), np.int32)
     if not len(keys):
         return keys.astype(np.int32), np.zeros((0, *(parts[0][1].shape[1:] if parts else (8, 8, 8))), np.int32)
@@ -59,7 +65,10 @@ def merge(parts):
         start += len(d)
     mask = (1 << 21) - 1
     out_keys = np.stack([unique & mask, (unique >> 21) & mask, unique >> 42], axis=1).astype(np.int32)
-    return out_keys, np.clip(total, -GRID_LIMIT, GRID_LIMIT).astype(np.int32)
+    out = np.clip(total, -GRID_LIMIT, GRID_LIMIT)
+    if channels:
+        out[:, 1:] = np.maximum(out[:, 1:], 0)
+    return out_keys, out.astype(np.int32)
 
 
 def describe(spec):
@@ -81,9 +90,8 @@ class _Input:
         if not manifest["sealed"]:
             raise FrameFormatError(f"{path}/{store.MANIFEST} does not match its checksum: edited or damaged; "
                                    "the merge refuses it")
-        if len(store.kinds_of(manifest)) > 1:
-            raise ConfigError(f"{path} holds a map of the detection-statistics model (its knowledge channel); the merge "
-                              "adds eq. 12 maps only")
+        self.kinds = store.kinds_of(manifest)
+        self.reading = manifest.get("reading") if len(self.kinds) > 1 else None
         zarr, _ = store.zarr_modules()
         self.spec = manifest["spec"]
         self.index = _read_index(_Arrays(zarr, self.path), self.path, manifest)
@@ -92,7 +100,7 @@ class _Input:
         if lost.mask.any():
             raise FrameFormatError(f"{path}: a damaged map store: {lost.summary(len(self.index))}; the merge refuses it")
         self.manifest = dict(spec=self.spec, format_version=manifest["format_version"],
-                             checksums=manifest.get("checksums"))
+                             checksums=manifest.get("checksums"), kinds=list(self.kinds))
         ids = key_ids(self.index[:, :3])
         self.order = np.argsort(ids, kind="stable")
         self.sorted_ids = ids[self.order]
@@ -116,6 +124,11 @@ def open_inputs(paths):
         if inputs and one.spec != inputs[0].spec:
             raise ConfigError(f"{p} holds a map on another lattice than {inputs[0].path}: {describe(one.spec)}, "
                               f"against {describe(inputs[0].spec)}; maps merge only on one lattice")
+        if inputs and one.reading != inputs[0].reading:
+            said = {i: "no knowledge channel (eq. 12)" if i.reading is None else f"the reading {i.reading}"
+                    for i in (one, inputs[0])}
+            raise ConfigError(f"{p} holds a map with {said[one]}, {inputs[0].path} one with {said[inputs[0]]}; maps "
+                              "merge only with one sensor model and one reading")
         inputs.append(one)
     return inputs
 
@@ -138,30 +151,40 @@ def merge_partition(pieces, expect, target, row0):
     zarr, _ = store.zarr_modules()
     parts = []
     for path, manifest, index in pieces:
-        data = np.zeros((len(index), *manifest["spec"].brick_data_shape), np.int32)
-        filled, lost = np.zeros(len(index), bool), _Lost(index[:, :3])
+        kinds = manifest["kinds"]
+        data = np.zeros((len(index), len(kinds), *manifest["spec"].brick_data_shape), np.int32)
+        lost = _Lost(index[:, :3])
         group = _Arrays(zarr, Path(path))
-        for segment in np.unique(index[:, 3]).tolist():
-            _read_segment(group, path, manifest, segment, index, data, filled, lost)
-        lost.add(~filled & ~lost.mask, "no stored data")
+        for c, kind in enumerate(kinds):
+            filled, channel = np.zeros(len(index), bool), np.zeros(data.shape[:1] + data.shape[2:], np.int32)
+            for segment in np.unique(index[:, 3]).tolist():
+                _read_segment(group, path, manifest, segment, index, channel, filled, lost, kind)
+            lost.add(~filled & ~lost.mask, f"no stored {kind} data")
+            data[:, c] = channel
         if lost.mask.any():
             raise FrameFormatError(f"{path}: a damaged map store: {lost.summary(len(index))}; the merge stops")
-        parts.append((index[:, :3], data))
-    keys, data = merge(parts)
+        parts.append((index[:, :3], data if len(kinds) > 1 else data[:, 0]))
+    keys, data = merge(parts, channels=len(pieces[0][1]["kinds"]) > 1)
     if not np.array_equal(key_ids(keys), expect):
         raise FrameFormatError(f"the inputs changed while they were merged ({', '.join(p for p, _, _ in pieces)}); "
                                "merge them again")
     worker = _worker_name()
     if target is None:
         return worker, keys, data
-    write_rows(target, row0, data)
-    return worker, store.chunk_crcs(data)
+    return worker, write_rows(target, row0, data)
 
 
 def write_rows(target, row0, data):
-    """Write ``data`` at rows ``row0``... of segment_0 of the store being written at ``target``."""
+    """Write ``data`` at rows ``row0``... of segment_0 of the store being written at ``target``
+    (with the knowledge channel, data (n, 3, *brick): its three kinds' arrays); returns the
+    chunks' CRC-32 per kind."""
     zarr, _ = store.zarr_modules()
-    zarr.open_array(str(Path(target) / "segment_0"), mode="r+")[row0:row0 + len(data)] = data
+    parts = [data] if data.ndim == 4 else [data[:, c] for c in range(data.shape[1])]
+    crcs = {}
+    for kind, values in zip(store.KINDS, parts):
+        zarr.open_array(str(Path(target) / f"{kind}_0"), mode="r+")[row0:row0 + len(values)] = values
+        crcs[kind] = store.chunk_crcs(values)
+    return crcs
 
 
 def _worker_name():
@@ -182,7 +205,7 @@ def merge_stores(client, paths, out, sensor_toml="", config=None, provenance=(),
     workers used, seconds)."""
     start = time.perf_counter()
     inputs = open_inputs(paths)
-    spec = inputs[0].spec
+    spec, kinds, reading = inputs[0].spec, inputs[0].kinds, inputs[0].reading
     workers = sorted(client.nthreads())
     ids, parts = plan(inputs, partitions or PARTITIONS_PER_WORKER * max(1, len(workers)))
     meta = store.manifest_meta(sensor_toml, config, provenance)
@@ -193,7 +216,8 @@ def merge_stores(client, paths, out, sensor_toml="", config=None, provenance=(),
             group = zarr.open_group(str(tmp), mode="a")
             group.attrs["radarcl"] = store.FORMAT
             if len(ids):
-                store.create_segment(group, 0, (len(ids), *spec.brick_data_shape), codec)
+                for kind in kinds:
+                    store.create_segment(group, 0, (len(ids), *spec.brick_data_shape), codec, kind)
         futures = [client.submit(merge_partition, [(str(i.path), i.manifest, i.rows(expect[0], expect[-1] + 1))
                                                    for i in inputs], expect, None if npz_out else str(tmp), row0,
                                  pure=False, workers=[workers[p % len(workers)]], allow_other_workers=True)
@@ -203,16 +227,21 @@ def merge_stores(client, paths, out, sensor_toml="", config=None, provenance=(),
             keys = np.concatenate([r[1] for r in results]) if results else np.zeros((0, 3), np.int32)
             data = np.concatenate([r[2] for r in results]) if results else np.zeros((0, *spec.brick_data_shape), np.int32)
             kept = {k: v for k, v in dict(sensor=sensor_toml or None, config=config or None).items() if v}
-            npz.write(tmp, spec, keys, data, meta=kept or None)
+            if reading is None:
+                npz.write(tmp, spec, keys, data, meta=kept or None)
+            else:
+                data = data if len(data) else np.zeros((0, 3, *spec.brick_data_shape), np.int32)
+                npz.write(tmp, spec, keys, data[:, 0], meta=kept or None,
+                          channels=npz.Channels(data[:, 1], data[:, 2], reading))
         else:
             index = np.zeros((len(ids), 5), np.int32)
             mask = (1 << 21) - 1
             index[:, 0], index[:, 1], index[:, 2] = ids & mask, (ids >> 21) & mask, ids >> 42
             index[:, 4] = np.arange(len(ids))
             store.write_index(group, "index_1", index, codec)
-            crcs = [c for r in results for c in r[1]]
-            store.write_manifest(tmp, spec, 1, "index_1", index, {0: len(ids)} if len(ids) else {},
-                                 {("segment", 0): crcs} if len(ids) else {}, [], meta)
+            crcs = {(kind, 0): [c for r in results for c in r[1][kind]] for kind in kinds} if len(ids) else {}
+            store.write_manifest(tmp, spec, 1, "index_1", index, {0: len(ids)} if len(ids) else {}, crcs, [], meta,
+                                 reading)
     return dict(bricks=len(ids), partitions=len(parts), workers_used=sorted({r[0] for r in results}),
                 seconds=time.perf_counter() - start)
 
