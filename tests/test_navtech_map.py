@@ -61,3 +61,18 @@ def test_true_geometry_is_the_most_self_consistent(runtime, data):
                     nm._moved(true, dyaw=math.radians(-2)), polar_png.beam_poses(scans, poses, 400, motion=False)):
         assert agreement(altered) < best - 0.05
     assert agreement(polar_png.beam_poses(scans, poses, 400, azimuth_sign=-1.0), both=True) < best - 0.05
+
+
+def test_consistency_of_maps_with_knowledge_counts_only_what_both_observed():
+    """A map with the knowledge channel reads its prior where it never looked, so "observed" is
+    its knowledge, not a non-zero value: the unknown voxels (equal in both, at the prior) must not
+    make two maps agree."""
+    prior = -3584                                                    # -3.5 nat in logodds units
+    a = np.full(100, prior, np.int32)
+    b = a.copy()
+    a[:10], b[:10] = np.arange(10) * 100, -np.arange(10) * 100       # what both saw: opposite
+    seen = np.zeros(100, bool)
+    seen[:10] = True
+    got = nm.consistency((a, seen), (b, seen))
+    assert got["common_voxels"] == 10 and got["correlation"] == pytest.approx(-1.0)
+    assert nm.consistency(a, b)["common_voxels"] == 99               # read as eq. 12 maps: every non-zero voxel

@@ -60,9 +60,12 @@ def build_map(runtime, config, spec, scans, per_beam, progress=None):
 
 
 def consistency(a, b):
-    """Agreement of two int grids (logodds units) over the voxels both observed: Pearson
-    correlation of their log-odds, Jaccard overlap of their occupied voxels, voxel count."""
-    both = (a != 0) & (b != 0)
+    """Agreement of two maps over the voxels both observed: Pearson correlation of their
+    log-odds, Jaccard overlap of their occupied voxels, voxel count. ``a``, ``b``: int grids
+    (logodds units; observed: not 0), or (grid, observed mask) pairs (a map with the knowledge
+    channel reads its prior where it never looked: its knowledge says what it observed)."""
+    (a, seen_a), (b, seen_b) = ((m if isinstance(m, tuple) else (m, m != 0)) for m in (a, b))
+    both = seen_a & seen_b
     x, y = a[both].astype(np.float64), b[both].astype(np.float64)
     occ_a, occ_b = x > OCCUPIED_NATS * logodds.SCALE, y > OCCUPIED_NATS * logodds.SCALE
     union = np.count_nonzero(occ_a | occ_b)
@@ -130,7 +133,9 @@ def run(runtime, config, data_dir, report=print, progress=None, poses=None, pose
     spec = grid_for(true_beams, range_max_m, config["grid.voxel_m"], sensors.brick_depth(config.sensor))
 
     def build(sc, pb):
-        return logodds.to_fixed(read_map(build_map(runtime, config, spec, sc, pb), config)[0])
+        log_odds, knowledge = read_map(build_map(runtime, config, spec, sc, pb), config)
+        units = logodds.to_fixed(log_odds)
+        return units if knowledge is None else (units, knowledge >= KNOWN_LOOKS)
 
     half_a = build(scans[:split], true_beams[:split])
     # case -> (per-azimuth poses, whether the first half is rebuilt with them too)
