@@ -351,3 +351,30 @@ def test_the_first_frame_of_a_new_pose_waits_for_no_planner_growth_or_recording(
     assert len(mapper.new_pose_latencies) == 2 * 16 and len(mapper.latencies) == len(frames) * n_az * n_el
     keep = np.ones(frames.shape[:3], bool)
     assert np.array_equal(mapper.mapping.snapshot(), offline(runtime, config, frames, poses, keep))
+
+
+def test_a_detection_statistics_map_is_served_as_it_reads_not_as_its_sums(runtime):
+    """--serve sends a viewer the bricks of a grid with the knowledge channel as the map reads
+    them where it knows and 0 where it does not (``Map.shown_units``, what `radarcl view` draws
+    of a saved map), the whole snapshot and a changed-slots update alike: not the raw sums,
+    which lack the look limit and the prior."""
+    from radarcl.commands.live import shown
+    from radarcl.config.presets import paper_config
+    from radarcl.maps.map import Map
+    from radarcl.pipeline import Mapping
+    from radarcl.scene.observe import observe
+    from radarcl.scene.outdoor import paper_scene
+
+    config = paper_config(0.8, {"interpret.model": "detstats"})
+    mapping = Mapping.from_config(runtime, config=config)
+    obs = observe(paper_scene(), [-5.2], seed=3)
+    mapping.fuse(obs.samples[0], obs.poses[0])
+    grid = mapping.grid
+    keys, data = grid.bricks()
+    whole = shown(grid, keys, {"evidence": data, "knowledge": grid.knowledge_bricks(),
+                               "looks": grid.knowledge_bricks("looks")}, config)
+    slot_keys, channels = grid.read_slots(np.arange(len(keys)), ("evidence", "knowledge", "looks"))
+    want = Map.of_grid(grid, config.model_params().reading)
+    assert np.array_equal(slot_keys, keys) and np.array_equal(shown(grid, slot_keys, channels, config), whole)
+    assert np.array_equal(whole, np.where(want.known(), want.read_units(), 0))
+    assert (whole != 0).any() and not np.array_equal(whole, data)

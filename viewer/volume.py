@@ -232,8 +232,7 @@ def load_map(path, max_size=2048, budget=None):
         # a map of the detection-statistics model is drawn as it reads (correlated looks counted
         # once, not its raw sums), and what the radar never observed as 0, which no mode draws:
         # unknown is not free
-        m = Map(spec, keys, bricks, channels.knowledge, channels.looks, channels.reading)
-        bricks = np.where(m.known(), m.read_units(), 0).astype(np.int32)
+        bricks = Map(spec, keys, bricks, channels.knowledge, channels.looks, channels.reading).shown_units()
     volume = from_bricks(spec, keys, bricks, max_size, budget)
     volume.poses = read_poses(path)
     return volume

@@ -52,13 +52,15 @@ def run(runtime, config, data_dir, report=None):
             out[name]["coverage"] = float(np.mean(stacked[:, extra] > 0))
             extra += 1
     column = list(maps).index("detection statistics" if "detection statistics" in maps else "map")
-    # the model's own prediction of a detection from the map, and the same with no map (the prior
-    # everywhere: the detection opportunity's fall with range alone, the control it must beat)
-    prior = sensor_model.read_log_odds(0, 0, 0, detstats.model_params().reading)
+    # the model's own prediction of a detection from the map, and the same with no map (the
+    # detection opportunity's fall with range alone, the controls it must beat): at p 1/2
+    # everywhere, and at the reading's prior everywhere
+    prior = float(sensor_model.read_log_odds(0, 0, 0, detstats.model_params().reading))
     out["detection statistics, predictive"] = score_probability(
         detection_probability(detstats, stacked[:, column] / logodds.SCALE, ranges), y)
-    out["control: P_d by range, no map"] = score_probability(
-        detection_probability(detstats, np.full(len(y), float(prior)), ranges), y)
+    out["control: P_d by range, p 1/2"] = score_probability(detection_probability(detstats, np.zeros(len(y)), ranges), y)
+    out["control: P_d by range, the prior"] = score_probability(
+        detection_probability(detstats, np.full(len(y), prior), ranges), y)
     out["baseline: no map"] = score(np.zeros(len(y)), y)
     # no radar data beyond one number: the held-out detection rate itself, as a constant log-odds
     rate = float(y.mean())

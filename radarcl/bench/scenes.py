@@ -44,7 +44,7 @@ def configurations(voxel_m, extra=(), radar="paper"):
     out = [("tuned", tuned), ("paper constants", preset())]
     if radar == "paper":
         out += [(f"tuned, beam {b}", tuned.replaced(beam__model=b)) for b in BEAM_MODELS if b != tuned["beam.model"]]
-    out += [("calibrated, occlusion (last release)", preset(CALIBRATED)),
+    out += [("calibrated, occlusion", preset(CALIBRATED)),
             ("detection statistics", preset({"interpret.model": "detstats"})),
             ("detection statistics, no prior", preset(DETSTATS_NO_PRIOR))]
     out += [(Path(f).stem, mapconfig.resolve(path=f, program={"grid.voxel_m": voxel_m}).replaced(grid__voxel_m=voxel_m))

@@ -31,6 +31,7 @@ from radarcl.io.brick_stream import BrickPublisher, parse_address
 from radarcl.io.stream import PortReader, StreamRecorder, open_port
 from radarcl.livemap import LiveMapper, PoseSource, Session
 from radarcl.maps import disk
+from radarcl.maps.map import Map
 
 SUMMARY = "fuse a radar's stream from a serial port (or any pyserial URL) as it arrives"
 DESCRIPTION = ("Reads the radar on PORT (/dev/ttyUSB0, socket://host:port, rfc2217://..., a pty from radarcl "
@@ -203,6 +204,14 @@ def counts_text(s):
             f"from the frames seen, {s['duplicates']} duplicates, {s['refused']} refused{bad}")
 
 
+def shown(grid, keys, channels, config):
+    """The bricks a viewer is sent of a grid with the knowledge channel (``channels``: evidence,
+    knowledge and looks bricks of ``keys``): as the map reads them where it knows, 0 where it
+    does not (``Map.shown_units``), not the raw sums."""
+    return Map(grid.spec, keys, channels["evidence"], channels["knowledge"], channels["looks"],
+               config.model_params().reading).shown_units()
+
+
 class _ViewServer:
     """--serve / --view: a BrickPublisher fed with the bricks each fuse changed (at most 5 times
     a second), and with --view a `radarcl view --follow` process."""
@@ -218,6 +227,9 @@ class _ViewServer:
         def snapshot():
             grid = mapper.mapping.grid
             keys, data = grid.bricks()
+            if grid.has_knowledge:
+                data = shown(grid, keys, {"evidence": data, "knowledge": grid.knowledge_bricks(),
+                                          "looks": grid.knowledge_bricks("looks")}, mapper.mapping.config)
             return grid.spec, keys, data, np.array(mapper.trajectory) if mapper.trajectory else None
 
         self.publisher = BrickPublisher(snapshot, self.address)
@@ -242,7 +254,12 @@ class _ViewServer:
         grid = self.mapper.mapping.grid
         slots = np.concatenate(self._slots)[:, 3] if self._slots else np.empty(0, np.int64)
         self._slots = []
-        keys, data = grid.read_slots(slots) if len(slots) else (None, None)
+        keys, data = (None, None)
+        if len(slots) and grid.has_knowledge:
+            keys, data = grid.read_slots(slots, ("evidence", "knowledge", "looks"))
+            data = shown(grid, keys, data, self.mapper.mapping.config)
+        elif len(slots):
+            keys, data = grid.read_slots(slots)
         poses = np.array(self.mapper.trajectory) if self.mapper.trajectory else None
         self.publisher.publish(keys, data, poses)
 

@@ -146,8 +146,9 @@ def plan(inputs, partitions):
 def merge_partition(pieces, expect, target, row0):
     """On a worker: read one partition's bricks from every input (``pieces``: [(path, the
     manifest's checks, index rows)]), sum them (``merge``), check they are the planned keys
-    ``expect``; write them at rows ``row0``... of ``target``'s segment_0 (returns (worker, the
-    chunks' CRC-32)), or return (worker, keys, data) when ``target`` is None."""
+    ``expect``; write them at rows ``row0``... of ``target``'s segment_0 (and its knowledge_0
+    and looks_0; returns (worker, {kind: the chunks' CRC-32})), or return (worker, keys, data)
+    when ``target`` is None."""
     zarr, _ = store.zarr_modules()
     parts = []
     for path, manifest, index in pieces:

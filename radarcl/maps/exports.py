@@ -172,8 +172,8 @@ def ply_points(m, path, occupied_nats=OCCUPIED_NATS, colour="log-odds"):
 
 
 def ply_mesh(m, path, occupied_nats=OCCUPIED_NATS, band=None):
-    """The isosurface at ``occupied_nats`` (marching cubes over the dense log-odds, unseen = 0)
-    as a PLY mesh in metres."""
+    """The isosurface at ``occupied_nats`` (marching cubes over the dense log-odds as read,
+    ``Map.dense``: unseen 0, or a knowledge map's prior) as a PLY mesh in metres."""
     plyfile = _need("plyfile")
     mcubes = _need("mcubes")
     occ, _ = check_thresholds(occupied_nats, 0.0)

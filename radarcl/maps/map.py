@@ -144,6 +144,14 @@ class Map:
             self._units = logodds.to_fixed(self.nats())
         return self._units
 
+    def shown_units(self):
+        """(n, 8, 8, 8) int32 log-odds units as a viewer draws them: for a map with knowledge the
+        reading where it knows and 0 (which no view mode draws) where it does not, since its
+        prior reads an unknown voxel as probably free; without knowledge the stored sums."""
+        if not self.has_knowledge:
+            return self.data
+        return np.where(self.known(), self.read_units(), 0).astype(np.int32)
+
     def known(self):
         """(n, 8, 8, 8) bool: voxels the map observed (knowledge of ``KNOWN_LOOKS`` looks or
         more; without knowledge: any evidence at all)."""
