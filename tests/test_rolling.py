@@ -12,7 +12,7 @@ from radarcl.config.stage_config import RadarConfig
 from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
 from radarcl.grid import EvidenceGrid
-from radarcl.gridspec import GridSpec
+from radarcl.gridspec import GridSpec, assemble
 from radarcl.maps import disk, store
 from radarcl.maps.rolling import RollingStore, RollingWindow
 from radarcl.stages.fusion import Fusion
@@ -146,3 +146,41 @@ def test_radarcl_fuse_window_on_the_oxford_scans(shared_data, tmp_path, capsys):
     (tmp_path / "file").write_text("x")
     assert main(["fuse", scans, *OXFORD, "--window", "--out", str(tmp_path / "file" / "m.rcmap")]) == 2
     assert "cannot create the directory of map" in capsys.readouterr().err
+
+
+def test_a_detection_statistics_drive_rolls_its_knowledge_channel_bit_for_bit(runtime, tmp_path):
+    """A grid with the knowledge channel rolls too: its knowledge and looks leave the device and
+    come back with its sums, and the store after the drive out and back holds the unbounded
+    grid's three channels, bit for bit, with the map's reading."""
+    from radarcl import logodds, sensor_model
+    from radarcl.maps.map import Map
+
+    reading = sensor_model.ModelParams().reading
+    shape = (LATTICE.n_beams, N_BINS, sensor_model.N_CLASSES)
+
+    def frame(j):
+        rng = np.random.default_rng(j)
+        e = rng.integers(-3000, 3000, (*shape, sensor_model.NODES))
+        d = rng.integers(0, logodds.KNOWLEDGE_SCALE + 1, (*shape, sensor_model.NODES))
+        return sensor_model.pack_nodes(e, d)
+
+    def run(window):
+        grid = window.grid if window else EvidenceGrid(runtime, SPEC, knowledge=True)
+        fusion = Fusion(runtime, grid, LATTICE, MODEL, N_BINS, SPACING, FIRST, LAST, detstats=True)
+        for j, pose in enumerate(drive()):
+            if window:
+                window.update(pose[:3, 3])
+            fusion(frame(j), pose)
+        return grid
+
+    unbounded = run(None)
+    want = {c: assemble(SPEC, *unbounded.bricks(c)) for c in unbounded.channels}
+    backing = RollingStore(tmp_path / "ds.rcmap", SPEC, segment_bricks=100, reading=reading)
+    window = RollingWindow(EvidenceGrid(runtime, SPEC, knowledge=True, chunk_bricks=64), backing, REACH_M + 4.0)
+    run(window)
+    window.finish()
+    assert window.evicted > 200 and backing.stats["restored_from_disk"] > 50
+    m = Map.open(tmp_path / "ds.rcmap")
+    assert m.reading == reading
+    for channel, got in (("evidence", m.data), ("knowledge", m.knowledge), ("looks", m.looks)):
+        assert np.array_equal(assemble(SPEC, m.keys, got), want[channel]) and want[channel].any(), channel

@@ -128,13 +128,15 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
         from radarcl.gridspec import GridSpec
 
         spec = GridSpec(spec.origin_m, spec.voxel_m, spec.shape, brick_z)
-    grid = EvidenceGrid(runtime, spec)
+    detstats = config["interpret.model"] == "detstats"
+    grid = EvidenceGrid(runtime, spec, knowledge=detstats)
     mapping = Mapping.from_config(runtime, config=config, grid=grid, per_beam_poses=True)
     rolling = backing = None
     if window_m is not None:
         rolling = RollingWindow(grid, None, window_m)
         rolling.check_reach(mapping.fusion.r_hi)
-        backing = RollingStore(store, spec, config.sensor.toml(), config.as_dict(), overwrite=True)
+        backing = RollingStore(store, spec, config.sensor.toml(), config.as_dict(), overwrite=True,
+                               reading=config.model_params().reading if detstats else None)
         rolling.backing = grid.backing = backing
     latencies, device_max, host_max, trajectory, bricks_max = [], 0, _rss_bytes(), [], 0
     stage = _stage_bytes(mapping)

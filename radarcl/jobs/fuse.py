@@ -82,10 +82,12 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
                               "bricks that leave the window); leave out --every")
         spec = drive_spec(config, frame_positions(source))
         # before the drive: a window a frame does not fit, a store that cannot be written
-        mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec))
+        detstats = config["interpret.model"] == "detstats"
+        mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec, knowledge=detstats))
         rolling = RollingWindow(mapping.grid, None, window_m)
         rolling.check_reach(mapping.fusion.r_hi)
-        backing = RollingStore(out, spec, config.sensor.toml(), config.as_dict(), inputs, overwrite=overwrite)
+        backing = RollingStore(out, spec, config.sensor.toml(), config.as_dict(), inputs, overwrite=overwrite,
+                               reading=config.model_params().reading if detstats else None)
         rolling.backing = mapping.grid.backing = backing
     else:
         saver = MapSaver(out, config.sensor.toml(), config.as_dict(), inputs)

@@ -13,6 +13,10 @@ and the index of the stored bricks (20 bytes each, about 8 % of a planar brick),
 Segments are written on a thread of their own (``zarr`` compresses outside the GIL), so the
 stream does not wait for the disk; the manifest after each segment names everything stored so
 far, so a drive that stops (or a disk that fills) leaves the map saved up to its last segment.
+
+A grid with the knowledge channel (the detection-statistics model) rolls the same way: its
+knowledge and looks bricks leave and come back with its sums, stored beside them (the store's
+``knowledge_<k>`` and ``looks_<k>`` arrays) with the map's reading.
 """
 
 import math
@@ -43,12 +47,14 @@ class RollingStore:
 
     path: the store directory (a new one; an existing store only with ``overwrite``); spec:
     the grid's ``GridSpec``; meta: what the manifest keeps (sensor, config, provenance: as
-    ``store.StoreWriter`` makes it). ``put(keys, data)`` takes bricks, ``restore(keys)``
-    returns those it holds, ``finish(keys, data)`` writes the last ones and closes.
-    A failed write (disk full, read-only) is raised, as ``ConfigError``, by the next call."""
+    ``store.StoreWriter`` makes it); ``reading``: a grid with the knowledge channel's reading
+    (its bricks are then dicts channel -> bricks, ``EvidenceGrid.KNOWLEDGE_CHANNELS``).
+    ``put(keys, data)`` takes bricks, ``restore(keys)`` returns those it holds,
+    ``finish(keys, data)`` writes the last ones and closes. A failed write (disk full,
+    read-only) is raised, as ``ConfigError``, by the next call."""
 
     def __init__(self, path, spec, sensor_toml="", config=None, inputs=(), overwrite=False,
-                 segment_bricks=SEGMENT_BRICKS):
+                 segment_bricks=SEGMENT_BRICKS, reading=None):
         self.path = Path(path)
         if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
             if not store.recognises(self.path) or not overwrite:
@@ -56,10 +62,12 @@ class RollingStore:
                                   "--force to replace a map store)")
             shutil.rmtree(self.path)
         try:
-            self._writer = store.StoreWriter(self.path, spec, sensor_toml, config, inputs)
+            self._writer = store.StoreWriter(self.path, spec, sensor_toml, config, inputs, reading=reading)
         except OSError as exc:
             raise ConfigError(f"{self.path}: the map store cannot be written ({exc.strerror or exc})") from None
-        self.spec, self.segment_bricks = spec, int(segment_bricks)
+        self.spec, self.segment_bricks, self.reading = spec, int(segment_bricks), reading
+        # bricks are kept as (n, kinds, *brick): the sums, and with knowledge its two channels
+        self.kinds = store.KINDS if reading is not None else store.KINDS[:1]
         self._lock = threading.Lock()
         self._pending_keys, self._pending_data = [], []          # taken, not yet handed to the writer
         self._flushing = []                                      # (ids, keys, data) handed to the writer
@@ -80,7 +88,7 @@ class RollingStore:
         self._raise()
         ids = _ids(keys)
         found = np.zeros(len(ids), bool)
-        data = np.zeros((len(ids), *self.spec.brick_data_shape), np.int32)
+        data = np.zeros((len(ids), len(self.kinds), *self.spec.brick_data_shape), np.int32)
         with self._lock:
             if self._pending_keys:
                 pk, pd = np.concatenate(self._pending_keys), np.concatenate(self._pending_data)
@@ -105,17 +113,17 @@ class RollingStore:
             found |= hit
         rows = np.flatnonzero(found)
         self.stats["restored"] += len(rows)
-        return rows, data[rows]
+        return rows, self._channels(data[rows])
 
     def put(self, keys, data):
-        """Take bricks (keys (n, 3), data (n, *brick) int32) that left the device; a full segment
-        goes to the writer's thread."""
+        """Take bricks (keys (n, 3), data (n, *brick) int32, or with knowledge a dict channel ->
+        bricks) that left the device; a full segment goes to the writer's thread."""
         self._raise()
         if not len(keys):
             return
         with self._lock:
             self._pending_keys.append(np.asarray(keys, np.int32))
-            self._pending_data.append(np.asarray(data, np.int32))
+            self._pending_data.append(self._stacked(data))
             waiting = sum(len(k) for k in self._pending_keys)
         if waiting >= self.segment_bricks:
             self._flush()
@@ -126,7 +134,7 @@ class RollingStore:
         if keys is not None and len(keys):
             with self._lock:
                 self._pending_keys.append(np.asarray(keys, np.int32))
-                self._pending_data.append(np.asarray(data, np.int32))
+                self._pending_data.append(self._stacked(data))
         if meta:
             self._writer.meta.update(meta)
         self._flush(final=True)
@@ -139,6 +147,23 @@ class RollingStore:
         """Stop the writer's thread (what it was writing finishes; nothing more is written)."""
         self._wait(raise_error=False)
         self._pool.shutdown()
+
+    def _stacked(self, data):
+        """Bricks as kept here, (n, kinds, *brick) int32, from an array (the sums alone) or a dict
+        channel -> bricks (a grid with the knowledge channel)."""
+        if isinstance(data, dict):
+            if self.reading is None:
+                raise ConfigError("a rolling store without a reading keeps eq. 12 maps; give the grid's reading")
+            return np.stack([np.asarray(data[c], np.int32) for c in ("evidence", "knowledge", "looks")], axis=1)
+        if self.reading is not None:
+            raise ConfigError("a rolling store with a reading keeps the knowledge channel with the sums")
+        return np.asarray(data, np.int32)[:, None]
+
+    def _channels(self, data):
+        """What the grid writes back (``EvidenceGrid.write_slots``): the sums alone, or a dict."""
+        if self.reading is None:
+            return data[:, 0]
+        return {c: data[:, i] for i, c in enumerate(("evidence", "knowledge", "looks"))}
 
     @property
     def bricks_stored(self):
@@ -177,7 +202,8 @@ class RollingStore:
             w = self._writer
             segment = len(self._segment_rows)
             if keys is not None:
-                self._crcs["segment", segment] = store.write_segment(w.group, segment, data, w._codec)
+                for i, kind in enumerate(self.kinds):
+                    self._crcs[kind, segment] = store.write_segment(w.group, segment, data[:, i], w._codec, kind)
                 self._segment_rows[segment] = len(keys)
             with self._lock:
                 if keys is not None:
@@ -191,7 +217,7 @@ class RollingStore:
                 arr[:] = index
             previous = [f"index_{self._version - 1}"] if self._version > 1 else []
             store.write_manifest(self.path, self.spec, self._version, name, index, self._segment_rows, self._crcs,
-                                 previous, w.meta)
+                                 previous, w.meta, self.reading)
             old = self.path / f"index_{self._version - 2}"
             if self._version > 2 and old.is_dir():
                 shutil.rmtree(old, ignore_errors=True)           # two back: no reader can still be on it
@@ -222,19 +248,21 @@ class RollingStore:
             self._where = np.insert(self._where, at, where, axis=0)
 
     def _read(self, where):
-        """Bricks at (segment, row) pairs, read chunk by chunk, each chunk's CRC-32 checked."""
-        out = np.zeros((len(where), *self.spec.brick_data_shape), np.int32)
+        """Bricks (n, kinds, *brick) at (segment, row) pairs, read chunk by chunk, each chunk's
+        CRC-32 checked."""
+        out = np.zeros((len(where), len(self.kinds), *self.spec.brick_data_shape), np.int32)
         chunk = where[:, 1] // CHUNK_BRICKS
         for seg in np.unique(where[:, 0]):
-            array = self._writer.group[f"segment_{int(seg)}"]
-            for c in np.unique(chunk[where[:, 0] == seg]):
-                here = np.flatnonzero((where[:, 0] == seg) & (chunk == c))
-                start = int(c) * CHUNK_BRICKS
-                block = np.ascontiguousarray(array[start:start + CHUNK_BRICKS], np.int32)
-                if zlib.crc32(np.ascontiguousarray(block, "<i4")) != self._crcs["segment", int(seg)][int(c)]:
-                    raise FrameFormatError(f"{self.path}: segment_{int(seg)} chunk {int(c)} does not match its "
-                                           "checksum: the store was changed under the drive")
-                out[here] = block[where[here, 1] - start]
+            for i, kind in enumerate(self.kinds):
+                array = self._writer.group[f"{kind}_{int(seg)}"]
+                for c in np.unique(chunk[where[:, 0] == seg]):
+                    here = np.flatnonzero((where[:, 0] == seg) & (chunk == c))
+                    start = int(c) * CHUNK_BRICKS
+                    block = np.ascontiguousarray(array[start:start + CHUNK_BRICKS], np.int32)
+                    if zlib.crc32(np.ascontiguousarray(block, "<i4")) != self._crcs[kind, int(seg)][int(c)]:
+                        raise FrameFormatError(f"{self.path}: {kind}_{int(seg)} chunk {int(c)} does not match its "
+                                               "checksum: the store was changed under the drive")
+                    out[here, i] = block[where[here, 1] - start]
         return out
 
 
@@ -268,9 +296,6 @@ class RollingWindow:
             raise ConfigError(f"the window must be a distance [m], got {window_m!r}") from None
         if not (math.isfinite(window) and window > 0):
             raise ConfigError(f"the window must be a positive distance [m], got {window_m!r}")
-        if getattr(grid, "has_knowledge", False):
-            raise ConfigError("a rolling window keeps eq. 12 maps (interpret.model = \"paper\"); the detection-statistics "
-                              "model's knowledge channel is not evicted yet: drop --window, or map with the paper model")
         self.grid, self.backing, self.window_m = grid, backing, window
         grid.backing = backing
         spec = grid.spec
@@ -306,11 +331,15 @@ class RollingWindow:
         nbx, nby, _ = grid.spec.brick_shape
         k = keys[far].astype(np.int64)
         out_keys, data = grid.evict((k[:, 2] * nby + k[:, 1]) * nbx + k[:, 0])
-        self.backing.put(out_keys, data["evidence"])
+        self.backing.put(out_keys, data if grid.has_knowledge else data["evidence"])
         self.evicted += len(out_keys)
         return len(out_keys)
 
     def finish(self, meta=None):
         """Write every brick still on the device and close the store; returns the bricks stored."""
-        keys, data = self.grid.bricks()
+        grid = self.grid
+        if grid.has_knowledge:
+            keys, data = grid.read_slots(grid.live_slots(), channels=grid.channels)
+        else:
+            keys, data = grid.bricks()
         return self.backing.finish(keys, data, meta)
