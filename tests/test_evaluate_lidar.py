@@ -81,7 +81,7 @@ def _write_recording(root, n_scans=6):
 def evaluated(runtime, tmp_path_factory):
     root = tmp_path_factory.mktemp("street")
     scene, track, lidar = _write_recording(root)
-    models = job.resolve_models("radiate-cts350x", ["paper", "calibrated"])
+    models = job.resolve_models("radiate-cts350x", ["paper", "calibrated", "detstats"])
     result, arrays = job.run(runtime, models, root, voxel_m=0.5, poses=root / "street.tum", report=lambda *_: None)
     return scene, lidar, result, arrays
 
@@ -142,3 +142,16 @@ def test_the_parked_car_is_occupied(evaluated):
     assert all(b["maps"]["paper constants"][0] for b in boxes)
     chance = [b["maps"]["paper constants"][2] for b in boxes]
     assert max(chance) < 1.0                                  # a map occupied everywhere would pass every box
+
+
+def test_the_detection_statistics_map_is_scored_as_it_reads(evaluated):
+    """`--model detstats` fuses with the knowledge channel and is scored through its reading: the
+    cells its radar never observed read the prior (the base rate), not the raw sums' 0, and it is
+    ranked in every band beside the others."""
+    from radarcl import sensor_model
+
+    _, _, result, arrays = evaluated
+    m = arrays["maps"]["detection statistics"]
+    prior = sensor_model.ModelParams().reading["prior_nats"]
+    assert (m == np.float64(np.rint(prior * 1024) / 1024)).mean() > 0.05 and (m > 1.0).any() and not (m == 0).any()
+    assert all(np.isfinite(row["auc"]["detection statistics"]) for row in result["bands"])

@@ -33,7 +33,7 @@ def add_arguments(parser):
     parser.add_argument("--sensor", default="radiate-cts350x", metavar="NAME|FILE",
                         help="sensor profile of the scans (default: %(default)s)")
     parser.add_argument("--model", action="append", default=None, metavar="NAME|FILE",
-                        help="a map to score: paper, tuned, calibrated, or a configuration file (repeatable; "
+                        help="a map to score: paper, tuned, calibrated, detstats, or a configuration file (repeatable; "
                              "default: paper and calibrated)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="set one configuration value for every model")

@@ -4,7 +4,8 @@ raw intensity, and the annotated vehicles checked (RADIATE).
 
 Every map is fused on one plane grid (the radar's plane around its path) from the same scans
 and poses: the configurations named (``MODELS``: the sensor's own defaults, i.e. the paper's
-constants; the tuned ones; the calibrated occlusion-aware ones) or given as files (any
+constants; the tuned ones; the calibrated occlusion-aware ones; the detection-statistics model,
+scored as its reading reads it) or given as files (any
 configuration ``--config`` takes, e.g. of a new sensor model), so that any model can be scored
 with no code change.
 """
@@ -15,10 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
+from radarcl import logodds
 from radarcl.config import mapconfig
 from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.evaluation import calibration, heldout, tuning
 from radarcl.evaluation import lidar as L
+from radarcl.evaluation.evaluate import read_map
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GridSpec
 from radarcl.io import radiate
@@ -27,7 +30,8 @@ from radarcl.pipeline import Mapping
 from radarcl.report import figures
 
 MODELS = {"paper": ("paper constants", {}), "tuned": ("tuned", tuning.TUNED),
-          "calibrated": ("calibrated (occlusion-aware)", calibration.CALIBRATED)}
+          "calibrated": ("calibrated (occlusion-aware)", calibration.CALIBRATED),
+          "detstats": ("detection statistics", {"interpret.model": "detstats"})}
 RAW, COUNT, RANGE = "raw intensity", "no radar: -1 per sample", "no radar: range (better sign)"
 
 
@@ -106,9 +110,13 @@ def run(runtime, models, data, voxel_m=0.3, bands=L.BANDS_M, poses=None, poses_f
            f"{np.min(truth.reach_m):.1f}-{np.max(truth.reach_m):.1f} m ({L.REACH_PERCENTILE:g} % of its points)")
     maps = {}
     for k, (label, config) in enumerate(models):
-        mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec), per_beam_poses=True)
+        detstats = config["interpret.model"] == "detstats"
+        mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec, knowledge=detstats),
+                                      per_beam_poses=True)
         mapping.fuse_source(source)
-        maps[label] = L.nats_of(mapping.snapshot())
+        # a map of the detection-statistics model is scored as it reads (its reading), not its sums
+        maps[label] = L.nats_of(logodds.to_fixed(read_map(mapping.grid, config)[0]) if detstats
+                                else mapping.snapshot())
         if progress is not None:
             progress(k + 1, len(models) + 2, "maps fused")
     base = models[0][1]
