@@ -17,10 +17,10 @@ from radarcl import logodds, sensor_model
 from radarcl.commands.options import add_config, default_data, resolve_config
 from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
+from radarcl.evaluation.evaluate import read_units
 from radarcl.evaluation.heldout import detection_probability, predictions, raw_map, score, score_probability
 from radarcl.io import polar_png
 from radarcl.jobs import navtech_map
-from radarcl.maps.map import KNOWN_LOOKS
 
 
 def run(runtime, config, data_dir, report=None):
@@ -33,25 +33,25 @@ def run(runtime, config, data_dir, report=None):
     spec = navtech_map.grid_for(per_beam, config["interpret.range_max_m"], config["grid.voxel_m"])
     train, test = list(range(0, len(scans), 2)), list(range(1, len(scans), 2))
     say(f"{len(scans)} scans: map of scans {train}, held out {test}")
-    maps, known = {}, {}
     detstats = config if config["interpret.model"] == "detstats" else config.replaced(interpret__model="detstats")
-    for name, c in (("map", config), ("detection statistics", detstats)):
-        if name == "map" or c is not config:      # the detection-statistics model beside the configuration's
-            maps[name], known[name] = _units(navtech_map.build_map(runtime, c, spec, [scans[k] for k in train],
+    models = {"map": config}
+    if detstats is not config:                    # the detection-statistics model beside the configuration's
+        models["detection statistics"] = detstats
+    maps, known = {}, {}
+    for name, c in models.items():
+        maps[name], known[name] = read_units(navtech_map.build_map(runtime, c, spec, [scans[k] for k in train],
                                                                    per_beam[train]), c)
     maps["baseline: raw_intensity"] = raw_map(runtime, config, spec, [scans[k] for k in train], per_beam[train])
+    knowing = [name for name, k in known.items() if k is not None]
     # the outcomes: the sensor profile's own detector, whatever the compared map's CFAR is
     outcome = mapconfig.resolve(config.sensor, program={"grid.voxel_m": config["grid.voxel_m"]})
-    columns = list(maps.values()) + [k for k in known.values() if k is not None]
+    columns = list(maps.values()) + [known[name].astype(np.int32) * logodds.SCALE for name in knowing]
     stacked, y, ranges = predictions(runtime, outcome, spec, np.stack(columns, axis=-1),
                                      [scans[k] for k in test], per_beam[test], with_ranges=True)
     out = {name: score(stacked[:, m], y) for m, name in enumerate(maps)}
-    extra = len(maps)
-    for name in maps:
-        if known.get(name) is not None:           # a map with knowledge covers the bins whose voxel it knows
-            out[name]["coverage"] = float(np.mean(stacked[:, extra] > 0))
-            extra += 1
-    column = list(maps).index("detection statistics" if "detection statistics" in maps else "map")
+    for i, name in enumerate(knowing):            # a map with knowledge covers the bins whose voxel it knows
+        out[name]["coverage"] = float(np.mean(stacked[:, len(maps) + i] > 0))
+    column = list(maps).index(list(models)[-1])   # the detection-statistics map
     # the model's own prediction of a detection from the map, and the same with no map (the
     # detection opportunity's fall with range alone, the controls it must beat): at p 1/2
     # everywhere, and at the reading's prior everywhere
@@ -68,16 +68,6 @@ def run(runtime, config, data_dir, report=None):
     return dict(benchmark="heldout-scans", device=runtime.name, sensor=config.sensor.name, scans=len(scans),
                 train=train, held_out=test, voxel_m=config["grid.voxel_m"], config=config.label(),
                 outcome_detector=outcome.label(), results=out)
-
-
-def _units(grid, config):
-    """A map's dense log-odds as read (``evaluate.read_map``), in logodds units, and for a map
-    with the knowledge channel its known voxels (``KNOWN_LOOKS``) as 1 nat (else None)."""
-    from radarcl.evaluation.evaluate import read_map
-
-    log_odds, knowledge = read_map(grid, config)
-    known = None if knowledge is None else ((knowledge >= KNOWN_LOOKS) * logodds.SCALE).astype(np.int32)
-    return logodds.to_fixed(log_odds), known
 
 
 def format_table(r):

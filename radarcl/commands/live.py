@@ -226,10 +226,8 @@ class _ViewServer:
 
         def snapshot():
             grid = mapper.mapping.grid
-            keys, data = grid.bricks()
-            if grid.has_knowledge:
-                data = shown(grid, keys, {"evidence": data, "knowledge": grid.knowledge_bricks(),
-                                          "looks": grid.knowledge_bricks("looks")}, mapper.mapping.config)
+            keys, data = grid.read_slots(grid.live_slots(), channels=grid.channels)
+            data = shown(grid, keys, data, mapper.mapping.config) if grid.has_knowledge else data["evidence"]
             return grid.spec, keys, data, np.array(mapper.trajectory) if mapper.trajectory else None
 
         self.publisher = BrickPublisher(snapshot, self.address)
@@ -255,11 +253,9 @@ class _ViewServer:
         slots = np.concatenate(self._slots)[:, 3] if self._slots else np.empty(0, np.int64)
         self._slots = []
         keys, data = (None, None)
-        if len(slots) and grid.has_knowledge:
-            keys, data = grid.read_slots(slots, ("evidence", "knowledge", "looks"))
-            data = shown(grid, keys, data, self.mapper.mapping.config)
-        elif len(slots):
-            keys, data = grid.read_slots(slots)
+        if len(slots):
+            keys, data = grid.read_slots(slots, channels=grid.channels)
+            data = shown(grid, keys, data, self.mapper.mapping.config) if grid.has_knowledge else data["evidence"]
         poses = np.array(self.mapper.trajectory) if self.mapper.trajectory else None
         self.publisher.publish(keys, data, poses)
 

@@ -22,6 +22,7 @@ from radarcl.evaluation.baseline import detection_scans, octree, read_back
 from radarcl.evaluation.metrics import evaluate, radar_scores
 from radarcl.evaluation.visibility import DETECTABLE_DB
 from radarcl.grid import EvidenceGrid
+from radarcl.maps.map import KNOWN_LOOKS
 from radarcl.pipeline import Mapping, evidence_config
 from radarcl.scene import streets
 from radarcl.scene.observe import NOISE_RMS, observe
@@ -91,6 +92,13 @@ def read_map(grid, config):
     log_odds = sensor_model.read_log_odds(units, known, grid.knowledge_snapshot("looks"),
                                           config.model_params().reading).astype(np.float32)
     return log_odds, (known / np.float32(logodds.KNOWLEDGE_SCALE)).astype(np.float32)
+
+
+def read_units(grid, config):
+    """``read_map`` in logodds units: (dense int32 log-odds as the map reads them, its known voxels
+    (bool, knowledge of ``KNOWN_LOOKS`` looks or more) or None for a map without the channel)."""
+    log_odds, knowledge = read_map(grid, config)
+    return logodds.to_fixed(log_odds), (None if knowledge is None else knowledge >= KNOWN_LOOKS)
 
 
 def for_scene(config, described):

@@ -16,12 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from radarcl import logodds
 from radarcl.config import mapconfig
 from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.evaluation import calibration, heldout, tuning
 from radarcl.evaluation import lidar as L
-from radarcl.evaluation.evaluate import read_map
+from radarcl.evaluation.evaluate import read_units
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GridSpec
 from radarcl.io import radiate
@@ -115,8 +114,7 @@ def run(runtime, models, data, voxel_m=0.3, bands=L.BANDS_M, poses=None, poses_f
                                       per_beam_poses=True)
         mapping.fuse_source(source)
         # a map of the detection-statistics model is scored as it reads (its reading), not its sums
-        maps[label] = L.nats_of(logodds.to_fixed(read_map(mapping.grid, config)[0]) if detstats
-                                else mapping.snapshot())
+        maps[label] = L.nats_of(read_units(mapping.grid, config)[0] if detstats else mapping.snapshot())
         if progress is not None:
             progress(k + 1, len(models) + 2, "maps fused")
     base = models[0][1]

@@ -24,7 +24,7 @@ import numpy as np
 from radarcl import logodds
 from radarcl.config import sensors
 from radarcl.errors import FrameFormatError
-from radarcl.evaluation.evaluate import read_map
+from radarcl.evaluation.evaluate import read_map, read_units
 from radarcl.geometry import se2_pose
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GridSpec
@@ -133,9 +133,8 @@ def run(runtime, config, data_dir, report=print, progress=None, poses=None, pose
     spec = grid_for(true_beams, range_max_m, config["grid.voxel_m"], sensors.brick_depth(config.sensor))
 
     def build(sc, pb):
-        log_odds, knowledge = read_map(build_map(runtime, config, spec, sc, pb), config)
-        units = logodds.to_fixed(log_odds)
-        return units if knowledge is None else (units, knowledge >= KNOWN_LOOKS)
+        units, known = read_units(build_map(runtime, config, spec, sc, pb), config)
+        return units if known is None else (units, known)
 
     half_a = build(scans[:split], true_beams[:split])
     # case -> (per-azimuth poses, whether the first half is rebuilt with them too)

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from radarcl.errors import ConfigError, FrameFormatError
+from radarcl.grid import EvidenceGrid
 from radarcl.maps import store
 from radarcl.maps.store_verify import CHUNK_BRICKS
 
@@ -154,7 +155,7 @@ class RollingStore:
         if isinstance(data, dict):
             if self.reading is None:
                 raise ConfigError("a rolling store without a reading keeps eq. 12 maps; give the grid's reading")
-            return np.stack([np.asarray(data[c], np.int32) for c in ("evidence", "knowledge", "looks")], axis=1)
+            return np.stack([np.asarray(data[c], np.int32) for c in EvidenceGrid.KNOWLEDGE_CHANNELS], axis=1)
         if self.reading is not None:
             raise ConfigError("a rolling store with a reading keeps the knowledge channel with the sums")
         return np.asarray(data, np.int32)[:, None]
@@ -163,7 +164,7 @@ class RollingStore:
         """What the grid writes back (``EvidenceGrid.write_slots``): the sums alone, or a dict."""
         if self.reading is None:
             return data[:, 0]
-        return {c: data[:, i] for i, c in enumerate(("evidence", "knowledge", "looks"))}
+        return {c: data[:, i] for i, c in enumerate(EvidenceGrid.KNOWLEDGE_CHANNELS)}
 
     @property
     def bricks_stored(self):
