@@ -16,6 +16,7 @@ DEVICES_ENV = "RADARCL_TEST_DEVICES"
 
 
 def _devices():
+    import radarcl.pipeline  # noqa: F401  registers the device check every radarcl process runs before using a device
     from radarcl.cl.runtime import _all_devices, build_problem, choose_device
 
     wanted = os.environ.get(DEVICES_ENV, "").strip().lower()

@@ -30,7 +30,7 @@ def test_a_device_that_cannot_build_is_passed_over_and_named(monkeypatch):
     if chosen:
         assert choose_device(spec="").int_ptr == chosen[0].int_ptr != default.int_ptr
     else:
-        with pytest.raises(NoOpenCLError, match="no OpenCL device can build radarcl's kernels: .*unknown target CPU"):
+        with pytest.raises(NoOpenCLError, match="no OpenCL device can run radarcl's kernels: .*unknown target CPU"):
             choose_device(spec="")
     with pytest.raises(NoOpenCLError, match="which cannot build kernels .*unknown target CPU 'generic'"):
         choose_device(spec=default.name)
