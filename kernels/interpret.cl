@@ -39,11 +39,20 @@
  * Until the first pulse (tau = 1) a noise bin copies unblocked[] (the host's exact nodes).
  * Logs without builtins (log10_nb); one exp and expm1 per pulse. eq. 12's constants are unused.
  *
+ * With -D GRADED=1 as well ("snr" evidence, radarcl.sensor_model.SnrTable), every bin's e is
+ * read from the table of the measured power instead: x = r / N, N the beam's noise floor (the
+ * ((last - first + 1) / 2)-th smallest power of the window, found exactly by bisection on the
+ * float's bits, / ln 2, at least noise_floor); e = table(ln x, ln tau + ln_snr[bin, class, node]),
+ * bilinear on the SNR_U x SNR_V grid, clamped to it; a pulse blocks by its summed (x - 1)+; d as
+ * above. Bins of a pulse take the tau in front of it, as without GRADED.
+ *
  * -D constants (set by radarcl/stages/interpret.py):
  *   N_BINS      bins per profile
  *   MAX_PULSES  pulse rows kept per beam; more are counted and still give evidence
  *   OCCLUSION   0: the paper's eq. 12; 1: the occlusion-aware variant above
  *   DETSTATS    0, or 1: the detection-statistics model above (with OCCLUSION 0)
+ *   GRADED      DETSTATS only: 0, or 1 for "snr" evidence; SNR_NU, SNR_NV, SNR_U0, SNR_V0 and
+ *               SNR_U_SCALE, SNR_V_SCALE (grid points per unit of u, v) give its table's grid
  */
 #include "radarcl_common.h"
 
@@ -117,6 +126,61 @@ static inline void write_nodes(__global int2 *out, const __global float *opp, co
             out[c * 4 + k] = (int2)((e[k] & 0xFFFF) | (e[k + 1] << 16), (d[k] & 0xFFFF) | (d[k + 1] << 16));
     }
 }
+
+#if GRADED
+/* the k-th smallest (0-based) of r[first .. last], exactly: bisection on the bits of the
+ * non-negative floats (ordered as their bits), counting eight bins at a time */
+static float kth_power(const __global float *r, int first, int last, int k)
+{
+    uint lo = 0u, hi = 0x7F800000u;             /* +inf: every checked profile lies below */
+    while (lo < hi) {
+        const uint mid = lo + ((hi - lo) >> 1);
+        int8 below8 = 0;
+        int j = first;
+        for (; j + 8 <= last + 1; j += 8)
+            below8 += as_int8(as_uint8(vload8(0, r + j)) <= (uint8)mid);     /* -1 where true */
+        int below = -(below8.s0 + below8.s1 + below8.s2 + below8.s3 + below8.s4 + below8.s5 + below8.s6 + below8.s7);
+        for (; j <= last; j++)
+            below += as_uint(r[j]) <= mid;
+        if (below >= k + 1)
+            hi = mid;
+        else
+            lo = mid + 1u;
+    }
+    return as_float(lo);
+}
+
+/* a grid position clamped to [0, n - 1] (-inf to 0), without builtins */
+static inline float grid_position(float x, float x0, float scale, int n)
+{
+    const float f = (x - x0) * scale;
+    return f > 0.0f ? (f < (float)(n - 1) ? f : (float)(n - 1)) : 0.0f;
+}
+
+/* one bin's node pairs from the SNR table: u = ln x, ln tau = -blocked */
+static inline void write_graded(__global int2 *out, const __global float *ln_s, const __global float *opp,
+                                const __global float *table, float u, float blocked, float tau)
+{
+    const float fu = grid_position(u, SNR_U0, SNR_U_SCALE, SNR_NU);
+    const int iu = min((int)fu, SNR_NU - 2);
+    const float du = fu - (float)iu;
+    const __global float *row0 = table + iu * SNR_NV, *row1 = row0 + SNR_NV;
+    for (int c = 0; c < 2; ++c) {
+        int e[5], d[5];
+        for (int k = 0; k < 5; ++k) {
+            const float fv = grid_position(ln_s[c * 5 + k] - blocked, SNR_V0, SNR_V_SCALE, SNR_NV);
+            const int iv = min((int)fv, SNR_NV - 2);
+            const float dv = fv - (float)iv;
+            const float v = (row0[iv] * (1.0f - dv) + row0[iv + 1] * dv) * (1.0f - du)
+                          + (row1[iv] * (1.0f - dv) + row1[iv + 1] * dv) * du;
+            e[k] = fixed_nb(v, LOGODDS_SCALE);
+            d[k] = as_int(tau * opp[c * 5 + k] * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
+        }
+        for (int k = 0; k < 4; ++k)
+            out[c * 4 + k] = (int2)((e[k] & 0xFFFF) | (e[k + 1] << 16), (d[k] & 0xFFFF) | (d[k + 1] << 16));
+    }
+}
+#endif
 #endif
 
 __kernel void interpret(
@@ -137,6 +201,9 @@ __kernel void interpret(
     const __global float *blocking,     // DETSTATS: (N_BINS,) a pulse's blocking per unit of (r/n - 1)+ at its peak
     const __global int2 *unblocked,     // DETSTATS: (N_BINS, 8) a noise bin's node pairs at tau = 1
     const float c_det,                  // DETSTATS: (1 - P_fa) / P_fa, P_fa the achieved false-alarm rate
+    const __global float *ln_snr,       // GRADED: (N_BINS, 2, 5) ln of the typical target's median SNR at tau = 1
+    const __global float *snr_table,    // GRADED: (SNR_NU, SNR_NV) evidence [nat] over (ln x, ln s)
+    const float noise_floor,            // GRADED: the least noise floor [power] (the CFAR's)
     const int n_beams,
     __global int *evidence,           // (n_beams, N_BINS) out [logodds units]; DETSTATS: (n_beams, N_BINS, 8) int2
     __global int4 *pulses,            // (n_beams, MAX_PULSES) out: start, end, peak, wide; -1 unused
@@ -185,6 +252,47 @@ __kernel void interpret(
     for (int j = 0; j < first_bin && j < N_BINS; j++)
         for (int w = 0; w < NODE_WORDS; w++)
             nd[j * NODE_WORDS + w] = (int2)(0);
+#if GRADED
+    if (first_bin <= last_bin) {
+        const float median = kth_power(r, first_bin, last_bin, (last_bin - first_bin + 1) / 2);
+        const float floor_power = median / 0.69314718056f > noise_floor ? median / 0.69314718056f : noise_floor;
+        const float ln_floor = log10_nb(floor_power) * LN10;
+        int count = 0, j = first_bin;
+        float blocked = 0.0f, tau = 1.0f;
+        while (j <= last_bin) {
+            if (!m[j]) {
+                write_graded(nd + j * NODE_WORDS, ln_snr + j * 10, opportunity + j * 10, snr_table,
+                             log10_nb(r[j]) * LN10 - ln_floor, blocked, tau);
+                j++;
+                continue;
+            }
+            const int start = j;
+            int peak = j;
+            float energy = 0.0f;
+            for (; j <= last_bin && m[j]; j++) {
+                if (r[j] > r[peak])
+                    peak = j;
+                const float excess = r[j] / floor_power - 1.0f;
+                energy += excess > 0.0f ? excess : 0.0f;
+            }
+            for (int i = start; i < j; i++)
+                write_graded(nd + i * NODE_WORDS, ln_snr + i * 10, opportunity + i * 10, snr_table,
+                             log10_nb(r[i]) * LN10 - ln_floor, blocked, tau);
+            if (count < MAX_PULSES)
+                pl[count] = (int4)(start, j - 1, peak, j - start >= wide_bins);
+            count++;
+            blocked += energy * blocking[peak];
+            tau = exp(-blocked);                  /* a builtin, once per pulse */
+        }
+        n_pulses[beam] = count;
+    } else {
+        n_pulses[beam] = 0;
+    }
+    for (int jj = max(last_bin + 1, 0); jj < N_BINS; jj++)
+        for (int w = 0; w < NODE_WORDS; w++)
+            nd[jj * NODE_WORDS + w] = (int2)(0);
+    return;
+#endif
     {
         int count = 0, j = first_bin;
         float blocked = 0.0f, tau = 1.0f, omt = 0.0f;

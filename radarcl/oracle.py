@@ -11,7 +11,7 @@ import numpy as np
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import check_poses
-from radarcl.sensor_model import node_lerp, quantised_rho2
+from radarcl.sensor_model import node_lerp, noise_floor, quantised_rho2
 
 WINDOWS = ("hann", "rect")
 OUTPUTS = ("magnitude", "power")
@@ -368,6 +368,10 @@ def interpret_detstats(profiles, noise, mask, config, bin_spacing_m, model, flag
       a bin without detection: e = ln(1 - delta) = ln((1 - tau) + tau model.miss[j]);
       a detected bin: e = ln(1 + delta w_j (1 - P_fa) / P_fa), w_j = r_j / r_peak of its pulse
           (the echo came from where the profile is strongest: its flanks share less).
+    With "snr" evidence (``model.graded``) every bin's evidence is instead
+      e = model.snr_table(ln x_j, ln tau_j + model.ln_snr[j]), x_j = r_j / N,
+    N the beam's ``sensor_model.noise_floor`` over the window, and a pulse blocks by its summed
+    (x - 1)+ (over the floor, not the CFAR's local estimate); delta as above.
     Returns ``(evidence, opportunity, pulses, n_pulses, flags)``: evidence int32 (..., n_bins,
     CLASSES, NODES) [logodds units, clamped to +-16 nat], opportunity int32 (same shape)
     [KNOWLEDGE_SCALE units], pulses, n_pulses and flags as ``interpret``'s. Beams with a
@@ -384,6 +388,9 @@ def interpret_detstats(profiles, noise, mask, config, bin_spacing_m, model, flag
     c_det = (1.0 - model.pfa) / model.pfa
     for b, (rb, nb, mb) in enumerate(zip(r.reshape(-1, n_bins), n.reshape(-1, n_bins), m.reshape(-1, n_bins))):
         if flags_out.reshape(-1)[b] & NO_EVIDENCE_FLAGS:
+            continue
+        if model.graded:
+            evidence[b], opportunity[b] = _detstats_graded(rb, mb, first, last, model)
             continue
         blocked, j = 0.0, first
         while j <= last:
@@ -407,3 +414,33 @@ def interpret_detstats(profiles, noise, mask, config, bin_spacing_m, model, flag
             blocked += np.maximum(rb[run] / nb[run] - 1.0, 0.0).sum() * model.blocking[peak]
     shape = (*batch, n_bins, *tail)
     return evidence.reshape(shape), opportunity.reshape(shape), pulses, n_pulses, flags_out
+
+
+def _detstats_graded(r, m, first, last, model):
+    """One beam of ``interpret_detstats`` with "snr" evidence: (evidence, opportunity), each
+    (n_bins, CLASSES, NODES) int32."""
+    n_bins = len(r)
+    evidence = np.zeros((n_bins, *model.opportunity.shape[1:]), np.int32)
+    opportunity = np.zeros_like(evidence)
+    if first > last:
+        return evidence, opportunity
+    x = r / noise_floor(r, first, last, model.noise_floor)
+    blocked = np.zeros(n_bins)                      # X_j: the blocking of the pulses that ended before j
+    j = first
+    while j <= last:
+        if m[j]:
+            start = j
+            while j <= last and m[j]:
+                j += 1
+            peak = start + int(np.argmax(r[start:j]))
+            blocked[j:] += np.maximum(x[start:j] - 1.0, 0.0).sum() * model.blocking[peak]
+        else:
+            j += 1
+    window = slice(first, last + 1)
+    with np.errstate(divide="ignore"):
+        ln_x = np.log(x[window])
+    v = -blocked[window, None, None] + model.ln_snr[window]
+    evidence[window] = logodds.to_fixed(model.snr_table(ln_x[:, None, None], v))
+    opportunity[window] = np.rint(np.exp(-blocked[window, None, None]) * model.opportunity[window]
+                                  * logodds.KNOWLEDGE_SCALE)
+    return evidence, opportunity

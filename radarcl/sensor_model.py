@@ -24,9 +24,26 @@ D the probability that it detects when v is free, and delta_v the voxel's *detec
 - D = P_fa on a bin where nothing else is known, and close to 1 on the flanks of a pulse whose
   peak lies elsewhere (its spread explains the detection whether or not v is occupied).
 
+That is the binary outcome (``sensor_model.evidence = "detection"``). The default,
+``"snr"``, uses what the bin measured, not only whether it crossed the threshold: the bin's power
+over the beam's noise floor, x = r / N (``noise_floor``: its median power over the range window /
+ln 2, the mean of exponential noise), gives the log-likelihood ratio of a typical target of median
+SNR s_v = tau_j S_j g(rho2) at v against v free (``SnrTable``):
+
+    e = ln(L / (1 - q + q L)),   L = E_s[exp(x s / (1 + s)) / (1 + s)]
+
+(Swerling 1 over the known noise: the power is exponential with mean 1 + s; E_s over the
+log-normal RCS prior; q = D, the chance that a free voxel's bin holds an echo anyway, bounds the
+evidence at ln(1 / q) as the detection's is bounded). An echo the CFAR does not call a detection
+(under its threshold, or masked by nearby echoes in its training cells) still counts by its
+strength, and the local noise estimate, which nearby echoes inflate, no longer sets the scale.
+
 So beam edges and far ranges give weak free evidence, shadows get none and a strong echo gives
 strong evidence. delta_v itself is the knowledge channel: the looks in which an object at v would
 have been seen; summed per voxel it tells "never observed" (0) from "observed, undecided".
+
+The CFAR still finds the pulses: a pulse's energy (with "snr", its summed (x - 1)+ over the floor)
+blocks the beam behind it, and delta, the knowledge, stays the CFAR's detection opportunity.
 
 Correlated evidence: looks from one viewpoint share speckle and model error, so they are not
 independent. The grid keeps exact integer sums (order-independent), and the number of looks n;
@@ -122,6 +139,7 @@ RANGES = {
     "prior_looks": (0.0, 100.0, "looks"),         # the knowledge at which the prior applies in full (0: everywhere)
     "false_alarm": (0.0, 0.5, ""),                # a measured false-alarm rate (0: the CFAR's statistics)
 }
+EVIDENCE_KINDS = ("snr", "detection")             # sensor_model.evidence: the measured SNR, or the CFAR's outcome
 GROUND_RANGE = (0.0, 1000.0, "m")                 # ground_below_m: the sensor's height above the ground plane (0: none)
 DEFAULT_SNR_DB = 50.0                             # the sensitivity assumed for a profile that gives none
 READING = ("look_limit", "prior_nats", "prior_looks")   # what a map keeps to be read (``read_log_odds``)
@@ -152,11 +170,14 @@ class ModelParams:
     prior_looks: float = 0.0
     false_alarm: float = 0.0
     ground_below_m: float = 0.0
+    evidence: str = "snr"
 
     def __post_init__(self):
         for name, (lo, hi, unit) in RANGES.items():
             check_range(f"sensor_model.{name}", getattr(self, name), lo, hi, unit)
         check_range("sensor_model.ground_below_m", self.ground_below_m, *GROUND_RANGE)
+        if self.evidence not in EVIDENCE_KINDS:
+            raise ConfigError(f"sensor_model.evidence = {self.evidence!r}: expected one of {', '.join(EVIDENCE_KINDS)}")
 
     @classmethod
     def of(cls, values):
@@ -240,6 +261,88 @@ def _detection_table(kind, factor, n_train, rank, oversampling, spread_db):
     return DetectionTable(x, np.clip((pd - pfa) / (1.0 - pfa), 0.0, 1.0), pfa)
 
 
+# -- the measured SNR's likelihood ratio ("snr" evidence) -------------------------------------------------------------
+SNR_U = (-8.0, 16.0, 385)        # u = ln x: the bin's power over the floor, -35 to +69.5 dB (clamped outside)
+SNR_V = (-40.0, 16.0, 449)       # v = ln s: the typical target's median SNR, -174 to +69.5 dB
+SPREAD_STEPS = 161               # trapezoid nodes over +-8 standard deviations of the log-normal RCS prior
+LN2 = math.log(2.0)
+
+
+@dataclass(frozen=True)
+class SnrTable:
+    """e(u, v) [nat] on a regular grid (``SNR_U`` x ``SNR_V``): the evidence of a bin whose power
+    is x = e^u times the beam's noise floor, for a voxel whose typical target has median SNR e^v
+    there (module docstring): e = ln(L / (1 - q + q L)), L = E_s[exp(x s / (1 + s)) / (1 + s)], s
+    log-normal of ``spread_db`` about e^v. Read bilinearly (``__call__``; the kernel reads the same
+    float32 table the same way); u and v outside the grid are clamped to it, and the first column
+    (v = -20: a target 87 dB under the noise) is 0 exactly, so a voxel no target could reach gets
+    no evidence."""
+
+    values: np.ndarray               # (SNR_U[2], SNR_V[2]) float64 [nat]
+    q: float
+
+    @classmethod
+    def build(cls, spread_db, q):
+        """The table of a prior of ``spread_db`` and a false-alarm share ``q`` in (0, 1/2]; built
+        once per pair (``_snr_table``)."""
+        return _snr_table(float(spread_db), float(q))
+
+    def __call__(self, u, v):
+        """Bilinear read at u = ln x, v = ln s (arrays, broadcast), float64."""
+        fu = _grid_position(u, SNR_U)
+        fv = _grid_position(v, SNR_V)
+        iu = np.minimum(fu.astype(np.int64), SNR_U[2] - 2)
+        iv = np.minimum(fv.astype(np.int64), SNR_V[2] - 2)
+        du, dv = fu - iu, fv - iv
+        t = self.values
+        return ((t[iu, iv] * (1.0 - dv) + t[iu, iv + 1] * dv) * (1.0 - du)
+                + (t[iu + 1, iv] * (1.0 - dv) + t[iu + 1, iv + 1] * dv) * du)
+
+
+def _grid_position(x, grid):
+    lo, hi, n = grid
+    x = np.asarray(x, np.float64)
+    return np.clip((np.where(np.isnan(x), lo, x) - lo) * ((n - 1) / (hi - lo)), 0.0, n - 1.0)
+
+
+def snr_evidence(x, ln_s, spread_db, q):
+    """The exact evidence [nat] of power ratios ``x`` (array) for median SNRs e^``ln_s`` (array,
+    broadcast): the quadrature ``SnrTable`` tabulates (trapezoid over the log-normal prior)."""
+    x = np.asarray(x, np.float64)[..., None]
+    sigma = spread_db * math.log(10.0) / 10.0
+    z = np.linspace(-8.0, 8.0, SPREAD_STEPS) if sigma else np.zeros(1)
+    w = np.exp(-0.5 * z * z)
+    w = w / w.sum()
+    ln_s = np.asarray(ln_s, np.float64)[..., None] + sigma * z
+    s = np.exp(np.minimum(ln_s, 700.0))
+    terms = x * (s / (1.0 + s)) - np.log1p(s) + np.log(w)
+    top = terms.max(axis=-1, keepdims=True)
+    ln_l = top[..., 0] + np.log(np.exp(terms - top).sum(axis=-1))
+    return ln_l - np.logaddexp(math.log1p(-q), math.log(q) + ln_l)
+
+
+@functools.lru_cache(maxsize=8)
+def _snr_table(spread_db, q):
+    check_range("the false-alarm share q", q, 1e-12, 0.5)
+    u = np.linspace(*SNR_U)
+    v = np.linspace(*SNR_V)
+    values = np.empty((len(u), len(v)))
+    for i in range(0, len(u), 32):             # 32 rows at a time (memory: rows x columns x SPREAD_STEPS)
+        values[i:i + 32] = snr_evidence(np.exp(u[i:i + 32])[:, None], v[None, :], spread_db, q)
+    values[:, 0] = 0.0
+    values.setflags(write=False)
+    return SnrTable(values, q)
+
+
+def noise_floor(profiles, first, last, floor=1e-30):
+    """The beams' noise floor [power], (...,): the median power of bins ``first`` .. ``last``
+    (the ((last - first + 1) // 2)-th smallest, 0-based: one of the bins, no averaging) / ln 2,
+    the mean of exponential noise whose median it is; at least ``floor`` (the CFAR's noise_floor)."""
+    r = np.asarray(profiles, np.float64)[..., first:last + 1]
+    k = r.shape[-1] // 2
+    return np.maximum(np.partition(r, k, axis=-1)[..., k] / LN2, floor)
+
+
 def _guard_for(oversampling):
     # The guard only has to keep the cell under test out of the training cells' correlation
     # (two resolution cells); the training cells' own correlation does not depend on it.
@@ -309,12 +412,23 @@ class BinModel:
     (``noise_bins``, the bins one echo's power spreads over: the window's equivalent noise
     bandwidth times the bins per resolution cell, 6 for the paper's Hann window padded x4);
     ``miss`` 1 - opportunity (kept apart: in float32 1 - delta would lose the digits that matter
-    when delta is close to 1); ``pfa`` the achieved false-alarm rate."""
+    when delta is close to 1); ``pfa`` the achieved false-alarm rate. "snr" evidence also needs
+    ``ln_snr`` (n_bins, CLASSES, NODES), ln of the typical target's median SNR per bin, class and
+    node at tau = 1 (-inf: no such target, e.g. terrain without a ground plane), its ``snr_table``
+    and the CFAR's ``noise_floor``; without a table the evidence is the CFAR's outcome."""
 
     opportunity: np.ndarray
     miss: np.ndarray
     blocking: np.ndarray
     pfa: float
+    ln_snr: np.ndarray = None
+    snr_table: SnrTable = None
+    noise_floor: float = 1e-30
+
+    @property
+    def graded(self):
+        """True for "snr" evidence (the measured power's likelihood ratio), False for the CFAR's outcome."""
+        return self.snr_table is not None
 
     @classmethod
     def build(cls, params, cfar, n_bins, bin_spacing_m, oversampling, half_az_rad, half_el_rad, voxel_m,
@@ -329,8 +443,8 @@ class BinModel:
         t = np.arange(NODES) / (NODES - 1) * math.log(4.0)
         ln_up, kappa = upright_snr(params, ranges, half_az_rad, half_el_rad)
         ln_ter = terrain_snr(params, ranges, voxel_m)
-        opportunity = np.stack([table(ln_up[:, None] - kappa[:, None] * t[None, :]),
-                                table(ln_ter[:, None] - t[None, :])], axis=1)
+        ln_snr = np.stack([ln_up[:, None] - kappa[:, None] * t[None, :], ln_ter[:, None] - t[None, :]], axis=1)
+        opportunity = table(ln_snr)
         cells = 1.0 if oversampling is None else float(oversampling)
         blocking = 1.0 / (block_snr(params, ranges, half_az_rad, half_el_rad) * HANN_ENBW * cells)
         pfa = table.pfa
@@ -350,7 +464,10 @@ class BinModel:
             pd = table.pfa + (1.0 - table.pfa) * opportunity
             pfa = params.false_alarm
             opportunity = np.clip((pd - pfa) / (1.0 - pfa), 0.0, 1.0)
-        return cls(opportunity, 1.0 - opportunity, blocking, pfa)
+        if params.evidence == "detection":
+            return cls(opportunity, 1.0 - opportunity, blocking, pfa)
+        return cls(opportunity, 1.0 - opportunity, blocking, pfa, ln_snr,
+                   SnrTable.build(params.target_spread_db, min(pfa, 0.5)), float(cfar.noise_floor))
 
 
 # -- the reading: correlated evidence and the prior ---------------------------------------------------------------------

@@ -231,29 +231,33 @@ def test_log10_nb8_is_log10_nb_lane_for_lane(runtime):
 
 
 # -- the detection-statistics model (DETSTATS=1) ------------------------------------------------------------------
-def detstats_model(n_bins=256, ground_below_m=1.5):
+def detstats_model(n_bins=256, ground_below_m=1.5, evidence="snr"):
     import math
 
     from radarcl import sensor_model as sm
 
-    params = sm.ModelParams(50.28, ground_below_m=ground_below_m)
+    params = sm.ModelParams(50.28, ground_below_m=ground_below_m, evidence=evidence)
     return sm.BinModel.build(params, CfarConfig(guard=16, train=8), n_bins, SPACING, 4.0, math.radians(0.5),
                              math.radians(1.0), 0.2)
 
 
 @pytest.mark.parametrize("local_size", [1, 16, 64])
-def test_detstats_matches_its_oracle(runtime, local_size):
-    """Node values identical to the float64 oracle until a beam's first pulse (the host's exact
-    table), within EVIDENCE_UNITS_TOL after it (float32 logs and blocking); pulses, counts and
-    flags identical; flagged beams and bins outside the window give 0."""
+@pytest.mark.parametrize("evidence", ["snr", "detection"])
+def test_detstats_matches_its_oracle(runtime, local_size, evidence):
+    """Node values within EVIDENCE_UNITS_TOL of the float64 oracle (float32 logs, blocking and,
+    with "snr", the table's bilinear read), and identical to it until a beam's first pulse with
+    "detection" (the host's exact table); pulses, counts and flags identical; flagged beams and
+    bins outside the window give 0."""
     from radarcl import sensor_model as sm
 
     x = frame(seed=11 + local_size)
     beams = x.reshape(-1, 256)
     beams[3, 40:44] = 30.0                       # a weak pulse: partial blocking behind it
     beams[4] = 0.0                               # silent
+    beams[5, 100:] = 0.0                         # "snr": a floor from a window half of zeros
+    beams[6, 60:63] = 1e30                       # a huge echo: x beyond the table, blocking without overflow
     cfg = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4, model="detstats")
-    model = detstats_model()
+    model = detstats_model(evidence=evidence)
     det = Detection(runtime, x.shape[:-1], 256, SPACING, CfarConfig(guard=16, train=8), cfg, bin_model=model)
     det.interpreter = Interpreter(runtime, x.shape[:-1], 256, SPACING, cfg, bin_model=model, local_size=local_size)
     got = det(x)
@@ -270,13 +274,19 @@ def test_detstats_matches_its_oracle(runtime, local_size):
         hits = np.flatnonzero(mask[b, first:last + 1])
         before[b, first:(first + hits[0]) if len(hits) else last + 1] = True
     before &= ~mask
-    assert np.array_equal(ge.reshape(-1, 256, 2, 5)[before], e.reshape(-1, 256, 2, 5)[before])
     assert not ge.reshape(-1, 256, 2, 5)[4].any() and not ge[..., :first, :, :].any()
+    assert not ge[..., last + 1:, :, :].any() and (ge != 0).any()
     window = np.zeros_like(mask)
     window[:, first:last + 1] = True
     hit = e.reshape(-1, 256, 2, 5)[mask & window & (flags.reshape(-1)[:, None] == 0)]
-    # a detection is evidence of occupancy (0 only where nearer echoes block the beam)
-    assert len(hit) and (hit >= 0).all() and (hit[:, 0, 0] > 0).mean() > 0.5
+    if evidence == "detection":
+        assert np.array_equal(ge.reshape(-1, 256, 2, 5)[before], e.reshape(-1, 256, 2, 5)[before])
+        # a detection is evidence of occupancy (0 only where nearer echoes block the beam)
+        assert len(hit) and (hit >= 0).all() and (hit[:, 0, 0] > 0).mean() > 0.5
+    else:
+        # behind the huge echo the beam is blocked: no evidence, no knowledge
+        assert not ge.reshape(-1, 256, 2, 5)[6, 64:].any() and not gd.reshape(-1, 256, 2, 5)[6, 64:].any()
+        assert (ge.reshape(-1, 256, 2, 5)[6, 60:63, 0] > 0).all()
 
 
 def test_detstats_needs_its_model(runtime):

@@ -68,6 +68,9 @@ KEYS = {
            "detstats: log-odds of an occupied voxel before any look (the world's base rate)",
            "detstats: looks at which the prior applies in full (0: everywhere, never-observed voxels too)",
            "detstats: a measured false-alarm rate of the CFAR on these profiles (0: from its statistics)"))},
+    "sensor_model.evidence": Key(lambda v: tomlfile.choice(v, sensor_model.EVIDENCE_KINDS), "",
+                                 "detstats: snr, the likelihood ratio of the measured power over the beam's noise "
+                                 "floor; detection, the CFAR's outcome alone"),
     "sensor_model.ground_below_m": Key(lambda v: _N(v, *sensor_model.GROUND_RANGE[:2], unit="m"), "m",
                                        "detstats: the sensor's height above the ground plane (0: no terrain class)"),
     "beam.model": Key(lambda v: tomlfile.choice(v, BEAM_MODELS), "", "beam volume (§3.4, Fig. 7c)"),

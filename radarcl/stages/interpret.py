@@ -14,7 +14,7 @@ import numpy as np
 from radarcl import logodds, oracle
 from radarcl.config.stage_config import InterpretConfig
 from radarcl.errors import ConfigError
-from radarcl.sensor_model import N_CLASSES, NODE_SHAPE, NODES, BinModel, pack_nodes
+from radarcl.sensor_model import N_CLASSES, NODE_SHAPE, NODES, SNR_U, SNR_V, BinModel, pack_nodes
 from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_group_size
 
 # Beams per work-group. One work-item walks one beam; any size is correct.
@@ -67,9 +67,17 @@ class Interpreter(Stage):
         if self.detstats and bin_model.opportunity.shape != (self.n_bins, N_CLASSES, NODES):
             raise ConfigError(f"the bin model has {bin_model.opportunity.shape[0]} bins; the profiles have {self.n_bins}")
         self.bin_model = bin_model if self.detstats else None
+        graded = self.detstats and bin_model.graded
+        if graded and bin_model.ln_snr.shape != bin_model.opportunity.shape:
+            raise ConfigError(f"the bin model's ln_snr is {bin_model.ln_snr.shape}, its opportunity "
+                              f"{bin_model.opportunity.shape}")
+        grid = dict(SNR_NU=SNR_U[2], SNR_NV=SNR_V[2], SNR_U0=float(SNR_U[0]), SNR_V0=float(SNR_V[0]),
+                    SNR_U_SCALE=(SNR_U[2] - 1) / (SNR_U[1] - SNR_U[0]),
+                    SNR_V_SCALE=(SNR_V[2] - 1) / (SNR_V[1] - SNR_V[0])) if graded else {}
         self._kernel = build(runtime, "interpret", dict(N_BINS=self.n_bins, MAX_PULSES=self.config.max_pulses,
                                                         OCCLUSION=int(self.config.model == "occlusion"),
-                                                        DETSTATS=int(self.detstats)))["interpret"]
+                                                        DETSTATS=int(self.detstats), GRADED=int(graded),
+                                                        **grid))["interpret"]
         self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
         f32, u8, i32 = np.dtype(np.float32), np.dtype(np.uint8), np.dtype(np.int32)
         shape = self.input_shape
@@ -89,10 +97,16 @@ class Interpreter(Stage):
         import pyopencl.array as cla
 
         q = self.runtime.queue
+        one = cla.zeros(q, (1,), np.float32)
         if not self.detstats:
-            one = cla.zeros(q, (1,), np.float32)
-            return dict(opportunity=one, miss=one, blocking=one, unblocked=cla.zeros(q, (1, 2), np.int32), c_det=1.0)
+            return dict(opportunity=one, miss=one, blocking=one, unblocked=cla.zeros(q, (1, 2), np.int32), c_det=1.0,
+                        ln_snr=one, snr_table=one, noise_floor=1.0)
         m = self.bin_model
+        graded = dict(ln_snr=one, snr_table=one, noise_floor=1.0)
+        if m.graded:
+            graded = dict(ln_snr=cla.to_device(q, m.ln_snr.astype(np.float32)),
+                          snr_table=cla.to_device(q, m.snr_table.values.astype(np.float32)),
+                          noise_floor=float(m.noise_floor))
         first, last = self.first_bin, self.last_bin
         unblocked = np.zeros((self.n_bins, N_CLASSES, NODES), np.int64), np.zeros((self.n_bins, N_CLASSES, NODES), np.int64)
         if first <= last:
@@ -102,7 +116,7 @@ class Interpreter(Stage):
         return dict(opportunity=cla.to_device(q, m.opportunity.astype(np.float32)),
                     miss=cla.to_device(q, m.miss.astype(np.float32)),
                     blocking=cla.to_device(q, m.blocking.astype(np.float32)),
-                    unblocked=cla.to_device(q, pack_nodes(*unblocked)), c_det=(1.0 - m.pfa) / m.pfa)
+                    unblocked=cla.to_device(q, pack_nodes(*unblocked)), c_det=(1.0 - m.pfa) / m.pfa, **graded)
 
     @property
     def input_shape(self):
