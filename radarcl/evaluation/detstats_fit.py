@@ -86,8 +86,8 @@ def looks(runtime, obs, inst, config):
     arrays, one entry per (frame, beam, voxel) with the voxel's centre inside the beam's volume
     and its bin in the range window: ``rho2``, ``range_m`` (of its bin), ``terrain`` (its class,
     ``sensor_model.terrain_dz``), ``detected`` (its bin's CFAR outcome) and ``blocked`` (the
-    blocking in front of the bin, ``oracle.interpret_detstats``'s X, in units of ``config``'s
-    block_gamma_db)."""
+    blocking in front of the bin, ``oracle.interpret_detstats``'s X with ``config``'s evidence,
+    in units of its block_gamma_db)."""
     from radarcl.pipeline import Mapping, bin_model
 
     mapping = Mapping.from_config(runtime, config=config)
@@ -106,8 +106,12 @@ def looks(runtime, obs, inst, config):
         profiles = mapping.range_fft(frame).profiles
         cfar = detection.cfar(profiles)
         mask = cfar.mask.reshape(lattice.n_beams, -1).astype(bool)
-        blocked = blocking(profiles.reshape(mask.shape), cfar.noise.reshape(mask.shape), mask, icfg,
-                           fusion.bin_spacing_m, bm)
+        power = profiles.reshape(mask.shape)
+        noise = cfar.noise.reshape(mask.shape)
+        if bm.graded:                  # "snr" evidence: a pulse's energy over the beam's noise floor
+            first, last = icfg.bin_interval(fusion.bin_spacing_m, power.shape[1])
+            noise = np.broadcast_to(sensor_model.noise_floor(power, first, last, bm.noise_floor)[:, None], power.shape)
+        blocked = blocking(power, noise, mask, icfg, fusion.bin_spacing_m, bm)
         P = np.asarray(poses)
         for b in range(lattice.n_beams):
             T = P[b] if P.ndim == 3 else P
