@@ -286,55 +286,79 @@ SELF_TEST_BEAMS = 32                # CFAR and eq. 12 compared on this many beam
 
 
 def self_test(runtime):
-    """Build every kernel of every built-in sensor's pipeline on ``runtime``'s device, run one
-    synthetic frame through each and compare it with the float64 oracle stage by stage (range
-    FFT, CFAR and eq. 12, fusion). Returns None when all agree, else a sentence saying where
-    they differ. ``radarcl.cl.runtime`` runs it in a child process before it uses a device,
-    so a compiler that aborts cannot take radarcl down with it."""
-    from radarcl import oracle
-
+    """Build every kernel of every built-in sensor's pipeline on ``runtime``'s device, with eq. 12
+    and with the detection-statistics model, run one synthetic frame through each and compare it
+    with the float64 oracle stage by stage (range FFT, CFAR and the interpreter, fusion). Returns
+    None when all agree, else a sentence saying where they differ. ``radarcl.cl.runtime`` runs
+    it in a child process before it uses a device, so a compiler that aborts cannot take radarcl
+    down with it."""
     rng = np.random.default_rng(29)
     for name in sensors.builtin_names():
         sensor = sensors.load(name)
-        program = {"grid.voxel_m": SELF_TEST_VOXEL_M,
-                   "interpret.range_max_m": min(SELF_TEST_RANGE_M, sensor.range_interval_m[1])}
-        config = mapconfig.resolve(sensor, program=program)
-        if not config.sensor.raw and config.sensor.n_bins() is None:
-            sensor = config.sensor
-            n = int(np.ceil(sensor.range_interval_m[1] / sensor.bin_spacing_m())) + 1       # the reader learns them
-            config = config.for_sensor(sensor.with_bins(n))
-        m = Mapping.from_config(runtime, config=config)
-        frame = _synthetic_frame(m, rng)
-        lattice = m.fusion.lattice
-        poses = np.broadcast_to(np.eye(4), (lattice.n_beams, 4, 4)) if m.fusion.per_beam_poses else np.eye(4)
-        m.fuse(frame, poses)
-        got = m.snapshot()
-        it = m.detection.interpreter
-        if m.range_fft is not None:
-            profiles = m.range_fft.arrays["profiles"].get()
-            flags = m.range_fft.arrays["flags"].get()
-            want = oracle.range_profile(frame, m.range_fft.n_fft, window=m.range_fft.window_kind, output="power")
-            err = np.nanmax(np.abs(profiles - want)) / np.nanmax(want)
-            if not err <= SELF_TEST_PROFILE_RTOL:
-                return f"sensor {name}: the range FFT is off by {err:.2g} of the peak (float64 oracle)"
-        else:
-            profiles, flags = frame, None
-        evidence = it.arrays["evidence"].get().reshape(profiles.shape)
-        rows = np.unique(np.linspace(0, lattice.n_beams - 1, SELF_TEST_BEAMS).astype(int))
-        p = profiles.reshape(lattice.n_beams, -1)[rows]
-        noise, _, mask = oracle.cfar(p, m.detection.cfar.config)
-        want_ev = oracle.interpret(p, noise, mask, it.config, it.bin_spacing_m,
-                                   None if flags is None else flags.reshape(-1)[rows])[0]
-        share = float((np.abs(evidence.reshape(lattice.n_beams, -1)[rows].astype(np.int64) - want_ev) <= 1).mean())
-        if share < SELF_TEST_MATCH or not (want_ev != 0).any():
-            return f"sensor {name}: CFAR and eq. 12 agree with the float64 oracle on only {share:.1%} of the bins"
-        sums, updates, ambiguous = oracle.fusion(m.grid.spec, evidence.reshape(lattice.n_beams, -1), lattice,
-                                                 m.fusion.model, poses, m.fusion.bin_spacing_m, m.fusion.first_bin,
-                                                 m.fusion.last_bin, margin=1e-3)
-        clear = (updates > 0) & ~ambiguous
-        share = float((np.abs(got[clear] - sums[clear]) <= updates[clear]).mean()) if clear.any() else 0.0
-        if share < SELF_TEST_MATCH or not (got != 0).any():
-            return f"sensor {name}: the fused map agrees with the float64 oracle on only {share:.1%} of the voxels"
+        for model in ("paper", "detstats"):
+            program = {"grid.voxel_m": SELF_TEST_VOXEL_M, "interpret.model": model,
+                       "interpret.range_max_m": min(SELF_TEST_RANGE_M, sensor.range_interval_m[1])}
+            config = mapconfig.resolve(sensor, program=program)
+            if not config.sensor.raw and config.sensor.n_bins() is None:
+                n = int(np.ceil(config.sensor.range_interval_m[1] / config.sensor.bin_spacing_m())) + 1   # the reader learns them
+                config = config.for_sensor(config.sensor.with_bins(n))
+            problem = _self_test_one(runtime, config, rng)
+            if problem:
+                return f"sensor {name} ({'eq. 12' if model == 'paper' else 'detection statistics'}): {problem}"
+    return None
+
+
+def _self_test_one(runtime, config, rng):
+    """``self_test`` of one sensor and configuration: None, or where the device and the oracle differ."""
+    from radarcl import oracle
+
+    m = Mapping.from_config(runtime, config=config)
+    frame = _synthetic_frame(m, rng)
+    lattice = m.fusion.lattice
+    poses = np.broadcast_to(np.eye(4), (lattice.n_beams, 4, 4)) if m.fusion.per_beam_poses else np.eye(4)
+    m.fuse(frame, poses)
+    got = m.snapshot()
+    it = m.detection.interpreter
+    if m.range_fft is not None:
+        profiles = m.range_fft.arrays["profiles"].get()
+        flags = m.range_fft.arrays["flags"].get()
+        want = oracle.range_profile(frame, m.range_fft.n_fft, window=m.range_fft.window_kind, output="power")
+        err = np.nanmax(np.abs(profiles - want)) / np.nanmax(want)
+        if not err <= SELF_TEST_PROFILE_RTOL:
+            return f"the range FFT is off by {err:.2g} of the peak (float64 oracle)"
+    else:
+        profiles, flags = frame, None
+    n_beams = lattice.n_beams
+    evidence = it.arrays["evidence"].get().reshape(n_beams, *it.arrays["evidence"].shape[len(it.batch):])
+    rows = np.unique(np.linspace(0, n_beams - 1, SELF_TEST_BEAMS).astype(int))
+    p = profiles.reshape(n_beams, -1)[rows]
+    noise, _, mask = oracle.cfar(p, m.detection.cfar.config)
+    row_flags = None if flags is None else flags.reshape(-1)[rows]
+    if it.detstats:
+        want_ev = np.stack(oracle.interpret_detstats(p, noise, mask, it.config, it.bin_spacing_m, it.bin_model,
+                                                     row_flags)[:2])
+        got_ev = np.stack(sensor_model.unpack_nodes(evidence[rows]))
+    else:
+        want_ev = oracle.interpret(p, noise, mask, it.config, it.bin_spacing_m, row_flags)[0]
+        got_ev = evidence[rows]
+    share = float((np.abs(got_ev.astype(np.int64) - want_ev) <= 1).mean())
+    if share < SELF_TEST_MATCH or not (want_ev != 0).any():
+        return f"CFAR and the interpreter agree with the float64 oracle on only {share:.1%} of the bins"
+    fused = dict(evidence=evidence.reshape(n_beams, -1))
+    if it.detstats:
+        fused = dict(evidence=None, nodes=sensor_model.unpack_nodes(evidence), terrain_dz=m.fusion.terrain_dz)
+    spec = m.grid.spec
+    nz, ny, nx = spec.array_shape
+    iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)
+    centres = spec.index_to_world(np.stack([ix, iy, iz], axis=1))
+    sums, updates, ambiguous = oracle.fusion_at_points(centres, fused.pop("evidence"), lattice, m.fusion.model, poses,
+                                                       m.fusion.bin_spacing_m, m.fusion.first_bin, m.fusion.last_bin,
+                                                       margin=1e-3, **fused)[:3]
+    got = got.reshape(-1)
+    clear = (updates > 0) & ~ambiguous
+    share = float((np.abs(got[clear] - sums[clear]) <= updates[clear]).mean()) if clear.any() else 0.0
+    if share < SELF_TEST_MATCH or not (got != 0).any():
+        return f"the fused map agrees with the float64 oracle on only {share:.1%} of the voxels"
     return None
 
 

@@ -21,7 +21,7 @@ def m():
     voxels (0), and values beyond OctoMap's clamp (+20 nat)."""
     dense = np.zeros(SPEC.array_shape, np.int32)               # (z, y, x)
     dense[2:14, 2:14, 2:20] = -2048
-    dense[2:14, 2:14, 12] = 5 * 1024
+    dense[2:14, 2:14, 12] = 6 * 1024
     dense[4:10, 6, 5] = 3 * 1024
     dense[8, 8, 12] = 20 * 1024
     keys, data = [], []
@@ -258,14 +258,14 @@ def test_every_format_counts_the_same_voxels_at_the_thresholds(tmp_path):
 @pytest.fixture(scope="module")
 def known():
     """A map with the knowledge channel (the detection-statistics model): free air (-2 nat, one
-    look), a wall at x = 1 m (+5 nat, two looks) and behind it, x >= 1.25 m, voxels whose sums
+    look), a wall at x = 1 m (+6 nat, two looks: +2 read with the default reading) and behind it, x >= 1.25 m, voxels whose sums
     are as negative as the free air's but which the radar could not see (a quarter look):
     never observed, whatever their sums say."""
     dense = np.zeros(SPEC.array_shape, np.int32)
     knowledge = np.zeros(SPEC.array_shape, np.int32)
     dense[2:14, 2:14, 2:20] = -2048
     knowledge[2:14, 2:14, 2:20] = 4096
-    dense[2:14, 2:14, 12] = 5 * 1024
+    dense[2:14, 2:14, 12] = 6 * 1024
     knowledge[2:14, 2:14, 12] = 2 * 4096
     knowledge[2:14, 2:14, 13:20] = 1024                        # a quarter look: below KNOWN_LOOKS
     keys, blocks = [], []

@@ -18,7 +18,7 @@ from radarcl.io import emulator
 from radarcl.io.inputs import open_input
 from radarcl.io.stream import PortReader, StreamRecorder, open_port
 from radarcl.jobs import live
-from radarcl.maps.disk import MapSaver, read, read_meta
+from radarcl.maps.disk import MapSaver, read, read_channels, read_meta
 from radarcl.pipeline import Mapping
 from radarcl.scene.observe import observe
 from radarcl.scene.outdoor import paper_scene
@@ -111,8 +111,9 @@ def test_ti_demo_frames_over_a_pty(runtime, tmp_path):
     assert np.array_equal(mapper.mapping.snapshot(), m.snapshot())
     from radarcl.maps.map import Map
 
-    nats = Map.of_grid(mapper.mapping.grid).log_odds_at([[1.975, 0.0, 0.0], [1.0, 0.0, 0.0]])
-    assert nats[0] > 20 and nats[1] < -20                      # the 1.95 m reflector, free space before it
+    shown = Map.of_grid(mapper.mapping.grid, config)            # the default model: read through its reading
+    nats = shown.log_odds_at([[1.975, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    assert nats[0] > 2 and nats[1] < -5                        # the 1.95 m reflector, free space before it
     # damaged: nothing raises, and most frames still arrive (TI has no CRC: a damaged one may too)
     faults = emulator.Faults(ber=1e-4, drop=1e-4, seed=2)
     _, s, _, intact = over_pty(runtime, config, emulator.ti_packets(q9), faults)
@@ -277,7 +278,9 @@ def test_radarcl_live_serves_viewers_records_and_survives_kill_9(runtime, tmp_pa
     temporary = [p for p in tmp_path.rglob("*") if ".tmp" in p.name]
     assert all(p.name.endswith(f".{proc.pid}.tmp") for p in temporary), temporary
     check(status, force=True)
-    StoreWriter(out, spec).save(keys, data)
+    _, _, _, channels = read_channels(out)                     # the default model's map: knowledge and looks too
+    StoreWriter(out, spec, reading=channels.reading).save(keys, data, knowledge=channels.knowledge,
+                                                          looks=channels.looks)
     assert not [p for p in tmp_path.rglob("*") if ".tmp" in p.name]
     assert rec.stat().st_size > 1000
 

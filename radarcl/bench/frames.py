@@ -28,12 +28,12 @@ def configurations(voxel_m, extra=()):
     from pathlib import Path
 
     from radarcl.config import mapconfig
-    from radarcl.config.presets import paper_config
+    from radarcl.config.presets import EQ12, paper_config
     from radarcl.evaluation.calibration import DETSTATS_NO_PRIOR
     from radarcl.evaluation.tuning import TUNED
 
     detstats = paper_config(voxel_m, {"interpret.model": "detstats"})
-    out = [("paper constants", paper_config(voxel_m)), ("tuned", paper_config(voxel_m, TUNED)),
+    out = [("paper constants", paper_config(voxel_m, EQ12)), ("tuned", paper_config(voxel_m, TUNED)),
            ("detection statistics", detstats),
            ("detection statistics, no look limit", detstats.replaced(sensor_model__look_limit=1e4)),
            ("detection statistics, look limit 1", detstats.replaced(sensor_model__look_limit=1.0)),

@@ -33,10 +33,12 @@ def run(runtime, config, data_dir, report=None):
     spec = navtech_map.grid_for(per_beam, config["interpret.range_max_m"], config["grid.voxel_m"])
     train, test = list(range(0, len(scans), 2)), list(range(1, len(scans), 2))
     say(f"{len(scans)} scans: map of scans {train}, held out {test}")
-    detstats = config if config["interpret.model"] == "detstats" else config.replaced(interpret__model="detstats")
-    models = {"map": config}
-    if detstats is not config:                    # the detection-statistics model beside the configuration's
-        models["detection statistics"] = detstats
+    # the configuration's map, and beside it eq. 12's or the detection-statistics model's
+    if config["interpret.model"] == "detstats":
+        detstats, models = config, {"map": config, "eq. 12": config.replaced(interpret__model="paper")}
+    else:
+        detstats = config.replaced(interpret__model="detstats")
+        models = {"map": config, "detection statistics": detstats}
     maps, known = {}, {}
     for name, c in models.items():
         maps[name], known[name] = read_units(navtech_map.build_map(runtime, c, spec, [scans[k] for k in train],
@@ -51,7 +53,7 @@ def run(runtime, config, data_dir, report=None):
     out = {name: score(stacked[:, m], y) for m, name in enumerate(maps)}
     for i, name in enumerate(knowing):            # a map with knowledge covers the bins whose voxel it knows
         out[name]["coverage"] = float(np.mean(stacked[:, len(maps) + i] > 0))
-    column = list(maps).index(list(models)[-1])   # the detection-statistics map
+    column = list(maps).index(next(n for n, c in models.items() if c is detstats))   # the detection-statistics map
     # the model's own prediction of a detection from the map, and the same with no map (the
     # detection opportunity's fall with range alone, the controls it must beat): at p 1/2
     # everywhere, and at the reading's prior everywhere

@@ -34,6 +34,7 @@ def configurations(voxel_m, extra=(), radar="paper"):
     from pathlib import Path
 
     from radarcl.config import mapconfig
+    from radarcl.config.presets import EQ12
     from radarcl.evaluation.calibration import CALIBRATED, DETSTATS_NO_PRIOR
     from radarcl.evaluation.tuning import TUNED
 
@@ -41,7 +42,7 @@ def configurations(voxel_m, extra=(), radar="paper"):
         return mapconfig.resolve(RADARS[radar], program={"grid.voxel_m": voxel_m, **(values or {})})
 
     tuned = preset(TUNED)
-    out = [("tuned", tuned), ("paper constants", preset())]
+    out = [("tuned", tuned), ("paper constants", preset(EQ12))]
     if radar == "paper":
         out += [(f"tuned, beam {b}", tuned.replaced(beam__model=b)) for b in BEAM_MODELS if b != tuned["beam.model"]]
     out += [("calibrated, occlusion", preset(CALIBRATED)),

@@ -34,7 +34,7 @@ def add_arguments(parser):
                         help="sensor profile of the scans (default: %(default)s)")
     parser.add_argument("--model", action="append", default=None, metavar="NAME|FILE",
                         help="a map to score: paper, tuned, calibrated, detstats, or a configuration file (repeatable; "
-                             "default: paper and calibrated)")
+                             "default: paper and detstats, eq. 12 and radarcl's default model)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="set one configuration value for every model")
     parser.add_argument("--force-sensor", action="store_true", help="use configuration files made for another sensor")
@@ -58,7 +58,7 @@ def run(args):
         outputs = [files.check(Path(args.out) / name, args.force, inputs=[data], what="output")
                    for name in ("lidar_truth.png", "lidar_map.png", "evaluate_lidar.json")]
     flags = dict(mapconfig.parse_flag(text) for text in args.set)
-    models = job.resolve_models(args.sensor, args.model or ["paper", "calibrated"], flags, args.force_sensor)
+    models = job.resolve_models(args.sensor, args.model or ["paper", "detstats"], flags, args.force_sensor)
     for _, c in models:
         say_notes(c.notes)
     result, arrays = job.run(runtime(), models, data, voxel_m=args.voxel, poses=args.poses,

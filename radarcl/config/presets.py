@@ -3,6 +3,11 @@
 from radarcl.config import mapconfig
 
 
+# The paper's own interpreter, eq. 12 (radarcl's default is the detection-statistics model): what
+# every "paper constants" map, the tuned constants and the eq. 12 calibration are made with.
+EQ12 = {"interpret.model": "paper"}
+
+
 def paper_config(voxel_m=0.1, values=None):
     """The paper radar's configuration at ``voxel_m`` with ``values`` {"section.key": value}
     set by the program (the reference scene lies in the paper's grid)."""

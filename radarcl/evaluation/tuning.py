@@ -36,8 +36,8 @@ SCALE_CANDIDATES = (1.0, 0.5, 0.25, 2.0)
 # window is still noise), wide pulses from 1.0 m (the detected leading edges of the ground are
 # shorter than the paper's 1.87 m), E_h / k_occ = -0.1 and E_l = 0 (noise behind a surface says
 # nothing), scaled by 1/4 for the Brier score. The CFAR windows stay the paper radar's own.
-TUNED = {"cfar.kind": "so", "cfar.pfa": 1e-2, "interpret.k_occ": 0.25, "interpret.e_high": -0.025,
-         "interpret.e_low": 0.0, "interpret.wide_pulse_m": 1.0}
+TUNED = {"interpret.model": "paper", "cfar.kind": "so", "cfar.pfa": 1e-2, "interpret.k_occ": 0.25,
+         "interpret.e_high": -0.025, "interpret.e_low": 0.0, "interpret.wide_pulse_m": 1.0}
 
 
 def _better(a, b):

@@ -17,7 +17,7 @@ log-likelihood on validation scenes, and a configuration file every command read
 
 import numpy as np
 
-from radarcl.config.presets import paper_config
+from radarcl.config.presets import EQ12, paper_config
 from radarcl.errors import ConfigError
 from radarcl.evaluation import calibration as cal
 from radarcl.evaluation.evaluate import instrument, map_observations, radar_score
@@ -58,7 +58,7 @@ def run(runtime, model="occlusion", voxel_m=0.2, seeds=None, report=None, unknow
         raise ConfigError("calibration needs at least 3 training scenes (2 to fit, 1 to validate)")
     n_val = max(1, len(seeds) // 3)
     fit_seeds, val_seeds = seeds[:-n_val], seeds[-n_val:]
-    base = paper_config(voxel_m)
+    base = paper_config(voxel_m, EQ12)
     zero = ("interpret.e_low",) if unknown_behind else ()
     scenes = []
     for seed in seeds:

@@ -20,6 +20,7 @@ import math
 import numpy as np
 
 from radarcl.config import mapconfig
+from radarcl.config.presets import EQ12
 from radarcl.errors import ConfigError
 from radarcl.evaluation import calibration as cal
 from radarcl.evaluation import detstats_fit as fit
@@ -86,7 +87,7 @@ def run(runtime, voxel_m=0.4, seeds=None, report=None, radar="paper"):
     no_prior = fitted.replaced(sensor_model__prior_nats=0.0)
     say("validation scenes ...")
     validation = {}
-    paper = mapconfig.resolve(SENSORS[radar], program={"grid.voxel_m": voxel_m})
+    paper = mapconfig.resolve(SENSORS[radar], program={"grid.voxel_m": voxel_m, **EQ12})
     for name, config in (("paper constants", paper), ("detection statistics, defaults", base),
                          ("detection statistics, fitted, no prior", no_prior),
                          ("detection statistics, fitted, fitted reading", calibrated)):

@@ -82,6 +82,8 @@ def run(runtime, config, data_dir, model="occlusion", report=None):
     """Calibrate ``config`` (a ``Resolved`` for a polar-scan sensor) on ``data_dir``; returns
     (the calibrated ``Resolved``, the result dict)."""
     say = report or (lambda _: None)
+    if config["interpret.model"] == "detstats":      # this fits eq. 12's constants: "profile constants" are eq. 12's
+        config = config.replaced(interpret__model="paper")
     scans, poses, _, _ = navtech_map.load(config, data_dir)
     if len(scans) < 8:
         raise ConfigError(f"calibrating on scans needs at least 8 (4 to fit, 4 to report on), found {len(scans)}")

@@ -5,10 +5,10 @@
 2. The outdoor scene of §4.3 (``scene.outdoor``): 15 tilts x 64 azimuths x 4 stacked beams =
    3,840 observations simulated to raw samples (``scene.observe``, seed ``EVALUATION_SEED``), or
    replayed from a recording, and saved as ``reference_scene.npz`` (replay it with --replay).
-3. The maps with the paper's constants, the tuned ones (``tuning.TUNED``, the one written and
-   shown unless ``shown`` names another) and the calibrated occlusion-aware interpreter
-   (``calibration.CALIBRATED``) at 0.1 m. The tuned map stays the one shown: the calibrated
-   constants are calibrated (ECE) but rank detectable voxels worse (README, issue 16).
+3. The maps with radarcl's default, the detection-statistics model (``sensor_model``: the one
+   written and shown unless ``shown`` names another), the paper's eq. 12 constants, the tuned
+   ones (``tuning.TUNED``) and the calibrated occlusion-aware interpreter
+   (``calibration.CALIBRATED``) at 0.1 m.
    (--quick: 0.4 m), the OctoMap-style baseline on the same detections, and their metrics
    against the exact ground truth (``metrics``), with timings.
 4. Plots: ``fig10_scene.png`` (two beams of the scene like the paper's Fig. 10),
@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from radarcl import oracle
-from radarcl.config.presets import paper_config
+from radarcl.config.presets import EQ12, paper_config
 from radarcl.config.stage_config import PAPER_RADAR
 from radarcl.errors import ConfigError
 from radarcl.evaluation import quality
@@ -37,6 +37,7 @@ from radarcl.io import recording
 from radarcl.jobs import demo_fig9
 from radarcl.maps.disk import save_grid
 from radarcl.maps.map import Map
+from radarcl.pipeline import bin_model
 from radarcl.report import figures
 from radarcl.report import html as page
 from radarcl.report.quality import METRICS_TEXT, chart, format_table, sweep_table
@@ -57,7 +58,10 @@ def _metrics_line(name, m, ms):
     return f"  {name:34s} {cells} {m['objects_found']:>3d}/{m['objects_total']:<3d} {ms:9.1f}"
 
 
-def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report=print, progress=None, shown="tuned"):
+SHOWN = "detection statistics"        # radarcl's default model: the map written, rendered and plotted
+
+
+def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report=print, progress=None, shown=SHOWN):
     """Run the main job into ``out_dir``; ``report`` gets lines, ``progress(done, total, what)``
     counts simulated frames and fused observations. Returns the summary dict."""
     out = Path(out_dir)
@@ -87,8 +91,8 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
     tuned = paper_config(voxel, TUNED)
     from radarcl.evaluation.calibration import CALIBRATED
 
-    configs = {"paper constants": paper_config(voxel), "tuned": tuned,
-               "calibrated": paper_config(voxel, CALIBRATED)}
+    configs = {"detection statistics": paper_config(voxel), "paper constants": paper_config(voxel, EQ12),
+               "tuned": tuned, "calibrated": paper_config(voxel, CALIBRATED)}
     if shown not in configs:
         raise ConfigError(f"the demo shows one of {', '.join(configs)}, not {shown!r}")
     report("truth: the line of sight and the noiseless echo of every voxel the tuned map's beams reach ...")
@@ -115,7 +119,7 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
                                   memory_mib=r.memory["sparse_bytes"] / 2 ** 20) for name, (c, r, m) in maps.items()}
     summary["baselines"] = base
 
-    save_grid(res.grid, out / "map.npz", poses=obs.poses)
+    save_grid(res.grid, out / "map.npz", poses=obs.poses, reading=config if res.grid.has_knowledge else None)
     summary["view"] = _render_view(out, report)
     _plot_profiles(obs, config, out / "fig10_scene.png", shown)
     _plot_topdown(res.log_odds, inst.truth.labels, res.spec, out / "topdown.png")
@@ -126,7 +130,7 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
         report(line)
     summary["quality"] = q
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    _write_report(out, summary, maps, base, q, Map.of_grid(res.grid))
+    _write_report(out, summary, maps, base, q, Map.of_grid(res.grid, config if res.grid.has_knowledge else None))
     report(f"wrote {', '.join(p.name for p in sorted(out.iterdir()))} in {out}")
     return summary
 
@@ -186,20 +190,27 @@ def _render_view(out, report):
 
 def _plot_profiles(obs, config, path, name, beams=((2, 32, 0), (14, 20, 3))):
     """Two beams of the recording like the paper's Fig. 10: a steep one on the grass and a
-    near-horizontal one, each with its CFAR threshold and its eq. 12 evidence (float64 oracle)."""
+    near-horizontal one, each with its CFAR threshold and its evidence (float64 oracle): eq. 12's,
+    or the detection-statistics model's for a voxel on the beam's axis (an upright target)."""
     spacing = config.bin_spacing_m
     interpret, cfar = config.interpret_config(), config.cfar_config()
+    detstats = config["interpret.model"] == "detstats"
+    model = bin_model(config, config["grid.voxel_m"]) if detstats else None
     panels = []
     for frame, az, el in beams:
         prof = oracle.range_profile(obs.samples[frame, az, el].astype(np.float64), config.n_fft, output="power")
         noise, _, mask = oracle.cfar(prof[None], cfar)
-        evidence = oracle.interpret(prof[None], noise, mask, interpret, spacing)[0][0]
+        if detstats:
+            evidence = oracle.interpret_detstats(prof[None], noise, mask, interpret, spacing, model)[0][0, :, 0, 0]
+        else:
+            evidence = oracle.interpret(prof[None], noise, mask, interpret, spacing)[0][0]
         elevation = obs.tilts_deg[frame] + PAPER_RADAR.elevation_step_deg * el
         azimuth = np.degrees(BeamLattice.from_radar(PAPER_RADAR).azimuths[az])
         panels.append((np.arange(len(prof)) * spacing, prof, cfar.alpha * noise[0], mask[0], evidence,
                        f"beam at {elevation:.1f} deg elevation, {azimuth:+.1f} deg azimuth"))
-    figures.save(figures.beams_figure(panels, f"Two beams of the reference scene (as the paper's Fig. 10), {name} "
-                                          "constants"), path, dpi=100)
+    label = "evidence on the axis [nat]" if detstats else "eq. 12 evidence [nat]"
+    figures.save(figures.beams_figure(panels, f"Two beams of the reference scene (as the paper's Fig. 10), {name}",
+                                      label), path, dpi=100)
 
 
 def _plot_topdown(log_odds, truth, spec, path):

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from radarcl.config import mapconfig
+from radarcl.config.presets import EQ12
 from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.evaluation import calibration, heldout, tuning
 from radarcl.evaluation import lidar as L
@@ -28,7 +29,7 @@ from radarcl.io.inputs import open_input
 from radarcl.pipeline import Mapping
 from radarcl.report import figures
 
-MODELS = {"paper": ("paper constants", {}), "tuned": ("tuned", tuning.TUNED),
+MODELS = {"paper": ("paper constants", EQ12), "tuned": ("tuned", tuning.TUNED),
           "calibrated": ("calibrated (occlusion-aware)", calibration.CALIBRATED),
           "detstats": ("detection statistics", {"interpret.model": "detstats"})}
 RAW, COUNT, RANGE = "raw intensity", "no radar: -1 per sample", "no radar: range (better sign)"

@@ -5,15 +5,17 @@ from pathlib import Path
 
 import numpy as np
 
+from radarcl import sensor_model
 from radarcl.errors import ConfigError
 from radarcl.io import polar_png
-from radarcl.pipeline import Detection
+from radarcl.pipeline import Detection, bin_model
 from radarcl.report import figures
 
 
 def report(runtime, config, scan_path, azimuth, out, say):
-    """Run CFAR + eq. 12 (``config``, a ``mapconfig.Resolved`` of a polar-PNG sensor) over
-    every azimuth of the scan at ``scan_path``, and plot ``azimuth`` to ``out``."""
+    """Run CFAR and the interpreter (``config``, a ``mapconfig.Resolved`` of a polar-PNG sensor:
+    eq. 12, or the detection-statistics model, whose evidence is plotted for a voxel on the beam's
+    axis) over every azimuth of the scan at ``scan_path``, and plot ``azimuth`` to ``out``."""
     sensor = config.sensor
     scan = polar_png.load_scan(scan_path, polar_png.PolarLayout.of(sensor))
     n_az = scan.levels.shape[0]
@@ -25,7 +27,11 @@ def report(runtime, config, scan_path, azimuth, out, say):
     spacing = sensor.bin_spacing_m()
     cfar_config, interpret_config = config.cfar_config(), config.interpret_config()
     power = scan.power()
-    detection = Detection(runtime, (n_az,), scan.n_bins, spacing, cfar_config, interpret_config)
+    detstats = interpret_config.model == "detstats"
+    if detstats and sensor.n_bins() is None:
+        config = config.for_sensor(sensor.with_bins(scan.n_bins))
+    model = bin_model(config, config["grid.voxel_m"]) if detstats else None
+    detection = Detection(runtime, (n_az,), scan.n_bins, spacing, cfar_config, interpret_config, bin_model=model)
     detection(power)                                     # build and warm up
     start = time.perf_counter()
     result = detection(power)
@@ -42,11 +48,17 @@ def report(runtime, config, scan_path, azimuth, out, say):
     a = azimuth
     rows = interp.pulses[a, :min(interp.n_pulses[a], interpret_config.max_pulses)]
     threshold = detection.cfar.alpha * cfar.noise[a]
+    if detstats:
+        evidence = sensor_model.unpack_nodes(interp.evidence[a])[0][:, 0, 0]       # upright class, rho2 = 0
+        model_text = f"detection statistics ({config['sensor_model.evidence']} evidence) on the beam's axis"
+    else:
+        evidence = interp.evidence[a]
+        model_text = (f"eq. 12 with k_occ {interpret_config.k_occ:g}, E_h {interpret_config.e_high:g}, "
+                      f"E_l {interpret_config.e_low:g}")
     title = (f"{sensor.name} {Path(scan_path).stem}, azimuth {a} ({np.degrees(scan.angles_rad[a]):.1f} deg): "
-             f"{interp.n_pulses[a]} pulses, {cfar_config.kind.upper()}-CFAR Pfa {cfar_config.pfa:g}, eq. 12 with k_occ "
-             f"{interpret_config.k_occ:g}, E_h {interpret_config.e_high:g}, E_l {interpret_config.e_low:g}")
+             f"{interp.n_pulses[a]} pulses, {cfar_config.kind.upper()}-CFAR Pfa {cfar_config.pfa:g}, {model_text}")
     fig = figures.interpretation_figure(np.arange(scan.n_bins) * spacing, power[a], threshold, rows,
-                                      interp.evidence[a], title,
+                                      evidence, title,
                                       (detection.interpreter.first_bin, detection.interpreter.last_bin))
     out = Path(out)
     figures.save(fig, out, dpi=110)

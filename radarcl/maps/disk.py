@@ -92,7 +92,9 @@ def _channels(grid, reading):
         return None
     if reading is None:
         raise ConfigError("a map with the knowledge channel is saved with its reading (the [sensor_model] keys "
-                          "look_limit, prior_nats, prior_looks)")
+                          "look_limit, prior_nats, prior_looks): pass reading= the configuration it was made with")
+    if not isinstance(reading, dict):
+        reading = reading_of(reading)
     return npz.Channels(grid.knowledge_bricks(), grid.knowledge_bricks("looks"), reading)
 
 
@@ -177,7 +179,8 @@ def convert(source, target, salvage=False):
 def save_grid(grid, path, poses=None, reading=None):
     """Write an ``EvidenceGrid`` (spec and allocated bricks, not the dense volume) to an npz
     file, with the sensor's ``poses`` (n, 4, 4) when given (the viewer draws them); a grid with
-    the knowledge channel with it and its ``reading`` (``reading_of``)."""
+    the knowledge channel with it and its ``reading``: a dict (``reading_of``) or the
+    ``mapconfig.Resolved`` the map was made with."""
     npz.write(path, grid.spec, *grid.bricks(), poses=poses, channels=_channels(grid, reading))
 
 

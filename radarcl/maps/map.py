@@ -32,7 +32,7 @@ from radarcl import logodds, sensor_model
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.gridspec import BRICK, GridSpec
 from radarcl.io.files import memory_budget
-from radarcl.maps.disk import read_map
+from radarcl.maps.disk import read_map, reading_of
 
 UNKNOWN = -1          # a 2D cell that is neither occupied nor free (the ROS OccupancyGrid convention)
 OCCUPIED_NATS = 1.0   # occupied above this log-odds (p 0.73)
@@ -93,12 +93,15 @@ class Map:
     @classmethod
     def of_grid(cls, grid, reading=None):
         """The map held by an ``EvidenceGrid`` (copied from the device); a grid with the knowledge
-        channel needs its ``reading`` (``maps.disk.reading_of``)."""
+        channel needs its ``reading``: a dict (``maps.disk.reading_of``) or the ``mapconfig.Resolved``
+        it was made with."""
         keys, data = grid.bricks()
         if not grid.has_knowledge:
             return cls(grid.spec, keys, data)
         if reading is None:
             raise ConfigError("a grid with the knowledge channel is read with its reading: Map.of_grid(grid, reading)")
+        if not isinstance(reading, dict):
+            reading = reading_of(reading)
         return cls(grid.spec, keys, data, grid.knowledge_bricks(), grid.knowledge_bricks("looks"), reading)
 
     def __post_init__(self):

@@ -169,9 +169,9 @@ def interpretation_figure(ranges_m, power, threshold, pulses, evidence_units, ti
     return fig
 
 
-def beams_figure(panels, title):
+def beams_figure(panels, title, evidence_label="eq. 12 evidence [nat]"):
     """Several beams like Fig. 10, side by side: ``panels`` of (ranges, power, threshold, mask,
-    evidence_units, subtitle)."""
+    evidence_units, subtitle); ``evidence_label`` names the evidence axis."""
     plt = _pyplot()
     fig, axes = plt.subplots(2, len(panels), figsize=(5.6 * len(panels), 6.6), sharex=True, squeeze=False)
     floor = np.finfo(np.float32).tiny
@@ -185,7 +185,7 @@ def beams_figure(panels, title):
         top._radarcl_shared_x = True
         bottom.plot(r, logodds.to_nats(evidence), lw=0.8)
         bottom.set_xlabel("range [m]")
-        bottom.set_ylabel("eq. 12 evidence [nat]")
+        bottom.set_ylabel(evidence_label)
     axes[0, 0].legend(loc="upper right")
     fig.suptitle(title)
     fig.tight_layout()
