@@ -42,7 +42,10 @@
  *     from "observed, undecided"), and looks[] counts the updates whose opportunity is not 0 (the
  *     reading counts correlated looks once: sensor_model.read_log_odds). The still table keeps
  *     q + 1 (never 0, whose bits mean "no beam") as an integer in place of the weight, and the
- *     class in bit 16.
+ *     class in bit 16. PACKED_LOOKS (DETSTATS, set by the host when a frame's knowledge of one voxel,
+ *     n_beams x KNOWLEDGE_SCALE, stays below 2^PACKED_LOOKS and its looks below 2^(31 - PACKED_LOOKS)):
+ *     the gather keeps knowledge and looks in one accumulator (sum + count << PACKED_LOOKS), one
+ *     register per unit fewer of the 32 AVX-512 holds.
  *
  * fusion_cached: a still radar's frame from the recorded table: each voxel sums
  * rint(evidence[entry] * weight) over its entries, the same integers the gather gives (the
@@ -253,7 +256,11 @@ __kernel void fusion(
     intL acc[UNITS];
     for (int u = 0; u < UNITS; ++u)
         acc[u] = 0;
-#if defined(DETSTATS) && !RECORD
+#if defined(DETSTATS) && !RECORD && defined(PACKED_LOOKS)
+    intL kacc[UNITS];                 /* the knowledge channel's sums + the looks' counts << PACKED_LOOKS */
+    for (int u = 0; u < UNITS; ++u)
+        kacc[u] = 0;
+#elif defined(DETSTATS) && !RECORD
     intL kacc[UNITS], nacc[UNITS];    /* the knowledge channel's sums, the looks' counts */
     for (int u = 0; u < UNITS; ++u)
         kacc[u] = nacc[u] = 0;
@@ -409,8 +416,12 @@ __kernel void fusion(
                 GATHER_NODES(pe, pk, row_nodes, at);
                 acc[u] += NODE_LERP(pe, f) & inside;
                 const intL kn = NODE_LERP(pk, f) & inside;
+  #ifdef PACKED_LOOKS
+                kacc[u] += kn + ((kn > 0) & (intL)(1 << PACKED_LOOKS));
+  #else
                 kacc[u] += kn;
                 nacc[u] -= kn > 0;                            /* true is -1 */
+  #endif
 #else
                 intL e = GATHER_L(row_ev, j);
   #ifdef GAUSSIAN
@@ -447,10 +458,15 @@ __kernel void fusion(
             const int r0 = ROWS * u;
             __global int *cell = knowledge + brick.w * BRICK_CELLS + (corner.z * 8 + corner.y) * 8 + corner.x
                                  + (ROW_DZ(r0) * 8 + ROW_DY(r0)) * 8;
-            const intL v = vloadL(0, cell) + kacc[u];
+  #ifdef PACKED_LOOKS
+            const intL ksum = kacc[u] & (intL)((1 << PACKED_LOOKS) - 1), nsum = kacc[u] >> PACKED_LOOKS;
+  #else
+            const intL ksum = kacc[u], nsum = nacc[u];
+  #endif
+            const intL v = vloadL(0, cell) + ksum;
             vstoreL(v > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : v, 0, cell);
             __global int *count = looks + (cell - knowledge);
-            const intL c = vloadL(0, count) + nacc[u];
+            const intL c = vloadL(0, count) + nsum;
             vstoreL(c > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : c, 0, count);
         }
 #endif

@@ -335,17 +335,24 @@ def detstats_grid(runtime, spec, lattice, model, packed, poses, terrain_dz, **op
     return grid, fusion, plan
 
 
+@pytest.mark.parametrize("accumulators", ["packed", "separate"])
 @pytest.mark.parametrize("rows", [1, 2])
 @pytest.mark.parametrize("model", [MODELS["near_field=True, gaussian=True"], MODELS["near_field=False, gaussian=False"]],
                          ids=["cylindrical-conical", "uniform cone"])
-def test_detstats_matches_its_oracle(runtime, model, rows):
+def test_detstats_matches_its_oracle(runtime, model, rows, accumulators, monkeypatch):
     """Each voxel takes its class's nodes (terrain below terrain_dz) interpolated at its quantised
     rho2: the evidence and knowledge sums equal the oracle's within one quantisation step of rho2
     per update (float32 vs float64 rho2: 1 + |step between nodes| / 4096 units) and are exact
-    integers: the still table gives the gather's."""
+    integers: the still table gives the gather's. The gather keeps knowledge and looks in one
+    accumulator for lattices under 512 beams, in two above (forced here by a smaller limit)."""
+    import radarcl.stages.fusion as fusion_module
+
+    if accumulators == "separate":
+        monkeypatch.setattr(fusion_module, "PACKED_LOOKS", 12)          # 256 beams x 4096 > 2^12
     lattice = LATTICES["paper, tilt -10 deg"]
     e, d, packed = random_nodes(lattice)
     grid, fusion, _ = detstats_grid(runtime, SMALL, lattice, model, packed, POSE, -0.8, rows=rows, still=True)
+    assert ("PACKED_LOOKS" in fusion._defines) == (accumulators == "packed")
     got, known = grid.snapshot(), grid.knowledge_snapshot()
     nz, ny, nx = SMALL.array_shape
     iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)

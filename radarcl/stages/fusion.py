@@ -46,6 +46,7 @@ VECTOR_WIDTHS = (4, 8)             # voxels along x per row of a work-item's blo
 CPU_ROWS = 2
 STILL_TABLE_SHARE = 0.25           # the still tables held may take this share of the device's memory
 PLAN_CACHE = 16                    # plans kept for poses that come back (the paper's stand has 15 tilts)
+PACKED_LOOKS = 21                  # detstats gather: looks counted above bit 21 of the knowledge sum (n_beams < 512)
 
 
 class Fusion(Stage):
@@ -112,6 +113,8 @@ class Fusion(Stage):
                        N_BINS=self.n_bins,
                        NEAR_FIELD=model.near_field, GAUSSIAN=model.gaussian,
                        PER_BEAM_POSES=self.per_beam_poses, AZ_WRAP=lattice.wraps, DETSTATS=self.detstats)
+        if self.detstats and lattice.n_beams * logodds.KNOWLEDGE_SCALE < 1 << PACKED_LOOKS:
+            defines["PACKED_LOOKS"] = PACKED_LOOKS         # knowledge and looks in one accumulator
         self._defines = {k: v for k, v in defines.items() if v is not False}
         if still not in ("auto", True, False):
             raise ConfigError(f"still must be 'auto', True or False, got {still!r}")
