@@ -307,3 +307,23 @@ def test_the_noise_floor_is_the_median_over_ln2():
         sm.ModelParams(evidence="cfar")
     with pytest.raises(ConfigError, match="sensor_model.evidence"):
         mapconfig.resolve("paper", flags={"sensor_model.evidence": "binary"})
+
+
+def test_a_default_prior_is_the_base_rate_at_the_grids_voxel():
+    """Surfaces fill a share of space in proportion to the voxel's edge: a default prior (fitted at
+    PRIOR_VOXEL_M) is moved by ln(voxel / PRIOR_VOXEL_M), the profile's as radarcl's; a prior the
+    user gives is kept; changing the voxel again starts from the default, not the moved value."""
+    base = sm.DEFAULTS["prior_nats"]
+    at = {v: mapconfig.resolve("paper", flags={"grid.voxel_m": v}) for v in (0.1, 0.2, 0.4)}
+    assert at[0.2]["sensor_model.prior_nats"] == pytest.approx(base)
+    assert at[0.4]["sensor_model.prior_nats"] == pytest.approx(base + math.log(2.0))
+    assert at[0.1]["sensor_model.prior_nats"] == pytest.approx(base - math.log(2.0))
+    assert "ln(0.4 / 0.2)" in at[0.4].origins["sensor_model.prior_nats"]
+    again = at[0.4].replaced(grid__voxel_m=0.1).replaced(grid__voxel_m=0.4)
+    assert again["sensor_model.prior_nats"] == pytest.approx(base + math.log(2.0))
+    spinning = mapconfig.resolve("spinning-sim", flags={"grid.voxel_m": 0.4})
+    assert spinning["sensor_model.prior_nats"] == pytest.approx(-5.0 + math.log(2.0))
+    given = mapconfig.resolve("paper", flags={"grid.voxel_m": 0.4, "sensor_model.prior_nats": -3.0})
+    assert given["sensor_model.prior_nats"] == -3.0 and given.origins["sensor_model.prior_nats"] == "flag"
+    assert given.model_params().reading["prior_nats"] == -3.0
+    assert at[0.4].model_params().reading["prior_nats"] == pytest.approx(base + math.log(2.0))

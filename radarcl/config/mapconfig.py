@@ -171,11 +171,12 @@ class Resolved:
 
     def label(self, base=None):
         """Short text naming the values that differ from ``base`` (a Resolved), or all the
-        CFAR and eq. 12 choices."""
+        CFAR and interpreter choices: eq. 12's constants, or the detection-statistics model's evidence."""
         keys = [k for k in self.values if base is None or base.values.get(k) != self.values[k]]
         if base is None:
-            keys = [k for k in keys if k.startswith(("cfar.kind", "cfar.pfa", "interpret.k_occ", "interpret.e_",
-                                                     "interpret.wide", "grid.voxel"))]
+            own = ("sensor_model.evidence",) if self["interpret.model"] == "detstats" else (
+                "interpret.k_occ", "interpret.e_", "interpret.wide")
+            keys = [k for k in keys if k.startswith(("cfar.kind", "cfar.pfa", "interpret.model", *own, "grid.voxel"))]
         return ", ".join(f"{k.split('.')[1]}={_short(self.values[k])}" for k in keys) or "the same"
 
     def as_dict(self):
@@ -269,6 +270,7 @@ def _checked(sensor, values, origins, notes=()):
             values["grid.origin_m"], origins["grid.origin_m"] = origin, f"sensor {sensor.name}: field of view"
         if "grid.size_m" not in values:
             values["grid.size_m"], origins["grid.size_m"] = size, f"sensor {sensor.name}: field of view"
+    _scale_default_prior(sensor, values, origins)
     order = {k: i for i, k in enumerate(KEYS)}
     values = dict(sorted(values.items(), key=lambda kv: order[kv[0]]))
     resolved = Resolved(sensor, values, origins, tuple(notes))
@@ -299,6 +301,25 @@ def _checked(sensor, values, origins, notes=()):
     except ConfigError as exc:
         fail(["grid.voxel_m", "grid.size_m"], str(exc))
     return resolved
+
+
+PRIOR_SCALED = "the base rate at {voxel:g} m: {base:g} nat at {ref:g} m + ln({voxel:g} / {ref:g})"
+
+
+def _scale_default_prior(sensor, values, origins):
+    """A default prior (radarcl's or the profile's, fitted at ``sensor_model.PRIOR_VOXEL_M``) as the
+    base rate at the grid's voxel (``sensor_model.prior_for_voxel``); one the user gave stays."""
+    key = "sensor_model.prior_nats"
+    origin = origins.get(key, "")
+    if origin.startswith("radarcl default"):
+        base, source = sensor_model.DEFAULTS["prior_nats"], "radarcl default"
+    elif origin.startswith(f"sensor {sensor.name} (") and key in sensor.defaults:
+        base, source = sensor.defaults[key], f"sensor {sensor.name} ({sensor.source})"
+    else:
+        return
+    voxel, ref = values["grid.voxel_m"], sensor_model.PRIOR_VOXEL_M
+    values[key] = check_value(key, max(-10.0, min(0.0, sensor_model.prior_for_voxel(base, voxel))))
+    origins[key] = f"{source}: " + PRIOR_SCALED.format(voxel=voxel, base=base, ref=ref)
 
 
 def show(resolved):
