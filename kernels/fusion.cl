@@ -179,7 +179,18 @@ static inline int or_unit(int16 v)
     G2_(pe, pk, p, at, 7)
 #define G2_16(pe, pk, p, at) G2_8(pe, pk, p, at) G2_(pe, pk, p, at, 8) G2_(pe, pk, p, at, 9) G2_(pe, pk, p, at, a) \
     G2_(pe, pk, p, at, b) G2_(pe, pk, p, at, c) G2_(pe, pk, p, at, d) G2_(pe, pk, p, at, e) G2_(pe, pk, p, at, f)
-#define GATHER_NODES(pe, pk, p, at) CAT(G2_, LN)(pe, pk, p, at)
+/* the same as 64-bit loads, split after: the node pairs of a unit's lanes in one long vector (PoCL
+ * then gathers whole vectors instead of inserting 2 LN lanes one by one) */
+#define GL_(p, at, l) p[at.s##l]
+#define GL_4(p, at) GL_(p, at, 0), GL_(p, at, 1), GL_(p, at, 2), GL_(p, at, 3)
+#define GL_8(p, at) GL_4(p, at), GL_(p, at, 4), GL_(p, at, 5), GL_(p, at, 6), GL_(p, at, 7)
+#define GL_16(p, at) GL_8(p, at), GL_(p, at, 8), GL_(p, at, 9), GL_(p, at, a), GL_(p, at, b), GL_(p, at, c), \
+    GL_(p, at, d), GL_(p, at, e), GL_(p, at, f)
+#define ulongL CAT(ulong, LN)
+#define as_uintL CAT(as_uint, LN)
+#define convert_uintL CAT(convert_uint, LN)
+#define GATHER_NODES(pe, pk, p, at) { const ulongL g_ = (ulongL)(CAT(GL_, LN)(((const __global ulong *)(p)), at)); \
+    pe = as_intL(convert_uintL(g_ & 0xFFFFFFFFul)); pk = as_intL(convert_uintL(g_ >> 32)); }
 #define GATHER_NODES_V(pe, pk, p, at) CAT(G2_, VEC)(pe, pk, p, at)
 #define SEGMENTS 4                            /* node segments over rho2 in [0, 1] */
 #define CLASSES 2                             /* target classes: upright, terrain */
