@@ -16,6 +16,7 @@ ln(1 + s), e = ln L - ln(1 - q + q L). On the axis (s = 100, 20 dB) and at the h
 +4.771095 at both (bounded by ln(1 / q)).
 """
 
+import itertools
 import math
 
 import numpy as np
@@ -327,3 +328,30 @@ def test_a_default_prior_is_the_base_rate_at_the_grids_voxel():
     assert given["sensor_model.prior_nats"] == -3.0 and given.origins["sensor_model.prior_nats"] == "flag"
     assert given.model_params().reading["prior_nats"] == -3.0
     assert at[0.4].model_params().reading["prior_nats"] == pytest.approx(base + math.log(2.0))
+
+
+def test_the_reading_fit_takes_the_best_reading_that_meets_the_goals():
+    """``detstats_fit.fit_reading``: the best pooled likelihood of the visible voxels, or, with a
+    constraint, the best of the readings that meet it, tried in order of likelihood."""
+    from radarcl.evaluation import detstats_fit as fit
+
+    rng = np.random.default_rng(3)
+    y = rng.random(4000) < 0.04                                      # 4 % occupied, as the scenes' visible voxels
+    n = rng.integers(1, 12, y.size).astype(float)
+    e = np.where(y, rng.normal(3.0, 2.0, y.size), rng.normal(-1.5, 1.0, y.size)) * n
+    k = n.copy()
+    best, ll, _ = fit.fit_reading([(e, k, n, y)])
+    tried = []
+
+    def meets(reading):
+        tried.append(reading)
+        return reading["look_limit"] >= 4.0 and reading["prior_nats"] >= -3.0
+
+    chosen, ll_chosen, _ = fit.fit_reading([(e, k, n, y)], meets)
+    assert chosen["look_limit"] >= 4.0 and chosen["prior_nats"] >= -3.0 and ll_chosen <= ll
+    assert tried[-1] == chosen and all(not meets(r) for r in tried[:-1])
+    every = [dict(look_limit=a, prior_nats=b, prior_looks=c) for a, b, c in
+             itertools.product(*fit.READING_GRID.values()) if b != 0.0 or c == fit.READING_GRID["prior_looks"][0]]
+    better = [r for r in every if meets(r) and fit.log_likelihood(e, k, n, y, r) > ll_chosen + 1e-12]
+    assert not better and (best == chosen) == meets(best)
+    assert fit.fit_reading([(e, k, n, y)], lambda r: False) is None
