@@ -110,6 +110,8 @@ def run(runtime, models, data, voxel_m=0.3, bands=L.BANDS_M, poses=None, poses_f
            f"{np.min(truth.reach_m):.1f}-{np.max(truth.reach_m):.1f} m ({L.REACH_PERCENTILE:g} % of its points)")
     maps = {}
     for k, (label, config) in enumerate(models):
+        if config["grid.voxel_m"] != spec.voxel_m:        # the plane grid's cells: a default prior follows them
+            config = config.replaced(grid__voxel_m=spec.voxel_m)
         detstats = config["interpret.model"] == "detstats"
         mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec, knowledge=detstats),
                                       per_beam_poses=True)
