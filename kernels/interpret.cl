@@ -252,58 +252,32 @@ __kernel void interpret(
     for (int j = 0; j < first_bin && j < N_BINS; j++)
         for (int w = 0; w < NODE_WORDS; w++)
             nd[j * NODE_WORDS + w] = (int2)(0);
+    {
 #if GRADED
-    if (first_bin <= last_bin) {
-        const float median = kth_power(r, first_bin, last_bin, (last_bin - first_bin + 1) / 2);
+        /* "snr" evidence: the measured power over the beam's noise floor, the window's median / ln 2 */
+        const float median = first_bin <= last_bin ? kth_power(r, first_bin, last_bin, (last_bin - first_bin + 1) / 2)
+                                                   : 0.0f;
         const float floor_power = median / 0.69314718056f > noise_floor ? median / 0.69314718056f : noise_floor;
         const float ln_floor = log10_nb(floor_power) * LN10;
-        int count = 0, j = first_bin;
-        float blocked = 0.0f, tau = 1.0f;
-        while (j <= last_bin) {
-            if (!m[j]) {
-                write_graded(nd + j * NODE_WORDS, ln_snr + j * 10, opportunity + j * 10, snr_table,
-                             log10_nb(r[j]) * LN10 - ln_floor, blocked, tau);
-                j++;
-                continue;
-            }
-            const int start = j;
-            int peak = j;
-            float energy = 0.0f;
-            for (; j <= last_bin && m[j]; j++) {
-                if (r[j] > r[peak])
-                    peak = j;
-                const float excess = r[j] / floor_power - 1.0f;
-                energy += excess > 0.0f ? excess : 0.0f;
-            }
-            for (int i = start; i < j; i++)
-                write_graded(nd + i * NODE_WORDS, ln_snr + i * 10, opportunity + i * 10, snr_table,
-                             log10_nb(r[i]) * LN10 - ln_floor, blocked, tau);
-            if (count < MAX_PULSES)
-                pl[count] = (int4)(start, j - 1, peak, j - start >= wide_bins);
-            count++;
-            blocked += energy * blocking[peak];
-            tau = exp(-blocked);                  /* a builtin, once per pulse */
-        }
-        n_pulses[beam] = count;
-    } else {
-        n_pulses[beam] = 0;
-    }
-    for (int jj = max(last_bin + 1, 0); jj < N_BINS; jj++)
-        for (int w = 0; w < NODE_WORDS; w++)
-            nd[jj * NODE_WORDS + w] = (int2)(0);
-    return;
+#define NOISE(j) floor_power
+#else
+#define NOISE(j) n[j]
 #endif
-    {
         int count = 0, j = first_bin;
         float blocked = 0.0f, tau = 1.0f, omt = 0.0f;
         while (j <= last_bin) {
             if (!m[j]) {
+#if GRADED
+                write_graded(nd + j * NODE_WORDS, ln_snr + j * 10, opportunity + j * 10, snr_table,
+                             log10_nb(r[j]) * LN10 - ln_floor, blocked, tau);
+#else
                 if (blocked == 0.0f) {
                     for (int w = 0; w < NODE_WORDS; w++)
                         nd[j * NODE_WORDS + w] = unblocked[j * NODE_WORDS + w];
                 } else {
                     write_nodes(nd + j * NODE_WORDS, opportunity + j * 10, miss + j * 10, tau, omt, 0, 0.0f);
                 }
+#endif
                 j++;
                 continue;
             }
@@ -313,13 +287,19 @@ __kernel void interpret(
             for (; j <= last_bin && m[j]; j++) {
                 if (r[j] > r[peak])
                     peak = j;
-                const float excess = r[j] / n[j] - 1.0f;
+                const float excess = r[j] / NOISE(j) - 1.0f;
                 energy += excess > 0.0f ? excess : 0.0f;
             }
             const int end = j - 1;
+#if GRADED
+            for (int i = start; i <= end; i++)
+                write_graded(nd + i * NODE_WORDS, ln_snr + i * 10, opportunity + i * 10, snr_table,
+                             log10_nb(r[i]) * LN10 - ln_floor, blocked, tau);
+#else
             const float scale = c_det / r[peak];
             for (int i = start; i <= end; i++)
                 write_nodes(nd + i * NODE_WORDS, opportunity + i * 10, miss + i * 10, tau, omt, 1, r[i] * scale);
+#endif
             if (count < MAX_PULSES)
                 pl[count] = (int4)(start, end, peak, end - start + 1 >= wide_bins);
             count++;
@@ -327,6 +307,7 @@ __kernel void interpret(
             tau = exp(-blocked);                  /* builtins, once per pulse */
             omt = -expm1(-blocked);
         }
+#undef NOISE
         for (int jj = max(last_bin + 1, 0); jj < N_BINS; jj++)
             for (int w = 0; w < NODE_WORDS; w++)
                 nd[jj * NODE_WORDS + w] = (int2)(0);
