@@ -11,7 +11,8 @@ import numpy as np
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import check_poses
-from radarcl.sensor_model import node_lerp, noise_floor, quantised_rho2
+from radarcl.sensor_model import node_lerp, quantised_rho2
+from radarcl.snr_evidence import noise_floor
 
 WINDOWS = ("hann", "rect")
 OUTPUTS = ("magnitude", "power")

@@ -62,7 +62,7 @@ LAYERS = (
     ("io",),
     ("oracle",),
     ("geometry", "grid", "sensor_model"),
-    ("physics", "cfar_theory", "cl", "logodds", "gridspec"),
+    ("physics", "cfar_theory", "cl", "logodds", "gridspec", "snr_evidence"),
     ("errors", "__init__"),
 )
 

@@ -24,6 +24,7 @@ import pytest
 
 from radarcl import cfar_theory, logodds, oracle
 from radarcl import sensor_model as sm
+from radarcl import snr_evidence as se
 from radarcl.config import keys, mapconfig, sensors
 from radarcl.config.stage_config import CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError
@@ -209,7 +210,7 @@ SNR_HAND = {  # (x, s): e [nat]
     (5.0, 100.0): 0.332005, (5.0, 25.0): 1.518655,
     (50.0, 100.0): 4.771095, (50.0, 25.0): 4.771095,
 }
-# The table is read bilinearly: against its own quadrature (sm.snr_evidence) it is within
+# The table is read bilinearly: against its own quadrature (se.snr_evidence) it is within
 # SNR_TABLE_P99_NATS at 99 % of random points and within SNR_TABLE_MAX_NATS everywhere a target
 # lies no more than 43 dB under the noise (v >= -10); below that, where a huge echo meets a target
 # the log-normal prior's far tail alone could make bright, the transition in v is too steep for
@@ -221,9 +222,9 @@ SNR_TABLE_MAX_NATS = 0.12
 def test_snr_evidence_hand_values():
     """The quadrature (no spread) and the table (within SNR_TABLE_MAX_NATS of it) against the
     hand values of the module docstring: a point target on the axis and at the half-power edge."""
-    table = sm.SnrTable.build(0.0, Q_CORR)
+    table = se.SnrTable.build(0.0, Q_CORR)
     for (x, s), e in SNR_HAND.items():
-        assert sm.snr_evidence(x, math.log(s), 0.0, Q_CORR) == pytest.approx(e, abs=1e-6)
+        assert se.snr_evidence(x, math.log(s), 0.0, Q_CORR) == pytest.approx(e, abs=1e-6)
         assert table(math.log(x), math.log(s)) == pytest.approx(e, abs=SNR_TABLE_MAX_NATS)
     # no-detection evidence (a noise-like bin) is weaker at the beam edge than on the axis
     assert SNR_HAND[(1.0, 100.0)] < SNR_HAND[(1.0, 25.0)] < 0
@@ -232,10 +233,10 @@ def test_snr_evidence_hand_values():
 @pytest.mark.parametrize("spread_db", [0.0, 7.0, 10.0])
 def test_the_snr_table_against_its_quadrature(spread_db):
     rng = np.random.default_rng(int(spread_db))
-    u = rng.uniform(sm.SNR_U[0], sm.SNR_U[1], 20000)
-    v = rng.uniform(sm.SNR_V[0], sm.SNR_V[1], 20000)
-    table = sm.SnrTable.build(spread_db, Q_CORR)
-    err = np.abs(table(u, v) - sm.snr_evidence(np.exp(u), v, spread_db, Q_CORR))
+    u = rng.uniform(se.SNR_U[0], se.SNR_U[1], 20000)
+    v = rng.uniform(se.SNR_V[0], se.SNR_V[1], 20000)
+    table = se.SnrTable.build(spread_db, Q_CORR)
+    err = np.abs(table(u, v) - se.snr_evidence(np.exp(u), v, spread_db, Q_CORR))
     assert np.quantile(err, 0.99) <= SNR_TABLE_P99_NATS
     assert err[v >= -10.0].max() <= SNR_TABLE_MAX_NATS
     assert np.all(table.values[:, 0] == 0.0) and table.values.max() <= -math.log(Q_CORR) + 1e-9   # bounded by ln(1 / q)
@@ -259,7 +260,7 @@ def test_snr_evidence_of_a_point_target_through_the_oracle():
     ln_snr[at, 0] = math.log(100.0) - t * math.log(4.0)
     opportunity = np.zeros(ln_snr.shape)
     model = sm.BinModel(opportunity, 1.0 - opportunity, np.zeros(n_bins), Q_CORR, ln_snr,
-                        sm.SnrTable.build(0.0, Q_CORR))
+                        se.SnrTable.build(0.0, Q_CORR))
     profiles = snr_beams(np.full((3, n_bins), np.nan))
     profiles[:, at] = np.array([1.0, 5.0, 50.0]) * math.log(2.0) / math.log(2.0)
     mask = np.zeros((3, n_bins), bool)
@@ -302,8 +303,8 @@ def test_snr_evidence_behind_a_strong_echo_stays_unknown():
 
 def test_the_noise_floor_is_the_median_over_ln2():
     r = np.arange(1.0, 12.0)[None, :] * np.ones((2, 1))
-    assert sm.noise_floor(r, 2, 8) == pytest.approx([6.0 / math.log(2.0)] * 2)       # bins 3..9: the 4th smallest
-    assert sm.noise_floor(np.zeros((1, 9)), 0, 8, floor=1e-30)[0] == 1e-30
+    assert se.noise_floor(r, 2, 8) == pytest.approx([6.0 / math.log(2.0)] * 2)       # bins 3..9: the 4th smallest
+    assert se.noise_floor(np.zeros((1, 9)), 0, 8, floor=1e-30)[0] == 1e-30
     with pytest.raises(ConfigError, match="sensor_model.evidence = 'cfar': expected one of snr, detection"):
         sm.ModelParams(evidence="cfar")
     with pytest.raises(ConfigError, match="sensor_model.evidence"):

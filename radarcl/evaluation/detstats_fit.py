@@ -30,7 +30,7 @@ import itertools
 
 import numpy as np
 
-from radarcl import logodds, sensor_model
+from radarcl import logodds, sensor_model, snr_evidence
 from radarcl.evaluation import visibility as vis
 
 READING_GOALS = dict(ece=0.05, false_free_obstacles=0.05)     # what a chosen reading's maps must meet
@@ -117,7 +117,7 @@ def looks(runtime, obs, inst, config):
         noise = cfar.noise.reshape(mask.shape)
         if bm.graded:                  # "snr" evidence: a pulse's energy over the beam's noise floor
             first, last = icfg.bin_interval(fusion.bin_spacing_m, power.shape[1])
-            noise = np.broadcast_to(sensor_model.noise_floor(power, first, last, bm.noise_floor)[:, None], power.shape)
+            noise = np.broadcast_to(snr_evidence.noise_floor(power, first, last, bm.noise_floor)[:, None], power.shape)
         blocked = blocking(power, noise, mask, icfg, fusion.bin_spacing_m, bm)
         P = np.asarray(poses)
         for b in range(lattice.n_beams):

@@ -14,7 +14,8 @@ import numpy as np
 from radarcl import logodds, oracle
 from radarcl.config.stage_config import InterpretConfig
 from radarcl.errors import ConfigError
-from radarcl.sensor_model import N_CLASSES, NODE_SHAPE, NODES, SNR_U, SNR_V, BinModel, pack_nodes
+from radarcl.sensor_model import N_CLASSES, NODE_SHAPE, NODES, BinModel, pack_nodes
+from radarcl.snr_evidence import SNR_U, SNR_V
 from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_group_size
 
 # Beams per work-group. One work-item walks one beam; any size is correct.

@@ -1,0 +1,104 @@
+"""The "snr" evidence of the detection-statistics model (``radarcl.sensor_model``): the
+log-likelihood ratio of a bin's measured power for a voxel holding a typical target against the
+voxel free, tabulated once and read bilinearly (here in float64, in ``kernels/interpret.cl``,
+-D GRADED, from the same float32 table).
+
+A bin's power over the beam's noise floor, x = r / N (``noise_floor``: the median power of the
+range window / ln 2, the mean of exponential noise), against a Swerling-1 target of median SNR
+s (exponential power of mean 1 + s over known exponential noise) with a log-normal RCS prior:
+
+    e = ln(L / (1 - q + q L)),   L = E_s[exp(x s / (1 + s)) / (1 + s)]
+
+q, the chance that a free voxel's bin holds an echo anyway (the CFAR's achieved false-alarm
+rate), bounds the evidence at ln(1 / q), as a detection's is bounded. ``snr_evidence`` is the
+quadrature, ``SnrTable`` its table.
+"""
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from radarcl.errors import ConfigError
+
+SNR_U = (-8.0, 16.0, 385)        # u = ln x: the bin's power over the floor, -35 to +69.5 dB (clamped outside)
+SNR_V = (-40.0, 16.0, 449)       # v = ln s: the typical target's median SNR, -174 to +69.5 dB
+SPREAD_STEPS = 161               # trapezoid nodes over +-8 standard deviations of the log-normal RCS prior
+LN2 = math.log(2.0)
+
+
+@dataclass(frozen=True)
+class SnrTable:
+    """e(u, v) [nat] on a regular grid (``SNR_U`` x ``SNR_V``): the evidence of a bin whose power
+    is x = e^u times the beam's noise floor, for a voxel whose typical target has median SNR e^v
+    there (module docstring): e = ln(L / (1 - q + q L)), L = E_s[exp(x s / (1 + s)) / (1 + s)], s
+    log-normal of ``spread_db`` about e^v. Read bilinearly (``__call__``; the kernel reads the same
+    float32 table the same way); u and v outside the grid are clamped to it, and the first column
+    (v = -40: a target 174 dB under the noise, whose prior's tail reaches no measurable power) is 0
+    exactly, so a voxel no target could reach gets no evidence."""
+
+    values: np.ndarray               # (SNR_U[2], SNR_V[2]) float64 [nat]
+    q: float
+
+    @classmethod
+    def build(cls, spread_db, q):
+        """The table of a prior of ``spread_db`` and a false-alarm share ``q`` in (0, 1/2]; built
+        once per pair (``_snr_table``)."""
+        return _snr_table(float(spread_db), float(q))
+
+    def __call__(self, u, v):
+        """Bilinear read at u = ln x, v = ln s (arrays, broadcast), float64."""
+        fu = _grid_position(u, SNR_U)
+        fv = _grid_position(v, SNR_V)
+        iu = np.minimum(fu.astype(np.int64), SNR_U[2] - 2)
+        iv = np.minimum(fv.astype(np.int64), SNR_V[2] - 2)
+        du, dv = fu - iu, fv - iv
+        t = self.values
+        return ((t[iu, iv] * (1.0 - dv) + t[iu, iv + 1] * dv) * (1.0 - du)
+                + (t[iu + 1, iv] * (1.0 - dv) + t[iu + 1, iv + 1] * dv) * du)
+
+
+def _grid_position(x, grid):
+    lo, hi, n = grid
+    x = np.asarray(x, np.float64)
+    return np.clip((np.where(np.isnan(x), lo, x) - lo) * ((n - 1) / (hi - lo)), 0.0, n - 1.0)
+
+
+def snr_evidence(x, ln_s, spread_db, q):
+    """The exact evidence [nat] of power ratios ``x`` (array) for median SNRs e^``ln_s`` (array,
+    broadcast): the quadrature ``SnrTable`` tabulates (trapezoid over the log-normal prior)."""
+    x = np.asarray(x, np.float64)[..., None]
+    sigma = spread_db * math.log(10.0) / 10.0
+    z = np.linspace(-8.0, 8.0, SPREAD_STEPS) if sigma else np.zeros(1)
+    w = np.exp(-0.5 * z * z)
+    w = w / w.sum()
+    ln_s = np.asarray(ln_s, np.float64)[..., None] + sigma * z
+    s = np.exp(np.minimum(ln_s, 700.0))
+    terms = x * (s / (1.0 + s)) - np.log1p(s) + np.log(w)
+    top = terms.max(axis=-1, keepdims=True)
+    ln_l = top[..., 0] + np.log(np.exp(terms - top).sum(axis=-1))
+    return ln_l - np.logaddexp(math.log1p(-q), math.log(q) + ln_l)
+
+
+@functools.lru_cache(maxsize=8)
+def _snr_table(spread_db, q):
+    if not 1e-12 <= q <= 0.5:
+        raise ConfigError(f"the false-alarm share q = {q!r} is outside (0, 0.5]")
+    u = np.linspace(*SNR_U)
+    v = np.linspace(*SNR_V)
+    values = np.empty((len(u), len(v)))
+    for i in range(0, len(u), 32):             # 32 rows at a time (memory: rows x columns x SPREAD_STEPS)
+        values[i:i + 32] = snr_evidence(np.exp(u[i:i + 32])[:, None], v[None, :], spread_db, q)
+    values[:, 0] = 0.0
+    values.setflags(write=False)
+    return SnrTable(values, q)
+
+
+def noise_floor(profiles, first, last, floor=1e-30):
+    """The beams' noise floor [power], (...,): the median power of bins ``first`` .. ``last``
+    (the ((last - first + 1) // 2)-th smallest, 0-based: one of the bins, no averaging) / ln 2,
+    the mean of exponential noise whose median it is; at least ``floor`` (the CFAR's noise_floor)."""
+    r = np.asarray(profiles, np.float64)[..., first:last + 1]
+    k = r.shape[-1] // 2
+    return np.maximum(np.partition(r, k, axis=-1)[..., k] / LN2, floor)
