@@ -83,7 +83,7 @@ def snr_evidence(x, ln_s, spread_db, q):
 
 @functools.lru_cache(maxsize=8)
 def _snr_table(spread_db, q):
-    if not 1e-12 <= q <= 0.5:
+    if not 0.0 < q <= 0.5:
         raise ConfigError(f"the false-alarm share q = {q!r} is outside (0, 0.5]")
     u = np.linspace(*SNR_U)
     v = np.linspace(*SNR_V)

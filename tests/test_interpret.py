@@ -295,3 +295,22 @@ def test_detstats_needs_its_model(runtime):
         Interpreter(runtime, (4,), 256, SPACING, cfg)
     with pytest.raises(ConfigError, match="the bin model has 256 bins; the profiles have 128"):
         Interpreter(runtime, (4,), 128, SPACING, cfg, bin_model=detstats_model(256))
+
+
+def test_snr_noise_floor_counts_negative_zero_as_zero(runtime):
+    """-0.0 passes the profile check; the kernel's median (a bisection on the floats' bits) counts
+    it as +0.0, as the oracle's partition does, instead of above +inf."""
+    from radarcl import sensor_model as sm
+
+    rng = np.random.default_rng(5)
+    x = rng.exponential(1.0, (4, 256)).astype(np.float32)
+    x[0, ::2] = -0.0                                  # every other bin
+    x[1, :200] = -0.0                                 # most of the beam
+    cfg = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4, model="detstats")
+    model = detstats_model()
+    det = Detection(runtime, (4,), 256, SPACING, CfarConfig(guard=16, train=8), cfg, bin_model=model)
+    got = det(x)
+    e, d, *_ = oracle.interpret_detstats(x, got.cfar.noise, got.cfar.mask, cfg, SPACING, model)
+    ge, gd = sm.unpack_nodes(got.interpret.evidence)
+    assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
+    assert (got.interpret.flags == 0).all() and (e[0] != 0).any()

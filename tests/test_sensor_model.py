@@ -311,7 +311,7 @@ def test_the_noise_floor_is_the_median_over_ln2():
         mapconfig.resolve("paper", flags={"sensor_model.evidence": "binary"})
 
 
-def test_a_default_prior_is_the_base_rate_at_the_grids_voxel():
+def test_a_default_prior_is_the_base_rate_at_the_grids_voxel(tmp_path):
     """Surfaces fill a share of space in proportion to the voxel's edge: a default prior (fitted at
     PRIOR_VOXEL_M) is moved by ln(voxel / PRIOR_VOXEL_M), the profile's as radarcl's; a prior the
     user gives is kept; changing the voxel again starts from the default, not the moved value."""
@@ -329,6 +329,15 @@ def test_a_default_prior_is_the_base_rate_at_the_grids_voxel():
     assert given["sensor_model.prior_nats"] == -3.0 and given.origins["sensor_model.prior_nats"] == "flag"
     assert given.model_params().reading["prior_nats"] == -3.0
     assert at[0.4].model_params().reading["prior_nats"] == pytest.approx(base + math.log(2.0))
+    # a saved configuration leaves the default prior out (and says so), so it follows the voxel it is used at
+    at[0.1].save(tmp_path / "c.toml")
+    text = (tmp_path / "c.toml").read_text()
+    assert "prior_nats is left out" in text and "\nprior_nats =" not in text
+    back = mapconfig.resolve(path=tmp_path / "c.toml", flags={"grid.voxel_m": 0.4})
+    assert back["sensor_model.prior_nats"] == pytest.approx(base + math.log(2.0))
+    assert mapconfig.resolve(path=tmp_path / "c.toml").values == at[0.1].values          # the round trip holds
+    given.save(tmp_path / "g.toml")                                                      # a given prior is written
+    assert mapconfig.resolve(path=tmp_path / "g.toml", flags={"grid.voxel_m": 0.1})["sensor_model.prior_nats"] == -3.0
 
 
 def test_the_reading_fit_takes_the_best_reading_that_meets_the_goals():

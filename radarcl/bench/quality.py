@@ -2,7 +2,7 @@
 (``evaluation.quality`` measures, ``report.quality`` shows)."""
 
 from radarcl.commands.options import add_output, positive_float
-from radarcl.config.presets import paper_config
+from radarcl.config.presets import EQ12, paper_config
 from radarcl.evaluation import quality
 from radarcl.evaluation.quality import VOXELS
 from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
@@ -40,7 +40,7 @@ def command(args, runtime, say):
         seed = EVALUATION_SEED if args.seed is None else args.seed
         say(f"simulating the reference scene, seed {seed} ...")
         obs = observe(scene, PAPER_TILTS_DEG, seed=seed)
-    reference = paper_config(args.voxel, None if args.paper else TUNED)
+    reference = paper_config(args.voxel, EQ12 if args.paper else TUNED)      # error against run time of eq. 12's choices
     result = quality.run(runtime(), scene, obs, reference, voxels=tuple(args.voxels), report=say)
     reliability = files.check(chart_path.with_name(chart_path.stem + "_reliability.png"), args.force,
                               inputs=[args.replay], what="reliability chart")

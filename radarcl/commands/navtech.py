@@ -1,11 +1,14 @@
-"""`radarcl navtech`: CFAR and eq. 12 on one polar scan, one azimuth plotted as the paper's Fig. 10."""
+"""`radarcl navtech`: CFAR and the interpreter (the profile's: detection statistics by default, eq. 12 with
+--set interpret.model=paper) on one polar scan, one azimuth plotted as the paper's Fig. 10."""
 
 from radarcl.commands.options import add_config, add_output, resolve_config, runtime
 from radarcl.io import files
 
-SUMMARY = "CFAR and the eq. 12 interpreter on one polar scan; plot one azimuth like the paper's Fig. 10"
-DESCRIPTION = ("Reads a polar PNG scan (1 dB per level), runs CFAR and eq. 12 on every azimuth with the kernels, "
-               "prints what was found and writes a Fig. 10 style PNG of one azimuth.")
+SUMMARY = "CFAR and the interpreter on one polar scan; plot one azimuth like the paper's Fig. 10"
+DESCRIPTION = ("Reads a polar PNG scan (1 dB per level), runs CFAR and the interpreter (the configuration's: the "
+               "detection-statistics model by default, plotted for a voxel on the beam's axis; eq. 12 with --set "
+               "interpret.model=paper) on every azimuth with the kernels, prints what was found and writes a Fig. 10 "
+               "style PNG of one azimuth.")
 
 
 def add_arguments(parser):

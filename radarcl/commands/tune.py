@@ -20,7 +20,7 @@ def add_arguments(parser):
 
 
 def run(args):
-    from radarcl.config.presets import paper_config
+    from radarcl.config.presets import EQ12, paper_config
     from radarcl.evaluation import tuning
     from radarcl.scene.observe import load_observations, observe
     from radarcl.scene.outdoor import PAPER_TILTS_DEG, paper_grid, paper_scene
@@ -31,7 +31,7 @@ def run(args):
     else:
         print(f"simulating the reference scene, seed {args.seed} ...")
         obs = observe(paper_scene(), PAPER_TILTS_DEG, seed=args.seed)
-    base = paper_config(args.voxel)
+    base = paper_config(args.voxel, EQ12)                # the search is over eq. 12's CFAR and constants
     truth = paper_scene().truth(paper_grid(args.voxel))
     best, _ = tuning.tune(runtime(), obs, truth, base, report=print, progress=progress(args))
     print(f"chosen: {best.label(base)}")

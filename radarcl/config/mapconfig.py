@@ -184,13 +184,20 @@ class Resolved:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.values.items()}
 
     def to_toml(self, header=()):
-        """The configuration as a file ``read`` accepts (every key, with its origin as a comment)."""
+        """The configuration as a file ``read`` accepts (every key, with its origin as a comment;
+        but a default prior, which follows the grid's voxel, is left out and said so: written, it
+        would hold the base rate of this voxel at every other)."""
         tables = {s: {} for s in SECTIONS}
         comments = {}
         for name, value in self.values.items():
             section, key = name.split(".")
             tables[section][key] = value
             comments[(section, key)] = self.origins.get(name)
+        prior = "sensor_model.prior_nats"
+        if PRIOR_SCALED_MARK in self.origins.get(prior, ""):
+            tables["sensor_model"]["prior_nats"] = None
+            header = (*header, f"[sensor_model] prior_nats is left out: the default prior follows the grid's voxel "
+                               f"({_short(self.values[prior])} nat here; {self.origins[prior]})")
         return tomlfile.dumps(tables, header=header, top={"sensor": self.sensor.name}, comments=comments)
 
     def save(self, path, header=(), overwrite=False):
@@ -303,7 +310,8 @@ def _checked(sensor, values, origins, notes=()):
     return resolved
 
 
-PRIOR_SCALED = "the base rate at {voxel:g} m: {base:g} nat at {ref:g} m + ln({voxel:g} / {ref:g})"
+PRIOR_SCALED_MARK = "the base rate at "
+PRIOR_SCALED = PRIOR_SCALED_MARK + "{voxel:g} m: {base:g} nat at {ref:g} m + ln({voxel:g} / {ref:g})"
 
 
 def _scale_default_prior(sensor, values, origins):

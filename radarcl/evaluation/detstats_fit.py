@@ -34,7 +34,7 @@ from radarcl import logodds, sensor_model, snr_evidence
 from radarcl.evaluation import visibility as vis
 
 READING_GOALS = dict(ece=0.05, false_free_obstacles=0.05)     # what a chosen reading's maps must meet
-READING_GRID = dict(look_limit=(1.0, 2.0, 4.0, 8.0, 16.0, 64.0, 1e4),
+READING_GRID = dict(look_limit=(1.0, 2.0, 3.0, 4.0, 8.0, 16.0, 64.0, 1e4),
                     prior_nats=tuple(-0.5 * k for k in range(13)),
                     prior_looks=(0.0, 0.25, 0.5, 1.0, 2.0))
 P_CLIP = 1e-6

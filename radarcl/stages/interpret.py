@@ -69,9 +69,9 @@ class Interpreter(Stage):
             raise ConfigError(f"the bin model has {bin_model.opportunity.shape[0]} bins; the profiles have {self.n_bins}")
         self.bin_model = bin_model if self.detstats else None
         graded = self.detstats and bin_model.graded
-        if graded and bin_model.ln_snr.shape != bin_model.opportunity.shape:
-            raise ConfigError(f"the bin model's ln_snr is {bin_model.ln_snr.shape}, its opportunity "
-                              f"{bin_model.opportunity.shape}")
+        if graded and np.shape(bin_model.ln_snr) != bin_model.opportunity.shape:
+            raise ConfigError(f"the bin model's ln_snr is {np.shape(bin_model.ln_snr)}, its opportunity "
+                              f"{bin_model.opportunity.shape}: 'snr' evidence needs both per bin, class and node")
         grid = dict(SNR_NU=SNR_U[2], SNR_NV=SNR_V[2], SNR_U0=float(SNR_U[0]), SNR_V0=float(SNR_V[0]),
                     SNR_U_SCALE=(SNR_U[2] - 1) / (SNR_U[1] - SNR_U[0]),
                     SNR_V_SCALE=(SNR_V[2] - 1) / (SNR_V[1] - SNR_V[0])) if graded else {}
