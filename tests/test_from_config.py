@@ -145,7 +145,10 @@ def test_tune_save_feeds_fuse_config(runtime, tmp_path, capsys):
     said = capsys.readouterr().out
     assert "chosen:" in said and f"wrote {cfg}" in said
     tuned = mapconfig.resolve(None, cfg)
-    assert all(o.startswith(f"file {cfg}:") for o in tuned.origins.values())
+    # every value from the file but the default prior, which follows the voxel and the file leaves out
+    prior = "sensor_model.prior_nats"
+    assert all(o.startswith(f"file {cfg}:") for k, o in tuned.origins.items() if k != prior)
+    assert "prior_nats is left out" in cfg.read_text() and tuned.origins[prior].startswith("radarcl default")
     assert main(["fuse", str(rec), "--config", str(cfg), "--out", str(out), "--no-progress"]) == 0
     assert main(["config", "show", "--config", str(cfg)]) == 0
     assert f"file {cfg}" in capsys.readouterr().out
