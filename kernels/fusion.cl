@@ -177,8 +177,6 @@ static inline int or_unit(int16 v)
 #define G2_4(pe, pk, p, at) G2_(pe, pk, p, at, 0) G2_(pe, pk, p, at, 1) G2_(pe, pk, p, at, 2) G2_(pe, pk, p, at, 3)
 #define G2_8(pe, pk, p, at) G2_4(pe, pk, p, at) G2_(pe, pk, p, at, 4) G2_(pe, pk, p, at, 5) G2_(pe, pk, p, at, 6) \
     G2_(pe, pk, p, at, 7)
-#define G2_16(pe, pk, p, at) G2_8(pe, pk, p, at) G2_(pe, pk, p, at, 8) G2_(pe, pk, p, at, 9) G2_(pe, pk, p, at, a) \
-    G2_(pe, pk, p, at, b) G2_(pe, pk, p, at, c) G2_(pe, pk, p, at, d) G2_(pe, pk, p, at, e) G2_(pe, pk, p, at, f)
 /* the same as 64-bit loads, split after: the node pairs of a unit's lanes in one long vector (PoCL
  * then gathers whole vectors instead of inserting 2 LN lanes one by one) */
 #define GL_(p, at, l) p[at.s##l]

@@ -284,7 +284,8 @@ def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
     return evidence, pulses, n_pulses, flags_out
 
 
-def fusion(spec, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin=0.0):
+def fusion(spec, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin=0.0, nodes=None,
+           terrain_dz=-math.inf):
     """Eq. 9 for one frame with the beam volume of §3.4 (radarcl.geometry), brute force.
 
     spec: a ``GridSpec``; evidence: (n_beams, n_bins) int eq. 12 updates [logodds units], beam
@@ -298,11 +299,13 @@ def fusion(spec, evidence, lattice, model, poses, bin_spacing_m, first_bin, last
     reached each voxel, ambiguous bool (nz, ny, nx)): voxels where some decision of a beam
     whose rho2 <= 1 + margin, at a bin within one of [first_bin, last_bin], (rho2 vs 1, the
     bin, d vs 0) lies within ``margin`` of its boundary, so float32 may decide it otherwise.
+    With ``nodes`` and ``terrain_dz``, the detection-statistics model's, as ``fusion_at_points``.
     """
     nz, ny, nx = spec.array_shape
     iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)
     centres = spec.index_to_world(np.stack([ix, iy, iz], axis=1))
-    out = fusion_at_points(centres, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin)
+    out = fusion_at_points(centres, evidence, lattice, model, poses, bin_spacing_m, first_bin, last_bin, margin,
+                           nodes=nodes, terrain_dz=terrain_dz)
     return tuple(a.reshape(nz, ny, nx) for a in out)
 
 
@@ -371,7 +374,7 @@ def interpret_detstats(profiles, noise, mask, config, bin_spacing_m, model, flag
           (the echo came from where the profile is strongest: its flanks share less).
     With "snr" evidence (``model.graded``) every bin's evidence is instead
       e = model.snr_table(ln x_j, ln tau_j + model.ln_snr[j]), x_j = r_j / N,
-    N the beam's ``sensor_model.noise_floor`` over the window, and a pulse blocks by its summed
+    N the beam's ``snr_evidence.noise_floor`` over the window, and a pulse blocks by its summed
     (x - 1)+ (over the floor, not the CFAR's local estimate); delta as above.
     Returns ``(evidence, opportunity, pulses, n_pulses, flags)``: evidence int32 (..., n_bins,
     CLASSES, NODES) [logodds units, clamped to +-16 nat], opportunity int32 (same shape)

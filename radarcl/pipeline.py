@@ -344,17 +344,11 @@ def _self_test_one(runtime, config, rng):
     share = float((np.abs(got_ev.astype(np.int64) - want_ev) <= 1).mean())
     if share < SELF_TEST_MATCH or not (want_ev != 0).any():
         return f"CFAR and the interpreter agree with the float64 oracle on only {share:.1%} of the bins"
-    fused = dict(evidence=evidence.reshape(n_beams, -1))
-    if it.detstats:
-        fused = dict(evidence=None, nodes=sensor_model.unpack_nodes(evidence), terrain_dz=m.fusion.terrain_dz)
-    spec = m.grid.spec
-    nz, ny, nx = spec.array_shape
-    iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)
-    centres = spec.index_to_world(np.stack([ix, iy, iz], axis=1))
-    sums, updates, ambiguous = oracle.fusion_at_points(centres, fused.pop("evidence"), lattice, m.fusion.model, poses,
-                                                       m.fusion.bin_spacing_m, m.fusion.first_bin, m.fusion.last_bin,
-                                                       margin=1e-3, **fused)[:3]
-    got = got.reshape(-1)
+    nodes = sensor_model.unpack_nodes(evidence) if it.detstats else None
+    sums, updates, ambiguous = oracle.fusion(m.grid.spec, None if it.detstats else evidence.reshape(n_beams, -1),
+                                             lattice, m.fusion.model, poses, m.fusion.bin_spacing_m, m.fusion.first_bin,
+                                             m.fusion.last_bin, margin=1e-3, nodes=nodes,
+                                             terrain_dz=m.fusion.terrain_dz)[:3]
     clear = (updates > 0) & ~ambiguous
     share = float((np.abs(got[clear] - sums[clear]) <= updates[clear]).mean()) if clear.any() else 0.0
     if share < SELF_TEST_MATCH or not (got != 0).any():

@@ -119,7 +119,7 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
                                   memory_mib=r.memory["sparse_bytes"] / 2 ** 20) for name, (c, r, m) in maps.items()}
     summary["baselines"] = base
 
-    save_grid(res.grid, out / "map.npz", poses=obs.poses, reading=config if res.grid.has_knowledge else None)
+    save_grid(res.grid, out / "map.npz", poses=obs.poses, reading=config)
     summary["view"] = _render_view(out, report)
     _plot_profiles(obs, config, out / "fig10_scene.png", shown)
     _plot_topdown(res.log_odds, inst.truth.labels, res.spec, out / "topdown.png")
@@ -130,7 +130,7 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report
         report(line)
     summary["quality"] = q
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    _write_report(out, summary, maps, base, q, Map.of_grid(res.grid, config if res.grid.has_knowledge else None))
+    _write_report(out, summary, maps, base, q, Map.of_grid(res.grid, config))
     report(f"wrote {', '.join(p.name for p in sorted(out.iterdir()))} in {out}")
     return summary
 

@@ -103,21 +103,23 @@ class Interpreter(Stage):
             return dict(opportunity=one, miss=one, blocking=one, unblocked=cla.zeros(q, (1, 2), np.int32), c_det=1.0,
                         ln_snr=one, snr_table=one, noise_floor=1.0)
         m = self.bin_model
-        graded = dict(ln_snr=one, snr_table=one, noise_floor=1.0)
-        if m.graded:
-            graded = dict(ln_snr=cla.to_device(q, m.ln_snr.astype(np.float32)),
-                          snr_table=cla.to_device(q, m.snr_table.values.astype(np.float32)),
-                          noise_floor=float(m.noise_floor))
+        opportunity = cla.to_device(q, m.opportunity.astype(np.float32))
+        blocking = cla.to_device(q, m.blocking.astype(np.float32))
+        if m.graded:                     # the table replaces the misses and the exact unblocked nodes
+            return dict(opportunity=opportunity, miss=one, blocking=blocking,
+                        unblocked=cla.zeros(q, (1, 2), np.int32), c_det=(1.0 - m.pfa) / m.pfa,
+                        ln_snr=cla.to_device(q, m.ln_snr.astype(np.float32)),
+                        snr_table=cla.to_device(q, m.snr_table.values.astype(np.float32)),
+                        noise_floor=float(m.noise_floor))
         first, last = self.first_bin, self.last_bin
         unblocked = np.zeros((self.n_bins, N_CLASSES, NODES), np.int64), np.zeros((self.n_bins, N_CLASSES, NODES), np.int64)
         if first <= last:
             with np.errstate(divide="ignore"):
                 unblocked[0][first:last + 1] = logodds.to_fixed(np.log(m.miss[first:last + 1]))
             unblocked[1][first:last + 1] = np.rint(m.opportunity[first:last + 1] * logodds.KNOWLEDGE_SCALE)
-        return dict(opportunity=cla.to_device(q, m.opportunity.astype(np.float32)),
-                    miss=cla.to_device(q, m.miss.astype(np.float32)),
-                    blocking=cla.to_device(q, m.blocking.astype(np.float32)),
-                    unblocked=cla.to_device(q, pack_nodes(*unblocked)), c_det=(1.0 - m.pfa) / m.pfa, **graded)
+        return dict(opportunity=opportunity, miss=cla.to_device(q, m.miss.astype(np.float32)), blocking=blocking,
+                    unblocked=cla.to_device(q, pack_nodes(*unblocked)), c_det=(1.0 - m.pfa) / m.pfa,
+                    ln_snr=one, snr_table=one, noise_floor=1.0)
 
     @property
     def input_shape(self):
