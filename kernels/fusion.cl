@@ -34,9 +34,11 @@
  *     more than -terrain_dz, i.e. z - origin z < terrain_dz, near the ground plane). nodes[] holds
  *     per (beam, bin, class, segment s) the int2 (e_s | e_{s+1} << 16, d_s | d_{s+1} << 16) of the evidence
  *     e [logodds units] and the detection opportunity d [KNOWLEDGE_SCALE units] at the segment's
- *     two ends, one 8-byte gather per voxel. rho2 is quantised to q = floor(rho2 x 2^14) (a
- *     float32 multiply by a power of two, then truncation), the segment is q >> 12 and the
- *     interpolation integer: e_s + ((e_{s+1} - e_s) (q & 4095) + 2048) >> 12, so the gather and
+ *     two ends, one 8-byte gather per voxel. rho2 is quantised to q = floor(min(rho2 x 2^14, 2^14 - 1))
+ *     (a float32 multiply by a power of two, then truncation; the cap puts rho2 = 1 at the end of
+ *     the last segment, and a NaN of an empty beam width there too: every q indexes a node pair),
+ *     the segment is q >> 12 and the interpolation integer: e_s + ((e_{s+1} - e_s) (q & 4095) + 2048)
+ *     >> 12, so the gather and
  *     the still table give the same integers whatever the compiler contracts. The evidence goes
  *     to pool[], the opportunity to knowledge[] (the knowledge channel: "never observed" apart
  *     from "observed, undecided"), and looks[] counts the updates whose opportunity is not 0 (the
@@ -178,7 +180,8 @@ static inline int or_unit(int16 v)
 #define G2_8(pe, pk, p, at) G2_4(pe, pk, p, at) G2_(pe, pk, p, at, 4) G2_(pe, pk, p, at, 5) G2_(pe, pk, p, at, 6) \
     G2_(pe, pk, p, at, 7)
 /* the same as 64-bit loads, split after: the node pairs of a unit's lanes in one long vector (PoCL
- * then gathers whole vectors instead of inserting 2 LN lanes one by one) */
+ * then gathers whole vectors instead of inserting 2 LN lanes one by one), split into their even
+ * and odd 32-bit words (two permutes, where narrowing each half was six instructions) */
 #define GL_(p, at, l) p[at.s##l]
 #define GL_4(p, at) GL_(p, at, 0), GL_(p, at, 1), GL_(p, at, 2), GL_(p, at, 3)
 #define GL_8(p, at) GL_4(p, at), GL_(p, at, 4), GL_(p, at, 5), GL_(p, at, 6), GL_(p, at, 7)
@@ -187,12 +190,19 @@ static inline int or_unit(int16 v)
 #define ulongL CAT(ulong, LN)
 #define as_uintL CAT(as_uint, LN)
 #define convert_uintL CAT(convert_uint, LN)
+#if LN == 16
+#define SPLIT_NODES(pe, pk, g) { const int16 lo_ = as_int16(g.lo), hi_ = as_int16(g.hi); \
+    pe = (int16)(lo_.even, hi_.even); pk = (int16)(lo_.odd, hi_.odd); }
+#else
+#define SPLIT_NODES(pe, pk, g) { const CAT(int, VEC2) w_ = CAT(as_int, VEC2)(g); pe = w_.even; pk = w_.odd; }
+#endif
 #define GATHER_NODES(pe, pk, p, at) { const ulongL g_ = (ulongL)(CAT(GL_, LN)(((const __global ulong *)(p)), at)); \
-    pe = as_intL(convert_uintL(g_ & 0xFFFFFFFFul)); pk = as_intL(convert_uintL(g_ >> 32)); }
+    SPLIT_NODES(pe, pk, g_) }
 #define GATHER_NODES_V(pe, pk, p, at) CAT(G2_, VEC)(pe, pk, p, at)
 #define SEGMENTS 4                            /* node segments over rho2 in [0, 1] */
 #define CLASSES 2                             /* target classes: upright, terrain */
 #define Q_ONE 16384.0f                        /* rho2 = 1 in quantisation steps (2^14; 2^12 per segment) */
+#define Q_MAX (Q_ONE - 1.0f)                  /* the last step: q stays in the last segment */
 /* the interpolated value between the signed 16-bit halves of x at the fraction f / 4096 */
 #define NODE_LERP(x, f) ((((x) << 16) >> 16) + (((((x) >> 16) - (((x) << 16) >> 16)) * (f) + 2048) >> 12))
 #if !defined(KNOWLEDGE_SCALE)
@@ -388,9 +398,9 @@ __kernel void fusion(
                 acc[u] -= inside;                                 /* inside is -1 */
 #elif RECORD == 2
   #if defined(DETSTATS)
-                intL q = convert_intL(MINF(num / den, 1.0f) * Q_ONE);
+                const intL q = convert_intL(MINF(num / den * Q_ONE, Q_MAX));    /* as the gather's */
                 const int cls = qz < terrain_dz;
-                const floatL wt = as_floatL(((q < 0 ? (intL)0 : q) + 1) | (cls << 16));   /* see the header */
+                const floatL wt = as_floatL((q + 1) | (cls << 16));             /* see the header */
   #elif defined(GAUSSIAN)
                 const floatL wt = weight_nb(num / den);
   #else
@@ -414,12 +424,11 @@ __kernel void fusion(
                 }
                 acc[u] -= inside;                                 /* inside is -1 */
 #elif defined(DETSTATS)
-                /* rho2 quantised (den = 0 and outside lanes give junk, masked below) */
-                intL q = convert_intL(MINF(num / den, 1.0f) * Q_ONE);
-                q = q < 0 ? (intL)0 : q;
-                intL seg = q >> 12;
-                seg = seg > SEGMENTS - 1 ? (intL)(SEGMENTS - 1) : seg;
-                const intL f = q - (seg << 12);
+                /* rho2 quantised, in [0, Q_MAX] (num >= 0 and den >= 0; 0 / 0 is NaN, which MINF
+                 * takes to Q_MAX; outside lanes' junk is masked below) */
+                const intL q = convert_intL(MINF(num / den * Q_ONE, Q_MAX));
+                const intL seg = q >> 12;
+                const intL f = q & 4095;
                 const intL at = (j * CLASSES + (qz < terrain_dz)) * SEGMENTS + seg;
                 intL pe, pk;
                 GATHER_NODES(pe, pk, row_nodes, at);
@@ -517,11 +526,10 @@ __kernel void fusion_cached(
 #ifdef DETSTATS
         /* q + 1 in place of the weight (0: no beam), the class in bit 16, the sign bit "more
          * entries follow" */
-        const intV q = (bits & 0xFFFF) - 1;
+        const intV q = (bits & 0xFFFF) - 1;                     /* -1 (no beam): masked below */
         const intV reached = bits != 0;
-        intV seg = q >> 12;
-        seg = seg > SEGMENTS - 1 ? (intV)(SEGMENTS - 1) : (seg < 0 ? (intV)0 : seg);
-        const intV f = q - (seg << 12);
+        const intV seg = (q >> 12) & (SEGMENTS - 1);            /* q = -1: segment 3, in bounds */
+        const intV f = q & 4095;
         const intV at = (index * CLASSES + ((bits >> 16) & 1)) * SEGMENTS + seg;
         intV pe, pk;
         GATHER_NODES_V(pe, pk, nodes, at);
@@ -550,10 +558,9 @@ __kernel void fusion_cached(
                     const int2 entry = extras[at];
 #ifdef DETSTATS
                     const int qe = (entry.y & 0xFFFF) - 1;
-                    const int sg = min(qe >> 12, SEGMENTS - 1);
-                    const int2 node = nodes[(entry.x * CLASSES + ((entry.y >> 16) & 1)) * SEGMENTS + sg];
-                    add += NODE_LERP(node.x, qe - (sg << 12));
-                    const int kn = NODE_LERP(node.y, qe - (sg << 12));
+                    const int2 node = nodes[(entry.x * CLASSES + ((entry.y >> 16) & 1)) * SEGMENTS + (qe >> 12)];
+                    add += NODE_LERP(node.x, qe & 4095);
+                    const int kn = NODE_LERP(node.y, qe & 4095);
                     kadd += kn;
                     nadd += kn > 0;
 #else

@@ -72,6 +72,7 @@ SEGMENTS = NODES - 1
 N_CLASSES = 2                    # target classes (``CLASSES``): upright, terrain
 NODE_SHAPE = (N_CLASSES, SEGMENTS, 2)   # per (beam, bin): int2 (evidence pair, opportunity pair) per class, segment
 Q_ONE = 1 << 14                  # rho2 = 1 in the fusion's quantisation steps (2^12 per segment)
+Q_MAX = Q_ONE - 1                # the last step: rho2 = 1 quantises into the last segment
 
 
 def pack_nodes(evidence, opportunity):
@@ -108,9 +109,11 @@ def unpack_nodes(packed):
 
 
 def quantised_rho2(rho2):
-    """rho2 in the fusion's steps: floor(min(rho2, 1) x 2^14), int64 (float64 here, float32 in
-    the kernel: they agree except where rho2 x 2^14 lies within float32 rounding of an integer)."""
-    return np.floor(np.minimum(np.asarray(rho2, np.float64), 1.0) * Q_ONE).astype(np.int64)
+    """rho2 in the fusion's steps: floor(min(rho2 x 2^14, 2^14 - 1)), int64 (float64 here, float32
+    in the kernel: they agree except where rho2 x 2^14 lies within float32 rounding of an integer).
+    The cap keeps q in the last segment (no clamp of the segment in the kernel): rho2 = 1 reads
+    within 1 unit of the last node."""
+    return np.floor(np.minimum(np.asarray(rho2, np.float64) * Q_ONE, Q_MAX)).astype(np.int64)
 
 
 def node_lerp(nodes, q):

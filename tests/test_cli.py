@@ -133,10 +133,11 @@ def test_bench_fusion_has_the_issue_keys():
     for key in ("still_ms_per_frame", "moving_ms_per_frame", "spinning_ms_per_frame", "planning_ms",
                 "planning_ms_numpy", "pipeline_ms_per_frame", "voxels_per_frame", "floor_ms_per_frame",
                 "spinning_voxels_per_frame", "ratio_vs_floor", "ratio_vs_numpy", "detstats_gather_ms_per_frame",
-                "detstats_still_ms_per_frame", "detstats_moving_ms_per_frame", "detstats_gather_ratio"):
+                "detstats_still_ms_per_frame", "detstats_moving_ms_per_frame", "detstats_gather_ratio",
+                "detstats_pipeline_ms_per_frame"):
         assert r[key] > 0, key
     assert set(r["load"]) == {"still", "gather", "moving", "planning", "planning_numpy", "spinning", "spinning_gather",
-                              "pipeline", "detstats_still", "detstats_gather", "detstats_moving"}
+                              "pipeline", "detstats_still", "detstats_gather", "detstats_moving", "detstats_pipeline"}
     assert r["detstats_gather_ms_per_frame"] > 0 and r["detstats_gather_ratio"] > 0     # issue 27's 1.5x goal
     assert any("detection statistics" in line for line in fusion.format_table(r))
     assert r["max_error_units"] <= 1 and r["oracle_voxels_compared"] > 10000

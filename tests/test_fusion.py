@@ -336,10 +336,10 @@ def detstats_grid(runtime, spec, lattice, model, packed, poses, terrain_dz, **op
 
 
 @pytest.mark.parametrize("accumulators", ["packed", "separate"])
-@pytest.mark.parametrize("rows", [1, 2])
+@pytest.mark.parametrize("widths", [{"rows": 1}, {"rows": 2}, {"vector_width": 4, "rows": 1}], ids=["8x1", "8x2", "4x1"])
 @pytest.mark.parametrize("model", [MODELS["near_field=True, gaussian=True"], MODELS["near_field=False, gaussian=False"]],
                          ids=["cylindrical-conical", "uniform cone"])
-def test_detstats_matches_its_oracle(runtime, model, rows, accumulators, monkeypatch):
+def test_detstats_matches_its_oracle(runtime, model, widths, accumulators, monkeypatch):
     """Each voxel takes its class's nodes (terrain below terrain_dz) interpolated at its quantised
     rho2: the evidence and knowledge sums equal the oracle's within one quantisation step of rho2
     per update (float32 vs float64 rho2: 1 + |step between nodes| / 4096 units) and are exact
@@ -351,7 +351,7 @@ def test_detstats_matches_its_oracle(runtime, model, rows, accumulators, monkeyp
         monkeypatch.setattr(fusion_module, "PACKED_LOOKS", 12)          # 256 beams x 4096 > 2^12
     lattice = LATTICES["paper, tilt -10 deg"]
     e, d, packed = random_nodes(lattice)
-    grid, fusion, _ = detstats_grid(runtime, SMALL, lattice, model, packed, POSE, -0.8, rows=rows, still=True)
+    grid, fusion, _ = detstats_grid(runtime, SMALL, lattice, model, packed, POSE, -0.8, still=True, **widths)
     assert ("PACKED_LOOKS" in fusion._defines) == (accumulators == "packed")
     got, known = grid.snapshot(), grid.knowledge_snapshot()
     nz, ny, nx = SMALL.array_shape

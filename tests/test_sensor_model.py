@@ -185,8 +185,10 @@ def test_node_packing_round_trips_and_interpolates():
     assert packed.shape == (7, *sm.NODE_SHAPE) and packed.dtype == np.int32
     back = sm.unpack_nodes(packed)
     assert np.array_equal(back[0], e) and np.array_equal(back[1], d)
-    q = np.array([0, 4096, 2048, sm.Q_ONE])
-    assert np.array_equal(sm.node_lerp(np.array([[0, 100, 200, 300, 400]] * 4), q), [0, 100, 50, 400])
+    q = np.array([0, 4096, 2048, sm.Q_ONE, sm.Q_MAX])
+    assert np.array_equal(sm.node_lerp(np.array([[0, 100, 200, 300, 400]] * 5), q), [0, 100, 50, 400, 400])
+    # the beam's edge and beyond quantise into the last segment, within 1 unit of the last node
+    assert np.array_equal(sm.quantised_rho2([0.0, 0.25, 1.0 - 2 ** -15, 1.0, 2.0]), [0, 4096, 16383, 16383, 16383])
     with pytest.raises(ConfigError, match="node values out of range"):
         sm.pack_nodes(e + logodds.EVIDENCE_LIMIT, d)
 
