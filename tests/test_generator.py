@@ -59,3 +59,8 @@ def test_the_scenes_bench_scores_every_map_and_baseline(runtime):
         assert {"auc_detectable", "auc_obstacles", "false_free", "ece", "objects_found"} <= set(m)
     assert r["scenes"][0]["classes"]["detectable"] > 0
     assert any("scene 201" in line for line in scenes.format_table(r))
+    # an object with a DETECTABLE surface voxel is one a perfect detector finds: its bin's +1 nat
+    # reaches the voxel; the others are seen only WEAK
+    oracle = r["mean"]["oracle detections, free 0"]
+    assert 0 < oracle["detectable_total"] <= oracle["objects_total"]
+    assert oracle["detectable_found"] == oracle["detectable_total"]

@@ -112,12 +112,17 @@ def test_a_map_of_zeros_and_the_empty_cases():
 
 def test_objects_are_found_within_one_voxel_of_their_visible_surface():
     t = small_truth()
-    objects = [dict(name="near", range_m=3.0, near=np.array([[2, 0, 0], [1, 1, 0]])),
-               dict(name="far", range_m=9.0, near=np.array([[5, 0, 0]]))]
+    objects = [dict(name="near", range_m=3.0, near=np.array([[2, 0, 0], [1, 1, 0]]), detectable=True),
+               dict(name="far", range_m=9.0, near=np.array([[5, 0, 0]]), detectable=False),
+               dict(name="post", range_m=5.0, near=np.array([[4, 0, 0]]), detectable=True)]
     L = np.zeros((1, 2, 6), np.float32)
     L[0, 1, 1] = 0.3
     L[0, 0, 5] = -1.0
     s = metrics.radar_scores(L, t, objects)
-    assert s["objects_found"] == 1 and s["objects_total"] == 2
-    assert s["objects"][0] == dict(name="near", range_m=3.0, peak_nats=pytest.approx(0.3), found=True)
+    assert s["objects_found"] == 1 and s["objects_total"] == 3
+    assert s["objects"][0] == dict(name="near", range_m=3.0, peak_nats=pytest.approx(0.3), found=True, detectable=True)
     assert s["objects"][1]["found"] is False and s["objects"][1]["peak_nats"] == -1.0
+    # the objects with a detectable surface: the far one echoes below every CFAR and is not counted
+    assert s["detectable_found"] == 1 and s["detectable_total"] == 2
+    L[0, 0, 4] = 0.1
+    assert metrics.radar_scores(L, t, objects)["detectable_found"] == 2

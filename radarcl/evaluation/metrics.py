@@ -137,8 +137,10 @@ def radar_scores(log_odds_nats, truth, objects=(), knowledge=None):
       the state its views and exports show);
     - ``brier``, ``ece`` (10 bins) and ``reliability`` rows on the visible voxels (FREE-visible,
       DETECTABLE, WEAK), occupied = surface voxel, every voxel at the probability the map reads;
-    - ``objects_found`` / ``objects_total`` and per object its range and peak log-odds
-      (``objects``: ``visibility.object_surfaces``).
+    - ``objects_found`` / ``objects_total`` and per object its range, peak log-odds and whether it
+      is detectable (``objects``: ``visibility.object_surfaces``); ``detectable_found`` /
+      ``detectable_total`` the same over the objects with a DETECTABLE surface voxel (the others
+      echo below every CFAR threshold: a map that finds them calls weak echoes occupied).
     With ``knowledge`` (dense [looks], a map of the detection-statistics model) also:
     ``known_visible``, the share of visible voxels it knows; ``ece_known`` and ``brier_known``,
     calibration on the visible voxels it knows.
@@ -175,10 +177,12 @@ def radar_scores(log_odds_nats, truth, objects=(), knowledge=None):
     for obj in objects:
         near = L[obj["near"][:, 2], obj["near"][:, 1], obj["near"][:, 0]]
         found.append(dict(name=obj["name"], range_m=obj["range_m"], peak_nats=float(near.max()),
-                          found=bool((near > 0).any())))
+                          found=bool((near > 0).any()), detectable=bool(obj.get("detectable", True))))
     out["objects"] = found
     out["objects_found"] = sum(o["found"] for o in found)
     out["objects_total"] = len(found)
+    out["detectable_found"] = sum(o["found"] for o in found if o["detectable"])
+    out["detectable_total"] = sum(o["detectable"] for o in found)
     out["voxels"] = dict(free_visible=int(free.sum()), detectable=int(det.sum()), weak=int(weak.sum()),
                          obstacles=int((det & truth.obstacle).sum()), shadowed=n_sh, occupied=n_occ)
     return out

@@ -198,7 +198,9 @@ def object_surfaces(scene, truth, spec, sensor_m=None):
     """Per object of ``scene`` (every solid but the ground, a tree's trunk and crown together)
     with a visible surface voxel (DETECTABLE or WEAK) in ``truth``: {"name", "range_m" (sensor
     to its nearest visible surface voxel), "near" (n, 3) voxel indices (x, y, z) within one
-    voxel of its visible surface (26-neighbourhood)}; and the names of objects with none."""
+    voxel of its visible surface (26-neighbourhood), "detectable" (a surface voxel is DETECTABLE:
+    an echo a perfect detector would see; an object seen only WEAK is below every CFAR)}; and
+    the names of objects with none."""
     sensor = np.asarray(scene.sensor_m if sensor_m is None else sensor_m, float)
     groups = {}
     for obj in scene.objects:
@@ -224,5 +226,5 @@ def object_surfaces(scene, truth, spec, sensor_m=None):
         near = np.argwhere(dilate(seen))[:, ::-1] + i0
         surface = np.argwhere(seen)[:, ::-1] + i0
         rng = float(np.linalg.norm(spec.index_to_world(surface) - sensor, axis=1).min())
-        found.append(dict(name=name, range_m=rng, near=near))
+        found.append(dict(name=name, range_m=rng, near=near, detectable=bool((mine & (cls == DETECTABLE)).any())))
     return found, hidden
