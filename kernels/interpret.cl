@@ -158,9 +158,26 @@ static inline float grid_position(float x, float x0, float scale, int n)
     return f > 0.0f ? (f < (float)(n - 1) ? f : (float)(n - 1)) : 0.0f;
 }
 
-/* one bin's node pairs from the SNR table: u = ln x, ln tau = -blocked */
+static inline float table_at(const __global float *row0, const __global float *row1, float du, float lnv)
+{
+    const float fv = grid_position(lnv, SNR_V0, SNR_V_SCALE, SNR_NV);
+    const int iv = min((int)fv, SNR_NV - 2);
+    const float dv = fv - (float)iv;
+    return (row0[iv] * (1.0f - dv) + row0[iv + 1] * dv) * (1.0f - du)
+         + (row1[iv] * (1.0f - dv) + row1[iv + 1] * dv) * du;
+}
+
+/* L of the evidence e = ln(L / (1 - q + q L)), e^e capped below its bound 1 / q */
+static inline float likelihood_ratio(float e, float q)
+{
+    const float t = min(exp(e), (1.0f - GAP_CAP) / q);
+    return t * (1.0f - q) / (1.0f - q * t);
+}
+
+/* one bin's node pairs from the SNR table: u = ln x, ln tau = -blocked; behind nearer echoes
+ * (blocked > 0) the mixture with a gap of chance gap (q: the table's) */
 static inline void write_graded(__global int2 *out, const __global float *ln_s, const __global float *opp,
-                                const __global float *table, float u, float blocked, float tau)
+                                const __global float *table, float u, float blocked, float tau, float gap, float q)
 {
     const float fu = grid_position(u, SNR_U0, SNR_U_SCALE, SNR_NU);
     const int iu = min((int)fu, SNR_NU - 2);
@@ -169,13 +186,18 @@ static inline void write_graded(__global int2 *out, const __global float *ln_s, 
     for (int c = 0; c < 2; ++c) {
         int e[5], d[5];
         for (int k = 0; k < 5; ++k) {
-            const float fv = grid_position(ln_s[c * 5 + k] - blocked, SNR_V0, SNR_V_SCALE, SNR_NV);
-            const int iv = min((int)fv, SNR_NV - 2);
-            const float dv = fv - (float)iv;
-            const float v = (row0[iv] * (1.0f - dv) + row0[iv + 1] * dv) * (1.0f - du)
-                          + (row1[iv] * (1.0f - dv) + row1[iv + 1] * dv) * du;
+            float v = table_at(row0, row1, du, ln_s[c * 5 + k] - blocked);
+            float known = tau;
+            if (gap > 0.0f && blocked > 0.0f) {          /* builtins: only behind an echo */
+                const float lb = likelihood_ratio(v, q);
+                const float l0 = likelihood_ratio(table_at(row0, row1, du, ln_s[c * 5 + k]), q);
+                const float lm = (1.0f - gap) * lb + gap * l0;
+                const float w = gap * l0 / lm;       /* the gap's posterior chance */
+                v = log(lm / (1.0f - q + q * lm));
+                known = w > 0.5f ? (1.0f - w) * tau + w : tau;   /* see the oracle */
+            }
             e[k] = fixed_nb(v, LOGODDS_SCALE);
-            d[k] = as_int(tau * opp[c * 5 + k] * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
+            d[k] = as_int(known * opp[c * 5 + k] * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
         }
         for (int k = 0; k < 4; ++k)
             out[c * 4 + k] = (int2)((e[k] & 0xFFFF) | (e[k + 1] << 16), (d[k] & 0xFFFF) | (d[k + 1] << 16));
@@ -205,6 +227,8 @@ __kernel void interpret(
     const __global float *ln_snr,       // GRADED: (N_BINS, 2, 5) ln of the typical target's median SNR at tau = 1
     const __global float *snr_table,    // GRADED: (SNR_NU, SNR_NV) evidence [nat] over (ln x, ln s)
     const float noise_floor,            // GRADED: the least noise floor [power] (the CFAR's)
+    const float blocker_gap,            // GRADED: the chance of a gap in nearer echoes (0: hard blocking)
+    const float snr_q,                  // GRADED: the table's q (the evidence's bound is ln(1 / q))
     const int n_beams,
     __global int *evidence,           // (n_beams, N_BINS) out [logodds units]; DETSTATS: (n_beams, N_BINS, 8) int2
     __global int4 *pulses,            // (n_beams, MAX_PULSES) out: start, end, peak, wide; -1 unused
@@ -270,7 +294,7 @@ __kernel void interpret(
             if (!m[j]) {
 #if GRADED
                 write_graded(nd + j * NODE_WORDS, ln_snr + j * 10, opportunity + j * 10, snr_table,
-                             log10_nb(r[j]) * LN10 - ln_floor, blocked, tau);
+                             log10_nb(r[j]) * LN10 - ln_floor, blocked, tau, blocker_gap, snr_q);
 #else
                 if (blocked == 0.0f) {
                     for (int w = 0; w < NODE_WORDS; w++)
@@ -295,7 +319,7 @@ __kernel void interpret(
 #if GRADED
             for (int i = start; i <= end; i++)
                 write_graded(nd + i * NODE_WORDS, ln_snr + i * 10, opportunity + i * 10, snr_table,
-                             log10_nb(r[i]) * LN10 - ln_floor, blocked, tau);
+                             log10_nb(r[i]) * LN10 - ln_floor, blocked, tau, blocker_gap, snr_q);
 #else
             const float scale = c_det / r[peak];
             for (int i = start; i <= end; i++)

@@ -11,7 +11,7 @@ import numpy as np
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import check_poses
-from radarcl.sensor_model import node_lerp, quantised_rho2
+from radarcl.sensor_model import GAP_CAP, node_lerp, quantised_rho2
 from radarcl.snr_evidence import noise_floor
 
 WINDOWS = ("hann", "rect")
@@ -442,9 +442,32 @@ def _detstats_graded(r, m, first, last, model):
             j += 1
     window = slice(first, last + 1)
     with np.errstate(divide="ignore"):
-        ln_x = np.log(x[window])
-    v = -blocked[window, None, None] + model.ln_snr[window]
-    evidence[window] = logodds.to_fixed(model.snr_table(ln_x[:, None, None], v))
-    opportunity[window] = np.rint(np.exp(-blocked[window, None, None]) * model.opportunity[window]
-                                  * logodds.KNOWLEDGE_SCALE)
+        ln_x = np.log(x[window])[:, None, None]
+    tau = np.exp(-blocked[window, None, None])
+    e = model.snr_table(ln_x, -blocked[window, None, None] + model.ln_snr[window])
+    known = np.broadcast_to(tau, e.shape).copy()
+    gap = model.blocker_gap
+    behind = blocked[window] > 0.0 if gap else np.zeros(e.shape[0], bool)
+    if behind.any():
+        # behind nearer echoes: through a gap they leave (chance ``gap``, a partial blocker), v's
+        # target is unblocked; the mixture of the two likelihoods, and the posterior chance of the gap
+        q = model.snr_table.q
+        lb = _likelihood_ratio(e[behind], q)
+        l0 = _likelihood_ratio(model.snr_table(ln_x[behind], model.ln_snr[window][behind]), q)
+        lm = (1.0 - gap) * lb + gap * l0
+        w = gap * l0 / lm
+        e[behind] = np.log(lm / (1.0 - q + q * lm))
+        # the knowledge follows the gap only where the power makes it more likely than not (noise
+        # behind a blocker tells little of a gap, and each look with any knowledge counts as one
+        # in the reading's look limit)
+        known[behind] = np.where(w > 0.5, (1.0 - w) * tau[behind] + w, tau[behind])
+    evidence[window] = logodds.to_fixed(e)
+    opportunity[window] = np.rint(known * model.opportunity[window] * logodds.KNOWLEDGE_SCALE)
     return evidence, opportunity
+
+
+def _likelihood_ratio(e, q):
+    """L of the evidence e = ln(L / (1 - q + q L)) (``snr_evidence``), with e^e capped just below
+    its bound 1 / q (where L is unbounded and the mixture's evidence is ln(1 / q) anyway)."""
+    t = np.minimum(np.exp(e), (1.0 - GAP_CAP) / q)
+    return t * (1.0 - q) / (1.0 - q * t)

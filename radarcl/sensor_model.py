@@ -138,6 +138,7 @@ RANGES = {
     "terrain_gamma_db": (-40.0, 10.0, "dB"),      # reflectivity of the terrain, seen at grazing incidence
     "terrain_band_m": (0.0, 10.0, "m"),           # voxels whose centre lies below the ground plane + this are terrain
     "block_gamma_db": (-40.0, 10.0, "dB"),        # an echo blocks the beam as a surface of this reflectivity
+    "blocker_gap": (0.0, 0.5, ""),                # the chance that a voxel behind nearer echoes is not behind them
     "look_limit": (0.5, 1e4, "looks"),            # correlated evidence: at most this many looks' worth
     "prior_nats": (-10.0, 0.0, "nat"),            # log-odds of an occupied voxel before any look: the world's base rate
     "prior_looks": (0.0, 100.0, "looks"),         # the knowledge at which the prior applies in full (0: everywhere)
@@ -146,6 +147,8 @@ RANGES = {
 EVIDENCE_KINDS = ("snr", "detection")             # sensor_model.evidence: the measured SNR, or the CFAR's outcome
 GROUND_RANGE = (0.0, 1000.0, "m")                 # ground_below_m: the sensor's height above the ground plane (0: none)
 DEFAULT_SNR_DB = 50.0                             # the sensitivity assumed for a profile that gives none
+BLOCKER_GAP = 0.01                                # sensor_model.blocker_gap's default (ModelParams)
+GAP_CAP = 1e-6                                    # the gap mixture reads e^e at most (1 - this) / q (L finite)
 READING = ("look_limit", "prior_nats", "prior_looks")   # what a map keeps to be read (``read_log_odds``)
 PRIOR_VOXEL_M = 0.2               # the voxel at which the default priors are the base rate (``prior_for_voxel``)
 
@@ -171,6 +174,10 @@ class ModelParams:
     # 101-104, streets 301-304, 0.2 m): the least blocking of -20 / -23 / -26 / -29 dB whose maps
     # call at most 5 % of the obstacle voxels free on both radars (README)
     block_gamma_db: float = -26.0
+    # a blocker is often partial (a car below a fan beam, a post in a wide one): behind nearer echoes
+    # the power's likelihood is a mixture, the blocked target's and (with this chance) the unblocked
+    # one's; chosen as block_gamma_db on the training scenes (README)
+    blocker_gap: float = BLOCKER_GAP
     # the reading: of the readings whose maps of training scenes 101-104 (0.2 m) meet both the ECE
     # and the false-free goal (<= 0.05), the one of the best likelihood of the visible voxels (an
     # unconstrained fit reads a look's mean and a prior of -6 nat: every free voxel right, a
@@ -350,7 +357,8 @@ class BinModel:
     when delta is close to 1); ``pfa`` the achieved false-alarm rate. "snr" evidence also needs
     ``ln_snr`` (n_bins, CLASSES, NODES), ln of the typical target's median SNR per bin, class and
     node at tau = 1 (-inf: no such target, e.g. terrain without a ground plane), its ``snr_table``
-    and the CFAR's ``noise_floor``; without a table the evidence is the CFAR's outcome."""
+    and the CFAR's ``noise_floor``, and ``blocker_gap`` (``ModelParams``); without a table the
+    evidence is the CFAR's outcome (whose blocking is hard: no gap)."""
 
     opportunity: np.ndarray
     miss: np.ndarray
@@ -359,6 +367,7 @@ class BinModel:
     ln_snr: np.ndarray = None
     snr_table: SnrTable = None
     noise_floor: float = 1e-30
+    blocker_gap: float = 0.0
 
     @property
     def graded(self):
@@ -402,7 +411,7 @@ class BinModel:
         if params.evidence == "detection":
             return cls(opportunity, 1.0 - opportunity, blocking, pfa)
         return cls(opportunity, 1.0 - opportunity, blocking, pfa, ln_snr,
-                   SnrTable.build(params.target_spread_db, min(pfa, 0.5)), float(cfar.noise_floor))
+                   SnrTable.build(params.target_spread_db, min(pfa, 0.5)), float(cfar.noise_floor), params.blocker_gap)
 
 
 # -- the reading: correlated evidence and the prior ---------------------------------------------------------------------

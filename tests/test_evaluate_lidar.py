@@ -146,13 +146,14 @@ def test_the_parked_car_is_occupied(evaluated):
 
 def test_the_detection_statistics_map_is_scored_as_it_reads(evaluated):
     """`--model detstats` fuses with the knowledge channel and is scored through its reading: the
-    cells its radar never observed read the prior (the base rate), not the raw sums' 0, and it is
-    ranked in every band beside the others."""
+    cells its radar never observed read the prior (the base rate), not the raw sums' 0 (behind
+    nearer echoes within the blocker gap's few hundredths of a nat of it), and it is ranked in
+    every band beside the others."""
     from radarcl import sensor_model
 
     _, _, result, arrays = evaluated
     m = arrays["maps"]["detection statistics"]
     prior = sensor_model.prior_for_voxel(sensor_model.DEFAULTS["prior_nats"], 0.5)   # the base rate at the cells' 0.5 m
-    assert (m == np.float64(np.rint(prior * 1024) / 1024)).mean() > 0.05 and (m > 1.0).any()
+    assert (np.abs(m - np.float64(np.rint(prior * 1024) / 1024)) <= 0.05).mean() > 0.05 and (m > 1.0).any()
     assert (m == 0).mean() < 1e-3                     # 0 only where evidence and the prior happen to cancel
     assert all(np.isfinite(row["auc"]["detection statistics"]) for row in result["bands"])

@@ -95,8 +95,8 @@ def test_ti_capture_with_the_default_model(runtime, shared_data):
 
 def test_oxford_navtech_scan(runtime, shared_data):
     """One scan read as the navtech-cts350x profile (bins, layout, per-azimuth poses from the
-    encoder): free space in front of the car, a wall at the right of the street occupied, the
-    rest of the grid never observed."""
+    encoder): free space in front of the car, the walls of the street and the echoes behind
+    them (through the blockers' gaps) occupied, the rest of the grid never observed."""
     sensor = mapconfig.resolve("navtech-cts350x").sensor
     source = open_input(sensor, shared_data / "navtech_oxford" / "radar" / "1547131046353776.png")
     assert len(source) == 1 and source.poses[0].shape == (400, 4, 4)
@@ -105,8 +105,8 @@ def test_oxford_navtech_scan(runtime, shared_data):
     assert m.fusion.per_beam_poses and m.frame_shape == (400, 3768)
     m.fuse(source.frames[0], source.poses[0], flags=source.flags[0])
     counts = Map.of_grid(m.grid, config).counts(1.0, -1.0)
-    assert counts["occupied"] > 100 and counts["free"] > 5 * counts["occupied"]
-    assert counts["unobserved"] > 10 * counts["free"]
+    assert counts["occupied"] > 100 and counts["free"] > 2000
+    assert counts["unobserved"] > 10 * (counts["free"] + counts["occupied"])
 
 
 def test_a_generic_polar_profile_learns_its_bins_from_the_data(runtime, shared_data):

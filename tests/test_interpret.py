@@ -1,5 +1,7 @@
 """kernels/interpret.cl <-> radarcl/stages/interpret.py against radarcl.oracle.interpret (eq. 12)."""
 
+import math
+
 import numpy as np
 import pytest
 from tolerances import EVIDENCE_UNITS_TOL
@@ -231,12 +233,12 @@ def test_log10_nb8_is_log10_nb_lane_for_lane(runtime):
 
 
 # -- the detection-statistics model (DETSTATS=1) ------------------------------------------------------------------
-def detstats_model(n_bins=256, ground_below_m=1.5, evidence="snr"):
+def detstats_model(n_bins=256, ground_below_m=1.5, evidence="snr", **params):
     import math
 
     from radarcl import sensor_model as sm
 
-    params = sm.ModelParams(50.28, ground_below_m=ground_below_m, evidence=evidence)
+    params = sm.ModelParams(50.28, ground_below_m=ground_below_m, evidence=evidence, **params)
     return sm.BinModel.build(params, CfarConfig(guard=16, train=8), n_bins, SPACING, 4.0, math.radians(0.5),
                              math.radians(1.0), 0.2)
 
@@ -284,9 +286,39 @@ def test_detstats_matches_its_oracle(runtime, local_size, evidence):
         # a detection is evidence of occupancy (0 only where nearer echoes block the beam)
         assert len(hit) and (hit >= 0).all() and (hit[:, 0, 0] > 0).mean() > 0.5
     else:
-        # behind the huge echo the beam is blocked: no evidence, no knowledge
-        assert not ge.reshape(-1, 256, 2, 5)[6, 64:].any() and not gd.reshape(-1, 256, 2, 5)[6, 64:].any()
+        # behind the huge echo the beam is blocked: no knowledge, and of evidence only the gap's
+        # (ln(1 - gap) on quiet bins, a little more on noise peaks): within +-0.2 nat of 0
+        behind_e, behind_d = ge.reshape(-1, 256, 2, 5)[6, 64:], gd.reshape(-1, 256, 2, 5)[6, 64:]
+        assert not behind_d.any() and np.abs(behind_e).max() <= 0.2 * logodds.SCALE
+        assert behind_e.min() >= math.floor(math.log(1.0 - model.blocker_gap) * logodds.SCALE) - EVIDENCE_UNITS_TOL
         assert (ge.reshape(-1, 256, 2, 5)[6, 60:63, 0] > 0).all()
+
+
+def test_a_gap_in_a_blocker_lets_the_echo_behind_it_count(runtime):
+    """sensor_model.blocker_gap: behind a strong echo, a second echo is evidence of occupancy and
+    knowledge with a gap (the mixture of the blocked and the unblocked target's likelihoods), and
+    none with hard blocking; the noise behind the blocker gives no knowledge either way. The
+    kernel matches its oracle in both."""
+    from radarcl import sensor_model as sm
+
+    x = np.random.default_rng(5).exponential(size=(2, 256)).astype(np.float32)
+    x[:, 40:42] = 1e7                             # the blocker: x ~ 1e7, far beyond the blocking unit
+    x[:, 120:122] = 1e4                           # an echo behind it
+    cfg = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4, model="detstats")
+    got = {}
+    for gap in (0.0, 0.01):
+        model = detstats_model(blocker_gap=gap)
+        det = Detection(runtime, (2,), 256, SPACING, CfarConfig(guard=16, train=8), cfg, bin_model=model)
+        out = det(x)
+        e, d = oracle.interpret_detstats(x, out.cfar.noise, out.cfar.mask, cfg, SPACING, model)[:2]
+        ge, gd = sm.unpack_nodes(out.interpret.evidence)
+        assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
+        assert out.interpret.n_pulses.tolist() == [2, 2]
+        got[gap] = ge[:, 120:122, 0], gd[:, 120:122, 0], gd[:, 60:110]
+    (e0, d0, n0), (e1, d1, n1) = got[0.0], got[0.01]
+    assert np.abs(e0).max() <= 1 and not d0.any()                  # hard blocking: nothing behind the blocker
+    assert (e1 > 2 * logodds.SCALE).all() and (d1 > 0).all()        # a gap: the echo counts, and is known
+    assert not n0.any() and not n1.any()                             # noise behind the blocker: still unknown
 
 
 def test_detstats_needs_its_model(runtime):

@@ -137,6 +137,8 @@ def test_parameters_outside_their_physical_range_are_refused():
         sm.ModelParams(50.0, target_spread_db=-1.0)
     with pytest.raises(ConfigError, match=r"sensor_model.prior_nats = 0.5 is outside its physical range \[-10, 0\]"):
         sm.ModelParams(50.0, prior_nats=0.5)
+    with pytest.raises(ConfigError, match=r"sensor_model.blocker_gap = 0.9 is outside its physical range \[0, 0.5\]"):
+        sm.ModelParams(50.0, blocker_gap=0.9)
     with pytest.raises(ConfigError, match=r"sensor_model.target_extent_m .* -0.2"):
         keys.check_value("sensor_model.target_extent_m", -0.2)
     with pytest.raises(ConfigError, match=r"sensor_model.look_limit must lie in \[0.5, 10000.0\].*got 0"):

@@ -64,6 +64,7 @@ KEYS = {
            "detstats: reflectivity of the terrain at grazing incidence",
            "detstats: voxels whose centre lies below the ground plane + this are terrain",
            "detstats: a detected echo blocks the beam as an opaque surface of this reflectivity",
+           "detstats: the chance that a voxel behind nearer echoes lies in a gap they leave (partial blockers)",
            "detstats: correlated evidence counts at most this many looks' worth",
            "detstats: log-odds of an occupied voxel before any look (the world's base rate)",
            "detstats: looks at which the prior applies in full (0: everywhere, never-observed voxels too)",

@@ -14,7 +14,7 @@ import numpy as np
 from radarcl import logodds, oracle
 from radarcl.config.stage_config import InterpretConfig
 from radarcl.errors import ConfigError
-from radarcl.sensor_model import N_CLASSES, NODE_SHAPE, NODES, BinModel, pack_nodes
+from radarcl.sensor_model import GAP_CAP, N_CLASSES, NODE_SHAPE, NODES, BinModel, pack_nodes
 from radarcl.snr_evidence import SNR_U, SNR_V
 from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_group_size
 
@@ -74,7 +74,7 @@ class Interpreter(Stage):
                               f"{bin_model.opportunity.shape}: 'snr' evidence needs both per bin, class and node")
         grid = dict(SNR_NU=SNR_U[2], SNR_NV=SNR_V[2], SNR_U0=float(SNR_U[0]), SNR_V0=float(SNR_V[0]),
                     SNR_U_SCALE=(SNR_U[2] - 1) / (SNR_U[1] - SNR_U[0]),
-                    SNR_V_SCALE=(SNR_V[2] - 1) / (SNR_V[1] - SNR_V[0])) if graded else {}
+                    SNR_V_SCALE=(SNR_V[2] - 1) / (SNR_V[1] - SNR_V[0]), GAP_CAP=GAP_CAP) if graded else {}
         self._kernel = build(runtime, "interpret", dict(N_BINS=self.n_bins, MAX_PULSES=self.config.max_pulses,
                                                         OCCLUSION=int(self.config.model == "occlusion"),
                                                         DETSTATS=int(self.detstats), GRADED=int(graded),
@@ -101,7 +101,7 @@ class Interpreter(Stage):
         one = cla.zeros(q, (1,), np.float32)
         if not self.detstats:
             return dict(opportunity=one, miss=one, blocking=one, unblocked=cla.zeros(q, (1, 2), np.int32), c_det=1.0,
-                        ln_snr=one, snr_table=one, noise_floor=1.0)
+                        ln_snr=one, snr_table=one, noise_floor=1.0, blocker_gap=0.0, snr_q=1.0)
         m = self.bin_model
         opportunity = cla.to_device(q, m.opportunity.astype(np.float32))
         blocking = cla.to_device(q, m.blocking.astype(np.float32))
@@ -110,7 +110,8 @@ class Interpreter(Stage):
                         unblocked=cla.zeros(q, (1, 2), np.int32), c_det=(1.0 - m.pfa) / m.pfa,
                         ln_snr=cla.to_device(q, m.ln_snr.astype(np.float32)),
                         snr_table=cla.to_device(q, m.snr_table.values.astype(np.float32)),
-                        noise_floor=float(m.noise_floor))
+                        noise_floor=float(m.noise_floor), blocker_gap=float(m.blocker_gap),
+                        snr_q=float(m.snr_table.q))
         first, last = self.first_bin, self.last_bin
         unblocked = np.zeros((self.n_bins, N_CLASSES, NODES), np.int64), np.zeros((self.n_bins, N_CLASSES, NODES), np.int64)
         if first <= last:
@@ -119,7 +120,7 @@ class Interpreter(Stage):
             unblocked[1][first:last + 1] = np.rint(m.opportunity[first:last + 1] * logodds.KNOWLEDGE_SCALE)
         return dict(opportunity=opportunity, miss=cla.to_device(q, m.miss.astype(np.float32)), blocking=blocking,
                     unblocked=cla.to_device(q, pack_nodes(*unblocked)), c_det=(1.0 - m.pfa) / m.pfa,
-                    ln_snr=one, snr_table=one, noise_floor=1.0)
+                    ln_snr=one, snr_table=one, noise_floor=1.0, blocker_gap=0.0, snr_q=1.0)
 
     @property
     def input_shape(self):
