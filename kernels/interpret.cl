@@ -44,7 +44,10 @@
  * ((last - first + 1) / 2)-th smallest power of the window, found exactly by bisection on the
  * float's bits, / ln 2, at least noise_floor); e = table(ln x, ln tau + ln_snr[bin, class, node]),
  * bilinear on the SNR_U x SNR_V grid, clamped to it; a pulse blocks by its summed (x - 1)+; d as
- * above. Bins of a pulse take the tau in front of it, as without GRADED.
+ * above. Bins of a pulse take the tau in front of it, as without GRADED. Behind nearer echoes
+ * (blocked > 0) with blocker_gap g > 0 (a partial blocker): L_b and L_0 from the table read at
+ * ln tau + ln_snr and at ln_snr, e = ln(L / (1 - q + q L)) of L = (1 - g) L_b + g L_0, and d =
+ * ((1 - w) tau + w) delta where the gap's posterior w = g L_0 / L is above 1/2 (exp_nb, log10_nb).
  *
  * -D constants (set by radarcl/stages/interpret.py):
  *   N_BINS      bins per profile
@@ -52,7 +55,8 @@
  *   OCCLUSION   0: the paper's eq. 12; 1: the occlusion-aware variant above
  *   DETSTATS    0, or 1: the detection-statistics model above (with OCCLUSION 0)
  *   GRADED      DETSTATS only: 0, or 1 for "snr" evidence; SNR_NU, SNR_NV, SNR_U0, SNR_V0 and
- *               SNR_U_SCALE, SNR_V_SCALE (grid points per unit of u, v) give its table's grid
+ *               SNR_U_SCALE, SNR_V_SCALE (grid points per unit of u, v) give its table's grid,
+ *               GAP_CAP (sensor_model.GAP_CAP) the gap mixture's cap on e^e below 1 / q
  */
 #include "radarcl_common.h"
 
@@ -167,10 +171,23 @@ static inline float table_at(const __global float *row0, const __global float *r
          + (row1[iv] * (1.0f - dv) + row1[iv + 1] * dv) * du;
 }
 
+/* e^x for x in [-87, 88] without a builtin call: 2^n e^r, n = rint(x / ln 2), |r| <= ln 2 / 2,
+ * e^r by its Taylor series to r^7 (error < 6e-9, below float32 rounding) */
+static inline float exp_nb(float x)
+{
+    x = x > 88.0f ? 88.0f : (x < -87.0f ? -87.0f : x);
+    const float y = x * 1.44269504089f;
+    const int n = as_int(y + 12582912.0f) - 0x4B400000;          /* rint, as fixed_nb */
+    const float r = x - (float)n * 0.69314718056f;
+    const float p = 1.0f + r * (1.0f + r * (0.5f + r * (1.0f / 6.0f + r * (1.0f / 24.0f + r * (1.0f / 120.0f
+                  + r * (1.0f / 720.0f + r * (1.0f / 5040.0f)))))));
+    return p * as_float((n + 127) << 23);
+}
+
 /* L of the evidence e = ln(L / (1 - q + q L)), e^e capped below its bound 1 / q */
 static inline float likelihood_ratio(float e, float q)
 {
-    const float t = min(exp(e), (1.0f - GAP_CAP) / q);
+    const float t = min(exp_nb(e), (1.0f - GAP_CAP) / q);
     return t * (1.0f - q) / (1.0f - q * t);
 }
 
@@ -188,12 +205,12 @@ static inline void write_graded(__global int2 *out, const __global float *ln_s, 
         for (int k = 0; k < 5; ++k) {
             float v = table_at(row0, row1, du, ln_s[c * 5 + k] - blocked);
             float known = tau;
-            if (gap > 0.0f && blocked > 0.0f) {          /* builtins: only behind an echo */
+            if (gap > 0.0f && blocked > 0.0f) {          /* only behind an echo */
                 const float lb = likelihood_ratio(v, q);
                 const float l0 = likelihood_ratio(table_at(row0, row1, du, ln_s[c * 5 + k]), q);
                 const float lm = (1.0f - gap) * lb + gap * l0;
                 const float w = gap * l0 / lm;       /* the gap's posterior chance */
-                v = log(lm / (1.0f - q + q * lm));
+                v = log10_nb(lm / (1.0f - q + q * lm)) * LN10;
                 known = w > 0.5f ? (1.0f - w) * tau + w : tau;   /* see the oracle */
             }
             e[k] = fixed_nb(v, LOGODDS_SCALE);
