@@ -205,7 +205,9 @@ static inline void write_graded(__global int2 *out, const __global float *ln_s, 
         for (int k = 0; k < 5; ++k) {
             float v = table_at(row0, row1, du, ln_s[c * 5 + k] - blocked);
             float known = tau;
-            if (gap > 0.0f && blocked > 0.0f) {          /* only behind an echo */
+            /* only behind an echo, and only for a target there is (ln_s at the table's first
+             * column, e.g. terrain without a ground plane: both reads are 0, the mixture too) */
+            if (gap > 0.0f && blocked > 0.0f && ln_s[c * 5 + k] > SNR_V0) {
                 const float lb = likelihood_ratio(v, q);
                 const float l0 = likelihood_ratio(table_at(row0, row1, du, ln_s[c * 5 + k]), q);
                 const float lm = (1.0f - gap) * lb + gap * l0;

@@ -20,7 +20,9 @@ D the probability that it detects when v is free, and delta_v the voxel's *detec
   the two-way gain at the voxel's offset from the axis (kappa < 1 for a target wider than the
   footprint);
 - tau_j = exp(-X_j) the fraction of the beam not yet blocked by nearer echoes: X_j sums the
-  energy of the pulses that ended before bin j, in units of an opaque beam-filling surface's;
+  energy of the pulses that ended before bin j, in units of an opaque beam-filling surface's
+  (with "snr" evidence, a blocker may leave a gap: with the chance ``blocker_gap`` v's target
+  is unblocked, and the likelihood behind nearer echoes is the mixture of the two);
 - D = P_fa on a bin where nothing else is known, and close to 1 on the flanks of a pulse whose
   peak lies elsewhere (its spread explains the detection whether or not v is occupied).
 
