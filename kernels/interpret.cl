@@ -56,7 +56,7 @@
  *   DETSTATS    0, or 1: the detection-statistics model above (with OCCLUSION 0)
  *   GRADED      DETSTATS only: 0, or 1 for "snr" evidence; SNR_NU, SNR_NV, SNR_U0, SNR_V0 and
  *               SNR_U_SCALE, SNR_V_SCALE (grid points per unit of u, v) give its table's grid,
- *               GAP_CAP (sensor_model.GAP_CAP) the gap mixture's cap on e^e below 1 / q
+ *               GAP_CAP (snr_evidence.GAP_CAP) the gap mixture's cap on e^e below 1 / q
  */
 #include "radarcl_common.h"
 
@@ -185,7 +185,8 @@ static inline float exp_nb(float x)
     return p * as_float((n + 127) << 23);
 }
 
-/* L of the evidence e = ln(L / (1 - q + q L)), e^e capped below its bound 1 / q */
+/* L of the evidence e = ln(L / (1 - q + q L)), e^e capped below its bound 1 / q (as
+ * snr_evidence.likelihood_ratio; the mixture below as snr_evidence.gap_mixture) */
 static inline float likelihood_ratio(float e, float q)
 {
     const float t = min(exp_nb(e), (1.0f - GAP_CAP) / q);

@@ -11,8 +11,8 @@ import numpy as np
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import check_poses
-from radarcl.sensor_model import GAP_CAP, node_lerp, quantised_rho2
-from radarcl.snr_evidence import noise_floor
+from radarcl.sensor_model import node_lerp, quantised_rho2
+from radarcl.snr_evidence import gap_mixture, noise_floor
 
 WINDOWS = ("hann", "rect")
 OUTPUTS = ("magnitude", "power")
@@ -455,12 +455,8 @@ def _detstats_graded(r, m, first, last, model):
     if behind.any():
         # behind nearer echoes: through a gap they leave (chance ``gap``, a partial blocker), v's
         # target is unblocked; the mixture of the two likelihoods, and the posterior chance of the gap
-        q = model.snr_table.q
-        lb = _likelihood_ratio(e[behind], q)
-        l0 = _likelihood_ratio(model.snr_table(ln_x[behind], model.ln_snr[window][behind]), q)
-        lm = (1.0 - gap) * lb + gap * l0
-        w = gap * l0 / lm
-        e[behind] = np.log(lm / (1.0 - q + q * lm))
+        e[behind], w = gap_mixture(e[behind], model.snr_table(ln_x[behind], model.ln_snr[window][behind]),
+                                   model.snr_table.q, gap)
         # the knowledge follows the gap only where the power makes it more likely than not (noise
         # behind a blocker tells little of a gap, and each look with any knowledge counts as one
         # in the reading's look limit)
@@ -468,10 +464,3 @@ def _detstats_graded(r, m, first, last, model):
     evidence[window] = logodds.to_fixed(e)
     opportunity[window] = np.rint(known * model.opportunity[window] * logodds.KNOWLEDGE_SCALE)
     return evidence, opportunity
-
-
-def _likelihood_ratio(e, q):
-    """L of the evidence e = ln(L / (1 - q + q L)) (``snr_evidence``), with e^e capped just below
-    its bound 1 / q (where L is unbounded and the mixture's evidence is ln(1 / q) anyway)."""
-    t = np.minimum(np.exp(e), (1.0 - GAP_CAP) / q)
-    return t * (1.0 - q) / (1.0 - q * t)

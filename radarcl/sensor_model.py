@@ -150,7 +150,6 @@ EVIDENCE_KINDS = ("snr", "detection")             # sensor_model.evidence: the m
 GROUND_RANGE = (0.0, 1000.0, "m")                 # ground_below_m: the sensor's height above the ground plane (0: none)
 DEFAULT_SNR_DB = 50.0                             # the sensitivity assumed for a profile that gives none
 BLOCKER_GAP = 0.01                                # sensor_model.blocker_gap's default (ModelParams)
-GAP_CAP = 1e-6                                    # the gap mixture reads e^e at most (1 - this) / q (L finite)
 READING = ("look_limit", "prior_nats", "prior_looks")   # what a map keeps to be read (``read_log_odds``)
 PRIOR_VOXEL_M = 0.2               # the voxel at which the default priors are the base rate (``prior_for_voxel``)
 

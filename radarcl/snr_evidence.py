@@ -25,6 +25,7 @@ from radarcl.errors import ConfigError
 SNR_U = (-8.0, 16.0, 385)        # u = ln x: the bin's power over the floor, -35 to +69.5 dB (clamped outside)
 SNR_V = (-40.0, 16.0, 449)       # v = ln s: the typical target's median SNR, -174 to +69.5 dB
 SPREAD_STEPS = 161               # trapezoid nodes over +-8 standard deviations of the log-normal RCS prior
+GAP_CAP = 1e-6                   # the gap mixture reads e^e at most (1 - this) / q (L finite)
 LN2 = math.log(2.0)
 
 
@@ -93,6 +94,24 @@ def _snr_table(spread_db, q):
     values[:, 0] = 0.0
     values.setflags(write=False)
     return SnrTable(values, q)
+
+
+def likelihood_ratio(e, q):
+    """L of the evidence e = ln(L / (1 - q + q L)), with e^e capped just below its bound 1 / q
+    (where L is unbounded and a mixture's evidence is ln(1 / q) anyway)."""
+    t = np.minimum(np.exp(e), (1.0 - GAP_CAP) / q)
+    return t * (1.0 - q) / (1.0 - q * t)
+
+
+def gap_mixture(e_blocked, e_open, q, gap):
+    """Behind nearer echoes that leave a gap with the chance ``gap`` (``sensor_model.blocker_gap``):
+    (e, w), the evidence of the mixture L = (1 - gap) L_b + gap L_0 of the likelihood ratios of
+    ``e_blocked`` (the target behind the blocker) and ``e_open`` (the target in the gap), and the
+    gap's posterior chance w = gap L_0 / L (the kernel: ``write_graded``)."""
+    lb = likelihood_ratio(e_blocked, q)
+    l0 = likelihood_ratio(e_open, q)
+    lm = (1.0 - gap) * lb + gap * l0
+    return np.log(lm / (1.0 - q + q * lm)), gap * l0 / lm
 
 
 def noise_floor(profiles, first, last, floor=1e-30):

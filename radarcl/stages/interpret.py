@@ -14,8 +14,8 @@ import numpy as np
 from radarcl import logodds, oracle
 from radarcl.config.stage_config import InterpretConfig
 from radarcl.errors import ConfigError
-from radarcl.sensor_model import GAP_CAP, N_CLASSES, NODE_SHAPE, NODES, BinModel, pack_nodes
-from radarcl.snr_evidence import SNR_U, SNR_V
+from radarcl.sensor_model import N_CLASSES, NODE_SHAPE, NODES, BinModel, pack_nodes
+from radarcl.snr_evidence import GAP_CAP, SNR_U, SNR_V
 from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_group_size
 
 # Beams per work-group. One work-item walks one beam; any size is correct.
@@ -99,28 +99,26 @@ class Interpreter(Stage):
 
         q = self.runtime.queue
         one = cla.zeros(q, (1,), np.float32)
+        tables = dict(opportunity=one, miss=one, blocking=one, unblocked=cla.zeros(q, (1, 2), np.int32), c_det=1.0,
+                      ln_snr=one, snr_table=one, noise_floor=1.0, blocker_gap=0.0, snr_q=1.0)
         if not self.detstats:
-            return dict(opportunity=one, miss=one, blocking=one, unblocked=cla.zeros(q, (1, 2), np.int32), c_det=1.0,
-                        ln_snr=one, snr_table=one, noise_floor=1.0, blocker_gap=0.0, snr_q=1.0)
+            return tables
         m = self.bin_model
-        opportunity = cla.to_device(q, m.opportunity.astype(np.float32))
-        blocking = cla.to_device(q, m.blocking.astype(np.float32))
+        tables.update(opportunity=cla.to_device(q, m.opportunity.astype(np.float32)),
+                      blocking=cla.to_device(q, m.blocking.astype(np.float32)), c_det=(1.0 - m.pfa) / m.pfa)
         if m.graded:                     # the table replaces the misses and the exact unblocked nodes
-            return dict(opportunity=opportunity, miss=one, blocking=blocking,
-                        unblocked=cla.zeros(q, (1, 2), np.int32), c_det=(1.0 - m.pfa) / m.pfa,
-                        ln_snr=cla.to_device(q, m.ln_snr.astype(np.float32)),
-                        snr_table=cla.to_device(q, m.snr_table.values.astype(np.float32)),
-                        noise_floor=float(m.noise_floor), blocker_gap=float(m.blocker_gap),
-                        snr_q=float(m.snr_table.q))
+            tables.update(ln_snr=cla.to_device(q, m.ln_snr.astype(np.float32)),
+                          snr_table=cla.to_device(q, m.snr_table.values.astype(np.float32)),
+                          noise_floor=float(m.noise_floor), blocker_gap=float(m.blocker_gap), snr_q=float(m.snr_table.q))
+            return tables
         first, last = self.first_bin, self.last_bin
         unblocked = np.zeros((self.n_bins, N_CLASSES, NODES), np.int64), np.zeros((self.n_bins, N_CLASSES, NODES), np.int64)
         if first <= last:
             with np.errstate(divide="ignore"):
                 unblocked[0][first:last + 1] = logodds.to_fixed(np.log(m.miss[first:last + 1]))
             unblocked[1][first:last + 1] = np.rint(m.opportunity[first:last + 1] * logodds.KNOWLEDGE_SCALE)
-        return dict(opportunity=opportunity, miss=cla.to_device(q, m.miss.astype(np.float32)), blocking=blocking,
-                    unblocked=cla.to_device(q, pack_nodes(*unblocked)), c_det=(1.0 - m.pfa) / m.pfa,
-                    ln_snr=one, snr_table=one, noise_floor=1.0, blocker_gap=0.0, snr_q=1.0)
+        tables.update(miss=cla.to_device(q, m.miss.astype(np.float32)), unblocked=cla.to_device(q, pack_nodes(*unblocked)))
+        return tables
 
     @property
     def input_shape(self):
