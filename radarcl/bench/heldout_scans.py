@@ -4,9 +4,11 @@ the CFAR detections of the scans it did not see (``evaluation.heldout`` scores i
 The Oxford sequence (``navtech_map.load``: polar scans with ground-truth odometry) is split by
 interleaving: the even scans make the map, the odd ones are held out (they see the same street a
 quarter of a second later). The baselines, from the same run and the same scans: the
-raw-intensity map (``heldout.raw_map``); no map (log-odds 0 everywhere); and the held-out
+raw-intensity map (``heldout.raw_map``); no map (log-odds 0 everywhere); the held-out
 detection rate as a constant (an oracle of one number that uses no map: it sets the
-log-likelihood a calibrated map must beat, AUC 0.5).
+log-likelihood a calibrated map must beat, AUC 0.5); and, as a reference for what these
+detections allow at all, the even scans' own detection frequency per voxel
+(``heldout.frequency_map``: the outcome itself counted, no sensor model).
 """
 
 from pathlib import Path
@@ -18,7 +20,8 @@ from radarcl.commands.options import add_config, default_data, resolve_config
 from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
 from radarcl.evaluation.evaluate import read_units
-from radarcl.evaluation.heldout import detection_probability, predictions, raw_map, score, score_probability
+from radarcl.evaluation.heldout import (detection_probability, frequency_map, predictions, raw_map, score,
+                                         score_probability)
 from radarcl.io import polar_png
 from radarcl.jobs import navtech_map
 
@@ -44,9 +47,11 @@ def run(runtime, config, data_dir, report=None):
         maps[name], known[name] = read_units(navtech_map.build_map(runtime, c, spec, [scans[k] for k in train],
                                                                    per_beam[train]), c)
     maps["baseline: raw_intensity"] = raw_map(runtime, config, spec, [scans[k] for k in train], per_beam[train])
-    knowing = [name for name, k in known.items() if k is not None]
     # the outcomes: the sensor profile's own detector, whatever the compared map's CFAR is
     outcome = mapconfig.resolve(config.sensor, program={"grid.voxel_m": config["grid.voxel_m"]})
+    maps["reference: detection frequency"] = np.rint(frequency_map(
+        runtime, outcome, spec, [scans[k] for k in train], per_beam[train]) * logodds.SCALE).astype(np.int32)
+    knowing = [name for name, k in known.items() if k is not None]
     columns = list(maps.values()) + [known[name].astype(np.int32) * logodds.SCALE for name in knowing]
     stacked, y, ranges = predictions(runtime, outcome, spec, np.stack(columns, axis=-1),
                                      [scans[k] for k in test], per_beam[test], with_ranges=True)
@@ -59,7 +64,7 @@ def run(runtime, config, data_dir, report=None):
     # everywhere, and at the reading's prior everywhere
     prior = float(sensor_model.read_log_odds(0, 0, 0, detstats.model_params().reading))
     out["detection statistics, predictive"] = score_probability(
-        detection_probability(detstats, stacked[:, column] / logodds.SCALE, ranges), y)
+        detection_probability(detstats, stacked[:, column], ranges), y)
     out["control: P_d by range, p 1/2"] = score_probability(detection_probability(detstats, np.zeros(len(y)), ranges), y)
     out["control: P_d by range, the prior"] = score_probability(
         detection_probability(detstats, np.full(len(y), prior), ranges), y)
@@ -75,9 +80,9 @@ def run(runtime, config, data_dir, report=None):
 def format_table(r):
     lines = [f"{r['sensor']}: map of scans {r['train']} predicts the CFAR detections of scans {r['held_out']} "
              f"({r['voxel_m']} m; map: {r['config']}; outcomes: {r['outcome_detector']})",
-             f"  {'predictor':26s} {'AUC':>6s} {'log-lik [nat/bin]':>18s} {'coverage':>9s} {'bins':>10s} {'detected':>9s}"]
+             f"  {'predictor':34s} {'AUC':>6s} {'log-lik [nat/bin]':>18s} {'coverage':>9s} {'bins':>10s} {'detected':>9s}"]
     for name, s in r["results"].items():
-        lines.append(f"  {name:26s} {s['auc']:6.3f} {s['log_likelihood']:18.4f} {s['coverage']:9.3f} {s['bins']:10d} "
+        lines.append(f"  {name:34s} {s['auc']:6.3f} {s['log_likelihood']:18.4f} {s['coverage']:9.3f} {s['bins']:10d} "
                      f"{s['detected']:9d}")
     return lines
 
