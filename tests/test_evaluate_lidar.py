@@ -157,3 +157,22 @@ def test_the_detection_statistics_map_is_scored_as_it_reads(evaluated):
     assert (np.abs(m - np.float64(np.rint(prior * 1024) / 1024)) <= 0.05).mean() > 0.05 and (m > 1.0).any()
     assert (m == 0).mean() < 1e-3                     # 0 only where evidence and the prior happen to cancel
     assert all(np.isfinite(row["auc"]["detection statistics"]) for row in result["bands"])
+
+
+def test_a_box_ranks_against_its_turned_copies():
+    """box_scores' rank: a box that alone stands out ranks 1; in a map occupied everywhere it
+    passes (occupied, chance 1) but ranks 0.5, as a box anywhere at its range would."""
+    from radarcl.gridspec import GridSpec
+
+    spec = GridSpec((-20.0, -20.0, -0.1), 0.2, (200, 200, 1))
+    corners = np.array([[9.0, -1.0], [11.0, -1.0], [11.0, 1.0], [9.0, 1.0]])
+    box = [("car", "car", 0, corners, np.zeros(2))]
+    alone = np.full((200, 200), -2.0)
+    alone[95:105, 145:155] = 5.0                       # y -1..1, x 9..11
+    everywhere = np.full((200, 200), 5.0)
+    (row,) = L.box_scores(spec, box, {"alone": alone, "everywhere": everywhere})
+    occupied, peak, chance, rank = row["maps"]["alone"]
+    # the copies turned by 5 and 10 deg still overlap the box (2 m wide at 10 m): they tie
+    assert occupied and peak == 5.0 and chance < 0.1 and rank > 0.95
+    occupied, _, chance, rank = row["maps"]["everywhere"]
+    assert occupied and chance == 1.0 and rank == 0.5

@@ -28,7 +28,9 @@ no-model baseline (``heldout.raw_map``). A map must beat all three in every band
 Objects (``box_scores``): each annotated box, placed in the world with the radar's pose at the
 azimuth that looks at it, is occupied in a map when a cell whose centre lies inside it has
 log-odds above 0. Beside it, the chance of that for the same box turned about the radar to
-``CHANCE_TURNS`` other bearings at the same range (a map occupied everywhere passes every box).
+``CHANCE_TURNS`` other bearings at the same range (a map occupied everywhere passes every box),
+and the box's rank among those copies by mean log-odds (0.5: no better than a box anywhere at
+its range).
 """
 
 import math
@@ -266,27 +268,34 @@ def _box_cells(spec, corners):
 
 def box_scores(spec, boxes, maps, truth=None):
     """Per box [{object, class, frame, range_m, cells, lidar_hits, maps: {name: (occupied,
-    peak log-odds, chance)}}]. ``boxes`` are [(object id, class, frame, world corners (4, 2),
+    peak log-odds, chance, rank)}}]. ``boxes`` are [(object id, class, frame, world corners (4, 2),
     radar position (2,))]; ``maps`` {name: (ny, nx) log-odds}; the chance is the share of
-    ``CHANCE_TURNS`` copies of the box turned about the radar that the map calls occupied."""
+    ``CHANCE_TURNS`` copies of the box turned about the radar that the map calls occupied, the
+    rank the share of those copies (inside the grid) whose mean log-odds lies below the box's
+    (ties one half): 0.5 when the map does not tell the box from anywhere else at its range, 1
+    when the box stands out from all of them (a map occupied everywhere passes every box, but
+    ranks them at 0.5). The mean, not the peak: a map whose evidence reaches its cap in many
+    places ties most copies at the peak."""
     out = []
     turns = np.linspace(0, 2 * math.pi, CHANCE_TURNS, endpoint=False)[1:]
     for obj, cls, frame, corners, radar in boxes:
         corners, radar = np.asarray(corners, float), np.asarray(radar, float)[:2]
         gx, gy = _box_cells(spec, corners)
+        copies = []
+        for a in turns:
+            c, s = math.cos(a), math.sin(a)
+            copies.append(_box_cells(spec, (corners - radar) @ np.array([[c, s], [-s, c]]) + radar))
         row = dict(object=obj, cls=cls, frame=frame, range_m=float(np.linalg.norm(corners.mean(0) - radar)),
                    cells=int(len(gx)), lidar_hits=int(truth.hits[gy, gx].sum()) if truth is not None else None,
                    maps={})
         for name, nats in maps.items():
             values = nats[gy, gx]
-            chance = []
-            for a in turns:
-                c, s = math.cos(a), math.sin(a)
-                turned = (corners - radar) @ np.array([[c, s], [-s, c]]) + radar
-                tx, ty = _box_cells(spec, turned)
-                chance.append(bool(len(tx)) and bool((nats[ty, tx] > 0).any()))
-            row["maps"][name] = (bool((values > 0).any()), float(values.max()) if len(values) else float("nan"),
-                                 float(np.mean(chance)))
+            peak = float(values.max()) if len(values) else float("nan")
+            chance = [bool(len(tx)) and bool((nats[ty, tx] > 0).any()) for tx, ty in copies]
+            means = np.array([nats[ty, tx].mean() for tx, ty in copies if len(tx)])
+            mean = values.mean() if len(values) else float("nan")
+            rank = float(np.mean((means < mean) + 0.5 * (means == mean))) if len(means) and len(values) else float("nan")
+            row["maps"][name] = (bool((values > 0).any()), peak, float(np.mean(chance)), rank)
         out.append(row)
     return out
 

@@ -187,15 +187,18 @@ def table(result):
     if result["boxes"]:
         lines.append("")
         lines.append("| object | class | frame | range [m] | cells | lidar hits | " +
-                     " | ".join(f"{n}: occupied (peak nat, chance)" for n in result["boxes"][0]["maps"]) + " |")
+                     " | ".join(f"{n}: occupied (peak nat, chance, rank)" for n in result["boxes"][0]["maps"]) + " |")
         lines.append("|" + "---|" * (6 + len(result["boxes"][0]["maps"])))
         for b in result["boxes"]:
             lines.append(f"| {b['object']} | {b['cls']} | {b['frame']} | {b['range_m']:.1f} | {b['cells']} | "
                          f"{b['lidar_hits']} | " + " | ".join(
-                             f"{'yes' if o else 'no'} ({p:.1f}, {c:.2f})" for o, p, c in b["maps"].values()) + " |")
+                             f"{'yes' if o else 'no'} ({p:.1f}, {c:.2f}, {k:.2f})" for o, p, c, k in b["maps"].values()) + " |")
         for name in result["boxes"][0]["maps"]:
             found = sum(b["maps"][name][0] for b in result["boxes"])
-            lines.append(f"{name}: {found} of {len(result['boxes'])} boxes occupied")
+            chance = np.median([b["maps"][name][2] for b in result["boxes"]])
+            rank = np.nanmean([b["maps"][name][3] for b in result["boxes"]])
+            lines.append(f"{name}: {found} of {len(result['boxes'])} boxes occupied (median chance {chance:.2f}); "
+                         f"mean rank of a box among its copies turned about the radar {rank:.2f} (0.5: chance)")
     return lines
 
 
