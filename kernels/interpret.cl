@@ -351,7 +351,9 @@ __kernel void interpret(
             count++;
             blocked += energy * blocking[peak];
             tau = exp(-blocked);                  /* builtins, once per pulse */
-            omt = -expm1(-blocked);
+#if !GRADED
+            omt = -expm1(-blocked);           /* 1 - tau, for the binary outcome's nodes */
+#endif
         }
 #undef NOISE
         for (int jj = max(last_bin + 1, 0); jj < N_BINS; jj++)
