@@ -176,3 +176,11 @@ def test_a_box_ranks_against_its_turned_copies():
     assert occupied and peak == 5.0 and chance < 0.1 and rank > 0.95
     occupied, _, chance, rank = row["maps"]["everywhere"]
     assert occupied and chance == 1.0 and rank == 0.5
+    # capped evidence: one cell at the cap in the box and in every copy (a tie by the peak), the
+    # rest of the box occupied where the copies are free: the mean tells the box apart
+    capped = np.full((200, 200), -2.0)
+    capped[::10, ::10] = 14.0                         # a speckle at the cap, one cell in every box
+    capped[96:104, 146:154] = np.maximum(capped[96:104, 146:154], 5.0)
+    (row,) = L.box_scores(spec, box, {"capped": capped})
+    occupied, peak, _, rank = row["maps"]["capped"]
+    assert peak == 14.0 and rank > 0.9

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from radarcl.bench import heldout_scans as hs
+from radarcl.errors import ConfigError
 
 
 def test_scores_by_hand():
@@ -60,3 +61,5 @@ def test_frequency_map_by_hand(monkeypatch):
     assert p[0, 0, 0] == pytest.approx((2 + 2 * rate) / (3 + 2))
     assert p[0, 1, 2] == pytest.approx((1 + 2 * rate) / (2 + 2))
     assert p[0, 0, 1] == pytest.approx(rate)          # never looked at: the rate
+    with pytest.raises(ConfigError, match="prior_looks must be > 0"):
+        heldout.frequency_map(None, None, spec, None, None, prior_looks=0.0)

@@ -49,8 +49,8 @@ def run(runtime, config, data_dir, report=None):
     maps["baseline: raw_intensity"] = raw_map(runtime, config, spec, [scans[k] for k in train], per_beam[train])
     # the outcomes: the sensor profile's own detector, whatever the compared map's CFAR is
     outcome = mapconfig.resolve(config.sensor, program={"grid.voxel_m": config["grid.voxel_m"]})
-    maps["reference: detection frequency"] = np.rint(frequency_map(
-        runtime, outcome, spec, [scans[k] for k in train], per_beam[train]) * logodds.SCALE).astype(np.int32)
+    maps["reference: detection frequency"] = logodds.to_fixed(frequency_map(
+        runtime, outcome, spec, [scans[k] for k in train], per_beam[train]))
     knowing = [name for name, k in known.items() if k is not None]
     columns = list(maps.values()) + [known[name].astype(np.int32) * logodds.SCALE for name in knowing]
     stacked, y, ranges = predictions(runtime, outcome, spec, np.stack(columns, axis=-1),

@@ -21,12 +21,13 @@ import numpy as np
 from radarcl import logodds
 from radarcl.evaluation.baseline import raw_evidence
 from radarcl.evaluation.metrics import roc_auc
+from radarcl.errors import ConfigError
 from radarcl.grid import EvidenceGrid
-from radarcl.pipeline import Mapping, evidence_config
+from radarcl.pipeline import Mapping, bin_model, evidence_config
 
 P_CLIP = 1e-4
 FREQUENCY_SIGMA_VOXELS = 1.0       # ``frequency_map``: one voxel, one look (README: the best of a sweep over 0.5-3
-                                   # voxels and 1-5 looks on the held-out scans themselves scores 0.001 AUC more)
+                                   # voxels and 1 and 5 looks on the held-out scans themselves scores 0.001 AUC more)
 FREQUENCY_PRIOR_LOOKS = 1.0
 
 
@@ -87,9 +88,14 @@ def frequency_map(runtime, config, spec, scans, per_beam, sigma_voxels=FREQUENCY
     map scans' own CFAR (``config``: the outcome detector) detected at each voxel, hits and looks
     (bins on the beam's axis) each smoothed by a Gaussian of ``sigma_voxels`` in the grid's plane,
     shrunk towards the map scans' detection rate by ``prior_looks``:
-    p = (H + a rate) / (K + a). Returns its log-odds [nat], a float64 grid of ``spec``."""
+    p = (H + a rate) / (K + a), ``prior_looks`` a > 0. Returns its log-odds [nat], a float64 grid
+    of ``spec``: +-inf where the map scans detected nothing or everything (``logodds.to_fixed``
+    clamps them)."""
     from scipy.ndimage import gaussian_filter
 
+    if not prior_looks > 0:
+        raise ConfigError(f"the reference's prior_looks must be > 0 (a voxel never looked at reads the rate), "
+                          f"got {prior_looks!r}")
     hits = np.zeros(spec.shape[::-1], np.float64)
     looks = np.zeros_like(hits)
     for idx, detected, _ in looked_bins(runtime, config, spec, scans, per_beam):
@@ -109,8 +115,6 @@ def detection_probability(config, log_odds, ranges_m):
     target's detection opportunity on the beam's axis at the bin's range (``sensor_model``), with
     the CFAR's achieved P_fa: a map says how likely a voxel is occupied, the model how likely an
     occupied one is seen."""
-    from radarcl.pipeline import bin_model
-
     bm = bin_model(config, config["grid.voxel_m"])
     j = np.clip(np.rint(np.asarray(ranges_m) / config.bin_spacing_m).astype(np.int64), 0, len(bm.opportunity) - 1)
     delta = bm.opportunity[j, 0, 0]

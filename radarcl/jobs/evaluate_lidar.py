@@ -198,7 +198,8 @@ def table(result):
             chance = np.median([b["maps"][name][2] for b in result["boxes"]])
             rank = np.nanmean([b["maps"][name][3] for b in result["boxes"]])
             lines.append(f"{name}: {found} of {len(result['boxes'])} boxes occupied (median chance {chance:.2f}); "
-                         f"mean rank of a box among its copies turned about the radar {rank:.2f} (0.5: chance)")
+                         f"mean rank of a box among its copies turned about the radar {rank:.2f} (0.5: no better than "
+                         f"anywhere at its range)")
     return lines
 
 
