@@ -41,8 +41,8 @@
  *     >> 12, so the gather and
  *     the still table give the same integers whatever the compiler contracts. The evidence goes
  *     to pool[], the opportunity to knowledge[] (the knowledge channel: "never observed" apart
- *     from "observed, undecided"), and looks[] counts the updates whose evidence or opportunity is
- *     not 0 (the reading counts correlated looks once: sensor_model.read_log_odds). The still table keeps
+ *     from "observed, undecided"), and looks[] counts the updates whose opportunity is not 0 (the
+ *     reading counts correlated looks once: sensor_model.read_log_odds). The still table keeps
  *     q + 1 (never 0, whose bits mean "no beam") as an integer in place of the weight, and the
  *     class in bit 16. PACKED_LOOKS (DETSTATS, set by the host when a frame's knowledge of one voxel,
  *     n_beams x KNOWLEDGE_SCALE, stays below 2^PACKED_LOOKS and its looks below 2^(31 - PACKED_LOOKS)):
@@ -255,7 +255,7 @@ __kernel void fusion(
     const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (header)
     const float terrain_dz,           // DETSTATS: voxels with z - beam origin z below this are terrain [m]
     __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity [KNOWLEDGE_SCALE units]
-    __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with evidence or opportunity [count]
+    __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity [count]
     __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
 {
     const int id = get_global_id(0);
@@ -432,15 +432,13 @@ __kernel void fusion(
                 const intL at = (j * CLASSES + (qz < terrain_dz)) * SEGMENTS + seg;
                 intL pe, pk;
                 GATHER_NODES(pe, pk, row_nodes, at);
-                const intL ev = NODE_LERP(pe, f) & inside;
-                acc[u] += ev;
+                acc[u] += NODE_LERP(pe, f) & inside;
                 const intL kn = NODE_LERP(pk, f) & inside;
-                /* a look: an update with evidence or opportunity (sensor_model.read_log_odds) */
   #ifdef PACKED_LOOKS
-                kacc[u] += kn + (((kn > 0) | (ev != 0)) & (intL)(1 << PACKED_LOOKS));
+                kacc[u] += kn + ((kn > 0) & (intL)(1 << PACKED_LOOKS));
   #else
                 kacc[u] += kn;
-                nacc[u] -= (kn > 0) | (ev != 0);              /* true is -1 */
+                nacc[u] -= kn > 0;                            /* true is -1 */
   #endif
 #else
                 intL e = GATHER_L(row_ev, j);
@@ -474,11 +472,7 @@ __kernel void fusion(
             vstoreL(v > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : (v < (intL)-GRID_LIMIT ? (intL)-GRID_LIMIT : v), 0, cell);
         }
 #if defined(DETSTATS) && !RECORD
-  #ifdef PACKED_LOOKS
         if (or_unit(kacc[u])) {       /* non-negative, saturating at GRID_LIMIT: order does not matter */
-  #else
-        if (or_unit(kacc[u] | nacc[u])) {   /* (a look may carry evidence and no knowledge) */
-  #endif
             const int r0 = ROWS * u;
             __global int *cell = knowledge + brick.w * BRICK_CELLS + (corner.z * 8 + corner.y) * 8 + corner.x
                                  + (ROW_DZ(r0) * 8 + ROW_DY(r0)) * 8;
@@ -509,7 +503,7 @@ __kernel void fusion_cached(
     const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (the class
                                       //   of each entry is in its record)
     __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity
-    __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with evidence or opportunity
+    __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity
     __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
 {
     const int id = get_global_id(0);
@@ -541,7 +535,7 @@ __kernel void fusion_cached(
         GATHER_NODES_V(pe, pk, nodes, at);
         intV sum = NODE_LERP(pe, f) & reached;
         intV ksum = NODE_LERP(pk, f) & reached;
-        intV nsum = -((ksum > 0) | (sum != 0));
+        intV nsum = -(ksum > 0);
 #else
         /* the weight's sign bit says "more entries follow" (weights are positive) */
         const floatV product = convert_floatV(GATHER(evidence, index)) * as_floatV(bits & 0x7FFFFFFF);
@@ -565,11 +559,10 @@ __kernel void fusion_cached(
 #ifdef DETSTATS
                     const int qe = (entry.y & 0xFFFF) - 1;
                     const int2 node = nodes[(entry.x * CLASSES + ((entry.y >> 16) & 1)) * SEGMENTS + (qe >> 12)];
-                    const int ev = NODE_LERP(node.x, qe & 4095);
-                    add += ev;
+                    add += NODE_LERP(node.x, qe & 4095);
                     const int kn = NODE_LERP(node.y, qe & 4095);
                     kadd += kn;
-                    nadd += kn > 0 || ev != 0;
+                    nadd += kn > 0;
 #else
                     const float p = (float)evidence[entry.x] * as_float(entry.y);
                     add += as_int(p + 12582912.0f) - 0x4B400000;    /* rint, half to even, as RINT_INTV */
@@ -588,7 +581,7 @@ __kernel void fusion_cached(
 #endif
         }
 #ifdef DETSTATS
-        if (or_lanes(ksum | nsum)) {        /* a look may carry evidence and no knowledge */
+        if (or_lanes(ksum)) {
             __global int *cell = kcells + (ROW_DZ(row) * 8 + ROW_DY(row)) * 8;
             const intV v = vloadV(0, cell) + ksum;
             vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : v, 0, cell);

@@ -13,8 +13,7 @@ A grid made with ``knowledge=True`` (the detection-statistics model, ``radarcl.s
 has two more channels with the same slots: per voxel the summed detection opportunity of its
 looks (``knowledge``: int32, ``logodds.KNOWLEDGE_SCALE`` units per look, non-negative, saturating
 at ``GRID_LIMIT``), so that "never observed" (0) differs from "observed, undecided" (evidence near
-0), and the number of looks (``looks``: updates with evidence or opportunity; the reading counts
-correlated looks once).
+0), and the number of those looks (``looks``: the reading counts correlated looks once).
 This module holds the grid on the device only; ``radarcl.maps`` reads and writes it as files.
 """
 

@@ -319,7 +319,7 @@ def fusion_at_points(centres, evidence, lattice, model, poses, bin_spacing_m, fi
     a voxel takes ``sensor_model.node_lerp`` of its bin's nodes of its class at its quantised
     rho2 (class 1, terrain, where its centre lies more than -``terrain_dz`` below the beam's
     origin: z - origin z < terrain_dz; else class 0), and the result has two more arrays, the
-    knowledge sums and the counts of updates whose evidence or opportunity is not 0 (n,)."""
+    knowledge sums and the counts of updates with an opportunity above 0 (n,)."""
     if nodes is not None:
         e_nodes, d_nodes = (np.asarray(a) for a in nodes)
         knowledge = np.zeros(len(centres), np.int64)
@@ -346,11 +346,10 @@ def fusion_at_points(centres, evidence, lattice, model, poses, bin_spacing_m, fi
         if nodes is not None:
             q = quantised_rho2(rho2[inside])
             cls = (x[inside, 2] < terrain_dz).astype(np.int64)
-            e = node_lerp(e_nodes[b, j[inside], cls], q)
-            sums[inside] += e
+            sums[inside] += node_lerp(e_nodes[b, j[inside], cls], q)
             opportunity = node_lerp(d_nodes[b, j[inside], cls], q)
             knowledge[inside] += opportunity
-            looks[inside] += (opportunity > 0) | (e != 0)        # a look: evidence or opportunity
+            looks[inside] += opportunity > 0
             updates[inside] += 1
             continue
         e = evidence[b, j[inside]].astype(np.float64)

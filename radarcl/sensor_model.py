@@ -48,9 +48,7 @@ The CFAR still finds the pulses: a pulse's energy (with "snr", its summed (x - 1
 blocks the beam behind it, and delta, the knowledge, stays the CFAR's detection opportunity.
 
 Correlated evidence: looks from one viewpoint share speckle and model error, so they are not
-independent. The grid keeps exact integer sums (order-independent), and the number of looks n
-(every update that carries evidence or opportunity: evidence without knowledge, behind a blocker
-or at a beam's far edge, counts too, or it would escape the limit and grow with every frame);
+independent. The grid keeps exact integer sums (order-independent), and the number of looks n;
 the reading divides the evidence E of a voxel looked at more than ``look_limit`` times by
 n / look_limit (``read_log_odds``): at most that many looks' worth of mean evidence, however
 many scans. The reading adds the prior, the world's base rate of occupied voxels, everywhere: a
@@ -424,9 +422,7 @@ def read_log_odds(evidence, knowledge, looks, reading):
         L = E / max(1, n / look_limit) + prior_nats x min(1, K / prior_looks)
 
     with E = ``evidence`` [logodds units], K = ``knowledge`` [KNOWLEDGE_SCALE units] in looks and
-    n = ``looks`` the number of looks (updates with evidence or an opportunity: a look that carries
-    evidence counts, or evidence without knowledge, behind a blocker, would grow with every frame),
-    ``reading`` a dict of ``READING``.
+    n = ``looks`` the number of looks with an opportunity, ``reading`` a dict of ``READING``.
     Correlated looks (one viewpoint, one speckle, a partial blocker seen again) count at most
     ``look_limit`` looks' worth of their mean evidence, however many scans.
 
