@@ -217,8 +217,8 @@ static inline void write_graded(__global int2 *out, const __global float *ln_s, 
                 v = log10_nb(lm / (1.0f - q + q * lm)) * LN10;
                 known = w > 0.5f ? (1.0f - w) * tau + w : tau;   /* see the oracle */
             }
-            e[k] = fixed_nb(v, LOGODDS_SCALE);
             d[k] = as_int(known * opp[c * 5 + k] * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
+            e[k] = d[k] ? fixed_nb(v, LOGODDS_SCALE) : 0;  /* no evidence from a look that is not one */
         }
         for (int k = 0; k < 4; ++k)
             out[c * 4 + k] = (int2)((e[k] & 0xFFFF) | (e[k + 1] << 16), (d[k] & 0xFFFF) | (d[k + 1] << 16));

@@ -461,6 +461,8 @@ def _detstats_graded(r, m, first, last, model):
         # behind a blocker tells little of a gap, and each look with any knowledge counts as one
         # in the reading's look limit)
         known[behind] = np.where(w > 0.5, (1.0 - w) * tau[behind] + w, tau[behind])
-    evidence[window] = logodds.to_fixed(e)
     opportunity[window] = np.rint(known * model.opportunity[window] * logodds.KNOWLEDGE_SCALE)
+    # no evidence from a look without an opportunity: the reading's look limit counts only looks
+    # that could see, and evidence it does not count would grow with every frame
+    evidence[window] = np.where(opportunity[window] != 0, logodds.to_fixed(e), 0)
     return evidence, opportunity

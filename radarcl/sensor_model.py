@@ -43,6 +43,10 @@ strength, and the local noise estimate, which nearby echoes inflate, no longer s
 So beam edges and far ranges give weak free evidence, shadows get none and a strong echo gives
 strong evidence. delta_v itself is the knowledge channel: the looks in which an object at v would
 have been seen; summed per voxel it tells "never observed" (0) from "observed, undecided".
+A look whose knowledge rounds to 0 gives no "snr" evidence either: the reading's look limit counts
+only looks with knowledge, and evidence it did not count would add up frame after frame (behind a
+blocker, the gap's ln(1 - g) on every quiet bin, and an echo the gap does not explain). The
+binary outcome's evidence vanishes with delta by itself.
 
 The CFAR still finds the pulses: a pulse's energy (with "snr", its summed (x - 1)+ over the floor)
 blocks the beam behind it, and delta, the knowledge, stays the CFAR's detection opportunity.

@@ -263,6 +263,7 @@ def test_snr_evidence_of_a_point_target_through_the_oracle():
     ln_snr = np.full((n_bins, sm.N_CLASSES, sm.NODES), -np.inf)
     ln_snr[at, 0] = math.log(100.0) - t * math.log(4.0)
     opportunity = np.zeros(ln_snr.shape)
+    opportunity[at, 0] = 1.0                          # the look sees the target (no evidence without)
     model = sm.BinModel(opportunity, 1.0 - opportunity, np.zeros(n_bins), Q_CORR, ln_snr,
                         se.SnrTable.build(0.0, Q_CORR))
     profiles = snr_beams(np.full((3, n_bins), np.nan))
