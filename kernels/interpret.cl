@@ -48,6 +48,7 @@
  * (blocked > 0) with blocker_gap g > 0 (a partial blocker): L_b and L_0 from the table read at
  * ln tau + ln_snr and at ln_snr, e = ln(L / (1 - q + q L)) of L = (1 - g) L_b + g L_0, and d =
  * ((1 - w) tau + w) delta where the gap's posterior w = g L_0 / L is above 1/2 (exp_nb, log10_nb).
+ * A node whose d rounds to 0 gets e = 0 (the reading counts only looks with knowledge).
  *
  * -D constants (set by radarcl/stages/interpret.py):
  *   N_BINS      bins per profile

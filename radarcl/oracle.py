@@ -379,7 +379,8 @@ def interpret_detstats(profiles, noise, mask, config, bin_spacing_m, model, flag
     echoes (X_j > 0) with ``model.blocker_gap`` g > 0 the evidence is the mixture's,
     e = ln(L / (1 - q + q L)), L = (1 - g) L_b + g L_0 (L_b, L_0: the likelihood ratios of the
     table's e at ln tau_j + ln_snr and at ln_snr), and delta = ((1 - w) tau_j + w) opportunity
-    where the gap's posterior w = g L_0 / L exceeds 1/2 (``_detstats_graded``).
+    where the gap's posterior w = g L_0 / L exceeds 1/2 (``_detstats_graded``). A node whose
+    opportunity rounds to 0 gets evidence 0 (the reading counts only looks with knowledge).
     Returns ``(evidence, opportunity, pulses, n_pulses, flags)``: evidence int32 (..., n_bins,
     CLASSES, NODES) [logodds units, clamped to +-16 nat], opportunity int32 (same shape)
     [KNOWLEDGE_SCALE units], pulses, n_pulses and flags as ``interpret``'s. Beams with a

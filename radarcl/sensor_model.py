@@ -46,7 +46,10 @@ have been seen; summed per voxel it tells "never observed" (0) from "observed, u
 A look whose knowledge rounds to 0 gives no "snr" evidence either: the reading's look limit counts
 only looks with knowledge, and evidence it did not count would add up frame after frame (behind a
 blocker, the gap's ln(1 - g) on every quiet bin, and an echo the gap does not explain). The
-binary outcome's evidence vanishes with delta by itself.
+binary outcome's miss evidence vanishes with delta by itself; a detection's, ln(1 + delta w (1 -
+P_fa) / P_fa), keeps up to 1 / (8192 P_fa) nat where delta rounds to 0 (0.014 nat at P_fa 0.0085),
+and the fusion's interpolation between a node with knowledge and one without can still round
+the knowledge to 0 under up to half a node's evidence: the limit holds for most looks, not all.
 
 The CFAR still finds the pulses: a pulse's energy (with "snr", its summed (x - 1)+ over the floor)
 blocks the beam behind it, and delta, the knowledge, stays the CFAR's detection opportunity.

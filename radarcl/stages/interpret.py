@@ -47,7 +47,9 @@ class Interpreter(Stage):
     (its tables go to the device once). With detstats the evidence is
     (*batch, n_bins, *sensor_model.NODE_SHAPE) int32 node pairs (``sensor_model.unpack_nodes``),
     equivalent to ``radarcl.oracle.interpret_detstats``: node values identical to the oracle's
-    until a beam's first pulse and within ``EVIDENCE_UNITS_TOL`` after it.
+    until a beam's first pulse and within ``EVIDENCE_UNITS_TOL`` after it (except, with "snr"
+    evidence, a node whose float32 and float64 opportunity round to 0 on different sides of 1/2,
+    where one has the evidence and the other 0; the seeded tests keep far from it).
     """
 
     def __init__(self, runtime, batch, n_bins, bin_spacing_m, config=None, *, local_size=None, bin_model=None):
