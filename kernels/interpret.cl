@@ -206,6 +206,12 @@ static inline void write_graded(__global int2 *out, const __global float *ln_s, 
     for (int c = 0; c < 2; ++c) {
         int e[5], d[5];
         for (int k = 0; k < 5; ++k) {
+            /* knowledge is at most opp (tau, w <= 1): a node it rounds to 0 for is a look that is
+             * not one, with no evidence (below), so it needs no table read */
+            if (opp[c * 5 + k] * (float)KNOWLEDGE_SCALE <= 0.5f) {
+                e[k] = d[k] = 0;
+                continue;
+            }
             float v = table_at(row0, row1, du, ln_s[c * 5 + k] - blocked);
             float known = tau;
             /* only behind an echo, and only for a target there is (ln_s at the table's first
