@@ -56,7 +56,7 @@ class EvidenceGrid:
         self.table = np.full((nbz, nby, nbx), -1, np.int32)     # brick (z, y, x) -> slot
         self.keys = np.empty((0, 3), np.int32)                  # slot -> brick (bx, by, bz); -1 when free
         self.free = np.empty(0, np.int32)                       # freed slots, reused lowest first
-        limit = int(runtime.device.max_mem_alloc_size)
+        limit = int(runtime.limits.max_mem_alloc_size)
         self.chunk_bricks = int(chunk_bricks) if chunk_bricks else max(1, min(CHUNK_BYTES, limit) // spec.brick_bytes)
         if self.chunk_bricks < 1 or self.chunk_bricks * spec.brick_bytes > limit:
             raise ConfigError(f"chunk_bricks must be in [1, {limit // spec.brick_bytes}], got {chunk_bricks!r}")
@@ -112,8 +112,8 @@ class EvidenceGrid:
                 "bricks": self.n_bricks, "bricks_total": int(self.table.size)}
 
     def _check_fits(self, needed):
-        limit = int(self.runtime.device.max_mem_alloc_size)
-        total = int(self.runtime.device.global_mem_size)
+        limit = int(self.runtime.limits.max_mem_alloc_size)
+        total = int(self.runtime.limits.global_mem_size)
         if needed * self.spec.brick_bytes * len(self.channels) > total:
             factor = (needed * self.spec.brick_bytes * len(self.channels) / total) ** (1 / 3)
             raise DeviceCapabilityError(

@@ -262,12 +262,12 @@ def _check_fits(runtime, config, spec):
     v = spec.voxel_m
     swept = sensors.frame_volume_m3(config.sensor, config["interpret.range_min_m"], config["interpret.range_max_m"], v)
     voxels = min(FIT_FRACTION * swept / v ** 3, float(spec.n_voxels))
-    needed, limit = 4.0 * voxels, float(runtime.device.max_mem_alloc_size)
+    needed, limit = 4.0 * voxels, float(runtime.limits.max_mem_alloc_size)
     if needed > limit:
         fits = v * (needed / limit) ** (1 / 3)
         raise DeviceCapabilityError(
             f"one frame of sensor {config.sensor.name} at {v:g} m voxels reaches at least {voxels:.3g} voxels "
-            f"({needed / 2**30:.1f} GiB of int32), more than the largest buffer of {runtime.device.name}, "
+            f"({needed / 2**30:.1f} GiB of int32), more than the largest buffer of {runtime.name}, "
             f"{limit / 2**30:.2f} GiB (radarcl info); use voxels of at least {fits:.3g} m, a shorter "
             "interpret.range_max_m, or a smaller grid")
 

@@ -36,9 +36,17 @@ DEVICES = _devices()
 
 @pytest.fixture(scope="session", params=DEVICES, ids=[_device_id(d) for d in DEVICES])
 def runtime(request):
+    """A runtime on each device under test; with ``RADARCL_TEST_LIMITS=<class>`` narrowed to that
+    GPU class (tests/device_classes.py), so the suite runs the GPU code paths."""
+    from device_classes import DEVICE_CLASSES, LIMITS_ENV, narrowed
     from radarcl.cl import Runtime
 
-    return Runtime(request.param)
+    cls = os.environ.get(LIMITS_ENV, "").strip()
+    if not cls:
+        return Runtime(request.param)
+    if cls not in DEVICE_CLASSES:
+        raise pytest.UsageError(f"{LIMITS_ENV} must be one of {sorted(DEVICE_CLASSES)}, got {cls!r}")
+    return Runtime(request.param, limits=narrowed(request.param, cls))
 
 
 @pytest.fixture(scope="session")

@@ -15,10 +15,12 @@ import signal
 import subprocess
 import sys
 import time
+import weakref
 from pathlib import Path
 
+from radarcl.cl.limits import DeviceLimits
 from radarcl.cl.signature import KernelFunction, parse_kernels
-from radarcl.errors import KernelBuildError, NoOpenCLError
+from radarcl.errors import DeviceCapabilityError, KernelBuildError, NoOpenCLError
 
 log = logging.getLogger(__name__)
 
@@ -393,25 +395,47 @@ def _define(name, value):
 
 
 class Runtime:
-    """One OpenCL context and in-order queue on one device, with memoised program builds."""
+    """One OpenCL context and in-order queue on one device, with memoised program builds.
 
-    def __init__(self, device=None, profiling=False):
+    ``limits`` (default: the device's own, ``DeviceLimits.of``) are what every stage honours;
+    ``held_bytes`` counts the device memory the stages of this runtime hold (``hold``), which the
+    grid's growth leaves room for."""
+
+    def __init__(self, device=None, profiling=False, limits=None):
         cl = _cl()
         self.device = device if device is not None else choose_device()
+        self.limits = DeviceLimits.of(self.device) if limits is None else limits
         self.context = cl.Context([self.device])
         props = cl.command_queue_properties.PROFILING_ENABLE if profiling else 0
         self.queue = cl.CommandQueue(self.context, properties=props)
         self._programs = {}
+        self.held_bytes = 0
 
     @property
     def name(self):
-        """'platform / device' of this runtime."""
-        return f"{self.device.platform.name} / {self.device.name}"
+        """'platform / device' of this runtime (with the narrowed limits, if any)."""
+        return self.limits.name
 
     @property
     def is_cpu(self):
-        """True for a CPU device (PoCL's pthread device, for instance)."""
-        return bool(self.device.type & _cl().device_type.CPU)
+        """True for a CPU device (PoCL's pthread device, for instance) not narrowed to a GPU's limits."""
+        return self.limits.is_cpu
+
+    def hold(self, owner, nbytes, what):
+        """Count ``nbytes`` of device memory held by ``owner`` until it is collected; raises
+        DeviceCapabilityError, before anything is allocated, when everything held would pass
+        the device's global memory."""
+        nbytes = int(nbytes)
+        total = self.held_bytes + nbytes
+        if total > self.limits.global_mem_size:
+            raise DeviceCapabilityError(
+                f"{what} needs {nbytes / 2**20:.1f} MiB of device memory beside the {self.held_bytes / 2**20:.1f} MiB "
+                f"radarcl already holds; {self.name} has {self.limits.global_mem_size / 2**20:.0f} MiB (radarcl info)")
+        self.held_bytes = total
+        weakref.finalize(owner, self._release, nbytes)
+
+    def _release(self, nbytes):
+        self.held_bytes -= nbytes
 
     def kernels(self, stem, defines=None):
         """Build ``kernels/<stem>.cl`` with ``-D`` ``defines`` (memoised) and return its KernelSet."""
@@ -466,7 +490,7 @@ class Runtime:
         a ``pyopencl.Kernel``)."""
         cl = _cl()
         kernel = getattr(kernel, "kernel", kernel)
-        return int(min(self.device.max_work_group_size,
+        return int(min(self.limits.max_work_group_size,
                        kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.device)))
 
     def empty(self, nbytes):

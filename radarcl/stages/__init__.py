@@ -120,13 +120,13 @@ class Stage:
 
         self.inputs, self.outputs = tuple(inputs), tuple(outputs)
         q = self.runtime.queue
-        limit = self.runtime.device.max_mem_alloc_size
+        limit = self.runtime.limits.max_mem_alloc_size
         for p in self.inputs + self.outputs:              # before the driver refuses with a code
             nbytes = float(np.prod(p.shape, dtype=np.float64)) * np.dtype(p.dtype).itemsize
             if nbytes > limit:
                 raise DeviceCapabilityError(f"{type(self).__name__}: {p.what} {tuple(p.shape)} {np.dtype(p.dtype)} "
                                             f"takes {nbytes / 2**30:.3g} GiB, more than the largest buffer of "
-                                            f"{self.runtime.device.name}, {limit / 2**30:.2f} GiB (radarcl info)")
+                                            f"{self.runtime.name}, {limit / 2**30:.2f} GiB (radarcl info)")
         self.arrays = {p.name: cla.empty(q, p.shape, p.dtype) for p in self.inputs + self.outputs}
         self._ports = {p.name: p for p in self.inputs + self.outputs}
 

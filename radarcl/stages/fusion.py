@@ -223,10 +223,10 @@ class Fusion(Stage):
             return plan.table
         q = self.runtime.queue
         n_rows = self._n_items(plan) * self._block_rows
-        device = q.device
+        limits = self.runtime.limits
         held = sum(p.table.nbytes for p in self._plans.values() if p.table is not None)
-        budget = STILL_TABLE_SHARE * device.global_mem_size - held if self.still == "auto" else float("inf")
-        limit = min(budget, device.max_mem_alloc_size)
+        budget = STILL_TABLE_SHARE * limits.global_mem_size - held if self.still == "auto" else float("inf")
+        limit = min(budget, limits.max_mem_alloc_size)
         dense_bytes = n_rows * (9 * self.vector_width + 4)   # counts, first entries, row starts
         if not n_rows or dense_bytes > limit:
             plan._table.append(None)

@@ -120,7 +120,7 @@ class RangeFFT(Stage):
             raise ConfigError(f"clip_level must be positive, got {clip_level!r}")
 
         m = 1 << max(1, math.ceil(math.log2(self.n_samples)))  # sub-transform length >= n_samples
-        device = runtime.device
+        limits = runtime.limits
         def local_bytes_for(width):          # two complex ping-pong buffers + the lanes' flags
             return 2 * self.n_fft * 8 * width + 8 * width
 
@@ -129,17 +129,17 @@ class RangeFFT(Stage):
             # (PoCL reports 512 KiB on some CPUs, 4 MiB on others: n_fft 4096 x 8 lanes needs
             # 512 KiB + 64 bytes).
             vector_width = CPU_VECTOR_WIDTH if runtime.is_cpu else 1
-            while vector_width > 1 and local_bytes_for(vector_width) > device.local_mem_size:
+            while vector_width > 1 and local_bytes_for(vector_width) > limits.local_mem_size:
                 vector_width //= 2
         if vector_width not in VECTOR_WIDTHS:
             raise ConfigError(f"vector_width must be one of {VECTOR_WIDTHS}, got {vector_width!r}")
         self.vector_width = int(vector_width)
         local_bytes = local_bytes_for(self.vector_width)
-        if local_bytes > device.local_mem_size:
+        if local_bytes > limits.local_mem_size:
             raise DeviceCapabilityError(f"n_fft = {self.n_fft} with vector_width {self.vector_width} needs "
-                                        f"{local_bytes} bytes of local memory; {device.name} has "
-                                        f"{device.local_mem_size} (use a smaller vector_width or n_fft)")
-        max_ls = min(self.n_fft // 4, device.max_work_group_size)
+                                        f"{local_bytes} bytes of local memory; {limits.name} has "
+                                        f"{limits.local_mem_size} (use a smaller vector_width or n_fft)")
+        max_ls = min(self.n_fft // 4, limits.max_work_group_size)
         if local_size is None:
             preferred = CPU_LOCAL_SIZE if runtime.is_cpu else max_ls
             local_size = 1 << int(math.log2(min(preferred, max_ls)))
