@@ -47,7 +47,9 @@
  *     class in bit 16. PACKED_LOOKS (DETSTATS, set by the host when a frame's knowledge of one voxel,
  *     n_beams x KNOWLEDGE_SCALE, stays below 2^PACKED_LOOKS and its looks below 2^(31 - PACKED_LOOKS)):
  *     the gather keeps knowledge and looks in one accumulator (sum + count << PACKED_LOOKS), one
- *     register per unit fewer of the 32 AVX-512 holds.
+ *     register per unit fewer of the 32 AVX-512 holds. NO_INT64 (a device without 64-bit integers,
+ *     optional in the embedded profile): DETSTATS gathers a node pair as an int2 per lane, not
+ *     as lanes of one ulong vector.
  *
  * fusion_cached: a still radar's frame from the recorded table: each voxel sums
  * rint(evidence[entry] * weight) over its entries, the same integers the gather gives (the
@@ -196,8 +198,15 @@ static inline int or_unit(int16 v)
 #else
 #define SPLIT_NODES(pe, pk, g) { const CAT(int, VEC2) w_ = CAT(as_int, VEC2)(g); pe = w_.even; pk = w_.odd; }
 #endif
+#ifdef NO_INT64
+/* a device without 64-bit integers (optional in the embedded profile): one int2 per lane */
+#define G2_16(pe, pk, p, at) G2_8(pe, pk, p, at) G2_(pe, pk, p, at, 8) G2_(pe, pk, p, at, 9) G2_(pe, pk, p, at, a) \
+    G2_(pe, pk, p, at, b) G2_(pe, pk, p, at, c) G2_(pe, pk, p, at, d) G2_(pe, pk, p, at, e) G2_(pe, pk, p, at, f)
+#define GATHER_NODES(pe, pk, p, at) CAT(G2_, LN)(pe, pk, p, at)
+#else
 #define GATHER_NODES(pe, pk, p, at) { const ulongL g_ = (ulongL)(CAT(GL_, LN)(((const __global ulong *)(p)), at)); \
     SPLIT_NODES(pe, pk, g_) }
+#endif
 #define GATHER_NODES_V(pe, pk, p, at) CAT(G2_, VEC)(pe, pk, p, at)
 #define SEGMENTS 4                            /* node segments over rho2 in [0, 1] */
 #define CLASSES 2                             /* target classes: upright, terrain */

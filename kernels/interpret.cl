@@ -65,6 +65,14 @@
  * exponent, and ln of the mantissa in [sqrt(1/2), sqrt(2)) by the atanh series to t^9 (error
  * < 1e-9); float32 rounding of the sum dominates, ~4e-6 decades at 1e38, 1e-7 near 1.
  * Subnormals are scaled by 2^64 first; log10(0) = -inf as log10's. */
+/* 1 where any of the eight mask bytes at p is set: two 32-bit words, since 64-bit integers are
+ * optional on embedded-profile devices (compilers join the two into one 64-bit test where they can) */
+static inline uint any8(const __global uchar *p)
+{
+    const uint2 w = as_uint2(vload8(0, p));
+    return (w.x | w.y) != 0u;
+}
+
 static inline float log10_nb(float x)
 {
     int bias = 0;
@@ -387,7 +395,7 @@ __kernel void interpret(
     for (int j = first_bin; j <= last_bin; j++) {
         /* Eight noise bins at once where no pulse is open and none starts: most of a profile
          * (PoCL does not vectorise a work-item's loop; the bins' values are as below). */
-        while (start < 0 && j + 8 <= last_bin + 1 && as_ulong(vload8(0, m + j)) == 0) {
+        while (start < 0 && j + 8 <= last_bin + 1 && !any8(m + j)) {
 #if OCCLUSION
             const int8 e = after_wide ? (int8)e_low
                 : e_high + (e_high_far - e_high) * ((int8)(j - first_bin) + (int8)(0, 1, 2, 3, 4, 5, 6, 7)) / span;
@@ -403,7 +411,7 @@ __kernel void interpret(
          * (a pulse's bins come in runs; one at a time, the logs were most of the kernel) */
         if (j >= chunk + 8) {
             chunk = j;
-            if (j + 8 <= N_BINS && as_ulong(vload8(0, m + j)) != 0)
+            if (j + 8 <= N_BINS && any8(m + j))
                 logs.v = log10_nb8(vload8(0, r + j)) - log10_nb8(vload8(0, n + j));
             else
                 chunk = -16;                                     /* no logs held */

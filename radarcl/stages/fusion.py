@@ -112,7 +112,8 @@ class Fusion(Stage):
         defines = dict(VEC=self.vector_width, ROWS=self.rows, BRICK_Z=self.brick_z, N_AZ=lattice.n_az, N_EL=lattice.n_el,
                        N_BINS=self.n_bins,
                        NEAR_FIELD=model.near_field, GAUSSIAN=model.gaussian,
-                       PER_BEAM_POSES=self.per_beam_poses, AZ_WRAP=lattice.wraps, DETSTATS=self.detstats)
+                       PER_BEAM_POSES=self.per_beam_poses, AZ_WRAP=lattice.wraps, DETSTATS=self.detstats,
+                       NO_INT64=not runtime.limits.int64)
         if self.detstats and lattice.n_beams * logodds.KNOWLEDGE_SCALE < 1 << PACKED_LOOKS:
             defines["PACKED_LOOKS"] = PACKED_LOOKS         # knowledge and looks in one accumulator
         self._defines = {k: v for k, v in defines.items() if v is not False}
@@ -122,7 +123,7 @@ class Fusion(Stage):
         kernels = build(runtime, "fusion", self._defines)
         self._kernel, self._cached_kernel = kernels["fusion"], kernels["fusion_cached"]
         self._record_kernels = None
-        self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
+        self.local_size = work_group_size(runtime, [self._kernel, self._cached_kernel], local_size, DEFAULT_LOCAL_SIZE)
         self._rotations = lattice.beam_rotations()
         self.r_lo = (self.first_bin - 0.5) * self.bin_spacing_m
         self.r_hi = (self.last_bin + 0.5) * self.bin_spacing_m
@@ -233,6 +234,8 @@ class Fusion(Stage):
             return None
         if self._record_kernels is None:
             self._record_kernels = [build(self.runtime, "fusion", {**self._defines, "RECORD": r})["fusion"] for r in (1, 2)]
+            # launches use one size; the work-item index, not the group, places a table row
+            self.local_size = min(self.local_size, *(self.runtime.max_local_size(k) for k in self._record_kernels))
         counts = cla.zeros(q, (n_rows * self.vector_width,), np.uint8)
         row_start = cla.zeros(q, (n_rows,), np.int32)
         dummy = cla.zeros(q, (1, 2), np.int32)

@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 
 from radarcl.errors import ConfigError
-from radarcl.stages import build
+from radarcl.stages import build, work_group_size
 
 # [rad] added to every angle bound, by the oracle and the kernel alike: it covers float32's
 # rounding of angles up to 2 pi (~1e-6 rad) a hundred times over.
@@ -27,6 +27,8 @@ DEVICE_REACH_M = 1e-3
 BLOCK_BITS = 2
 BLOCK = 1 << BLOCK_BITS     # bricks per block edge: the coarse pass's unit
 PVEC_CPU = 8                # bricks per work-item on a CPU, one per SIMD lane
+LOCAL_SIZE = 64             # work-items per group where the compiled kernel allows it (any size works:
+                            # the kernel returns past the last brick)
 
 
 class HeadFrame(NamedTuple):
@@ -123,6 +125,7 @@ class FusionPlanner:
         if lattice.wraps:
             defines["AZ_WRAP"] = True
         self._kernel = build(runtime, "fusion_plan", defines)["fusion_plan"]
+        self._local = work_group_size(runtime, self._kernel, None, LOCAL_SIZE)
         self._head = cla.empty(runtime.queue, (12,), np.float32)
         self._blocks, self._out = None, None
 
@@ -151,7 +154,7 @@ class FusionPlanner:
         cl.enqueue_copy(q, self._head.data, head.astype(np.float32), is_blocking=False)
         cl.enqueue_copy(q, self._blocks.data, packed, is_blocking=False)
         margin = float(frame.rot_margin) + WINDOW_SLACK
-        local = 64
+        local = self._local
         event = self._kernel(q, (-(-n // local) * local,), (local,), blocks=self._blocks, n_blocks=len(blocks),
                              grid_bx=int(grid_bricks[0]), grid_by=int(grid_bricks[1]), grid_bz=int(grid_bricks[2]),
                              brick_m=float(brick_m), head=self._head,
