@@ -21,6 +21,7 @@ This module holds the grid on the device only; ``radarcl.maps`` reads and writes
 import numpy as np
 
 from radarcl import logodds
+from radarcl.cl.limits import size_text
 from radarcl.errors import ConfigError, DeviceCapabilityError
 from radarcl.gridspec import GridSpec, assemble
 
@@ -57,6 +58,9 @@ class EvidenceGrid:
         self.keys = np.empty((0, 3), np.int32)                  # slot -> brick (bx, by, bz); -1 when free
         self.free = np.empty(0, np.int32)                       # freed slots, reused lowest first
         limit = int(runtime.limits.max_mem_alloc_size)
+        if limit < spec.brick_bytes:
+            raise DeviceCapabilityError(f"one brick of the grid takes {size_text(spec.brick_bytes)}, more than the largest "
+                                        f"buffer of {runtime.name}, {size_text(limit)} (radarcl info)")
         self.chunk_bricks = int(chunk_bricks) if chunk_bricks else max(1, min(CHUNK_BYTES, limit) // spec.brick_bytes)
         if self.chunk_bricks < 1 or self.chunk_bricks * spec.brick_bytes > limit:
             raise ConfigError(f"chunk_bricks must be in [1, {limit // spec.brick_bytes}], got {chunk_bricks!r}")
@@ -113,12 +117,12 @@ class EvidenceGrid:
 
     def _check_fits(self, needed):
         limit = int(self.runtime.limits.max_mem_alloc_size)
-        total = int(self.runtime.limits.global_mem_size)
+        total = int(self.runtime.limits.global_mem_size) - self.runtime.held_bytes    # beside the stages' buffers
         if needed * self.spec.brick_bytes * len(self.channels) > total:
-            factor = (needed * self.spec.brick_bytes * len(self.channels) / total) ** (1 / 3)
+            factor = (needed * self.spec.brick_bytes * len(self.channels) / max(total, 1)) ** (1 / 3)
             raise DeviceCapabilityError(
-                f"the grid needs {needed} bricks = {needed * self.spec.brick_bytes / 2**20:.0f} MiB but "
-                f"{self.runtime.name} has {total / 2**20:.0f} MiB; use voxels of at least "
+                f"the grid needs {needed} bricks = {size_text(needed * self.spec.brick_bytes * len(self.channels))} "
+                f"but {self.runtime.name} has {size_text(max(total, 0))} beside the pipeline's buffers; use voxels of at least "
                 f"{self.spec.voxel_m * factor:.3g} m, a smaller grid, or a rolling window (sparse bricks already "
                 "leave out space no beam reaches)")
         return limit

@@ -283,29 +283,45 @@ SELF_TEST_MATCH = 0.99              # evidence bins within 1 unit, and clear vox
 SELF_TEST_VOXEL_M = 2.0             # coarse, and out to SELF_TEST_RANGE_M: the oracle's fusion visits
 SELF_TEST_RANGE_M = 24.0            # every voxel for every beam
 SELF_TEST_BEAMS = 32                # CFAR and eq. 12 compared on this many beams of a frame (they are per beam)
+SELF_TEST_BIN_MARGIN = 1.25         # a profile sensor's bins reach this far past SELF_TEST_RANGE_M (CFAR's window)
 
 
 def self_test(runtime):
     """Build every kernel of every built-in sensor's pipeline on ``runtime``'s device, with eq. 12
     and with the detection-statistics model, run one synthetic frame through each and compare it
-    with the float64 oracle stage by stage (range FFT, CFAR and the interpreter, fusion). Returns
-    None when all agree, else a sentence saying where they differ. ``radarcl.cl.runtime`` runs
-    it in a child process before it uses a device, so a compiler that aborts cannot take radarcl
-    down with it."""
+    with the float64 oracle stage by stage (range FFT, CFAR and the interpreter, fusion).
+    Returns None when all agree; a sentence saying where they differ (the device is unusable);
+    or, where some sensor's pipeline does not fit the device (``DeviceCapabilityError``: local
+    memory, the largest buffer), ``{"problem": None, "notes": [a sentence per sensor]}``: the
+    device stays usable and only that sensor is refused, when it is asked for, with the same
+    sentence. A device that fits no built-in sensor at all is unusable. ``radarcl.cl.runtime``
+    runs it in a child process before it uses a device, so a compiler that aborts cannot take
+    radarcl down with it."""
     rng = np.random.default_rng(29)
+    notes, ran = [], 0
     for name in sensors.builtin_names():
         sensor = sensors.load(name)
         for model in ("paper", "detstats"):
             program = {"grid.voxel_m": SELF_TEST_VOXEL_M, "interpret.model": model,
                        "interpret.range_max_m": min(SELF_TEST_RANGE_M, sensor.range_interval_m[1])}
             config = mapconfig.resolve(sensor, program=program)
-            if not config.sensor.raw and config.sensor.n_bins() is None:
-                n = int(np.ceil(config.sensor.range_interval_m[1] / config.sensor.bin_spacing_m())) + 1   # the reader learns them
-                config = config.for_sensor(config.sensor.with_bins(n))
-            problem = _self_test_one(runtime, config, rng)
+            if not config.sensor.raw:
+                # bins past the tested range carry no evidence: profiles only as long as the test
+                # needs (some sensors' readers learn the count from the data)
+                n = int(np.ceil(SELF_TEST_RANGE_M * SELF_TEST_BIN_MARGIN / config.sensor.bin_spacing_m())) + 1
+                config = config.for_sensor(config.sensor.with_bins(min(n, config.sensor.n_bins() or n)))
+            what = f"sensor {name} ({'eq. 12' if model == 'paper' else 'detection statistics'})"
+            try:
+                problem = _self_test_one(runtime, config, rng)
+            except DeviceCapabilityError as exc:
+                notes.append(f"{what}: {exc}")
+                continue
+            ran += 1
             if problem:
-                return f"sensor {name} ({'eq. 12' if model == 'paper' else 'detection statistics'}): {problem}"
-    return None
+                return f"{what}: {problem}"
+    if not ran:
+        return f"fits none of the built-in sensors: {'; '.join(notes)}"
+    return dict(problem=None, notes=notes) if notes else None
 
 
 def _self_test_one(runtime, config, rng):

@@ -22,12 +22,13 @@ DEVICE_CLASSES = {
 LIMITS_ENV = "RADARCL_TEST_LIMITS"
 
 
-def narrowed(device, name):
-    """``device``'s limits narrowed to class ``name``."""
+def narrowed(device, name, **more):
+    """``device``'s limits narrowed to class ``name``, and further by ``more`` (named in the label)."""
     from radarcl.cl.limits import DeviceLimits
 
-    changes = DEVICE_CLASSES[name]
+    changes = {**DEVICE_CLASSES[name], **more}
     real = DeviceLimits.of(device)
     # a class cannot grant what the device lacks; fp64 and int64 are only ever taken away
     changes = {k: v for k, v in changes.items() if not (isinstance(v, bool) and v and not getattr(real, k))}
-    return real.narrowed(label=name, **changes)
+    label = ", ".join([name, *(f"{k}={v}" for k, v in more.items())])
+    return real.narrowed(label=label, **changes)

@@ -91,7 +91,7 @@ def test_bad_files_are_refused(runtime, tmp_path):
 
 def test_a_grid_too_big_for_the_device_says_what_to_do(runtime):
     huge = GridSpec((0, 0, 0), 0.05, (4096, 4096, 512))          # 32 GiB dense
-    with pytest.raises(DeviceCapabilityError, match=r"needs \d+ bricks = \d+ MiB.*use voxels of at least"):
+    with pytest.raises(DeviceCapabilityError, match=r"needs \d+ bricks = [\d.]+ [KMG]iB.*use voxels of at least"):
         EvidenceGrid(runtime, huge, dense=True)
     assert EvidenceGrid(runtime, huge).n_bricks == 0               # sparse: nothing allocated yet
     with pytest.raises(ConfigError, match="brick table"):

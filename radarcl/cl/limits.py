@@ -52,3 +52,12 @@ class DeviceLimits:
                 raise ValueError(f"{key} can be narrowed to at most the device's {real}, got {value!r}")
         name = f"{self.name} (as {label or ', '.join(f'{k}={v}' for k, v in changes.items())})"
         return dataclasses.replace(self, name=name, narrowed_from=tuple(changes), **changes)
+
+
+def size_text(nbytes):
+    """``nbytes`` for a sentence: "512 bytes", "32.0 KiB", "7.8 MiB", "1.25 GiB"."""
+    nbytes = float(nbytes)
+    for unit, scale in (("GiB", 2 ** 30), ("MiB", 2 ** 20), ("KiB", 2 ** 10)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.3g} {unit}"
+    return f"{nbytes:.0f} bytes"

@@ -2,7 +2,7 @@
 ``python -m radarcl.cl.probe P D [MODULE:FUNCTION ...]`` builds a small kernel on device P:D,
 then runs each named check (``runtime.DEVICE_CHECKS``, registered by the layers above: the
 pipeline's every kernel against the float64 oracle) and prints one line,
-``radarcl-probe: {"problem": null or why}``.
+``radarcl-probe: {"problem": null or why, "notes": [what it cannot run]}``.
 A compiler that aborts kills this process, not radarcl; the parent reads the signal."""
 
 import importlib
@@ -17,16 +17,20 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     p, d, checks = int(argv[0]), int(argv[1]), argv[2:]
     device = next(dev for pi, di, _, dev in runtime._all_devices() if (pi, di) == (p, d))
-    problem = runtime.probe(device)
+    problem, notes = runtime.probe(device), []
     for name in checks if problem is None else ():
         module, _, function = name.partition(":")
         try:
-            problem = getattr(importlib.import_module(module), function)(runtime.Runtime(device))
+            said = getattr(importlib.import_module(module), function)(runtime.Runtime(device))
         except Exception as exc:                     # noqa: BLE001 - the verdict is the point
-            problem = f"{type(exc).__name__} in {name}: {str(exc).splitlines()[0] if str(exc) else ''}"
+            said = f"{type(exc).__name__} in {name}: {str(exc).splitlines()[0] if str(exc) else ''}"
+        if isinstance(said, dict):
+            problem, notes = said.get("problem"), notes + list(said.get("notes", []))
+        else:
+            problem = said
         if problem is not None:
             break
-    print(runtime.PROBE_MARK + json.dumps(dict(problem=problem)), flush=True)
+    print(runtime.PROBE_MARK + json.dumps(dict(problem=problem, notes=notes)), flush=True)
     return 0
 
 

@@ -18,7 +18,7 @@ import time
 import weakref
 from pathlib import Path
 
-from radarcl.cl.limits import DeviceLimits
+from radarcl.cl.limits import DeviceLimits, size_text
 from radarcl.cl.signature import KernelFunction, parse_kernels
 from radarcl.errors import DeviceCapabilityError, KernelBuildError, NoOpenCLError
 
@@ -109,7 +109,7 @@ def _all_devices():
 
 
 _PROBE_SOURCE = "__kernel void probe(__global float *x) { x[get_global_id(0)] = sqrt(x[get_global_id(0)]); }"
-_probed = {}                                  # device -> None or the reason it is unusable
+_probed = {}                                  # device -> its verdict: {"problem": None or why, "notes": [...]}
 
 _UNKNOWN_CPU_HINT = ("this PoCL's LLVM does not know this CPU (PyPI's PoCL 3.0 has LLVM 14, which "
                      "predates AMD Zen 4/5); install a newer PoCL, e.g. Debian's pocl-opencl-icd "
@@ -118,7 +118,8 @@ _UNKNOWN_CPU_HINT = ("this PoCL's LLVM does not know this CPU (PyPI's PoCL 3.0 h
 DEVICE_CHECKS = []
 """What the child process runs on a device before radarcl uses it, after the small kernel:
 "module:function" names of checks taking a ``Runtime`` and returning None or the reason the
-device cannot be used. The runtime sits below what it checks, so the layers above register
+device cannot be used, or a dict ``{"problem": None or why, "notes": [sentences]}`` where the
+device is usable but not for everything (a sensor it cannot fit: ``device_notes``). The runtime sits below what it checks, so the layers above register
 their checks (``register_device_check``: ``radarcl.pipeline`` registers its ``self_test``, which
 builds every kernel of every built-in pipeline and compares a frame with the float64 oracle)."""
 
@@ -151,17 +152,27 @@ def build_problem(device):
     copy instruction", exit 134). So the check runs in a child process (``radarcl.cl.probe``):
     a small kernel, then the ``DEVICE_CHECKS``. A child that dies, fails a build, computes wrong results
     or runs past ``PROBE_TIMEOUT_S`` makes the device unusable, with the reason."""
+    return _verdict(device)["problem"]
+
+
+def device_notes(device):
+    """What the check said of a usable ``device`` beside its verdict: sentences naming what it
+    cannot run (a built-in sensor whose buffers do not fit it), [] when nothing."""
+    return _verdict(device)["notes"]
+
+
+def _verdict(device):
     key = device.int_ptr
     if key not in _probed:
         identity = _identity(device)
         verdicts = _read_verdicts()
         cached = verdicts.get(identity)
         if cached is not None:
-            _probed[key] = cached["problem"]
+            _probed[key] = dict(problem=cached["problem"], notes=cached.get("notes", []))
         else:
-            problem = _probe_in_child(device)
-            _probed[key] = problem
-            verdicts[identity] = dict(problem=problem, device=f"{device.platform.name} / {device.name}",
+            verdict = _probe_in_child(device)
+            _probed[key] = verdict
+            verdicts[identity] = dict(verdict, device=f"{device.platform.name} / {device.name}",
                                       driver=device.driver_version, checked=time.strftime("%Y-%m-%dT%H:%M:%S"))
             _write_verdicts(verdicts)
     return _probed[key]
@@ -194,7 +205,8 @@ def _read_verdicts():
     if not isinstance(data, dict):
         return {}
     return {k: v for k, v in data.items() if isinstance(k, str) and isinstance(v, dict)
-            and (v.get("problem") is None or isinstance(v.get("problem"), str))}
+            and (v.get("problem") is None or isinstance(v.get("problem"), str))
+            and isinstance(v.get("notes", []), list) and all(isinstance(n, str) for n in v.get("notes", []))}
 
 
 def _write_verdicts(verdicts):
@@ -213,7 +225,13 @@ def _write_verdicts(verdicts):
 
 
 def _probe_in_child(device):
-    """Run ``radarcl.cl.probe`` on ``device`` in a child process; None or the reason."""
+    """Run ``radarcl.cl.probe`` on ``device`` in a child process: its verdict, a dict of
+    "problem" (None or the reason it is unusable) and "notes" (what it cannot run)."""
+    problem = _problem_in_child(device)
+    return problem if isinstance(problem, dict) else dict(problem=problem, notes=[])
+
+
+def _problem_in_child(device):
     place = next(((p, d) for p, d, _, dev in _all_devices() if dev.int_ptr == device.int_ptr), None)
     if place is None:
         return "is not among the listed devices"
@@ -230,7 +248,10 @@ def _probe_in_child(device):
     lines = [ln for ln in done.stdout.splitlines() if ln.startswith(PROBE_MARK)]
     if done.returncode == 0 and lines:
         try:
-            return json.loads(lines[-1][len(PROBE_MARK):])["problem"]
+            said = json.loads(lines[-1][len(PROBE_MARK):])
+            problem, notes = said["problem"], said.get("notes", [])
+            if (problem is None or isinstance(problem, str)) and all(isinstance(n, str) for n in notes):
+                return dict(problem=problem, notes=list(notes))
         except (ValueError, KeyError, TypeError):
             pass
     said = [ln for ln in done.stderr.strip().splitlines() if ln.strip()]
@@ -328,6 +349,7 @@ def device_report():
             lines.append(f"      UNUSABLE       {build_problem(device)}")
         else:
             lines.append("      checked        builds and runs every kernel, agrees with the float64 oracle")
+            lines += [f"      cannot run     {note}" for note in device_notes(device)]
     lines.append(f"(* = chosen; set {DEVICE_ENV}=P:D or a name substring to override)")
     pinned = os.environ.get(AFFINITY_ENV)
     lines.append(f"PoCL CPU workers pinned to cores: {'yes' if pinned == '1' else 'no'} ({AFFINITY_ENV}="
@@ -429,8 +451,8 @@ class Runtime:
         total = self.held_bytes + nbytes
         if total > self.limits.global_mem_size:
             raise DeviceCapabilityError(
-                f"{what} needs {nbytes / 2**20:.1f} MiB of device memory beside the {self.held_bytes / 2**20:.1f} MiB "
-                f"radarcl already holds; {self.name} has {self.limits.global_mem_size / 2**20:.0f} MiB (radarcl info)")
+                f"{what} need {size_text(nbytes)} of device memory beside the {size_text(self.held_bytes)} "
+                f"radarcl already holds; {self.name} has {size_text(self.limits.global_mem_size)} (radarcl info)")
         self.held_bytes = total
         weakref.finalize(owner, self._release, nbytes)
 

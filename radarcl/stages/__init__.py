@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarcl import logodds, oracle
+from radarcl.cl.limits import size_text
 from radarcl.errors import ConfigError, DeviceCapabilityError, ShapeError
 from radarcl.gridspec import GRID_LIMIT
 
@@ -73,9 +74,12 @@ def _integer(value, what):
     return int(value)
 
 
-def work_group_size(runtime, kernel, requested, default):
-    """``requested`` (or ``default``, capped by the device) checked against the kernel's limit."""
-    limit = runtime.max_local_size(kernel)
+def work_group_size(runtime, kernels, requested, default):
+    """``requested`` (or ``default``, capped by the device) checked against the compiled limit of
+    ``kernels`` (one kernel, or a list launched with the same size): what a register-heavy GPU
+    build allows can be less than the device's maximum."""
+    kernels = kernels if isinstance(kernels, (list, tuple)) else [kernels]
+    limit = min(runtime.max_local_size(k) for k in kernels)
     size = min(default, limit) if requested is None else requested
     if isinstance(size, bool) or not (isinstance(size, (int, np.integer)) and 1 <= size <= limit):
         raise ConfigError(f"local_size must be an integer in [1, {limit}], got {requested!r}")
@@ -125,8 +129,11 @@ class Stage:
             nbytes = float(np.prod(p.shape, dtype=np.float64)) * np.dtype(p.dtype).itemsize
             if nbytes > limit:
                 raise DeviceCapabilityError(f"{type(self).__name__}: {p.what} {tuple(p.shape)} {np.dtype(p.dtype)} "
-                                            f"takes {nbytes / 2**30:.3g} GiB, more than the largest buffer of "
-                                            f"{self.runtime.name}, {limit / 2**30:.2f} GiB (radarcl info)")
+                                            f"takes {size_text(nbytes)}, more than the largest buffer of "
+                                            f"{self.runtime.name}, {size_text(limit)} (radarcl info)")
+        total = sum(float(np.prod(p.shape, dtype=np.float64)) * np.dtype(p.dtype).itemsize
+                    for p in self.inputs + self.outputs)
+        self.runtime.hold(self, total, f"{type(self).__name__}'s buffers")
         self.arrays = {p.name: cla.empty(q, p.shape, p.dtype) for p in self.inputs + self.outputs}
         self._ports = {p.name: p for p in self.inputs + self.outputs}
 
