@@ -14,14 +14,23 @@
  * Zero padding is pruned: with N_FFT = P * M and M >= N_SAMPLES, bin P m + q of the padded
  * transform is the M-point FFT of z_j W_N^{jq}, so the P sub-transforms skip the zeros
  * entirely (the first log2 P decimation-in-frequency stages would only multiply by twiddles).
- * Each M-point transform is a Stockham autosort FFT in local memory: one radix-2 pass when
- * log2 M is odd, then radix-4 passes. Twiddles come from a float64-exact table.
+ * Each M-point transform is a Stockham autosort FFT between two work buffers of N_FFT x VEC
+ * complex: one radix-2 pass when log2 M is odd, then radix-4 passes. Twiddles come from a
+ * float64-exact table.
+ *
+ * Work buffers: in local memory where they fit the device's (SCRATCH_GLOBAL 0, the faster path);
+ * otherwise (SCRATCH_GLOBAL 1) in work-group g's own slice of a global buffer, scratch[g][2][N_FFT],
+ * so every n_fft runs on a device with little local memory. The job flags and peaks stay in local
+ * memory on both paths, and both do the same arithmetic in the same order.
  *
  * -D constants (set by radarcl/stages/range_fft.py):
  *   N_FFT, N_SAMPLES, M, LOG2_M, P, LOG2_P, N_BINS  sizes as above; N_BINS = N_FFT/2 (real) or N_FFT
  *   VEC          jobs per work-group, one per SIMD lane: 1, 2, 4 or 8
- *   LOCAL_SIZE   work-group size, a power of two dividing N_FFT/4; a constant so that the
- *                butterfly loops have fixed trip counts
+ *   LOCAL_SIZE   work-group size, a power of two dividing N_FFT/4 and within the built kernel's
+ *                CL_KERNEL_WORK_GROUP_SIZE; a constant so that the butterfly loops have fixed
+ *                trip counts
+ *   SCRATCH_GLOBAL 1: work buffers in scratch[], 2 N_FFT cvec of __global memory per work-group;
+ *                0 or unset: in __local memory, 2 N_FFT cvec beside the flags
  *   INPUT_KIND   0 float32 real, 1 int16 real, 2 complex64 (float2)
  *   WINDOWED     1: multiply samples by window[] on load; 0: rectangular, no load
  *   POWER        1: |X|^2 on store; 0: |X|
@@ -65,6 +74,16 @@ typedef float16 cvec;
 #error "VEC must be 1, 2, 4 or 8"
 #endif
 typedef union { rvec v; float s[VEC]; } lanes_t;
+
+/* Where the two work buffers live, and the fence a barrier needs to order them. The flags are
+ * always local, so the global path's barriers fence both spaces. */
+#if SCRATCH_GLOBAL
+#define WORK __global
+#define WORK_FENCE (CLK_GLOBAL_MEM_FENCE | CLK_LOCAL_MEM_FENCE)
+#else
+#define WORK __local
+#define WORK_FENCE CLK_LOCAL_MEM_FENCE
+#endif
 #if VEC == 2
 typedef int2 ivec;
 #define EVEN_BEAMS(p) ((float2)((float)(p)[0], (float)(p)[2 * N_SAMPLES]))
@@ -116,7 +135,7 @@ inline float load_part(float v, float clip_level, int *bad, float *peak)
 }
 
 /* Sample row j of the group's jobs into the P blocks: buf[q M + j] = w_j z_j W_N^{j q}. */
-inline void put_row(__local cvec *buf, int j, cvec z, const __global float *window, const __global float2 *twiddle)
+inline void put_row(WORK cvec *buf, int j, cvec z, const __global float *window, const __global float2 *twiddle)
 {
 #if WINDOWED
     if (j < N_SAMPLES) z *= window[j];
@@ -146,10 +165,16 @@ void range_fft(
     const float clip_level,           /* |sample| >= this flags the beam CLIPPED [ADC units] */
     const int n_beams,                /* beams in the frame (n_az * n_el) */
     __global float *profiles,         /* (n_beams, N_BINS) magnitude or power */
-    __global uchar *flags)            /* (n_beams) FLAG_* bits */
+    __global uchar *flags,            /* (n_beams) FLAG_* bits */
+    __global cvec *scratch)           /* (work-groups, 2, N_FFT) work buffers if SCRATCH_GLOBAL, else unused */
 {
+#if SCRATCH_GLOBAL
+    __global cvec *buf0 = scratch + (size_t)get_group_id(0) * (2 * N_FFT);
+    __global cvec *buf1 = buf0 + N_FFT;
+#else
     __local cvec buf0[N_FFT];
     __local cvec buf1[N_FFT];
+#endif
     __local int job_flags[BEAMS_PER_JOB * VEC];
     __local int job_peak[BEAMS_PER_JOB * VEC];       /* largest |sample| loaded, float bits */
 
@@ -246,7 +271,7 @@ void range_fft(
             if (peak[b] > 0.0f) atomic_max(&job_peak[b], as_int(peak[b]));   /* >= 0: int order = float order */
         }
     }
-    barrier(CLK_LOCAL_MEM_FENCE);
+    barrier(WORK_FENCE);
 #if !COMPLEX_INPUT
     /* The weaker beam of a pair takes the stronger's rounding (oracle.beam_flags). The passes
      * below end with barriers, so the store sees these flags. */
@@ -259,8 +284,8 @@ void range_fft(
 #endif
 
     /* Stockham passes over the P blocks at once; p = length of the finished sub-transforms. */
-    __local cvec *src = buf0;
-    __local cvec *dst = buf1;
+    WORK cvec *src = buf0;
+    WORK cvec *dst = buf1;
     int p = 1;
 #if LOG2_M & 1
     for (int i = lid; i < N_FFT / 2; i += LOCAL_SIZE) {
@@ -271,8 +296,8 @@ void range_fft(
         dst[base + 2 * ii] = u0 + u1;                      /* p = 1: no twiddle */
         dst[base + 2 * ii + 1] = u0 - u1;
     }
-    barrier(CLK_LOCAL_MEM_FENCE);
-    { __local cvec *t = src; src = dst; dst = t; }
+    barrier(WORK_FENCE);
+    { WORK cvec *t = src; src = dst; dst = t; }
     p = 2;
 #endif
 #if LOG2_M >= 2
@@ -294,8 +319,8 @@ void range_fft(
             dst[j + 2 * p] = v0 - v2;
             dst[j + 3 * p] = v1 - v3;
         }
-        barrier(CLK_LOCAL_MEM_FENCE);
-        { __local cvec *t = src; src = dst; dst = t; }
+        barrier(WORK_FENCE);
+        { WORK cvec *t = src; src = dst; dst = t; }
     }
 #endif
 

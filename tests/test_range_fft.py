@@ -2,11 +2,14 @@
 
 import numpy as np
 import pytest
+from device_classes import KIB, MIB, narrowed
 from tolerances import RANGE_FFT_RTOL, WEAK_TONE_RTOL
 
 from radarcl import oracle
-from radarcl.errors import ConfigError, ShapeError
-from radarcl.stages.range_fft import RangeFFT
+from radarcl.cl import Runtime
+from radarcl.cl.limits import DeviceLimits
+from radarcl.errors import ConfigError, DeviceCapabilityError, ShapeError
+from radarcl.stages.range_fft import MAX_FFT, RangeFFT
 
 
 def make_samples(rng, shape, dtype):
@@ -247,3 +250,163 @@ def test_full_groups_check_samples_as_vectors(runtime, dtype):
     assert 0 < valid.sum() < 32
     assert rel_err(got.profiles[valid], one.profiles[valid]) <= RANGE_FFT_RTOL
     assert rel_err(got.profiles[valid], oracle.range_profile(x, 512)[valid]) <= RANGE_FFT_RTOL
+
+
+# Work buffers in global memory where local memory is short: GPU classes faked on the device
+# under test (tests/device_classes.py), every result against the float64 oracle.
+
+@pytest.fixture(scope="module")
+def as_class(runtime):
+    """``as_class(name)``: a runtime on the device under test with the limits of GPU class
+    ``name``, made once per module (each runtime builds its kernels once)."""
+    made = {}
+
+    def make(name):
+        if name not in made:
+            made[name] = Runtime(runtime.device, limits=narrowed(runtime.device, name))
+        return made[name]
+    return make
+
+
+def with_bad_samples(x):
+    """A NaN (floats) or clipped (int16) sample in the first beam, and in the last one of more
+    than two, so that the flags travel through the path too and a valid beam is left."""
+    x = x.copy()
+    beams = x.reshape(-1, x.shape[-1])
+    bad = np.iinfo(np.int16).max if x.dtype == np.int16 else np.nan
+    beams[0, 3] = bad
+    if len(beams) > 2:
+        beams[-1, -1] = bad
+    return x
+
+
+GLOBAL_CASES = [  # (class, n_samples, n_fft, batch)
+    ("gpu-32k", 512, 2048, (5, 3)),         # 2 x 2048 complex + flags is just past 32 KiB; log2 M odd
+    ("gpu-16k", 4096, 4096, (5, 3)),        # no padding: every pass in global memory
+    ("embedded-32k", 200, 4096, (3, 1)),    # P = 16 pruned blocks
+    ("gpu-16k", 40000, MAX_FFT, (2, 1)),    # the longest transform, M = n_fft
+    ("gpu-16k", 256, MAX_FFT, (2, 1)),      # the longest transform, P = 256
+]
+
+
+@pytest.mark.parametrize("dtype", [np.int16, np.float32, np.complex64])
+@pytest.mark.parametrize("cls,n,n_fft,batch", GLOBAL_CASES)
+def test_global_work_buffers_match_oracle(as_class, cls, n, n_fft, batch, dtype):
+    rt = as_class(cls)
+    x = with_bad_samples(make_samples(np.random.default_rng(n_fft + n), (*batch, n), dtype))
+    plan = RangeFFT(rt, batch, n, n_fft, dtype=dtype)
+    assert plan.scratch_space == "global" and plan.scratch_bytes > 0
+    assert plan.local_bytes <= rt.limits.local_mem_size
+    got = plan(x)
+    want = oracle.range_profile(x, n_fft)
+    assert np.array_equal(got.flags, oracle.beam_flags(x, plan.clip_level))
+    assert np.array_equal(np.isnan(got.profiles), np.isnan(want))
+    valid = got.valid
+    assert valid.any()
+    assert rel_err(got.profiles[valid], want[valid]) <= RANGE_FFT_RTOL
+
+
+@pytest.mark.parametrize("cls,n_fft,space", [
+    ("gpu-16k", 512, "local"),      # 8 KiB of buffers + flags fit
+    ("gpu-16k", 1024, "global"),    # 16 KiB of buffers + 16 bytes of flags do not
+    ("gpu-32k", 1024, "local"),
+    ("gpu-32k", 2048, "global"),
+    ("gpu-48k", 2048, "local"),
+    ("embedded-32k", 1024, "local"),
+])
+def test_local_work_buffers_wherever_they_fit(as_class, cls, n_fft, space):
+    rt = as_class(cls)
+    x = make_samples(np.random.default_rng(4), (4, 4, 256), np.int16)
+    plan = RangeFFT(rt, (4, 4), 256, n_fft)
+    assert plan.scratch_space == space
+    assert plan.vector_width == 1                          # a GPU class: one job per work-group
+    assert plan.local_bytes <= rt.limits.local_mem_size
+    assert plan.scratch_bytes == (0 if space == "local" else plan.n_groups * 2 * n_fft * 8)
+    assert rel_err(plan(x).profiles, oracle.range_profile(x, n_fft)) <= RANGE_FFT_RTOL
+
+
+@pytest.mark.parametrize("dtype,flag_bytes", [(np.int16, 16), (np.float32, 16), (np.complex64, 8)])
+def test_local_memory_counts_every_beams_flags(runtime, dtype, flag_bytes):
+    """job_flags and job_peak hold one int each per beam: two beams per job for real input, one
+    for complex. Local memory of exactly the buffers and one complex job's flags takes complex
+    input on the local path, real input on the global one."""
+    buffers = 2 * 1024 * 8
+    x = make_samples(np.random.default_rng(15), (2, 1, 256), dtype)
+    roomy = RangeFFT(Runtime(runtime.device, limits=narrowed(runtime.device, "gpu-32k")), (2, 1), 256, 1024,
+                     dtype=dtype)
+    assert roomy.scratch_space == "local" and roomy.local_bytes == buffers + flag_bytes
+    limits = DeviceLimits.of(runtime.device).narrowed(label="buffers + 8 bytes", is_cpu=False,
+                                                      local_mem_size=buffers + 8)
+    tight = RangeFFT(Runtime(runtime.device, limits=limits), (2, 1), 256, 1024, dtype=dtype)
+    assert tight.scratch_space == ("local" if flag_bytes <= 8 else "global")
+    assert tight.local_bytes <= limits.local_mem_size
+    assert rel_err(tight(x).profiles, oracle.range_profile(x, 1024)) <= RANGE_FFT_RTOL
+
+
+@pytest.mark.parametrize("vector_width", [1, 2, 4, 8])
+@pytest.mark.parametrize("local_size", [1, 16, 64])
+def test_global_work_buffers_at_every_vector_width(runtime, vector_width, local_size):
+    """A CPU with little local memory: the lanes of the vectorised load and the butterflies
+    work in global memory, full groups and a partial last one (17 beams) alike."""
+    limits = DeviceLimits.of(runtime.device).narrowed(label="cpu-16k", local_mem_size=16 * KIB)
+    rt = Runtime(runtime.device, limits=limits)
+    x = with_bad_samples(make_samples(np.random.default_rng(12), (17, 1, 256), np.float32))
+    plan = RangeFFT(rt, (17, 1), 256, 1024, dtype=np.float32, vector_width=vector_width, local_size=local_size)
+    assert plan.scratch_space == "global"
+    got = plan(x)
+    want = oracle.range_profile(x, 1024)
+    assert np.array_equal(got.flags, oracle.beam_flags(x, plan.clip_level))
+    valid = got.valid
+    assert rel_err(got.profiles[valid], want[valid]) <= RANGE_FFT_RTOL
+
+
+def test_a_cpu_without_room_for_any_width_keeps_its_lanes(runtime):
+    limits = DeviceLimits.of(runtime.device).narrowed(label="cpu-16k", local_mem_size=16 * KIB)
+    plan = RangeFFT(Runtime(runtime.device, limits=limits), (4, 4), 256, 2048)
+    lanes = 8 if limits.is_cpu else 1                         # a GPU under test takes one job per group
+    assert plan.scratch_space == "global" and plan.vector_width == lanes
+    assert plan.local_bytes == 2 * 4 * 2 * lanes              # the flags of the group's beam pairs
+
+
+def test_scratch_is_held_against_global_memory(as_class):
+    rt = as_class("gpu-16k")
+    before = rt.held_bytes
+    plan = RangeFFT(rt, (8, 4), 256, 4096)
+    assert plan.scratch_space == "global" and plan.scratch_bytes == 16 * 2 * 4096 * 8
+    ports = sum(a.nbytes for a in plan.arrays.values())          # the frame, profiles and flags
+    assert rt.held_bytes == before + plan.scratch_bytes + ports
+
+
+def test_scratch_beyond_the_largest_buffer_is_refused(runtime):
+    """What the global path needs and what the device has, in one sentence."""
+    limits = narrowed(runtime.device, "gpu-16k").narrowed(max_mem_alloc_size=1 * MIB)
+    said = (r"n_fft = 4096 with vector_width 1 needs 65552 bytes of local memory per work-group, more than the "
+            r"16384 of .*, so its work buffers go to global memory: 32 work-groups x 65536 bytes = 2 MiB in one "
+            r"buffer, more than the largest buffer the device allows, 1 MiB")
+    with pytest.raises(DeviceCapabilityError, match=said):
+        RangeFFT(Runtime(runtime.device, limits=limits), (16, 4), 256, 4096)
+
+
+def test_work_group_size_within_the_device_limit(runtime):
+    limits = narrowed(runtime.device, "gpu-16k").narrowed(max_work_group_size=64)
+    rt = Runtime(runtime.device, limits=limits)
+    x = make_samples(np.random.default_rng(13), (4, 2, 256), np.int16)
+    plan = RangeFFT(rt, (4, 2), 256, 1024)                   # n_fft / 4 = 256 workers wanted
+    assert plan.local_size == 64
+    assert rel_err(plan(x).profiles, oracle.range_profile(x, 1024)) <= RANGE_FFT_RTOL
+    with pytest.raises(ConfigError, match="local_size must be a power of two <= 64"):
+        RangeFFT(rt, (4, 2), 256, 1024, local_size=128)
+
+
+def test_work_group_size_within_the_built_kernels_limit(as_class, monkeypatch):
+    """The built kernel may run fewer work-items than the device (its registers, its local
+    memory; CL_KERNEL_WORK_GROUP_SIZE): a defaulted size is rebuilt at the largest power of
+    two within it, a requested one is refused with a sentence."""
+    rt = as_class("gpu-16k")
+    monkeypatch.setattr(rt, "max_local_size", lambda kernel: 100)
+    x = make_samples(np.random.default_rng(14), (4, 2, 256), np.float32)
+    plan = RangeFFT(rt, (4, 2), 256, 1024, dtype=np.float32)
+    assert plan.local_size == 64
+    assert rel_err(plan(x).profiles, oracle.range_profile(x, 1024)) <= RANGE_FFT_RTOL
+    with pytest.raises(ConfigError, match=r"local_size 128 is more than the 100 work-items .* runs this build"):
+        RangeFFT(rt, (4, 2), 256, 1024, dtype=np.float32, local_size=128)

@@ -25,7 +25,7 @@ def test_a_device_that_cannot_build_is_passed_over_and_named(monkeypatch):
     says why not, and `radarcl info` marks it."""
     default = choose_device()
     reason = "cannot build kernels (error: unknown target CPU 'generic'); install a newer PoCL"
-    monkeypatch.setattr(rt_module, "_probed", {default.int_ptr: reason})
+    monkeypatch.setattr(rt_module, "_probed", {default.int_ptr: dict(problem=reason, notes=[])})
     chosen = [dev for _, _, _, dev in rt_module._all_devices() if rt_module.build_problem(dev) is None]
     if chosen:
         assert choose_device(spec="").int_ptr == chosen[0].int_ptr != default.int_ptr
@@ -103,9 +103,11 @@ def test_kernels_are_called_by_name_as_their_source_declares(runtime):
     from radarcl.errors import ConfigError, ShapeError
 
     f = runtime.kernels("range_fft", _defines())["range_fft"]
-    assert f.names == ("samples", "window", "twiddle", "scale", "clip_level", "n_beams", "profiles", "flags")
+    assert f.names == ("samples", "window", "twiddle", "scale", "clip_level", "n_beams", "profiles", "flags",
+                       "scratch")
     q = runtime.queue
-    bufs = {n: cla.empty(q, 64, np.float32) for n in ("samples", "window", "twiddle", "scale", "profiles", "flags")}
+    bufs = {n: cla.empty(q, 64, np.float32)
+            for n in ("samples", "window", "twiddle", "scale", "profiles", "flags", "scratch")}
     with pytest.raises(ConfigError, match="missing \\['n_beams'\\]"):
         f(q, (2,), (2,), clip_level=1.0, **bufs)
     with pytest.raises(ConfigError, match="unknown \\['beams'\\]"):

@@ -12,6 +12,12 @@ downstream; their paired beam is unaffected. Real beams are paired in one comple
 weaker of a pair whose peaks differ by more than ``oracle.PAIR_RATIO`` is flagged
 ``FLAG_CROSSTALK`` and gives no evidence (int16 input never reaches it). A beam that reaches
 ``clip_level`` is flagged ``FLAG_CLIPPED`` and counted.
+
+Work memory: the kernel's two complex ping-pong buffers (2 x n_fft x vector_width complex64 per
+work-group) live in local memory where the device's holds them, the faster path; otherwise in a
+global scratch buffer the plan allocates once, one slice per work-group (``scratch_space`` says
+which), so every n_fft up to ``MAX_FFT`` runs on any device, a GPU with 16 KiB of local memory
+included. Both paths do the same arithmetic in the same order.
 """
 
 import math
@@ -20,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarcl import oracle
+from radarcl.cl.limits import size_text
 from radarcl.config.stage_config import is_power_of_two
 from radarcl.errors import ConfigError, DeviceCapabilityError, ShapeError
 from radarcl.stages import Port, Stage, beam_batch, build, count
@@ -29,7 +36,7 @@ from radarcl.stages import Port, Stage, beam_batch, build, count
 # Full groups of real beams load each sample row as two vectors with the checks per lane
 # (lane by lane with branches the loads took half the kernel): bench range-fft, upload +
 # kernel vs scipy.fft, 1.37 / 1.15 -> 0.95 / 0.90 at n_fft 512 / 1024 (PoCL 3.1, Zen 5).
-MAX_FFT = 1 << 16              # the kernel's two complex work buffers live in local memory
+MAX_FFT = 1 << 16              # the longest transform the tests check against the oracle
 CPU_LOCAL_SIZE = 16
 CPU_VECTOR_WIDTH = 8
 VECTOR_WIDTHS = (1, 2, 4, 8)
@@ -72,12 +79,17 @@ class RangeFFT(Stage):
     clip_level: |sample| at or above this flags the beam CLIPPED (default: int16 rails
         for int16 input, never for floats).
     local_size: work-group size (a power of two dividing n_fft/4); default 16 on a CPU device,
-        n_fft/4 (or the device limit) on a GPU.
+        n_fft/4 (or the device limit) on a GPU, halved to what the built kernel allows
+        (CL_KERNEL_WORK_GROUP_SIZE); a local_size the built kernel cannot run is refused.
     vector_width: jobs (beam pairs, or I/Q beams) per work-group, one per SIMD lane: 1, 2, 4, 8;
-        default 8 on a CPU device (halved until its buffers fit the device's local memory), 1 on
-        a GPU.
+        default 8 on a CPU device (halved until its buffers fit the device's local memory; 8
+        with global work buffers when no width fits), 1 on a GPU.
 
     Float outputs stay finite: samples beyond ``oracle.sample_limit(n_samples)`` are flagged.
+
+    After construction ``scratch_space`` is "local" or "global" (where the work buffers live),
+    ``local_bytes`` the local memory a work-group uses and ``scratch_bytes`` the global scratch
+    buffer's size (0 on the local path).
     """
 
     def __init__(self, runtime, batch, n_samples, n_fft, *, dtype=np.int16, window="hann",
@@ -120,39 +132,87 @@ class RangeFFT(Stage):
             raise ConfigError(f"clip_level must be positive, got {clip_level!r}")
 
         m = 1 << max(1, math.ceil(math.log2(self.n_samples)))  # sub-transform length >= n_samples
-        limits = runtime.limits
-        def local_bytes_for(width):          # two complex ping-pong buffers + the lanes' flags
-            return 2 * self.n_fft * 8 * width + 8 * width
+        limits = runtime.limits                # every device limit from here, never runtime.device
+        beams_per_job = 1 if self.complex_input else 2
+
+        def buffer_bytes(width):             # the two complex ping-pong buffers of a work-group
+            return 2 * self.n_fft * np.dtype(np.complex64).itemsize * width
+
+        def flag_bytes(width):               # job_flags and job_peak: one int per beam of the group
+            return 2 * 4 * beams_per_job * width
+
+        def fits_local(width):
+            return buffer_bytes(width) + flag_bytes(width) <= limits.local_mem_size
 
         if vector_width is None:
             # The widest lane count up to the device default whose buffers fit local memory
-            # (PoCL reports 512 KiB on some CPUs, 4 MiB on others: n_fft 4096 x 8 lanes needs
-            # 512 KiB + 64 bytes).
-            vector_width = CPU_VECTOR_WIDTH if runtime.is_cpu else 1
-            while vector_width > 1 and local_bytes_for(vector_width) > limits.local_mem_size:
+            # (PoCL reports 512 KiB on some CPUs, 4 MiB on others); where none fits, the
+            # default width with global work buffers, whose size does not depend on the width.
+            default_width = CPU_VECTOR_WIDTH if runtime.is_cpu else 1
+            vector_width = default_width
+            while vector_width > 1 and not fits_local(vector_width):
                 vector_width //= 2
+            if not fits_local(vector_width):
+                vector_width = default_width
+                while vector_width > 1 and flag_bytes(vector_width) > limits.local_mem_size:
+                    vector_width //= 2
         if vector_width not in VECTOR_WIDTHS:
             raise ConfigError(f"vector_width must be one of {VECTOR_WIDTHS}, got {vector_width!r}")
         self.vector_width = int(vector_width)
-        local_bytes = local_bytes_for(self.vector_width)
-        if local_bytes > limits.local_mem_size:
-            raise DeviceCapabilityError(f"n_fft = {self.n_fft} with vector_width {self.vector_width} needs "
-                                        f"{local_bytes} bytes of local memory; {limits.name} has "
-                                        f"{limits.local_mem_size} (use a smaller vector_width or n_fft)")
+        # Local memory is faster: global work buffers only where the local ones do not fit.
+        self.scratch_space = "local" if fits_local(self.vector_width) else "global"
+        if self.scratch_space == "local":
+            self.local_bytes = buffer_bytes(self.vector_width) + flag_bytes(self.vector_width)
+            self.scratch_bytes = 0
+        else:
+            self.local_bytes = flag_bytes(self.vector_width)
+            self.scratch_bytes = self.n_groups * buffer_bytes(self.vector_width)
+            if self.local_bytes > limits.local_mem_size:
+                raise DeviceCapabilityError(
+                    f"the range FFT with vector_width {self.vector_width} needs {self.local_bytes} bytes of local "
+                    f"memory for its beam flags; {limits.name} has {limits.local_mem_size}"
+                    + (" (use a smaller vector_width)" if self.vector_width > 1 else ""))
+            if self.scratch_bytes > limits.max_mem_alloc_size:
+                raise DeviceCapabilityError(
+                    f"n_fft = {self.n_fft} with vector_width {self.vector_width} needs "
+                    f"{buffer_bytes(self.vector_width) + flag_bytes(self.vector_width)} bytes of local memory per "
+                    f"work-group, more than the {limits.local_mem_size} of {limits.name}, "
+                    f"so its work buffers go to global memory: {self.n_groups} work-groups x "
+                    f"{buffer_bytes(self.vector_width)} bytes = {size_text(self.scratch_bytes)} in one buffer, "
+                    f"more than the largest buffer the device allows, {size_text(limits.max_mem_alloc_size)} "
+                    f"(process fewer beams per frame)")
+
         max_ls = min(self.n_fft // 4, limits.max_work_group_size)
+        requested = local_size
         if local_size is None:
             preferred = CPU_LOCAL_SIZE if runtime.is_cpu else max_ls
             local_size = 1 << int(math.log2(min(preferred, max_ls)))
         if not is_power_of_two(local_size) or local_size > max_ls:
             raise ConfigError(f"local_size must be a power of two <= {max_ls} (n_fft/4 and the "
                               f"device limit), got {local_size!r}")
-        self.local_size = int(local_size)
         defines = dict(N_FFT=self.n_fft, N_SAMPLES=self.n_samples, M=m, LOG2_M=int(math.log2(m)),
                        P=self.n_fft // m, LOG2_P=int(math.log2(self.n_fft // m)), N_BINS=self.n_bins,
-                       LOCAL_SIZE=self.local_size, VEC=self.vector_width, INPUT_KIND=_INPUT_KINDS[self.dtype],
+                       VEC=self.vector_width, INPUT_KIND=_INPUT_KINDS[self.dtype],
                        WINDOWED=window != "rect", POWER=output == "power",
-                       CHECK_FINITE=self.dtype != np.int16, SAMPLE_LIMIT=oracle.sample_limit(self.n_samples))
-        self._kernel = build(runtime, "range_fft", defines)["range_fft"]
+                       CHECK_FINITE=self.dtype != np.int16, SAMPLE_LIMIT=oracle.sample_limit(self.n_samples),
+                       SCRATCH_GLOBAL=self.scratch_space == "global")
+        # LOCAL_SIZE is fixed before the build (reqd_work_group_size), but only the built kernel
+        # says how many work-items it can run (its registers and local memory): a defaulted size
+        # is halved to that and built again, a requested one is refused.
+        while True:
+            self._kernel = build(runtime, "range_fft", dict(defines, LOCAL_SIZE=local_size))["range_fft"]
+            kernel_limit = runtime.max_local_size(self._kernel)
+            if local_size <= kernel_limit:
+                break
+            if requested is not None:
+                raise ConfigError(f"local_size {local_size} is more than the {kernel_limit} work-items {limits.name} "
+                                  f"runs this build of the range-FFT kernel with (CL_KERNEL_WORK_GROUP_SIZE); use "
+                                  f"local_size <= {kernel_limit}, or leave it out")
+            if kernel_limit < 1:
+                raise DeviceCapabilityError(f"the range-FFT kernel needs at least one work-item per work-group; "
+                                            f"{limits.name} allows {kernel_limit} for it")
+            local_size = 1 << int(math.log2(kernel_limit))
+        self.local_size = int(local_size)
         import pyopencl.array as cla
 
         j = np.arange(self.n_fft)
@@ -161,6 +221,11 @@ class RangeFFT(Stage):
             window=cla.to_device(q, w.astype(np.float32)),
             twiddle=cla.to_device(q, np.exp(-2j * np.pi * j / self.n_fft).astype(np.complex64)),
             scale=cla.to_device(q, per_bin.astype(np.float32)))
+        if self.scratch_space == "global":
+            runtime.hold(self, self.scratch_bytes, "the range FFT's global work buffers")
+            self._scratch = runtime.empty(self.scratch_bytes)
+        else:                                  # the kernel takes the argument but never reads it
+            self._scratch = runtime.empty(np.dtype(np.complex64).itemsize * self.vector_width)   # one cvec
         self._allocate([Port("samples", self.input_shape, self.dtype, "a frame")],
                        [Port("profiles", (*self.batch, self.n_bins), np.dtype(np.float32), "range profiles"),
                         Port("flags", self.batch, np.dtype(np.uint8), "beam flags")])
@@ -196,7 +261,7 @@ class RangeFFT(Stage):
         return self._kernel(self.runtime.queue, gsize, (self.local_size,), wait_for=wait_for,
                             samples=self.device("samples", samples), clip_level=self.clip_level,
                             n_beams=self.n_beams, profiles=self.arrays["profiles"], flags=self.arrays["flags"],
-                            **self._constants)
+                            scratch=self._scratch, **self._constants)
 
     def _result(self, profiles, flags):
         return RangeFFTResult(profiles, flags)
