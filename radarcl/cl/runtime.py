@@ -119,9 +119,10 @@ DEVICE_CHECKS = []
 """What the child process runs on a device before radarcl uses it, after the small kernel:
 "module:function" names of checks taking a ``Runtime`` and returning None or the reason the
 device cannot be used, or a dict ``{"problem": None or why, "notes": [sentences]}`` where the
-device is usable but not for everything (a sensor it cannot fit: ``device_notes``). The runtime sits below what it checks, so the layers above register
-their checks (``register_device_check``: ``radarcl.pipeline`` registers its ``self_test``, which
-builds every kernel of every built-in pipeline and compares a frame with the float64 oracle)."""
+device is usable but not for everything (a sensor it cannot fit: ``device_notes``). The runtime
+sits below what it checks, so the layers above register their checks (``register_device_check``:
+``radarcl.pipeline`` registers its ``self_test``, which builds every kernel of every built-in
+pipeline and compares a frame with the float64 oracle)."""
 
 
 def register_device_check(function):
@@ -343,7 +344,8 @@ def device_report():
             f"local {device.local_mem_size // 1024} KiB",
             f"      int32 atomics  {'yes' if 'cl_khr_global_int32_base_atomics' in ext else 'no'}, "
             f"int64 atomics {'yes' if 'cl_khr_int64_base_atomics' in ext else 'no'}, "
-            f"fp64 {'yes' if 'cl_khr_fp64' in ext else 'no'}",
+            f"64-bit integers {'yes' if DeviceLimits.of(device).int64 else 'no (kernels built without)'}, "
+            f"fp64 {'yes' if 'cl_khr_fp64' in ext else 'no (not needed)'}",
         ]
         if build_problem(device):
             lines.append(f"      UNUSABLE       {build_problem(device)}")
