@@ -1,12 +1,14 @@
 """`radarcl bench NAME`: benchmarks, each printing its figures and their ratio to a baseline
 measured in the same run (interleaved, medians: ``timing``). Each benchmark module has
-``add_arguments(parser)`` and ``command(args, runtime, say)`` -> (result dict, table lines)."""
+``add_arguments(parser)`` and ``command(args, runtime, say)`` -> (result dict, table lines).
+`radarcl bench all` (``suite``) runs those that tell a device apart, at sizes for a lent GPU, into
+one JSON and one table; it exits 1 when one of them failed."""
 
 import json
 import sys
 
 from radarcl.bench import (cfar, drive, frames, fusion, heldout_scans, live, merge, polar_read, quality, range_fft,
-                           scenes, store, viewer)
+                           scenes, store, suite, viewer)
 from radarcl.commands.options import runtime
 
 SUMMARY = "benchmarks, each against a baseline measured in the same run"
@@ -47,9 +49,14 @@ def add_arguments(parser):
         b.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
         module.add_arguments(b)
         b.set_defaults(bench_module=module)
+    b = benches.add_parser("all", help=suite.SUMMARY, description=suite.DESCRIPTION)
+    suite.add_arguments(b)
+    b.set_defaults(bench_module=suite)
 
 
 def run(args):
+    if args.bench_module is suite:
+        return suite.main(args, runtime)
     say = (lambda line: None) if args.json else (lambda line: print(line, file=sys.stderr))
     say(f"measuring {args.bench} ...")
     result, lines = args.bench_module.command(args, runtime, say)

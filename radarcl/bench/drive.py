@@ -20,6 +20,7 @@ in the same run: today's unbounded grid on the same frames. Beside them: the mem
 import math
 import multiprocessing
 import os
+import queue as queues
 import shutil
 import sys
 import tempfile
@@ -216,18 +217,32 @@ def _child(queue, kwargs):
 
 
 def in_process(**kwargs):
-    """``run_drive`` in a fresh process (its memory high-water marks are its own)."""
+    """``run_drive`` in a fresh process (its memory high-water marks are its own). A process that
+    dies without answering (killed for memory, a driver's crash) is an error, not a wait for ever."""
     ctx = multiprocessing.get_context("spawn")
     queue = ctx.Queue()
     p = ctx.Process(target=_child, args=(queue, kwargs))
     p.start()
-    status, value = queue.get()
+    status, value = _answer(queue, p)
     p.join()
     if status != "ok":
         from radarcl.errors import RadarclError
 
         raise RadarclError(f"the drive failed: {value}")
     return value
+
+
+def _answer(queue, process, poll_s=1.0):
+    """The child's (status, value), or ("error", why) once it has ended without putting one."""
+    while True:
+        try:
+            return queue.get(timeout=poll_s)
+        except queues.Empty:
+            if not process.is_alive():
+                try:                                # it may have answered just before it ended
+                    return queue.get(timeout=poll_s)
+                except queues.Empty:
+                    return "error", f"its process ended (exit code {process.exitcode}) without a result"
 
 
 def memory_ratio(data, voxel_m, n_frames=MEMORY_SCANS):
@@ -241,9 +256,9 @@ def memory_ratio(data, voxel_m, n_frames=MEMORY_SCANS):
 
 
 def run(data, minutes=None, scans=None, voxel_m=DEFAULT_VOXEL_M, window_m=None, baseline_scans=None, picture=None,
-        report=None):
+        report=None, memory_scans=MEMORY_SCANS):
     """The bench: the rolling drive, the unbounded baseline on the same frames (or its first
-    ``baseline_scans``), the planar / cubic memory; returns the --json dict."""
+    ``baseline_scans``), the planar / cubic memory on ``memory_scans``; returns the --json dict."""
     say = report or (lambda _: None)
     track, stamps = drive_track(data)
     n = len(stamps) - 1
@@ -266,8 +281,8 @@ def run(data, minutes=None, scans=None, voxel_m=DEFAULT_VOXEL_M, window_m=None, 
         nb = n if baseline_scans is None else min(n, int(baseline_scans))
         say(f"baseline: today's unbounded grid on the first {nb} of those scans ...")
         baseline = in_process(data=data, n_frames=nb, voxel_m=voxel_m)
-        say(f"planar vs cubic bricks on {MEMORY_SCANS} scans ...")
-        memory = memory_ratio(data, voxel_m)
+        say(f"planar vs cubic bricks on {memory_scans} scans ...")
+        memory = memory_ratio(data, voxel_m, memory_scans)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     result = dict(benchmark="drive", scans_repeat=True, frames=n, whole_drive_frames=len(stamps) - 1,
