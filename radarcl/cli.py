@@ -1,7 +1,8 @@
 """The `radarcl` command: a table of subcommands (``COMMANDS``), each a module of
 ``radarcl.commands`` (or ``radarcl.bench``) that owns its options and its run.
 
-Exit status: 0 done, 2 a radarcl error or a bad argument (one sentence on stderr), 130 Ctrl-C,
+Exit status: 0 done, 1 a command that ran but found something wrong (`bench all`: a bench
+failed), 2 a radarcl error or a bad argument (one sentence on stderr), 130 Ctrl-C,
 143 SIGTERM, 70 an unexpected error (a bug: one sentence, and the traceback with --debug or
 RADARCL_DEBUG=1).
 """
