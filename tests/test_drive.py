@@ -13,6 +13,7 @@ from radarcl.gridspec import BRICK
 from radarcl.maps import disk
 
 FIRST, FRAMES, VOXEL, RANGE, WINDOW = 8361, 24, 0.4, 20.0, 27.0
+HOST_GROWTH_MIB = 1024        # a bound on the drive's own resident growth (its maps, scans and pools), well above it
 
 
 def test_a_small_drive_keeps_its_memory_high_water_marks(shared_data, tmp_path, monkeypatch):
@@ -22,6 +23,7 @@ def test_a_small_drive_keeps_its_memory_high_water_marks(shared_data, tmp_path, 
     moved = np.linalg.norm(np.diff(track.at(stamps[[FIRST, FIRST + FRAMES]])[:, :2, 3], axis=0))
     assert moved > 2 * WINDOW, f"the car moves {moved:.0f} m over these scans"
     common = dict(data=data, n_frames=FRAMES, voxel_m=VOXEL, progress=False, first=FIRST, range_m=RANGE)
+    resident = drive._rss_bytes() / 2**20          # the test process's own, before the drive
     rolling = drive.run_drive(**common, window_m=WINDOW, store=tmp_path / "d.rcmap")
     unbounded = drive.run_drive(**common)
     edge = BRICK * VOXEL
@@ -29,7 +31,9 @@ def test_a_small_drive_keeps_its_memory_high_water_marks(shared_data, tmp_path, 
     assert rolling["evicted"] > 0 and rolling["bricks"] == unbounded["bricks"]
     assert rolling["device_bricks_max"] <= disc < unbounded["device_bricks_max"]
     assert rolling["device_mib_max"] < unbounded["device_mib_max"]
-    assert rolling["host_mib_max"] < 2048 and rolling["latency_p99_ms"] >= rolling["latency_p50_ms"] > 0
+    # the drive's own host memory: what the suite's earlier tests left resident is not the drive's
+    assert rolling["host_mib_max"] - resident < HOST_GROWTH_MIB
+    assert rolling["latency_p99_ms"] >= rolling["latency_p50_ms"] > 0
     assert rolling["frames"] == FRAMES and 0 < rolling["realtime_factor"]
     spec, keys, data_w = disk.read(tmp_path / "d.rcmap")
     assert len(keys) == rolling["bricks"] and len(disk.read_poses(tmp_path / "d.rcmap")) == FRAMES
