@@ -16,8 +16,11 @@ SYSTEM_PACKAGES_BROWSER := chromium
 # (AMD Zen 5 reads as 'generic' there and every build fails) and ran our kernels faster
 # (ARCHITECTURE.md). Optional: installed where apt-get can, otherwise PyPI's PoCL is used.
 SYSTEM_PACKAGES_OPENCL := pocl-opencl-icd
+# Oclgrind, a simulated OpenCL device that reports out-of-bounds accesses, data races and API
+# misuse: `make check-kernels` runs the kernels' tests on it, `make test` a small slice of them.
+SYSTEM_PACKAGES_OCLGRIND := oclgrind
 
-.PHONY: demo test fuzz bench info clean system
+.PHONY: demo test check-kernels fuzz bench bench-device info clean system
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -30,6 +33,7 @@ system:
 	ldconfig -p | grep -q 'libEGL_mesa.so' || missing="$$missing $(SYSTEM_PACKAGES_EGL)"; \
 	command -v xvfb-run >/dev/null || missing="$$missing $(SYSTEM_PACKAGES_X)"; \
 	[ -z "$(NEED_BROWSER)" ] || command -v chromium >/dev/null || missing="$$missing $(SYSTEM_PACKAGES_BROWSER)"; \
+	[ -z "$(NEED_OCLGRIND)" ] || command -v oclgrind >/dev/null || missing="$$missing $(SYSTEM_PACKAGES_OCLGRIND)"; \
 	{ [ -e /etc/OpenCL/vendors/pocl.icd ] && ldconfig -p | grep -q 'libpocl.so'; } || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && missing="$$missing $(SYSTEM_PACKAGES_OPENCL)"; } || \
 	  echo "note: no system PoCL; using PyPI's PoCL 3.0 (LLVM 14), which cannot build for CPUs newer than LLVM 14 (AMD Zen 4/5): radarcl info says"; \
 	if [ -n "$$missing" ]; then \
@@ -45,8 +49,16 @@ demo: system $(BIN)/.installed
 	$(BIN)/radarcl demo --out out/demo
 
 test: NEED_BROWSER := 1
+test: NEED_OCLGRIND := 1
 test: system $(BIN)/.installed
 	$(BIN)/python -m pytest -q
+
+# Every kernel file's tests on Oclgrind (--check-api --data-races, built at -cl-opt-disable), once
+# on the CPU code paths and once with a 32 KiB GPU's limits; fails on any report Oclgrind prints and
+# prints the counts per kernel file (tests/oclgrind_check.py; --full there runs every size).
+check-kernels: NEED_OCLGRIND := 1
+check-kernels: system $(BIN)/.installed
+	$(BIN)/python tests/oclgrind_check.py
 
 # The long fuzz run: 16x the CI examples, the counts written to out/fuzz.json (configurations,
 # frames, files, streams) and out/fuzz_store.json (map stores, stream recordings).
@@ -56,6 +68,12 @@ fuzz: $(BIN)/.installed
 
 bench: $(BIN)/.installed
 	$(BIN)/radarcl bench range-fft
+
+# Every benchmark that tells a device apart, in one run of at most about 5 minutes (for a lent GPU;
+# a GPU is preferred, RADARCL_DEVICE picks another device): a table on stdout, every figure in
+# out/bench-device.json; the exit status is 1 when a bench failed (its error is in both).
+bench-device: $(BIN)/.installed
+	$(BIN)/radarcl bench all --json out/bench-device.json
 
 info: $(BIN)/.installed
 	$(BIN)/radarcl info
