@@ -61,10 +61,6 @@
  */
 #include "radarcl_common.h"
 
-/* log10 of x >= 0 without a builtin call (PoCL may call its builtins out of line): the
- * exponent, and ln of the mantissa in [sqrt(1/2), sqrt(2)) by the atanh series to t^9 (error
- * < 1e-9); float32 rounding of the sum dominates, ~4e-6 decades at 1e38, 1e-7 near 1.
- * Subnormals are scaled by 2^64 first; log10(0) = -inf as log10's. */
 /* 1 where any of the eight mask bytes at p is set: two 32-bit words, since 64-bit integers are
  * optional on embedded-profile devices (compilers join the two into one 64-bit test where they can) */
 static inline uint any8(const __global uchar *p)
@@ -73,6 +69,10 @@ static inline uint any8(const __global uchar *p)
     return (w.x | w.y) != 0u;
 }
 
+/* log10 of x >= 0 without a builtin call (PoCL may call its builtins out of line): the
+ * exponent, and ln of the mantissa in [sqrt(1/2), sqrt(2)) by the atanh series to t^9 (error
+ * < 1e-9); float32 rounding of the sum dominates, ~4e-6 decades at 1e38, 1e-7 near 1.
+ * Subnormals are scaled by 2^64 first; log10(0) = -inf as log10's. */
 static inline float log10_nb(float x)
 {
     int bias = 0;

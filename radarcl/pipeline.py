@@ -293,8 +293,10 @@ def self_test(runtime):
     Returns None when all agree; a sentence saying where they differ (the device is unusable);
     or, where some sensor's pipeline does not fit the device (``DeviceCapabilityError``: local
     memory, the largest buffer), ``{"problem": None, "notes": [a sentence per sensor]}``: the
-    device stays usable and only that sensor is refused, when it is asked for, with the same
-    sentence. A device that fits no built-in sensor at all is unusable. ``radarcl.cl.runtime``
+    device stays usable and that sensor is refused when it is asked for, with a sentence of the
+    same kind (the notes hold at this check's sizes: 2 m voxels, SELF_TEST_RANGE_M; a map of
+    other sizes is checked when it is built). A device that fits no built-in sensor at all is
+    unusable. ``radarcl.cl.runtime``
     runs it in a child process before it uses a device, so a compiler that aborts cannot take
     radarcl down with it."""
     rng = np.random.default_rng(29)

@@ -115,3 +115,18 @@ def test_a_drive_process_that_dies_without_answering_is_an_error_not_a_hang():
     status, why = drive._answer(queue, process, poll_s=0.2)
     process.join()
     assert status == "error" and why == "its process ended (exit code 9) without a result"
+
+
+def test_two_failures_in_a_row_each_keep_their_line(tmp_path, monkeypatch, capsys):
+    from radarcl.bench import range_fft
+
+    def on_fire(*args, **kwargs):
+        raise RuntimeError("the device caught fire")
+
+    monkeypatch.setattr(cfar, "run", on_fire)
+    monkeypatch.setattr(range_fft, "run", on_fire)
+    assert main(["bench", "all", "--quick", "--only", "range-fft,cfar", "--json", str(tmp_path / "b.json")]) == 1
+    lines = capsys.readouterr().out.splitlines()
+    assert "range-fft  FAILED: RuntimeError: the device caught fire" in lines
+    assert "cfar  FAILED: RuntimeError: the device caught fire" in lines
+    assert lines[-1] == "2 of 2 benchmarks FAILED: range-fft, cfar"

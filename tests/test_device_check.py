@@ -1,4 +1,4 @@
-"""A device is checked in a child process before radarcl uses it (issue 29): one whose compiler
+"""A device is checked in a child process before radarcl uses it: one whose compiler
 aborts (PyPI's PoCL 3.0 on some CPUs: "LLVM ERROR: Cannot emit physreg copy instruction", exit
 134) is marked unusable by `radarcl info` and never chosen, the verdict is cached per device
 and driver, and a program a damaged driver cache hands back without its kernels is never used."""

@@ -69,11 +69,13 @@ def test_a_device_that_fits_no_sensor_is_unusable(runtime):
 
 
 def test_info_names_what_a_usable_device_cannot_run(runtime, monkeypatch):
-    note = "sensor spinning-sim (eq. 12): n_fft = 2048 needs 32776 bytes of local memory; the device has 32768"
-    monkeypatch.setattr(rt_module, "_probed", {runtime.device.int_ptr: dict(problem=None, notes=[note])})
+    """A device with notes is still usable and chosen; `radarcl info` lists what it cannot run."""
+    notes = self_test(as_class(runtime, "gpu-32k", max_mem_alloc_size=1 * MIB))["notes"]
+    monkeypatch.setattr(rt_module, "_probed", {runtime.device.int_ptr: dict(problem=None, notes=notes)})
     lines = rt_module.device_report()
-    assert f"      cannot run     {note}" in lines
-    assert rt_module.choose_device(spec=f"{runtime.device.platform.name}").int_ptr is not None
+    assert all(f"      cannot run     {note}" in lines for note in notes) and notes
+    place = next(f"{p}:{d}" for p, d, _, dev in rt_module._all_devices() if dev.int_ptr == runtime.device.int_ptr)
+    assert rt_module.choose_device(spec=place).int_ptr == runtime.device.int_ptr
 
 
 def test_work_group_sizes_come_from_the_device_class(runtime):
@@ -93,6 +95,14 @@ def test_work_group_sizes_come_from_the_device_class(runtime):
     assert np.array_equal(maps[0], maps[1]) and (maps[0] != 0).any()
 
 
+LONG_TYPE = r"(?<![A-Za-z0-9])(u?long\d*)\b"     # also inside as_ulong(...), convert_long4(...)
+
+
+def test_the_long_type_pattern_finds_casts_and_conversions():
+    assert re.findall(LONG_TYPE, "as_ulong(x) + convert_long4(y); ulong8 z; long w; longer; along") == \
+        ["ulong", "long4", "ulong8", "long"]
+
+
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc's preprocessor to read the built sources")
 def test_a_device_without_64_bit_integers_gets_kernels_without_them(runtime):
     """Embedded-profile devices may lack 64-bit integers: every kernel the detection-statistics
@@ -106,7 +116,7 @@ def test_a_device_without_64_bit_integers_gets_kernels_without_them(runtime):
         options = [o for o in kernels.options if o.startswith(("-D", "-I"))]
         done = subprocess.run(["gcc", "-E", "-P", "-x", "c", *options, str(kernels.source_path)],
                               capture_output=True, text=True, check=True)
-        used = set(re.findall(r"\b(u?long\d*)\b", done.stdout))
+        used = set(re.findall(LONG_TYPE, done.stdout))
         assert not used, f"{kernels.source_path.name} uses {sorted(used)} with {' '.join(options)}"
 
 

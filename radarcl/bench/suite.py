@@ -269,7 +269,7 @@ def table(report):
     cells, failures = [], {}
     for name, b in report["benches"].items():
         if b["status"] != "ok":
-            failures[len(cells)] = f"{name}  FAILED: {b['error']}"
+            failures.setdefault(len(cells), []).append(f"{name}  FAILED: {b['error']}")
             continue
         for r in b["rows"]:
             base = "" if r["baseline"] is None else (
@@ -280,8 +280,7 @@ def table(report):
     fmt = "  ".join(f"{{:{'>' if i == 2 else '<'}{w}}}" for i, w in enumerate(widths))
     lines = [fmt.format(*head).rstrip(), "  ".join("-" * w for w in widths)]
     for i in range(len(cells) + 1):
-        if i in failures:
-            lines.append(failures[i])
+        lines += failures.get(i, [])
         if i < len(cells):
             lines.append(fmt.format(*cells[i]).rstrip())
     load = report["load_before"], report["load_after"] or report["load_before"]

@@ -24,7 +24,6 @@ class DeviceLimits:
     max_work_group_size: int       # work-items per work-group
     fp64: bool                     # doubles (no kernel needs them; reported)
     int64: bool                    # 64-bit integers in kernels (optional in the embedded profile)
-    narrowed_from: tuple = ()      # the fields a test narrowed, for the device's name in reports
 
     @classmethod
     def of(cls, device):
@@ -51,7 +50,7 @@ class DeviceLimits:
             elif not 0 < value <= real:
                 raise ValueError(f"{key} can be narrowed to at most the device's {real}, got {value!r}")
         name = f"{self.name} (as {label or ', '.join(f'{k}={v}' for k, v in changes.items())})"
-        return dataclasses.replace(self, name=name, narrowed_from=tuple(changes), **changes)
+        return dataclasses.replace(self, name=name, **changes)
 
 
 def size_text(nbytes):

@@ -180,16 +180,20 @@ def _verdict(device):
 
 
 def _identity(device):
-    """The key of a device's verdict: what it is, its driver, and what was checked on it."""
+    """The key of a device's verdict: what it is, its driver, and what was checked on it: the
+    kernel sources, and the Python that sizes and runs them (the checks' modules, the stages)."""
     from radarcl import __version__
 
     h = hashlib.sha256()
     for part in (device.platform.name, device.platform.version, device.name, device.version, device.driver_version,
                  __version__, _PROBE_SOURCE, *DEVICE_CHECKS):
         h.update(str(part).encode() + b"\0")
+    package = Path(__file__).resolve().parent.parent
     try:
-        directory = kernels_dir()
-        for p in sorted(directory.iterdir()):
+        sources = [*sorted(kernels_dir().iterdir()), *sorted((package / "stages").glob("*.py")),
+                   *sorted((package / "cl").glob("*.py"))]
+        sources += [package.parent / (name.partition(":")[0].replace(".", "/") + ".py") for name in DEVICE_CHECKS]
+        for p in sources:
             if p.is_file():
                 h.update(p.name.encode() + b"\0" + p.read_bytes())
     except (KernelBuildError, OSError):
@@ -251,7 +255,8 @@ def _problem_in_child(device):
         try:
             said = json.loads(lines[-1][len(PROBE_MARK):])
             problem, notes = said["problem"], said.get("notes", [])
-            if (problem is None or isinstance(problem, str)) and all(isinstance(n, str) for n in notes):
+            if (problem is None or isinstance(problem, str)) and isinstance(notes, list) \
+                    and all(isinstance(n, str) for n in notes):
                 return dict(problem=problem, notes=list(notes))
         except (ValueError, KeyError, TypeError):
             pass

@@ -124,6 +124,7 @@ class Fusion(Stage):
         self._kernel, self._cached_kernel = kernels["fusion"], kernels["fusion_cached"]
         self._record_kernels = None
         self.local_size = work_group_size(runtime, [self._kernel, self._cached_kernel], local_size, DEFAULT_LOCAL_SIZE)
+        self._local_size_requested = local_size is not None
         self._rotations = lattice.beam_rotations()
         self.r_lo = (self.first_bin - 0.5) * self.bin_spacing_m
         self.r_hi = (self.last_bin + 0.5) * self.bin_spacing_m
@@ -227,7 +228,8 @@ class Fusion(Stage):
         limits = self.runtime.limits
         held = sum(p.table.nbytes for p in self._plans.values() if p.table is not None)
         budget = STILL_TABLE_SHARE * limits.global_mem_size - held if self.still == "auto" else float("inf")
-        limit = min(budget, limits.max_mem_alloc_size)
+        # beside everything else radarcl holds on the device (the tables are held too, below)
+        limit = min(budget, limits.max_mem_alloc_size, limits.global_mem_size - self.runtime.held_bytes)
         dense_bytes = n_rows * (9 * self.vector_width + 4)   # counts, first entries, row starts
         if not n_rows or dense_bytes > limit:
             plan._table.append(None)
@@ -235,7 +237,12 @@ class Fusion(Stage):
         if self._record_kernels is None:
             self._record_kernels = [build(self.runtime, "fusion", {**self._defines, "RECORD": r})["fusion"] for r in (1, 2)]
             # launches use one size; the work-item index, not the group, places a table row
-            self.local_size = min(self.local_size, *(self.runtime.max_local_size(k) for k in self._record_kernels))
+            fits = min(self.runtime.max_local_size(k) for k in self._record_kernels)
+            if self.local_size > fits and self._local_size_requested:
+                raise ConfigError(f"local_size {self.local_size} is more than the {fits} work-items {self.runtime.name} "
+                                  "runs the still table's recording kernels with (CL_KERNEL_WORK_GROUP_SIZE); use "
+                                  f"local_size <= {fits}, or leave it out")
+            self.local_size = min(self.local_size, fits)
         counts = cla.zeros(q, (n_rows * self.vector_width,), np.uint8)
         row_start = cla.zeros(q, (n_rows,), np.int32)
         dummy = cla.zeros(q, (1, 2), np.int32)
@@ -255,6 +262,7 @@ class Fusion(Stage):
         self._launch(self._record_kernels[1], plan, self.arrays["evidence"], counts=counts, row_start=row_start,
                      first=first, extras=extras).wait()
         table = StillTable(counts, row_start, first, extras, n_rows, total)
+        self.runtime.hold(table, table.nbytes, "the still radar's table")
         plan._table.append(table)
         return table
 
