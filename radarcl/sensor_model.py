@@ -1,4 +1,4 @@
-"""The detection-statistics sensor model (issue 27): evidence from the radar's own detection
+"""The detection-statistics sensor model: evidence from the radar's own detection
 statistics, a knowledge channel, and correlated evidence counted once.
 
 For a voxel v that a beam covers, the update is the log-likelihood ratio of what the beam

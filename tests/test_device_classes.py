@@ -103,10 +103,10 @@ def test_the_long_type_pattern_finds_casts_and_conversions():
         ["ulong", "long4", "ulong8", "long"]
 
 
-@pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc's preprocessor to read the built sources")
 def test_a_device_without_64_bit_integers_gets_kernels_without_them(runtime):
     """Embedded-profile devices may lack 64-bit integers: every kernel the detection-statistics
     pipeline builds for such a class, preprocessed with its own options, names no long type."""
+    assert shutil.which("gcc"), "this test reads the built sources through gcc's preprocessor (apt-get install gcc)"
     narrow = as_class(runtime, "embedded-32k")
     assert not narrow.limits.int64
     config = mapconfig.resolve("paper", program={"grid.voxel_m": 1.0, "interpret.model": "detstats"})

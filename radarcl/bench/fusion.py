@@ -13,7 +13,7 @@ which other processes used more than a quarter of a core are discarded: ``interl
 - the whole pipeline: upload raw samples, range FFT, CFAR, eq. 12, fusion;
 - the same frame with the detection-statistics model (``sensor_model``; interpret.model
   "detstats"): the gather, the still table and the moving radar on its node pairs and knowledge
-  pool, beside eq. 12's in the same interleaved run (issue 27's goal: at most 1.5x eq. 12's gather);
+  pool, beside eq. 12's in the same interleaved run (the goal: at most 1.5x eq. 12's gather);
 - the float64 numpy oracle (``oracle.fusion_at_points``), timed on ``ORACLE_BEAMS`` beams over
   the voxels of the reached bricks and scaled to the frame (it is linear in beams); the
   kernel's error is measured on those beams;

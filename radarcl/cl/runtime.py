@@ -232,14 +232,9 @@ def _write_verdicts(verdicts):
 def _probe_in_child(device):
     """Run ``radarcl.cl.probe`` on ``device`` in a child process: its verdict, a dict of
     "problem" (None or the reason it is unusable) and "notes" (what it cannot run)."""
-    problem = _problem_in_child(device)
-    return problem if isinstance(problem, dict) else dict(problem=problem, notes=[])
-
-
-def _problem_in_child(device):
     place = next(((p, d) for p, d, _, dev in _all_devices() if dev.int_ptr == device.int_ptr), None)
     if place is None:
-        return "is not among the listed devices"
+        return dict(problem="is not among the listed devices", notes=[])
     cmd = [sys.executable, "-m", "radarcl.cl.probe", str(place[0]), str(place[1]), *DEVICE_CHECKS]
     env = dict(os.environ, RADARCL_PROBE_SOURCE=_PROBE_SOURCE)
     log.debug("checking %s / %s in a child process", device.platform.name, device.name)
@@ -247,9 +242,9 @@ def _problem_in_child(device):
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=PROBE_TIMEOUT_S, env=env,
                               stdin=subprocess.DEVNULL)
     except subprocess.TimeoutExpired:
-        return f"did not finish radarcl's self-test in {PROBE_TIMEOUT_S} s"
+        return dict(problem=f"did not finish radarcl's self-test in {PROBE_TIMEOUT_S} s", notes=[])
     except OSError as exc:
-        return f"could not be checked ({exc})"
+        return dict(problem=f"could not be checked ({exc})", notes=[])
     lines = [ln for ln in done.stdout.splitlines() if ln.startswith(PROBE_MARK)]
     if done.returncode == 0 and lines:
         try:
@@ -265,8 +260,9 @@ def _problem_in_child(device):
     if done.returncode < 0:
         how = f"signal {-done.returncode}" + (f" ({signal.Signals(-done.returncode).name})" if
                                               -done.returncode in signal.valid_signals() else "")
-        return f"crashes while building or running radarcl's kernels ({how}: {last or 'no message'})"
-    return f"failed radarcl's self-test (exit {done.returncode}: {last or 'no message'})"
+        return dict(problem=f"crashes while building or running radarcl's kernels ({how}: {last or 'no message'})",
+                    notes=[])
+    return dict(problem=f"failed radarcl's self-test (exit {done.returncode}: {last or 'no message'})", notes=[])
 
 
 PROBE_MARK = "radarcl-probe: "

@@ -121,7 +121,7 @@ def calibration(p, y, bins=ECE_BINS):
 
 
 def radar_scores(log_odds_nats, truth, objects=(), knowledge=None):
-    """The metrics of issue 15 on one fixed voxel set (``truth``, a ``VisibilityTruth``):
+    """The radar's metrics on one fixed voxel set (``truth``, a ``VisibilityTruth``):
 
     - ``auc_detectable``, ``iou_detectable``: DETECTABLE vs FREE-visible (where the radar has signal);
     - ``auc_weak``, ``iou_weak``: WEAK vs FREE-visible;

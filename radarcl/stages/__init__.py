@@ -125,15 +125,14 @@ class Stage:
         self.inputs, self.outputs = tuple(inputs), tuple(outputs)
         q = self.runtime.queue
         limit = self.runtime.limits.max_mem_alloc_size
-        for p in self.inputs + self.outputs:              # before the driver refuses with a code
-            nbytes = float(np.prod(p.shape, dtype=np.float64)) * np.dtype(p.dtype).itemsize
+        sizes = [float(np.prod(p.shape, dtype=np.float64)) * np.dtype(p.dtype).itemsize
+                 for p in self.inputs + self.outputs]
+        for p, nbytes in zip(self.inputs + self.outputs, sizes):   # before the driver refuses with a code
             if nbytes > limit:
                 raise DeviceCapabilityError(f"{type(self).__name__}: {p.what} {tuple(p.shape)} {np.dtype(p.dtype)} "
                                             f"takes {size_text(nbytes)}, more than the largest buffer of "
                                             f"{self.runtime.name}, {size_text(limit)} (radarcl info)")
-        total = sum(float(np.prod(p.shape, dtype=np.float64)) * np.dtype(p.dtype).itemsize
-                    for p in self.inputs + self.outputs)
-        self.runtime.hold(self, total, f"{type(self).__name__}'s buffers")
+        self.runtime.hold(self, sum(sizes), f"{type(self).__name__}'s buffers")
         self.arrays = {p.name: cla.empty(q, p.shape, p.dtype) for p in self.inputs + self.outputs}
         self._ports = {p.name: p for p in self.inputs + self.outputs}
 
