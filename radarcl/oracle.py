@@ -12,7 +12,7 @@ from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import check_poses
 from radarcl.sensor_model import node_lerp, quantised_rho2
-from radarcl.snr_evidence import gap_mixture, noise_floor
+from radarcl.snr_evidence import bounded, gap_mixture, noise_floor
 
 WINDOWS = ("hann", "rect")
 OUTPUTS = ("magnitude", "power")
@@ -379,8 +379,9 @@ def interpret_detstats(profiles, noise, mask, config, bin_spacing_m, model, flag
     echoes (X_j > 0) with ``model.blocker_gap`` g > 0 the evidence is the mixture's,
     e = ln(L / (1 - q + q L)), L = (1 - g) L_b + g L_0 (L_b, L_0: the likelihood ratios of the
     table's e at ln tau_j + ln_snr and at ln_snr), and delta = ((1 - w) tau_j + w) opportunity
-    where the gap's posterior w = g L_0 / L exceeds 1/2 (``_detstats_graded``). A node whose
-    opportunity rounds to 0 gets evidence 0 (the reading counts only looks with knowledge).
+    where the gap's posterior w = g L_0 / L exceeds 1/2 (``_detstats_graded``); every look's evidence is then held within +-delta ln(1 / q)
+    (``snr_evidence.bounded``). A node whose opportunity rounds to 0 gets evidence 0, with either
+    evidence (the reading counts only looks with knowledge).
     Returns ``(evidence, opportunity, pulses, n_pulses, flags)``: evidence int32 (..., n_bins,
     CLASSES, NODES) [logodds units, clamped to +-16 nat], opportunity int32 (same shape)
     [KNOWLEDGE_SCALE units], pulses, n_pulses and flags as ``interpret``'s. Beams with a
@@ -418,8 +419,9 @@ def interpret_detstats(profiles, noise, mask, config, bin_spacing_m, model, flag
             tau = math.exp(-blocked)
             for i in range(start, j):
                 delta = tau * model.opportunity[i]
-                evidence[b, i] = logodds.to_fixed(np.log1p(delta * (rb[i] / rb[peak]) * c_det))
                 opportunity[b, i] = np.rint(delta * logodds.KNOWLEDGE_SCALE)
+                evidence[b, i] = np.where(opportunity[b, i] != 0,
+                                          logodds.to_fixed(np.log1p(delta * (rb[i] / rb[peak]) * c_det)), 0)
             blocked += np.maximum(rb[run] / nb[run] - 1.0, 0.0).sum() * model.blocking[peak]
     shape = (*batch, n_bins, *tail)
     return evidence.reshape(shape), opportunity.reshape(shape), pulses, n_pulses, flags_out
@@ -462,8 +464,11 @@ def _detstats_graded(r, m, first, last, model):
         # behind a blocker tells little of a gap, and each look with any knowledge counts as one
         # in the reading's look limit)
         known[behind] = np.where(w > 0.5, (1.0 - w) * tau[behind] + w, tau[behind])
-    opportunity[window] = np.rint(known * model.opportunity[window] * logodds.KNOWLEDGE_SCALE)
-    # no evidence from a look without an opportunity: the reading's look limit counts only looks
-    # that could see, and evidence it does not count would grow with every frame
+    delta = known * model.opportunity[window]
+    opportunity[window] = np.rint(delta * logodds.KNOWLEDGE_SCALE)
+    # a look says at most its opportunity's share of what a look can say, and nothing without an
+    # opportunity: the reading's look limit counts only looks that could see, and evidence it does
+    # not count would grow with every frame
+    e = bounded(e, delta, model.snr_table.bound)
     evidence[window] = np.where(opportunity[window] != 0, logodds.to_fixed(e), 0)
     return evidence, opportunity

@@ -74,7 +74,7 @@ import numpy as np
 
 from radarcl import cfar_theory, logodds
 from radarcl.errors import ConfigError, ShapeError
-from radarcl.snr_evidence import SnrTable
+from radarcl.snr_evidence import Clutter, SnrTable
 
 NODES = 5                        # node values over rho2 = 0, 1/4, ..., 1
 SEGMENTS = NODES - 1
@@ -139,25 +139,33 @@ def node_lerp(nodes, q):
 
 # -- the physical parameters ---------------------------------------------------------------------------------------
 # Each key's physical range: a value outside is refused with the key, the value and the range.
-RANGES = {
-    "snr_1m2_at_10m_db": (0.0, 120.0, "dB"),      # the sensor's sensitivity: SNR of 1 m^2 at 10 m on the axis
-    "target_gamma_db": (-40.0, 10.0, "dB"),       # reflectivity of a typical occupied voxel's (upright) surface
-    "target_spread_db": (0.0, 15.0, "dB"),        # log-normal spread of its mean RCS
-    "target_extent_m": (0.01, 10.0, "m"),         # side of the typical target's patch
-    "terrain_gamma_db": (-40.0, 10.0, "dB"),      # reflectivity of the terrain, seen at grazing incidence
-    "terrain_band_m": (0.0, 10.0, "m"),           # voxels whose centre lies below the ground plane + this are terrain
-    "block_gamma_db": (-40.0, 10.0, "dB"),        # an echo blocks the beam as a surface of this reflectivity
-    "blocker_gap": (0.0, 0.5, ""),                # the chance that a voxel behind nearer echoes is not behind them
-    "look_limit": (0.5, 1e4, "looks"),            # correlated evidence: at most this many looks' worth
-    "prior_nats": (-10.0, 0.0, "nat"),            # log-odds of an occupied voxel before any look: the world's base rate
-    "prior_looks": (0.0, 100.0, "looks"),         # the knowledge at which the prior applies in full (0: everywhere)
-    "false_alarm": (0.0, 0.5, ""),                # a measured false-alarm rate (0: the CFAR's statistics)
+RANGES = {   # key: (lo, hi, unit, what it is)
+    "snr_1m2_at_10m_db": (0.0, 120.0, "dB", "SNR of a 1 m^2 target at 10 m on the beam's axis (the sensor's sensitivity)"),
+    "target_gamma_db": (-40.0, 10.0, "dB", "reflectivity of a typical occupied voxel's upright surface"),
+    "target_spread_db": (0.0, 15.0, "dB", "log-normal spread of the typical target's mean RCS"),
+    "target_extent_m": (0.01, 10.0, "m", "side of the typical target's patch"),
+    "terrain_gamma_db": (-40.0, 10.0, "dB", "reflectivity of the terrain at grazing incidence"),
+    "terrain_band_m": (0.0, 10.0, "m", "voxels whose centre lies below the ground plane + this are terrain"),
+    "block_gamma_db": (-40.0, 10.0, "dB", "a detected echo blocks the beam as an opaque surface of this reflectivity"),
+    "blocker_gap": (0.0, 0.5, "", "the chance that a voxel behind nearer echoes lies in a gap they leave "
+                                  "(partial blockers)"),
+    "look_limit": (0.5, 1e4, "looks", "correlated evidence counts at most this many looks' worth"),
+    "prior_nats": (-10.0, 0.0, "nat", "log-odds of an occupied voxel before any look (the world's base rate)"),
+    "prior_looks": (0.0, 100.0, "looks", "looks at which the prior applies in full (0: everywhere, never-observed "
+                                         "voxels too)"),
+    "false_alarm": (0.0, 0.5, "", "a measured false-alarm rate of the CFAR on these profiles (0: from its "
+                                  "statistics)"),
+    "clutter_share": (0.0, 0.99, "", "the chance that a bin holds clutter where nothing is (sidelobes, multipath, "
+                                     "diffuse scatterers; 0: noise alone)"),
+    "clutter_db": (-20.0, 80.0, "dB", "the clutter's median power over the noise floor"),
+    "clutter_spread_db": (0.0, 30.0, "dB", "log-normal spread of the clutter's power"),
 }
 EVIDENCE_KINDS = ("snr", "detection")             # sensor_model.evidence: the measured SNR, or the CFAR's outcome
 GROUND_RANGE = (0.0, 1000.0, "m")                 # ground_below_m: the sensor's height above the ground plane (0: none)
 DEFAULT_SNR_DB = 50.0                             # the sensitivity assumed for a profile that gives none
 BLOCKER_GAP = 0.01                                # sensor_model.blocker_gap's default (ModelParams)
-READING = ("look_limit", "prior_nats", "prior_looks")   # what a map keeps to be read (``read_log_odds``)
+READING = ("look_limit", "prior_nats", "prior_looks", "known_looks")   # what a map keeps to be read (``read_log_odds``)
+KNOWN_LOOKS = 0.5                 # a voxel whose knowledge reaches this many looks is observed; below, it reads the prior
 PRIOR_VOXEL_M = 0.2               # the voxel at which the default priors are the base rate (``prior_for_voxel``)
 
 
@@ -194,11 +202,16 @@ class ModelParams:
     prior_nats: float = -4.0
     prior_looks: float = 0.0
     false_alarm: float = 0.0
+    # the background where nothing is, beyond exponential noise (``snr_evidence.Clutter``): none in a
+    # simulator's world; a real radar's is fitted from its recording (``radarcl fit-sensor``)
+    clutter_share: float = 0.0
+    clutter_db: float = 10.0
+    clutter_spread_db: float = 10.0
     ground_below_m: float = 0.0
     evidence: str = "snr"
 
     def __post_init__(self):
-        for name, (lo, hi, unit) in RANGES.items():
+        for name, (lo, hi, unit, _) in RANGES.items():
             check_range(f"sensor_model.{name}", getattr(self, name), lo, hi, unit)
         check_range("sensor_model.ground_below_m", self.ground_below_m, *GROUND_RANGE)
         if self.evidence not in EVIDENCE_KINDS:
@@ -213,7 +226,12 @@ class ModelParams:
     @property
     def reading(self):
         """The parameters a map is read with (``read_log_odds``), as a dict."""
-        return {k: float(getattr(self, k)) for k in READING}
+        return {**{k: float(getattr(self, k)) for k in READING if k != "known_looks"}, "known_looks": KNOWN_LOOKS}
+
+    @property
+    def clutter(self):
+        """The background law (``snr_evidence.Clutter``) of the "snr" evidence."""
+        return Clutter(self.clutter_share, self.clutter_db, self.clutter_spread_db)
 
 
 DEFAULTS = {f.name: f.default for f in fields(ModelParams)}
@@ -419,14 +437,16 @@ class BinModel:
         if params.evidence == "detection":
             return cls(opportunity, 1.0 - opportunity, blocking, pfa)
         return cls(opportunity, 1.0 - opportunity, blocking, pfa, ln_snr,
-                   SnrTable.build(params.target_spread_db, min(pfa, 0.5)), float(cfar.noise_floor), params.blocker_gap)
+                   SnrTable.build(params.target_spread_db, min(pfa, 0.5), params.clutter), float(cfar.noise_floor),
+                   params.blocker_gap)
 
 
 # -- the reading: correlated evidence and the prior ---------------------------------------------------------------------
 def read_log_odds(evidence, knowledge, looks, reading):
     """Log-odds [nat] of stored sums, order-independent (a function of the exact integer sums):
 
-        L = E / max(1, n / look_limit) + prior_nats x min(1, K / prior_looks)
+        L = E / max(1, n / look_limit) + prior_nats x min(1, K / prior_looks)   where K >= known_looks,
+        L = the prior alone                                                     elsewhere
 
     with E = ``evidence`` [logodds units], K = ``knowledge`` [KNOWLEDGE_SCALE units] in looks and
     n = ``looks`` the number of looks with an opportunity, ``reading`` a dict of ``READING``.
@@ -435,15 +455,19 @@ def read_log_odds(evidence, knowledge, looks, reading):
 
     The prior is the log-odds of an occupied voxel before any look: the world's base rate. With
     ``prior_looks`` 0 (the default) it applies everywhere, so a voxel never observed reads the base
-    rate, a calibrated probability; that it is *unknown* is the knowledge channel's to say
-    (``maps.map.KNOWN_LOOKS``), not its value's. With ``prior_looks`` > 0 (maps written before
-    that default) it grows with the knowledge and a voxel never observed reads 0."""
+    rate, a calibrated probability. A voxel with less than ``known_looks`` of knowledge is
+    unobserved (``maps.map`` classes it so): it reads the prior whatever evidence reached it, so
+    every query and export agrees with the map's classes. ``known_looks`` 0 (maps written before
+    it was kept, whose reading lacks it) reads every voxel by its sums; ``prior_looks`` > 0 (maps
+    written before that default) grows the prior with the knowledge, and a voxel never observed
+    reads 0."""
     e = np.asarray(evidence, np.float64) / logodds.SCALE
     out = e / np.maximum(1.0, np.asarray(looks, np.float64) / float(reading["look_limit"]))
     prior = float(reading.get("prior_nats", 0.0))
+    k = np.asarray(knowledge, np.float64)
     if prior and float(reading["prior_looks"]) > 0.0:
-        k = np.asarray(knowledge, np.float64) / logodds.KNOWLEDGE_SCALE
-        out = out + prior * np.minimum(1.0, k / float(reading["prior_looks"]))
-    elif prior:
-        out = out + prior
-    return out
+        prior = prior * np.minimum(1.0, k / logodds.KNOWLEDGE_SCALE / float(reading["prior_looks"]))
+    known_looks = float(reading.get("known_looks", 0.0))
+    if known_looks:
+        out = np.where(k >= known_looks * logodds.KNOWLEDGE_SCALE, out, 0.0)
+    return out + prior

@@ -4,14 +4,24 @@ voxel free, tabulated once and read bilinearly (here in float64, in ``kernels/in
 -D GRADED, from the same float32 table).
 
 A bin's power over the beam's noise floor, x = r / N (``noise_floor``: the median power of the
-range window / ln 2, the mean of exponential noise), against a Swerling-1 target of median SNR
-s (exponential power of mean 1 + s over known exponential noise) with a log-normal RCS prior:
+range window / ln 2, the mean of exponential noise). Where nothing is, a real radar shows more
+than noise: sidelobes of strong echoes in the same scan, multipath, clutter. The background is
+exponential noise, or with the chance c (``Clutter.share``) clutter, exponential power of mean
+1 + G with G log-normal (``Clutter.median_db`` over the floor, ``Clutter.spread_db``):
 
-    e = ln(L / (1 - q + q L)),   L = E_s[exp(x s / (1 + s)) / (1 + s)]
+    p0(x) = (1 - c) e^-x + c pC(x),           pC(x) = E_G[exp(-x / (1 + G)) / (1 + G)]
+    p1(x) = (1 - c) pT(x; s) + c pC(x),        pT(x; s) = E_s[exp(-x / (1 + s)) / (1 + s)]
+    e = ln(L / (1 - q + q L)),                 L = p1 / p0
 
-q, the chance that a free voxel's bin holds an echo anyway (the CFAR's achieved false-alarm
-rate), bounds the evidence at ln(1 / q), as a detection's is bounded. ``snr_evidence`` is the
-quadrature, ``SnrTable`` its table.
+pT: a Swerling-1 target of median SNR s over the noise (exponential power of mean 1 + s) with a
+log-normal RCS prior; where clutter is, it masks the target. A weak target (s -> 0) makes p1 -> p0
+and e -> 0 whatever the power: a bin holding far more than the target could give is explained by
+the background, not by v. q, the chance that a free voxel's bin holds v's echo anyway (the CFAR's
+achieved false-alarm rate), bounds the evidence at ln(1 / q), as a detection's is bounded (with
+c = 0, L = E_s[exp(x s / (1 + s)) / (1 + s)]: the model without clutter). ``bounded`` then caps
+each look's evidence at its opportunity delta (the chance a typical target at v would have been
+detected) times ln(1 / q): a look that could hardly have seen v says little of it either way.
+``snr_evidence`` is the quadrature, ``SnrTable`` its table.
 """
 
 import functools
@@ -25,28 +35,75 @@ from radarcl.errors import ConfigError
 SNR_U = (-8.0, 16.0, 385)        # u = ln x: the bin's power over the floor, -35 to +69.5 dB (clamped outside)
 SNR_V = (-40.0, 16.0, 449)       # v = ln s: the typical target's median SNR, -174 to +69.5 dB
 SPREAD_STEPS = 161               # trapezoid nodes over +-8 standard deviations of the log-normal RCS prior
+CLUTTER_STEPS = 97               # the same over the clutter's log-normal power
 GAP_CAP = 1e-6                   # the gap mixture reads e^e at most (1 - this) / q (L finite)
 LN2 = math.log(2.0)
+DB = math.log(10.0) / 10.0       # nat per dB of power
+
+
+@dataclass(frozen=True)
+class Clutter:
+    """The background where nothing is, beyond exponential noise: with the chance ``share`` a bin
+    holds clutter, exponential power of mean 1 + G over the noise floor, G log-normal with median
+    ``median_db`` and spread ``spread_db`` [dB] (sidelobes of strong echoes, multipath, diffuse
+    scatterers). ``share`` 0: noise alone (a simulator's world without its harder physics)."""
+
+    share: float = 0.0
+    median_db: float = 10.0
+    spread_db: float = 10.0
+
+    def __post_init__(self):
+        if not 0.0 <= self.share < 1.0:
+            raise ConfigError(f"the clutter share {self.share!r} is outside [0, 1)")
+
+    def ln_density(self, x):
+        """ln pC(x): the log-density of clutter power x (array) over the floor (-inf with share 0)."""
+        x = np.asarray(x, np.float64)
+        if not self.share:
+            return np.full(x.shape, -np.inf)
+        sigma = self.spread_db * DB
+        z = np.linspace(-8.0, 8.0, CLUTTER_STEPS) if sigma else np.zeros(1)
+        w = np.exp(-0.5 * z * z)
+        mean = 1.0 + np.exp(self.median_db * DB + sigma * z)
+        terms = -x[..., None] / mean - np.log(mean) + np.log(w / w.sum())
+        top = terms.max(axis=-1, keepdims=True)
+        return top[..., 0] + np.log(np.exp(terms - top).sum(axis=-1))
+
+    def ln_background(self, x):
+        """ln p0(x): noise, or with the chance ``share`` clutter."""
+        x = np.asarray(x, np.float64)
+        if not self.share:
+            return -x
+        return np.logaddexp(math.log1p(-self.share) - x, math.log(self.share) + self.ln_density(x))
+
+
+NO_CLUTTER = Clutter()
 
 
 @dataclass(frozen=True)
 class SnrTable:
     """e(u, v) [nat] on a regular grid (``SNR_U`` x ``SNR_V``): the evidence of a bin whose power
     is x = e^u times the beam's noise floor, for a voxel whose typical target has median SNR e^v
-    there (module docstring): e = ln(L / (1 - q + q L)), L = E_s[exp(x s / (1 + s)) / (1 + s)], s
-    log-normal of ``spread_db`` about e^v. Read bilinearly (``__call__``; the kernel reads the same
-    float32 table the same way); u and v outside the grid are clamped to it, and the first column
-    (v = -40: a target 174 dB under the noise, whose prior's tail reaches no measurable power) is 0
-    exactly, so a voxel no target could reach gets no evidence."""
+    there (module docstring), below ``bound`` = ln(1 / q).
+    Read bilinearly (``__call__``; the kernel reads the same float32 table the same way); u and v
+    outside the grid are clamped to it, and the first column (v = -40: a target 174 dB under the
+    noise, whose prior's tail reaches no measurable power) is 0 exactly, so a voxel no target
+    could reach gets no evidence."""
 
     values: np.ndarray               # (SNR_U[2], SNR_V[2]) float64 [nat]
     q: float
+    clutter: Clutter = NO_CLUTTER
+
+    @property
+    def bound(self):
+        """ln(1 / q) [nat]: the most one look says, as much as a detection (``bounded``)."""
+        return -math.log(self.q)
 
     @classmethod
-    def build(cls, spread_db, q):
-        """The table of a prior of ``spread_db`` and a false-alarm share ``q`` in (0, 1/2]; built
-        once per pair (``_snr_table``)."""
-        return _snr_table(float(spread_db), float(q))
+    def build(cls, spread_db, q, clutter=NO_CLUTTER):
+        """The table of a prior of ``spread_db``, a false-alarm share ``q`` in (0, 1/2] and a
+        background ``clutter``; built once per set (``_snr_table``)."""
+        return _snr_table(float(spread_db), float(q), clutter)
 
     def __call__(self, u, v):
         """Bilinear read at u = ln x, v = ln s (arrays, broadcast), float64."""
@@ -66,34 +123,39 @@ def _grid_position(x, grid):
     return np.clip((np.where(np.isnan(x), lo, x) - lo) * ((n - 1) / (hi - lo)), 0.0, n - 1.0)
 
 
-def snr_evidence(x, ln_s, spread_db, q):
+def snr_evidence(x, ln_s, spread_db, q, clutter=NO_CLUTTER):
     """The exact evidence [nat] of power ratios ``x`` (array) for median SNRs e^``ln_s`` (array,
-    broadcast): the quadrature ``SnrTable`` tabulates (trapezoid over the log-normal prior)."""
-    x = np.asarray(x, np.float64)[..., None]
-    sigma = spread_db * math.log(10.0) / 10.0
+    broadcast) against a background ``clutter``: what the table (``SnrTable``) holds, the
+    quadrature it tabulates (trapezoid over the log-normal priors)."""
+    x = np.asarray(x, np.float64)
+    sigma = spread_db * DB
     z = np.linspace(-8.0, 8.0, SPREAD_STEPS) if sigma else np.zeros(1)
     w = np.exp(-0.5 * z * z)
     w = w / w.sum()
     ln_s = np.asarray(ln_s, np.float64)[..., None] + sigma * z
-    s = np.exp(np.minimum(ln_s, 700.0))
-    terms = x * (s / (1.0 + s)) - np.log1p(s) + np.log(w)
+    mean = 1.0 + np.exp(np.minimum(ln_s, 700.0))
+    terms = -x[..., None] / mean - np.log(mean) + np.log(w)
     top = terms.max(axis=-1, keepdims=True)
-    ln_l = top[..., 0] + np.log(np.exp(terms - top).sum(axis=-1))
+    ln_l = top[..., 0] + np.log(np.exp(terms - top).sum(axis=-1)) + x       # ln pT(x; s) / e^-x
+    if clutter.share:
+        c, ln_c = clutter.share, clutter.ln_density(x)
+        ln_l = (np.logaddexp(math.log1p(-c) + ln_l - x, math.log(c) + ln_c)
+                - np.logaddexp(math.log1p(-c) - x, math.log(c) + ln_c))
     return ln_l - np.logaddexp(math.log1p(-q), math.log(q) + ln_l)
 
 
 @functools.lru_cache(maxsize=8)
-def _snr_table(spread_db, q):
+def _snr_table(spread_db, q, clutter):
     if not 0.0 < q <= 0.5:
         raise ConfigError(f"the false-alarm share q = {q!r} is outside (0, 0.5]")
     u = np.linspace(*SNR_U)
     v = np.linspace(*SNR_V)
     values = np.empty((len(u), len(v)))
     for i in range(0, len(u), 32):             # 32 rows at a time (memory: rows x columns x SPREAD_STEPS)
-        values[i:i + 32] = snr_evidence(np.exp(u[i:i + 32])[:, None], v[None, :], spread_db, q)
+        values[i:i + 32] = snr_evidence(np.exp(u[i:i + 32])[:, None], v[None, :], spread_db, q, clutter)
     values[:, 0] = 0.0
     values.setflags(write=False)
-    return SnrTable(values, q)
+    return SnrTable(values, q, clutter)
 
 
 def likelihood_ratio(e, q):
@@ -112,6 +174,14 @@ def gap_mixture(e_blocked, e_open, q, gap):
     l0 = likelihood_ratio(e_open, q)
     lm = (1.0 - gap) * lb + gap * l0
     return np.log(lm / (1.0 - q + q * lm)), gap * l0 / lm
+
+
+def bounded(e, delta, bound):
+    """A look's evidence ``e`` [nat] within +-``delta`` x ``bound``: with the opportunity delta
+    (the chance a typical target at the voxel would have been detected, after blocking) a look
+    says at most delta times the most a look says (``SnrTable.bound``), either way."""
+    cap = np.asarray(delta, np.float64) * bound
+    return np.clip(e, -cap, cap)
 
 
 def noise_floor(profiles, first, last, floor=1e-30):

@@ -2,15 +2,19 @@
 map_server reads it, rosbags; an empty map gives valid empty files."""
 
 
+import dataclasses
+
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from radarcl import logodds, sensor_model
 from radarcl.cli import main
 from radarcl.errors import ConfigError
 from radarcl.gridspec import GridSpec, assemble
 from radarcl.maps import exports
-from radarcl.maps.map import Map
+from radarcl.maps.map import UNOBSERVED, Map
 
 SPEC = GridSpec((-2.0, -3.0, -1.0), 0.25, (24, 16, 16))
 
@@ -283,14 +287,18 @@ def known():
 
 def test_a_known_map_reads_the_prior_where_unknown_and_vti_marks_only_what_it_knows(known, tmp_path):
     """With the default reading a voxel never observed reads the prior (the base rate), in a
-    brick or outside every brick alike; the .vti's observed mask is the knowledge, not the value."""
+    brick or outside every brick alike, and so does one whose evidence came with too little
+    knowledge to call it observed; the .vti's observed mask is the knowledge, not the value. A
+    map written before the reading kept ``known_looks`` reads such a voxel by its sums."""
     import vtk
     from vtk.util.numpy_support import vtk_to_numpy
 
     prior = known.reading["prior_nats"]
     d = known.dense() / logodds.SCALE
     assert d[0, 0, 0] == pytest.approx(prior, abs=1e-3)                 # no brick there
-    assert d[8, 8, 15] == pytest.approx(-2.0 + prior, abs=1e-3)         # behind the wall: a quarter look
+    assert d[8, 8, 15] == pytest.approx(prior, abs=1e-3)                # behind the wall: a quarter look
+    legacy = dataclasses.replace(known, reading={k: v for k, v in known.reading.items() if k != "known_looks"})
+    assert legacy.dense()[8, 8, 15] / logodds.SCALE == pytest.approx(-2.0 + prior, abs=1e-3)
     assert known.probability_at(SPEC.index_to_world(np.array([0, 0, 0]))) == pytest.approx(1 / (1 + np.exp(-prior)))
     exports.vti(known, tmp_path / "k.vti")
     reader = vtk.vtkXMLImageDataReader()
@@ -298,6 +306,38 @@ def test_a_known_map_reads_the_prior_where_unknown_and_vti_marks_only_what_it_kn
     reader.Update()
     observed = vtk_to_numpy(reader.GetOutput().GetPointData().GetArray("observed")).reshape(SPEC.array_shape)
     assert observed.sum() == 12 * 12 * 11 and observed[8, 8, 8] == 1 and observed[8, 8, 15] == 0
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), look_limit=st.sampled_from([0.5, 2.0, 4.0]),
+       prior=st.sampled_from([-6.0, -4.0, -0.5]))
+def test_no_query_reads_occupied_where_the_map_has_not_observed(seed, look_limit, prior):
+    """Whatever sums a voxel holds (any evidence, up to the fusion's limit, any knowledge and
+    looks), a voxel the map classes unobserved reads the prior through every query: log_odds_at,
+    probability_at (never above 1/2), dense, state_at; the observed ones read their sums."""
+    rng = np.random.default_rng(seed)
+    n = 3
+    data = rng.integers(-30 * 1024, 30 * 1024, (n, 8, 8, 8)).astype(np.int32)
+    knowledge = (rng.choice([0, 1, 2047, 2048, 2049, 4096, 20000], (n, 8, 8, 8))).astype(np.int32)
+    looks = np.where(knowledge > 0, rng.integers(1, 9, (n, 8, 8, 8)), rng.integers(0, 3, (n, 8, 8, 8))).astype(np.int32)
+    keys = np.array([(0, 0, 0), (1, 0, 0), (0, 1, 1)], np.int32)
+    reading = dict(sensor_model.ModelParams().reading, look_limit=look_limit, prior_nats=prior)
+    m = Map(SPEC, keys, data, knowledge, looks, reading)
+    centres = SPEC.index_to_world(np.stack(np.meshgrid(*(np.arange(k) for k in SPEC.shape), indexing="ij"),
+                                           -1).reshape(-1, 3))
+    state = m.state_at(centres)
+    nats, p = m.log_odds_at(centres), m.probability_at(centres)
+    unobserved = state == UNOBSERVED
+    assert unobserved.any() and (~unobserved).any()
+    assert np.all(nats[unobserved] == prior) and np.all(p[unobserved] <= 0.5)
+    k_at = m.units_at(centres, "knowledge")
+    assert np.array_equal(unobserved, k_at < sensor_model.KNOWN_LOOKS * logodds.KNOWLEDGE_SCALE)
+    dense = m.dense()                                                       # (z, y, x)
+    idx = SPEC.world_to_index(centres)
+    assert np.all(dense[idx[:, 2], idx[:, 1], idx[:, 0]][unobserved] == logodds.to_fixed(prior))
+    seen = ~unobserved
+    e, n_looks = m.units_at(centres)[seen] / logodds.SCALE, m.units_at(centres, "looks")[seen]
+    assert np.allclose(nats[seen], e / np.maximum(1.0, n_looks / look_limit) + prior)
 
 
 def test_unknown_stays_unknown_in_the_costmap_occupancy_grid_and_octomap(known, tmp_path):

@@ -317,8 +317,41 @@ def test_a_gap_in_a_blocker_lets_the_echo_behind_it_count(runtime):
         got[gap] = ge[:, 120:122, 0], gd[:, 120:122, 0], gd[:, 60:110]
     (e0, d0, n0), (e1, d1, n1) = got[0.0], got[0.01]
     assert np.abs(e0).max() <= 1 and not d0.any()                  # hard blocking: nothing behind the blocker
-    assert (e1 > 2 * logodds.SCALE).all() and (d1 > 0).all()        # a gap: the echo counts, and is known
+    assert (e1 > 1.5 * logodds.SCALE).all() and (d1 > 0).all()      # a gap: the echo counts, and is known,
+    bound = -math.log(detstats_model(blocker_gap=0.01).snr_table.q)    # as much as its knowledge allows
+    assert (e1 <= d1 / logodds.KNOWLEDGE_SCALE * bound * logodds.SCALE + EVIDENCE_UNITS_TOL).all()
     assert not n0.any() and not n1.any()                             # noise behind the blocker: still unknown
+
+
+def test_a_strong_echo_where_a_look_could_hardly_see_adds_at_most_its_share(runtime):
+    """A look with a small detection opportunity delta says at most delta ln(1 / q) either way,
+    however strong or weak the bin (snr_evidence.bounded): a 40 dB echo where the typical target's
+    opportunity is 0.02 gives 0.02 ln(1 / q), not the ln(1 / q) of the table; a bin far under the
+    noise no more than -0.02 ln(1 / q); a look that sees says +-ln(1 / q) at most. Kernel and
+    oracle alike."""
+    from radarcl import sensor_model as sm
+
+    base = detstats_model(ground_below_m=0.0)
+    at = 100
+    opportunity = np.array(base.opportunity)
+    ln_snr = np.array(base.ln_snr)
+    opportunity[at, 0] = [1.0, 0.02, 0.02, 0.02, 0.02]            # node 0: a look that sees; 1-4: hardly
+    ln_snr[at, 0] = math.log(1e4)                                   # a 40 dB target: the table says all it can
+    model = sm.BinModel(opportunity, 1.0 - opportunity, base.blocking, base.pfa, ln_snr, base.snr_table)
+    x = np.full((2, 256), math.log(2.0), np.float32)                # the floor: median / ln 2 = 1
+    x[0, at] = 1e4                                                  # 40 dB over the floor
+    x[1, at] = 1e-3                                                 # far under it
+    mask = np.zeros(x.shape, np.uint8)
+    cfg = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4, model="detstats")
+    out = Interpreter(runtime, (2,), 256, SPACING, cfg, bin_model=model)(x, np.ones_like(x), mask)
+    ge, gd = sm.unpack_nodes(out.evidence)
+    e, d = oracle.interpret_detstats(x, np.ones_like(x), mask, cfg, SPACING, model)[:2]
+    assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.array_equal(gd, d)
+    bound = -math.log(model.snr_table.q) * logodds.SCALE
+    assert abs(e[0, at, 0, 0] - bound) <= EVIDENCE_UNITS_TOL          # a look that sees: the table's most
+    assert np.all(np.abs(e[0, at, 0, 1:] - 0.02 * bound) <= EVIDENCE_UNITS_TOL)
+    assert np.all(np.abs(e[1, at, 0, 1:] + 0.02 * bound) <= EVIDENCE_UNITS_TOL)
+    assert abs(e[1, at, 0, 0] + bound) <= EVIDENCE_UNITS_TOL          # free evidence: at most as much
 
 
 def test_detstats_needs_its_model(runtime):

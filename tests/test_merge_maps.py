@@ -121,7 +121,7 @@ def test_a_map_on_another_lattice_is_refused_before_any_work(tmp_path, other):
         merge_maps.merge_stores(NoWork(), [paths[0], tmp_path], out)
 
 
-READING = dict(look_limit=4.0, prior_nats=-3.5, prior_looks=0.0)
+READING = dict(look_limit=4.0, prior_nats=-3.5, prior_looks=0.0, known_looks=0.5)
 
 
 def knowing_maps(root, spec, inputs=3, bricks=700, seed=3, reading=READING):

@@ -106,7 +106,7 @@ def test_a_planar_map_with_the_knowledge_channel_keeps_both(tmp_path, name):
     keys, data = planar_map(THICK)
     knowledge = np.abs(data) * 4
     looks = (knowledge > 0).astype(np.int32)
-    reading = dict(look_limit=4.0, prior_nats=0.0, prior_looks=0.5)
+    reading = dict(look_limit=4.0, prior_nats=0.0, prior_looks=0.5, known_looks=0.5)
     path = tmp_path / name
     if name.endswith(".npz"):
         npz.write(path, THICK, keys, data, channels=npz.Channels(knowledge, looks, reading))

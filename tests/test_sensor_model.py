@@ -165,6 +165,9 @@ def test_the_reading():
     assert np.allclose(sm.read_log_odds(e, k, n, reading), [0.0, -10.0, 0.0, 1.0, -1.04])  # never observed: still 0
     reading["prior_looks"] = 0.0          # the default: the prior everywhere, never observed reads the base rate
     assert np.allclose(sm.read_log_odds(e, k, n, reading), [0.0, -10.0, -2.0, 1.0, -2.04])
+    reading["known_looks"] = sm.KNOWN_LOOKS   # the default: less knowledge than that reads the prior alone
+    assert np.allclose(sm.read_log_odds(e, k, n, reading), [0.0, -10.0, -2.0, 1.0, -2.0])
+    assert sm.ModelParams().reading["known_looks"] == sm.KNOWN_LOOKS
 
 
 def test_the_default_reading_puts_the_prior_everywhere_and_an_old_map_reads_as_it_did():
@@ -246,6 +249,30 @@ def test_the_snr_table_against_its_quadrature(spread_db):
     assert np.all(table.values[:, 0] == 0.0) and table.values.max() <= -math.log(Q_CORR) + 1e-9   # bounded by ln(1 / q)
     # monotone in the measured power: a stronger echo is never less evidence of a target
     assert np.all(np.diff(table.values, axis=0) >= -1e-9)
+
+
+def test_clutter_explains_an_echo_a_weak_target_could_not_give():
+    """With a background that holds clutter (a fifth of the bins, 15 dB median, 10 dB spread), a
+    bright bin where the typical target is weak is explained by the background (about 0 nat; noise
+    alone calls it the most a look says), a bright bin where the target is strong is still
+    evidence of it, and a noise-like bin is still free evidence. The table holds to its quadrature."""
+    clutter = se.Clutter(0.2, 15.0, 10.0)
+    weak, strong = math.log(0.1), math.log(1e4)                     # -10 dB and 40 dB targets
+    assert se.snr_evidence(1e3, weak, 0.0, Q_CORR) == pytest.approx(-math.log(Q_CORR), abs=0.01)
+    assert abs(se.snr_evidence(1e3, weak, 7.0, Q_CORR, clutter)) < 0.02
+    assert se.snr_evidence(1e4, strong, 7.0, Q_CORR, clutter) > 2.0
+    assert se.snr_evidence(1.0, math.log(100.0), 7.0, Q_CORR, clutter) < -2.0
+    # the background law is a density: it integrates to 1 over x (trapezoid on a log grid)
+    u = np.linspace(-12.0, 14.0, 20001)
+    x = np.exp(u)
+    assert np.trapezoid(np.exp(clutter.ln_density(x)) * x, u) == pytest.approx(1.0, abs=1e-3)
+    table = se.SnrTable.build(7.0, Q_CORR, clutter)
+    rng = np.random.default_rng(3)
+    u, v = rng.uniform(*se.SNR_U[:2], 5000), rng.uniform(-10.0, se.SNR_V[1], 5000)
+    err = np.abs(table(u, v) - se.snr_evidence(np.exp(u), v, 7.0, Q_CORR, clutter))
+    assert np.quantile(err, 0.99) <= SNR_TABLE_P99_NATS and err.max() <= SNR_TABLE_MAX_NATS
+    with pytest.raises(ConfigError, match=r"sensor_model.clutter_share = 1 is outside its physical range"):
+        sm.ModelParams(clutter_share=1)
 
 
 def snr_beams(profiles, noise_floor_power=1.0):

@@ -160,7 +160,7 @@ def test_point_queries_agree_with_the_dense_map(tmp_path):
 
 
 # -- the knowledge channel (the detection-statistics model) ---------------------------------------------------------
-READING = dict(look_limit=4.0, prior_nats=-2.0, prior_looks=0.5)
+READING = dict(look_limit=4.0, prior_nats=-2.0, prior_looks=0.5, known_looks=0.5)
 
 
 def knowledge_map(seed=1):

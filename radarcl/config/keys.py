@@ -55,20 +55,8 @@ KEYS = {
                                 "occlusion: a pulse whose peak r/n reaches this is a surface"),
     "interpret.e_high_far": Key(lambda v: _N(v, -16, 0, unit="nat"), "nat",
                                 "occlusion: E_h at the far end of the range (e_high at the near end)"),
-    **{f"sensor_model.{name}": Key(lambda v, lo=lo, hi=hi, unit=unit: _N(v, lo, hi, unit=unit), unit, why)
-       for name, (lo, hi, unit), why in zip(sensor_model.RANGES, sensor_model.RANGES.values(), (
-           "detstats: SNR of a 1 m^2 target at 10 m on the beam's axis (the sensor's sensitivity)",
-           "detstats: reflectivity of a typical occupied voxel's upright surface",
-           "detstats: log-normal spread of the typical target's mean RCS",
-           "detstats: side of the typical target's patch",
-           "detstats: reflectivity of the terrain at grazing incidence",
-           "detstats: voxels whose centre lies below the ground plane + this are terrain",
-           "detstats: a detected echo blocks the beam as an opaque surface of this reflectivity",
-           "detstats: the chance that a voxel behind nearer echoes lies in a gap they leave (partial blockers)",
-           "detstats: correlated evidence counts at most this many looks' worth",
-           "detstats: log-odds of an occupied voxel before any look (the world's base rate)",
-           "detstats: looks at which the prior applies in full (0: everywhere, never-observed voxels too)",
-           "detstats: a measured false-alarm rate of the CFAR on these profiles (0: from its statistics)"))},
+    **{f"sensor_model.{name}": Key(lambda v, lo=lo, hi=hi, unit=unit: _N(v, lo, hi, unit=unit), unit, f"detstats: {why}")
+       for name, (lo, hi, unit, why) in sensor_model.RANGES.items()},
     "sensor_model.evidence": Key(lambda v: tomlfile.choice(v, sensor_model.EVIDENCE_KINDS), "",
                                  "detstats: snr, the likelihood ratio of the measured power over the beam's noise "
                                  "floor; detection, the CFAR's outcome alone"),

@@ -33,12 +33,12 @@ from radarcl.errors import ConfigError, ShapeError
 from radarcl.gridspec import BRICK, GridSpec
 from radarcl.io.files import memory_budget
 from radarcl.maps.disk import read_map, reading_of
+from radarcl.sensor_model import KNOWN_LOOKS
 
 UNKNOWN = -1          # a 2D cell that is neither occupied nor free (the ROS OccupancyGrid convention)
 OCCUPIED_NATS = 1.0   # occupied above this log-odds (p 0.73)
 FREE_NATS = -1.0      # free below this (p 0.27)
 UNOBSERVED, FREE, UNDECIDED, OCCUPIED = -1, 0, 1, 2       # voxel classes (``classes``)
-KNOWN_LOOKS = 0.5     # a voxel whose knowledge reaches this many looks is observed (detection statistics)
 
 
 def check_thresholds(occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):

@@ -8,7 +8,7 @@ A map of the detection-statistics model (``radarcl.sensor_model``) adds three me
 version ``KNOWLEDGE_VERSION`` (2): ``knowledge`` (n, *brick) int32 [z, y, x], the summed
 detection opportunity in ``logodds.KNOWLEDGE_SCALE`` units per look (same bricks, same order as
 ``data``; 0 where never observed), ``looks`` (n, *brick) int32, the number of those looks, and
-``reading`` (a JSON object of ``sensor_model.READING``: look_limit, prior_nats, prior_looks): a
+``reading`` (a JSON object of ``sensor_model.READING``: look_limit, prior_nats, prior_looks, known_looks): a
 voxel's log-odds is ``sensor_model.read_log_odds(data, knowledge, looks, reading)``, not
 ``data`` itself. A map without
 them is written as version 1, byte for byte as before; version 1 files read as maps without
@@ -55,11 +55,16 @@ class Channels:
 
 
 READING_SIGNS = {"prior_nats": ("number <= 0", lambda v: v <= 0),         # the rest: positive
-                 "prior_looks": ("number >= 0", lambda v: v >= 0)}     # 0: the prior applies everywhere
+                 "prior_looks": ("number >= 0", lambda v: v >= 0),     # 0: the prior applies everywhere
+                 "known_looks": ("number >= 0", lambda v: v >= 0)}     # 0: every voxel read by its sums
+LEGACY_READING = {"known_looks": 0.0}   # what a reading written before these keys reads with
 
 
 def check_reading(reading, where):
-    """A map's reading as a dict of floats, or FrameFormatError naming what is wrong."""
+    """A map's reading as a dict of floats (a reading written before ``LEGACY_READING``'s keys
+    were kept gets their old values), or FrameFormatError naming what is wrong."""
+    if isinstance(reading, dict) and set(reading) == set(READING) - set(LEGACY_READING):
+        reading = {**reading, **LEGACY_READING}
     if not isinstance(reading, dict) or set(reading) != set(READING):
         raise FrameFormatError(f"{where}: its reading must give exactly {', '.join(READING)}, got {reading!r}")
     out = {}

@@ -111,7 +111,8 @@ class Interpreter(Stage):
         if m.graded:                     # the table replaces the misses and the exact unblocked nodes
             tables.update(ln_snr=cla.to_device(q, m.ln_snr.astype(np.float32)),
                           snr_table=cla.to_device(q, m.snr_table.values.astype(np.float32)),
-                          noise_floor=float(m.noise_floor), blocker_gap=float(m.blocker_gap), snr_q=float(m.snr_table.q))
+                          noise_floor=float(m.noise_floor), blocker_gap=float(m.blocker_gap),
+                          snr_q=float(m.snr_table.q))
             return tables
         first, last = self.first_bin, self.last_bin
         unblocked = np.zeros((self.n_bins, N_CLASSES, NODES), np.int64), np.zeros((self.n_bins, N_CLASSES, NODES), np.int64)
@@ -119,6 +120,7 @@ class Interpreter(Stage):
             with np.errstate(divide="ignore"):
                 unblocked[0][first:last + 1] = logodds.to_fixed(np.log(m.miss[first:last + 1]))
             unblocked[1][first:last + 1] = np.rint(m.opportunity[first:last + 1] * logodds.KNOWLEDGE_SCALE)
+            unblocked[0][unblocked[1] == 0] = 0                 # no look, no evidence (as the kernel's nodes)
         tables.update(miss=cla.to_device(q, m.miss.astype(np.float32)), unblocked=cla.to_device(q, pack_nodes(*unblocked)))
         return tables
 
