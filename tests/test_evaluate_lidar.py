@@ -184,3 +184,76 @@ def test_a_box_ranks_against_its_turned_copies():
     (row,) = L.box_scores(spec, box, {"capped": capped})
     occupied, peak, _, rank = row["maps"]["capped"]
     assert peak == 14.0 and rank > 0.9
+
+
+def _p(nats):
+    return 1.0 / (1.0 + math.exp(-nats))
+
+
+def test_costmap_scores_by_hand():
+    """Classes at the export thresholds (strictly above 1 nat occupied, strictly below -1 free);
+    without a knowledge channel a cell of no evidence (0) is unknown, with one every cell the map
+    does not know is unknown whatever it reads, and is left out of the ECE."""
+    nats = np.array([[2.0, 1.0, 0.5, -1.5, 0.0, 3.0, -2.0, -0.5]])
+    pos = np.array([[1, 1, 1, 1, 0, 0, 0, 0]], bool)             # the lidar's occupied cells
+    neg = ~pos
+    s = L.costmap_scores(nats, pos, neg)
+    # occupied: 2.0 (pos), 3.0 (neg); free: -1.5 (pos), -2.0 (neg); 1.0 sits on the threshold (undecided)
+    assert s["recall"] == 1 / 4 and s["miss"] == 1 / 4 and s["phantom"] == 1 / 4
+    assert s["unknown"] == 4 / 8                                  # 1.0, 0.5 | 0.0 (no evidence), -0.5
+    # ECE over the seven cells with evidence, ten bins: -1.5 (y 1) and -2.0 (y 0) share (0.1, 0.2]
+    mixed = 2 * abs(0.5 - (_p(-1.5) + _p(-2.0)) / 2)
+    ece = ((1 - _p(2.0)) + (1 - _p(1.0)) + (1 - _p(0.5)) + mixed + _p(3.0) + _p(-0.5)) / 7
+    assert s["ece_cells"] == 7 and s["ece"] == pytest.approx(ece, abs=1e-12)
+
+    known = np.array([[1, 1, 0, 1, 1, 0, 0, 1]], bool)
+    s = L.costmap_scores(nats, pos, neg, known)
+    # 3.0 and -2.0 are not known: no phantom, and -2.0 is not free; 0.0 is known and undecided
+    assert s["recall"] == 1 / 4 and s["miss"] == 1 / 4 and s["phantom"] == 0.0
+    assert s["unknown"] == 6 / 8                                  # 1.0, 0.5 | 0.0, 3.0, -2.0, -0.5
+    ece = ((1 - _p(2.0)) + (1 - _p(1.0)) + (1 - _p(-1.5)) + _p(0.0) + _p(-0.5)) / 5    # one cell per bin
+    assert s["ece_cells"] == 5 and s["ece"] == pytest.approx(ece, abs=1e-12)
+    empty = L.costmap_scores(nats, pos, np.zeros_like(neg))
+    assert math.isnan(empty["phantom"]) and empty["recall"] == 1 / 4
+
+
+def test_the_raw_threshold_at_equal_recall_by_hand():
+    """The raw map calls the same share of the lidar's occupied cells occupied as the map does:
+    every cell above the threshold, at it the share of the tied ones that makes the recall
+    exact; its phantom rate counts the free cells tied at the threshold by the same share."""
+    score = np.array([5.0, 4.0, 4.0, 2.0, 1.0, 4.0, 3.0, 0.0, 0.0])
+    pos = np.array([1, 1, 1, 1, 1, 0, 0, 0, 0], bool)
+    neg = ~pos
+    assert L.phantom_at_recall(score, pos, neg, 1 / 5) == (5.0, 0.0)
+    assert L.phantom_at_recall(score, pos, neg, 2 / 5) == (4.0, 0.5 / 4)     # half the two 4s: half the free 4
+    assert L.phantom_at_recall(score, pos, neg, 3 / 5) == (4.0, 1 / 4)
+    assert L.phantom_at_recall(score, pos, neg, 4 / 5) == (2.0, 2 / 4)
+    assert L.phantom_at_recall(score, pos, neg, 1.0) == (1.0, 2 / 4)
+    assert L.phantom_at_recall(score, pos, neg, 0.0) == (math.inf, 0.0)
+    assert all(math.isnan(v) for v in L.phantom_at_recall(score, pos, np.zeros_like(neg), 0.5))
+
+
+def test_band_scores_carry_the_costmap_figures():
+    """band_scores gives each map its costmap_scores over the band's cells and the baseline's
+    phantom rate at that map's recall."""
+    from radarcl.gridspec import GridSpec
+
+    rng = np.random.default_rng(3)
+    n = 60
+    hits = np.zeros((1, n), np.int32)
+    hits[0, :25] = 1
+    truth = L.LidarTruth(GridSpec((0.0, 0.0, -0.1), 0.2, (n, 1, 1)), hits, (1 - hits) * 2, [10.0])
+    distance = np.full((1, n), 3.0)
+    distance[0, -5:] = 7.0                                          # five free cells in another band
+    nats = np.round(rng.normal(0, 2, (1, n)), 1)
+    raw = np.round(rng.normal(0, 1, (1, n)), 1)
+    known = rng.random((1, n)) < 0.8
+    (row,) = L.band_scores(truth, distance, {"m": nats}, {"raw": raw}, bands=(2.0, 5.0, 10.0),
+                           known={"m": known}, equal_recall="raw")
+    band = distance < 5.0
+    pos, neg = truth.occupied & band, truth.free & band
+    want = L.costmap_scores(nats, pos, neg, known)
+    t, phantom = L.phantom_at_recall(raw, pos, neg, want["recall"])
+    assert row["costmap"]["m"] == dict(want, equal_recall_threshold=t, equal_recall_phantom=phantom)
+    assert (row["occupied"], row["free"]) == (25, 30)
+
