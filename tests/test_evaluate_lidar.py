@@ -78,9 +78,16 @@ def _write_recording(root, n_scans=6):
 
 
 @pytest.fixture(scope="module")
-def evaluated(runtime, tmp_path_factory):
+def recording(tmp_path_factory):
+    """(root, scene, lidar poses) of the synthetic recording (six scans)."""
     root = tmp_path_factory.mktemp("street")
-    scene, track, lidar = _write_recording(root)
+    scene, _, lidar = _write_recording(root)
+    return root, scene, lidar
+
+
+@pytest.fixture(scope="module")
+def evaluated(runtime, recording):
+    root, scene, lidar = recording
     models = job.resolve_models("radiate-cts350x", ["paper", "calibrated", "detstats"])
     result, arrays = job.run(runtime, models, root, voxel_m=0.5, poses=root / "street.tum", report=lambda *_: None)
     return scene, lidar, result, arrays
@@ -184,3 +191,141 @@ def test_a_box_ranks_against_its_turned_copies():
     (row,) = L.box_scores(spec, box, {"capped": capped})
     occupied, peak, _, rank = row["maps"]["capped"]
     assert peak == 14.0 and rank > 0.9
+
+
+def _p(nats):
+    return 1.0 / (1.0 + math.exp(-nats))
+
+
+def test_costmap_scores_by_hand():
+    """Classes at the export thresholds (strictly above 1 nat occupied, strictly below -1 free);
+    without a knowledge channel a cell of no evidence (0) is unknown, with one every cell the map
+    does not know is unknown whatever it reads, and is left out of the ECE."""
+    nats = np.array([[2.0, 1.0, 0.5, -1.5, 0.0, 3.0, -2.0, -0.5]])
+    pos = np.array([[1, 1, 1, 1, 0, 0, 0, 0]], bool)             # the lidar's occupied cells
+    neg = ~pos
+    s = L.costmap_scores(nats, pos, neg)
+    # occupied: 2.0 (pos), 3.0 (neg); free: -1.5 (pos), -2.0 (neg); 1.0 sits on the threshold (undecided)
+    assert s["recall"] == 1 / 4 and s["miss"] == 1 / 4 and s["phantom"] == 1 / 4
+    assert s["unknown"] == 4 / 8                                  # 1.0, 0.5 | 0.0 (no evidence), -0.5
+    # ECE over the seven cells with evidence, ten bins: -1.5 (y 1) and -2.0 (y 0) share (0.1, 0.2]
+    mixed = 2 * abs(0.5 - (_p(-1.5) + _p(-2.0)) / 2)
+    ece = ((1 - _p(2.0)) + (1 - _p(1.0)) + (1 - _p(0.5)) + mixed + _p(3.0) + _p(-0.5)) / 7
+    assert s["ece_cells"] == 7 and s["ece"] == pytest.approx(ece, abs=1e-12)
+
+    known = np.array([[1, 1, 0, 1, 1, 0, 0, 1]], bool)
+    s = L.costmap_scores(nats, pos, neg, known)
+    # 3.0 and -2.0 are not known: no phantom, and -2.0 is not free; 0.0 is known and undecided
+    assert s["recall"] == 1 / 4 and s["miss"] == 1 / 4 and s["phantom"] == 0.0
+    assert s["unknown"] == 6 / 8                                  # 1.0, 0.5 | 0.0, 3.0, -2.0, -0.5
+    ece = ((1 - _p(2.0)) + (1 - _p(1.0)) + (1 - _p(-1.5)) + _p(0.0) + _p(-0.5)) / 5    # one cell per bin
+    assert s["ece_cells"] == 5 and s["ece"] == pytest.approx(ece, abs=1e-12)
+    empty = L.costmap_scores(nats, pos, np.zeros_like(neg))
+    assert math.isnan(empty["phantom"]) and empty["recall"] == 1 / 4
+
+
+def test_the_raw_threshold_at_equal_recall_by_hand():
+    """The raw map calls the same share of the lidar's occupied cells occupied as the map does:
+    every cell above the threshold, at it the share of the tied ones that makes the recall
+    exact; its phantom rate counts the free cells tied at the threshold by the same share."""
+    score = np.array([5.0, 4.0, 4.0, 2.0, 1.0, 4.0, 3.0, 0.0, 0.0])
+    pos = np.array([1, 1, 1, 1, 1, 0, 0, 0, 0], bool)
+    neg = ~pos
+    assert L.phantom_at_recall(score, pos, neg, 1 / 5) == (5.0, 0.0)
+    assert L.phantom_at_recall(score, pos, neg, 2 / 5) == (4.0, 0.5 / 4)     # half the two 4s: half the free 4
+    assert L.phantom_at_recall(score, pos, neg, 3 / 5) == (4.0, 1 / 4)
+    assert L.phantom_at_recall(score, pos, neg, 4 / 5) == (2.0, 2 / 4)
+    assert L.phantom_at_recall(score, pos, neg, 1.0) == (1.0, 2 / 4)
+    assert L.phantom_at_recall(score, pos, neg, 0.0) == (math.inf, 0.0)
+    assert all(math.isnan(v) for v in L.phantom_at_recall(score, pos, np.zeros_like(neg), 0.5))
+
+
+def test_band_scores_carry_the_costmap_figures():
+    """band_scores gives each map its costmap_scores over the band's cells and the baseline's
+    phantom rate at that map's recall."""
+    from radarcl.gridspec import GridSpec
+
+    rng = np.random.default_rng(3)
+    n = 60
+    hits = np.zeros((1, n), np.int32)
+    hits[0, :25] = 1
+    truth = L.LidarTruth(GridSpec((0.0, 0.0, -0.1), 0.2, (n, 1, 1)), hits, (1 - hits) * 2, [10.0])
+    distance = np.full((1, n), 3.0)
+    distance[0, -5:] = 7.0                                          # five free cells in another band
+    nats = np.round(rng.normal(0, 2, (1, n)), 1)
+    raw = np.round(rng.normal(0, 1, (1, n)), 1)
+    known = rng.random((1, n)) < 0.8
+    (row,) = L.band_scores(truth, distance, {"m": nats}, {"raw": raw}, bands=(2.0, 5.0, 10.0),
+                           known={"m": known}, equal_recall="raw")
+    band = distance < 5.0
+    pos, neg = truth.occupied & band, truth.free & band
+    want = L.costmap_scores(nats, pos, neg, known)
+    t, phantom = L.phantom_at_recall(raw, pos, neg, want["recall"])
+    assert row["costmap"]["m"] == dict(want, equal_recall_threshold=t, equal_recall_phantom=phantom)
+    assert (row["occupied"], row["free"]) == (25, 30)
+
+
+def test_the_job_reads_each_map_as_its_costmap_does(evaluated):
+    """The job's costmap figures are those of each map as it reads: the detection-statistics map
+    with its knowledge (cells it does not know unknown), the others by their evidence alone; the
+    raw intensity at each map's recall."""
+    _, _, result, arrays = evaluated
+    truth, maps, known = arrays["truth"], arrays["maps"], arrays["known"]
+    assert set(known) == {"detection statistics"} and known["detection statistics"].dtype == bool
+    assert not known["detection statistics"].all()
+    distance = L.range_from_path(arrays["spec"], arrays["per_beam"][..., :3, 3].reshape(-1, 3))
+    row = result["bands"][0]
+    band = (distance >= row["band"][0]) & (distance < row["band"][1])
+    pos, neg = truth.occupied & band, truth.free & band
+    for name in maps:
+        want = L.costmap_scores(maps[name], pos, neg, known.get(name))
+        want["equal_recall_threshold"], want["equal_recall_phantom"] = L.phantom_at_recall(arrays["raw"], pos, neg,
+                                                                                           want["recall"])
+        assert row["costmap"][name] == want
+    lines = job.table(result)
+    assert lines[0].startswith("scans 0:6 of 6 (all: 000001..000006), 0.00-1.50 s after the recording's first")
+    assert "detection statistics:" in lines
+    assert "| band | recall | phantom | raw @recall | miss | unknown | ECE (cells) |" in lines
+
+
+def test_select_scans_is_a_checked_slice():
+    assert job.select_scans(None, 6) == (0, 6)
+    assert job.select_scans((None, -2), 6) == (0, 4) and job.select_scans((-3, None), 6) == (3, 6)
+    assert job.select_scans((2, 6), 6) == (2, 6)
+    from radarcl.errors import ConfigError
+
+    for bad, words in (((4, 4), "selects no scan"), ((5, 2), "selects no scan"), ((3, 9), "outside"),
+                       ((-7, None), "outside")):
+        with pytest.raises(ConfigError, match=words):
+            job.select_scans(bad, 6)
+
+
+def test_scans_scores_a_part_of_the_recording_and_says_which(recording, tmp_path, capsys):
+    """`evaluate-lidar --scans 2:` fuses scans 2-5 only, against the lidar frames taken while they
+    were (0.7-1.6 s: the scans' azimuths run from 0.626 to 1.625 s), names them in its first
+    line and in --json; a range outside the recording or holding no scan is refused in a
+    sentence, before anything is fused."""
+    from radarcl.cli import main
+
+    root = recording[0]
+    common = [str(root), "--poses", str(root / "street.tum"), "--model", "paper", "--voxel", "0.5", "--no-progress"]
+    assert main(["evaluate-lidar", *common, "--scans", "2:", "--json", str(tmp_path / "r.json")]) == 0
+    out = capsys.readouterr().out
+    assert ("scans 2:6 of 6 (4 scans: 000003..000006), 0.50-1.50 s after the recording's first (UNIX "
+            "1700000000.626-1700000001.625 s); 10 lidar frames taken meanwhile") in out
+    r = json.loads((tmp_path / "r.json").read_text())
+    assert r["scans"] == 4 and r["lidar_frames"] == 10
+    assert {k: r["scan_range"][k] for k in ("start", "stop", "total", "first", "last", "lidar_within")} == \
+        dict(start=2, stop=6, total=6, first="000003", last="000006", lidar_within=True)
+    figures = {"phantom", "miss", "unknown", "recall", "ece", "ece_cells", "equal_recall_threshold",
+               "equal_recall_phantom"}
+    assert r["bands"] and all(figures == set(row["costmap"]["paper constants"]) for row in r["bands"])
+    assert r["costmap_thresholds"] == dict(occupied_nats=1.0, free_nats=-1.0, known_looks=0.5)
+    for bad, words in (("4:4", "selects no scan"), ("3:9", "outside the recording's 6 scans"),
+                       ("-7:", "outside the recording's 6 scans")):
+        assert main(["evaluate-lidar", *common, f"--scans={bad}"]) == 2
+        err = capsys.readouterr().err
+        assert f"--scans {bad}" in err and words in err, err
+    with pytest.raises(SystemExit):
+        main(["evaluate-lidar", *common, "--scans", "2-4"])
+    assert "expected START:STOP" in capsys.readouterr().err

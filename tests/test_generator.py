@@ -56,9 +56,16 @@ def test_the_scenes_bench_scores_every_map_and_baseline(runtime):
     names = set(r["mean"])
     assert {"tuned", "paper constants", "baseline: prior_only", "baseline: raw_intensity", "baseline: octomap"} <= names
     for m in r["mean"].values():
-        assert {"auc_detectable", "auc_obstacles", "false_free", "ece", "objects_found"} <= set(m)
+        assert {"auc_detectable", "auc_obstacles", "false_free", "ece", "objects_found", "ece_occupied",
+                "occupied_calls"} <= set(m)
     assert r["scenes"][0]["classes"]["detectable"] > 0
-    assert any("scene 201" in line for line in scenes.format_table(r))
+    lines = scenes.format_table(r)
+    assert any("scene 201" in line for line in lines) and "ECEocc" in lines[1] and "occ-n" in lines[1]
+    # what the default map calls occupied: counted over the scene, its calibration in the table
+    detstats = r["mean"]["detection statistics"]
+    assert detstats["occupied_calls"] == r["scenes"][0]["maps"]["detection statistics"]["occupied_calls"] > 0
+    row = next(line for line in lines if line.strip().startswith("detection statistics "))
+    assert row.split()[-1] == str(detstats["occupied_calls"]) and row.split()[-2] == f"{detstats['ece_occupied']:.3f}"
     # an object with a DETECTABLE surface voxel is one a perfect detector finds: its bin's +1 nat
     # reaches the voxel; the others are seen only WEAK
     oracle = r["mean"]["oracle detections, free 0"]

@@ -126,3 +126,58 @@ def test_objects_are_found_within_one_voxel_of_their_visible_surface():
     assert s["detectable_found"] == 1 and s["detectable_total"] == 2
     L[0, 0, 4] = 0.1
     assert metrics.radar_scores(L, t, objects)["detectable_found"] == 2
+
+
+def _p(nats):
+    return 1.0 / (1.0 + math.exp(-nats))
+
+
+def test_the_occupied_call_ece_by_hand():
+    """ECE of what the map calls occupied: over the visible voxels (FREE-visible, DETECTABLE,
+    WEAK) read at p >= 0.5; a map with knowledge: only those it knows, whatever the others read;
+    one without: those holding evidence (a voxel at exactly 0 is unknown, no call)."""
+    t = small_truth()
+    L = np.array([[[-1.0, 0.5, 2.0, -0.1, 0.1, -3.0],
+                   [-2.0, 1.0, 9.0, 5.0, 0.0, -0.7]]], np.float32)
+    s = metrics.radar_scores(L, t)
+    # visible at p >= 0.5: 0.5 (free), 2.0 and 1.0 (detectable), each alone in its bin
+    assert s["occupied_calls"] == 3
+    assert s["ece_occupied"] == pytest.approx((_p(0.5) + (1 - _p(2.0)) + (1 - _p(1.0))) / 3, abs=1e-12)
+    # a weak echo at the slightest positive evidence is a call; at exactly 0 it is none
+    L2 = L.copy()
+    L2[0, 0, 3] = 1e-3
+    s2 = metrics.radar_scores(L2, t)
+    assert s2["occupied_calls"] == 4
+    assert s2["ece_occupied"] == pytest.approx((_p(0.5) + (1 - _p(2.0)) + (1 - _p(1.0)) + (1 - _p(1e-3))) / 4,
+                                               abs=1e-7)
+    L2[0, 0, 3] = 0.0
+    assert metrics.radar_scores(L2, t)["occupied_calls"] == 3
+    zeros = metrics.radar_scores(np.zeros((1, 2, 6), np.float32), t)
+    assert zeros["occupied_calls"] == 0 and math.isnan(zeros["ece_occupied"])
+    k = np.zeros((1, 2, 6), np.float32)
+    k[0, 0, 1], k[0, 0, 2] = 1.0, 0.5                 # it knows the free 0.5 and the detectable 2.0 (0.5 look: known)
+    k[0, 1, 1] = 0.49                                 # and not quite the detectable 1.0
+    s = metrics.radar_scores(L, t, knowledge=k)
+    assert s["occupied_calls"] == 2
+    assert s["ece_occupied"] == pytest.approx((_p(0.5) + (1 - _p(2.0))) / 2, abs=1e-12)
+    assert math.isnan(metrics.radar_scores(L, t, knowledge=np.zeros_like(k))["ece_occupied"])
+
+
+def test_an_object_is_found_only_where_the_map_knows_it():
+    """A map with the knowledge channel finds an object only at a voxel it knows that reads p >
+    0.5; what it reads where it does not know (its prior, or evidence too thin) finds nothing."""
+    t = small_truth()
+    objects = [dict(name="near", range_m=3.0, near=np.array([[2, 0, 0], [1, 1, 0]]), detectable=True),
+               dict(name="post", range_m=5.0, near=np.array([[4, 0, 0]]), detectable=True)]
+    L = np.zeros((1, 2, 6), np.float32)
+    L[0, 0, 2], L[0, 1, 1], L[0, 0, 4] = -1.0, 0.3, 2.0   # "near": p > 0.5 at (x 1, y 1); "post" at x 4
+    k = np.zeros((1, 2, 6), np.float32)
+    k[0, 0, 2] = 3.0                                  # "near" known only where it reads free
+    k[0, 0, 4] = 1.0                                  # "post" known where it reads occupied
+    s = metrics.radar_scores(L, t, objects, knowledge=k)
+    assert [o["found"] for o in s["objects"]] == [False, True]
+    assert s["objects_found"] == 1 and s["detectable_found"] == 1
+    assert s["objects"][0]["peak_nats"] == pytest.approx(0.3)           # the peak is what it reads, known or not
+    k[0, 1, 1] = 0.5
+    assert metrics.radar_scores(L, t, objects, knowledge=k)["objects_found"] == 2
+    assert metrics.radar_scores(L, t, objects)["objects_found"] == 2     # without knowledge: as before

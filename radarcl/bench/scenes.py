@@ -5,8 +5,12 @@ scene's seed) and mapped with the paper's constants, the tuned constants and eac
 the tuned configuration; every map and the three baselines (prior_only, raw_intensity, octomap)
 are scored on that scene's fixed voxel set (what the tuned configuration's beams reach,
 ``evaluate.instrument``). The table gives per configuration the mean of each score over the
-scenes (objects: found / total summed; det-obj: the same over the objects
-with a DETECTABLE surface voxel, the ones a perfect per-bin detector sees). Nothing is tuned here: the held-out split is for
+scenes (objects: found / total summed, an object found where one of its voxels reads p > 0.5
+and, for a map with the knowledge channel, the map knows that voxel; det-obj: the same over the
+objects with a DETECTABLE surface voxel, the ones a perfect per-bin detector sees; ECEocc: the
+calibration of what the map calls occupied, the ECE over the visible voxels it knows and reads at
+p >= 0.5 (without the knowledge channel: that hold evidence), beside their number summed over
+the scenes, occ-n). Nothing is tuned here: the held-out split is for
 reporting only. The two "oracle detections" rows are not maps one can make: the beams fused
 with the noiseless truth of every bin (``evaluate.oracle_detections``), +1 nat on detectable bins
 and 0 (or -1 nat) on the others: what a perfect per-bin detector gives through the same beam
@@ -22,6 +26,7 @@ from radarcl.geometry import BEAM_MODELS
 KEYS = ("auc_detectable", "iou_detectable", "auc_obstacles", "iou_obstacles", "auc_weak", "false_free",
         "false_free_obstacles", "shadow_unknown", "ece", "brier")
 KNOWLEDGE_KEYS = ("ece_known", "known_visible")     # maps with the knowledge channel
+OCCUPIED_KEYS = ("ece_occupied",)                   # what the map calls occupied (its count is summed)
 
 
 RADARS = {"paper": "paper", "spinning": "spinning-sim"}      # --radar: the sensor profile it simulates
@@ -99,7 +104,9 @@ def run(runtime, seeds, voxel_m=0.2, report=None, extra=(), physics=0, radar="pa
         if not rows:
             mean[name] = dict(error=per_scene[0]["maps"][name].get("error"))
             continue
-        mean[name] = {k: _mean([r.get(k) for r in rows]) for k in KEYS + KNOWLEDGE_KEYS + ("ms_per_frame",)}
+        mean[name] = {k: _mean([r.get(k) for r in rows]) for k in KEYS + KNOWLEDGE_KEYS + OCCUPIED_KEYS
+                      + ("ms_per_frame",)}
+        mean[name]["occupied_calls"] = sum(r["occupied_calls"] for r in rows)
         mean[name]["objects_found"] = sum(r["objects_found"] for r in rows)
         mean[name]["objects_total"] = sum(r["objects_total"] for r in rows)
         mean[name]["detectable_found"] = sum(r["detectable_found"] for r in rows)
@@ -115,6 +122,10 @@ def physics_names(physics):
     return [name for bit, name in ((SIDELOBES, "sidelobes"), (MULTIPATH, "multipath")) if physics & bit] or ["none"]
 
 
+def _cell(v, width=6):
+    return f"{'-':>{width}s}" if v is None else f"{v:{width}.3f}"
+
+
 def _mean(values):
     values = [v for v in values if v is not None]
     return float(np.mean(values)) if values else None
@@ -125,10 +136,10 @@ def format_table(r):
     lines = [f"{len(r['seeds'])} generated {'streets, spinning radar' if r.get('radar') == 'spinning' else 'scenes'} "
              f"(seeds {', '.join(map(str, r['seeds']))}) at {r['voxel_m']} m, "
              f"harder physics: {', '.join(r.get('physics', ['none']))}, on {r['device']}; each scored on its own fixed "
-             f"voxel set, means over the scenes",
+             f"voxel set, means over the scenes (objects and occ-n summed)",
              f"  {'map':36s} {'AUCdet':>6s} {'IoUdet':>6s} {'AUCobs':>6s} {'IoUobs':>6s} {'AUCwk':>6s} {'f-free':>6s} "
              f"{'ff-obs':>6s} {'shd-unk':>7s} {'ECE':>6s} {'Brier':>6s} {'objects':>8s} {'det-obj':>7s} {'ms/frame':>8s} "
-             f"{'ECEknwn':>7s} {'known':>7s}"]
+             f"{'ECEknwn':>7s} {'known':>7s} {'ECEocc':>6s} {'occ-n':>8s}"]
     for name, m in r["mean"].items():
         if "error" in m:
             lines.append(f"  {name:36s} {m['error']}")
@@ -137,7 +148,7 @@ def format_table(r):
         extra = " ".join(f"{m.get(k):7.3f}" if m.get(k) is not None else f"{'-':>7s}" for k in KNOWLEDGE_KEYS)
         lines.append(f"  {name:36s} {cells} {m['shadow_unknown']:7.3f} {m['ece']:6.3f} {m['brier']:6.3f} "
                      f"{m['objects_found']:>3d}/{m['objects_total']:<4d} {m['detectable_found']:>3d}/{m['detectable_total']:<3d} "
-                     f"{m['ms_per_frame']:8.1f} {extra}")
+                     f"{m['ms_per_frame']:8.1f} {extra} {_cell(m.get('ece_occupied'))} {m['occupied_calls']:8d}")
     for s in r["scenes"]:
         lines.append(f"  scene {s['scene']['seed']}: {s['voxel_set']}")
     return lines

@@ -19,7 +19,10 @@ Truth (``lidar_truth``), in the radar's plane (one cell per map column):
 Scores (``band_scores``), per band of range from the radar's path (a cell's distance to the
 nearest position of the radar), over the cells the lidar knows: the ROC area of each predictor
 (occupied against free), and for maps the IoU at the occupancy threshold (log-odds > 0 against
-OCCUPIED). Bands with fewer than ``MIN_CELLS`` occupied or free cells are not scored. Two
+OCCUPIED) and what a robot acting on the map's costmap meets (``costmap_scores``: the phantom
+and miss rates at the export thresholds, the cells left unknown, the calibration against the
+lidar, and the raw intensity's phantom rate at the same recall, ``phantom_at_recall``). Bands
+with fewer than ``MIN_CELLS`` occupied or free cells are not scored. Two
 predictors use no radar data: the number of radar samples a cell holds, negated ("-1 per
 sample": occupied cells lie farther out, so counting wins against summed evidence when range is
 not held fixed), and the range itself; the raw intensity fused with the same beams is the
@@ -40,9 +43,10 @@ import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError
-from radarcl.evaluation.metrics import roc_auc
+from radarcl.evaluation.metrics import calibration, probability, roc_auc
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GridSpec
+from radarcl.maps.map import FREE, OCCUPIED, UNOBSERVED, classes
 from radarcl.pipeline import Mapping, evidence_config
 
 EGO_RADIUS_M = 3.0           # nearer the lidar: the vehicle that carries it (a car reaches ~2.5 m from its roof)
@@ -213,14 +217,76 @@ def range_from_path(spec, positions):
     return d.reshape(ny, nx)
 
 
-def band_scores(truth, distance, maps, baselines, bands=BANDS_M, mask=None):
-    """Rows per band [{band, occupied, free, auc: {name: AUC}, iou: {name: IoU}}]: ``maps`` and
-    ``baselines`` are {name: (ny, nx) score, higher = more occupied}; maps also get an IoU at
-    log-odds 0. Only cells of ``mask`` count (default all). Bands where the lidar knows fewer
-    than ``MIN_CELLS`` of either class are left out."""
+def costmap_scores(nats, pos, neg, known=None):
+    """What a robot acting on a map meets where the lidar knows: ``nats`` (ny, nx) log-odds as the
+    map reads them, ``pos`` / ``neg`` the lidar's occupied / free cells (bool masks), ``known``
+    the cells the map knows (bool, a map with the knowledge channel: knowledge of ``KNOWN_LOOKS``
+    looks or more; None: the cells holding any evidence, as for a map without it). The map's
+    classes are the costmap export's (``maps.map.classes``): occupied above ``OCCUPIED_NATS``,
+    free below ``FREE_NATS``, unknown between them and wherever the map does not know the cell,
+    whatever it reads. A dict of
+
+    - ``phantom``: the share of ``neg`` called occupied (a robot stops for nothing there);
+    - ``miss``: the share of ``pos`` called free (a robot drives into it);
+    - ``unknown``: the share of ``pos`` and ``neg`` called neither;
+    - ``recall``: the share of ``pos`` called occupied;
+    - ``ece`` (``metrics.calibration``, 10 bins) of the probability the map reads against the
+      lidar's occupied / free, over the cells of ``pos`` and ``neg`` the map knows, and their
+      number ``ece_cells`` (the cells it does not know are left out: they count in ``unknown``).
+
+    Shares are NaN over an empty set."""
+    nats, pos, neg = np.asarray(nats, np.float64), np.asarray(pos, bool), np.asarray(neg, bool)
+    c = classes(logodds.to_fixed(nats), known=known)
+    known = c != UNOBSERVED if known is None else np.asarray(known, bool)
+
+    def share(hit, of):
+        n = int(np.count_nonzero(of))
+        return int(np.count_nonzero(hit & of)) / n if n else float("nan")
+
+    lidar = pos | neg
+    scored = lidar & known
+    out = dict(phantom=share(c == OCCUPIED, neg), miss=share(c == FREE, pos),
+               unknown=share((c != OCCUPIED) & (c != FREE), lidar), recall=share(c == OCCUPIED, pos),
+               ece_cells=int(np.count_nonzero(scored)))
+    out["ece"] = calibration(probability(nats[scored]), pos[scored])[0] if out["ece_cells"] else float("nan")
+    return out
+
+
+def phantom_at_recall(score, pos, neg, recall):
+    """(threshold, phantom rate) of ``score`` (ny, nx, higher = more occupied) called occupied
+    above a threshold chosen so that it calls exactly ``recall`` of the ``pos`` cells occupied:
+    above the threshold every cell, at it the share of the tied cells that makes the recall exact
+    (the ROC curve's straight segment across a tie, as the AUC's ties count one half); the
+    phantom rate is the share of ``neg`` called occupied that way. Recall 0: threshold +inf,
+    phantom 0. NaN for an empty ``pos`` or ``neg`` or a NaN recall."""
+    s = np.asarray(score, np.float64)
+    s_pos, s_neg = s[np.asarray(pos, bool)], s[np.asarray(neg, bool)]
+    if not len(s_pos) or not len(s_neg) or not np.isfinite(recall):
+        return float("nan"), float("nan")
+    wanted = float(recall) * len(s_pos)                          # positive cells to call occupied
+    if wanted <= 0:
+        return float("inf"), 0.0
+    t = np.sort(s_pos)[::-1][min(len(s_pos), int(math.ceil(wanted - 1e-9))) - 1]
+    above, tied = np.count_nonzero(s_pos > t), np.count_nonzero(s_pos == t)
+    share = (wanted - above) / tied                              # of the tied cells, in (0, 1]
+    phantom = (np.count_nonzero(s_neg > t) + share * np.count_nonzero(s_neg == t)) / len(s_neg)
+    return float(t), float(phantom)
+
+
+def band_scores(truth, distance, maps, baselines, bands=BANDS_M, mask=None, known=None, equal_recall=None):
+    """Rows per band [{band, occupied, free, auc: {name: AUC}, iou: {name: IoU}, costmap: {name:
+    costmap_scores}}]: ``maps`` and ``baselines`` are {name: (ny, nx) score, higher = more
+    occupied}; maps (log-odds [nat] as they read) also get an IoU at log-odds 0 and their
+    ``costmap_scores`` (``known``: {name: (ny, nx) bool} for the maps with the knowledge channel),
+    and with ``equal_recall`` (the name of a baseline) that baseline's threshold and phantom rate
+    at each map's recall (``phantom_at_recall``) in their ``costmap`` entry as
+    ``equal_recall_threshold`` and ``equal_recall_phantom``. Only cells of ``mask`` count
+    (default all). Bands where the lidar knows fewer than ``MIN_CELLS`` of either class are left
+    out."""
     occ, free = truth.occupied, truth.free
     if mask is not None:
         occ, free = occ & mask, free & mask
+    known = known or {}
     rows = []
     for lo, hi in zip(bands[:-1], bands[1:]):
         band = (distance >= lo) & (distance < hi)
@@ -229,7 +295,7 @@ def band_scores(truth, distance, maps, baselines, bands=BANDS_M, mask=None):
         if n_pos < MIN_CELLS or n_neg < MIN_CELLS:
             continue
         y = np.r_[np.ones(n_pos, bool), np.zeros(n_neg, bool)]
-        row = dict(band=(lo, hi), occupied=n_pos, free=n_neg, auc={}, iou={})
+        row = dict(band=(lo, hi), occupied=n_pos, free=n_neg, auc={}, iou={}, costmap={})
         for name, score in {**maps, **baselines}.items():
             s = np.r_[score[pos], score[neg]]
             row["auc"][name] = roc_auc(s, y)
@@ -237,6 +303,10 @@ def band_scores(truth, distance, maps, baselines, bands=BANDS_M, mask=None):
             called = np.r_[score[pos], score[neg]] > 0
             union = int(np.count_nonzero(called | y))
             row["iou"][name] = int(np.count_nonzero(called & y)) / union if union else float("nan")
+            row["costmap"][name] = costmap_scores(score, pos, neg, known.get(name))
+            if equal_recall is not None:
+                t, phantom = phantom_at_recall(baselines[equal_recall], pos, neg, row["costmap"][name]["recall"])
+                row["costmap"][name].update(equal_recall_threshold=t, equal_recall_phantom=phantom)
         rows.append(row)
     return rows
 

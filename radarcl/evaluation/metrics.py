@@ -137,10 +137,17 @@ def radar_scores(log_odds_nats, truth, objects=(), knowledge=None):
       the state its views and exports show);
     - ``brier``, ``ece`` (10 bins) and ``reliability`` rows on the visible voxels (FREE-visible,
       DETECTABLE, WEAK), occupied = surface voxel, every voxel at the probability the map reads;
+    - ``ece_occupied`` and ``occupied_calls``: the calibration of what the map calls occupied, the
+      ECE over the visible voxels it knows and reads at p >= 0.5, and their number: of the voxels
+      a robot would avoid, is the share truly occupied the probability the map gives them? A map
+      without the knowledge channel knows every voxel holding evidence: one at exactly 0 (no
+      evidence; UNOBSERVED in ``maps.map.classes``, unknown in the costmap) is no call;
     - ``objects_found`` / ``objects_total`` and per object its range, peak log-odds and whether it
-      is detectable (``objects``: ``visibility.object_surfaces``); ``detectable_found`` /
-      ``detectable_total`` the same over the objects with a DETECTABLE surface voxel (the others
-      echo below every CFAR threshold: a map that finds them calls weak echoes occupied).
+      is detectable (``objects``: ``visibility.object_surfaces``); an object is found when one of
+      its voxels reads p > 0.5 where the map knows it (a map without the knowledge channel: any
+      of them); ``detectable_found`` / ``detectable_total`` the same over the objects with a
+      DETECTABLE surface voxel (the others echo below every CFAR threshold: a map that finds them
+      calls weak echoes occupied).
     With ``knowledge`` (dense [looks], a map of the detection-statistics model) also:
     ``known_visible``, the share of visible voxels it knows; ``ece_known`` and ``brier_known``,
     calibration on the visible voxels it knows.
@@ -168,6 +175,11 @@ def radar_scores(log_odds_nats, truth, objects=(), knowledge=None):
     p, y = probability(L[visible]), (det | weak)[visible]
     out["brier"] = float(np.mean((p - y) ** 2)) if len(p) else float("nan")
     out["ece"], out["reliability"] = calibration(p, y)
+    # a voxel with no evidence (0) is no call: maps.map.classes' UNOBSERVED, unknown in the costmap
+    knows = claimed if knowledge is not None else L != 0
+    called = knows[visible] & (p >= 0.5)
+    out["ece_occupied"] = calibration(p[called], y[called])[0] if called.any() else float("nan")
+    out["occupied_calls"] = int(np.count_nonzero(called))
     if knowledge is not None:
         kv = claimed[visible]
         out["known_visible"] = float(np.count_nonzero(kv) / max(1, len(kv)))
@@ -175,9 +187,10 @@ def radar_scores(log_odds_nats, truth, objects=(), knowledge=None):
         out["brier_known"] = float(np.mean((p[kv] - y[kv]) ** 2)) if kv.any() else float("nan")
     found = []
     for obj in objects:
-        near = L[obj["near"][:, 2], obj["near"][:, 1], obj["near"][:, 0]]
+        at = (obj["near"][:, 2], obj["near"][:, 1], obj["near"][:, 0])
+        near = L[at]
         found.append(dict(name=obj["name"], range_m=obj["range_m"], peak_nats=float(near.max()),
-                          found=bool((near > 0).any()), detectable=bool(obj.get("detectable", True))))
+                          found=bool(((near > 0) & claimed[at]).any()), detectable=bool(obj.get("detectable", True))))
     out["objects"] = found
     out["objects_found"] = sum(o["found"] for o in found)
     out["objects_total"] = len(found)
