@@ -24,6 +24,7 @@ from radarcl.commands import (
     emulate,
     evaluate_lidar,
     export,
+    fit_sensor,
     fuse,
     fuse_many,
     info,
@@ -41,7 +42,7 @@ from radarcl.errors import RadarclError, Terminated
 
 COMMANDS = {
     "info": info, "sensors": sensors, "config": config, "demo": demo, "tune": tune, "calibrate": calibrate,
-    "calibrate-scans": calibrate_scans, "fuse": fuse, "fuse-many": fuse_many, "convert": convert, "export": export,
+    "calibrate-scans": calibrate_scans, "fit-sensor": fit_sensor, "fuse": fuse, "fuse-many": fuse_many, "convert": convert, "export": export,
     "navtech": navtech, "navtech-map": navtech_map, "poses": poses, "evaluate-lidar": evaluate_lidar, "live": live, "emulate": emulate, "replay": replay,
     "render": render, "view": view, "bench": bench,
 }

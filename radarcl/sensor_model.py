@@ -159,6 +159,8 @@ RANGES = {   # key: (lo, hi, unit, what it is)
                                      "diffuse scatterers; 0: noise alone)"),
     "clutter_db": (-20.0, 80.0, "dB", "the clutter's median power over the noise floor"),
     "clutter_spread_db": (0.0, 30.0, "dB", "log-normal spread of the clutter's power"),
+    "noise_scale": (0.1, 10.0, "", "the noise's mean over the floor the interpreter takes (the window's median / "
+                                   "ln 2; 1: noise alone sets the median)"),
 }
 EVIDENCE_KINDS = ("snr", "detection")             # sensor_model.evidence: the measured SNR, or the CFAR's outcome
 GROUND_RANGE = (0.0, 1000.0, "m")                 # ground_below_m: the sensor's height above the ground plane (0: none)
@@ -207,6 +209,7 @@ class ModelParams:
     clutter_share: float = 0.0
     clutter_db: float = 10.0
     clutter_spread_db: float = 10.0
+    noise_scale: float = 1.0
     ground_below_m: float = 0.0
     evidence: str = "snr"
 
@@ -231,7 +234,7 @@ class ModelParams:
     @property
     def clutter(self):
         """The background law (``snr_evidence.Clutter``) of the "snr" evidence."""
-        return Clutter(self.clutter_share, self.clutter_db, self.clutter_spread_db)
+        return Clutter(self.clutter_share, self.clutter_db, self.clutter_spread_db, self.noise_scale)
 
 
 DEFAULTS = {f.name: f.default for f in fields(ModelParams)}

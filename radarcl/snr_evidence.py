@@ -4,21 +4,23 @@ voxel free, tabulated once and read bilinearly (here in float64, in ``kernels/in
 -D GRADED, from the same float32 table).
 
 A bin's power over the beam's noise floor, x = r / N (``noise_floor``: the median power of the
-range window / ln 2, the mean of exponential noise). Where nothing is, a real radar shows more
-than noise: sidelobes of strong echoes in the same scan, multipath, clutter. The background is
-exponential noise, or with the chance c (``Clutter.share``) clutter, exponential power of mean
-1 + G with G log-normal (``Clutter.median_db`` over the floor, ``Clutter.spread_db``):
+range window / ln 2, the mean of exponential noise were the window noise alone; the noise's mean
+in these units is v, ``Clutter.noise_scale``, 1 unless echoes and clutter move the median). Where
+nothing is, a real radar shows more than noise: sidelobes of strong echoes in the same scan,
+multipath, clutter. The background is exponential noise, or with the chance c (``Clutter.share``)
+clutter, exponential power of mean v + G with G log-normal (``Clutter.median_db`` over the
+floor, ``Clutter.spread_db``):
 
-    p0(x) = (1 - c) e^-x + c pC(x),           pC(x) = E_G[exp(-x / (1 + G)) / (1 + G)]
-    p1(x) = (1 - c) pT(x; s) + c pC(x),        pT(x; s) = E_s[exp(-x / (1 + s)) / (1 + s)]
-    e = ln(L / (1 - q + q L)),                 L = p1 / p0
+    p0(x) = (1 - c) pN(x) + c pC(x),    pN(x) = exp(-x / v) / v,   pC(x) = E_G[exp(-x / (v + G)) / (v + G)]
+    p1(x) = (1 - c) pT(x; s) + c pC(x),  pT(x; s) = E_s[exp(-x / (v + s)) / (v + s)]
+    e = ln(L / (1 - q + q L)),           L = p1 / p0
 
-pT: a Swerling-1 target of median SNR s over the noise (exponential power of mean 1 + s) with a
-log-normal RCS prior; where clutter is, it masks the target. A weak target (s -> 0) makes p1 -> p0
+pT: a Swerling-1 target of median SNR s (exponential power of mean v + s) with a log-normal RCS
+prior; where clutter is, it masks the target. A weak target (s -> 0) makes p1 -> p0
 and e -> 0 whatever the power: a bin holding far more than the target could give is explained by
 the background, not by v. q, the chance that a free voxel's bin holds v's echo anyway (the CFAR's
 achieved false-alarm rate), bounds the evidence at ln(1 / q), as a detection's is bounded (with
-c = 0, L = E_s[exp(x s / (1 + s)) / (1 + s)]: the model without clutter). ``bounded`` then caps
+c = 0 and v = 1, L = E_s[exp(x s / (1 + s)) / (1 + s)]: the model without clutter). ``bounded`` then caps
 each look's evidence at its opportunity delta (the chance a typical target at v would have been
 detected) times ln(1 / q): a look that could hardly have seen v says little of it either way.
 ``snr_evidence`` is the quadrature, ``SnrTable`` its table.
@@ -43,18 +45,22 @@ DB = math.log(10.0) / 10.0       # nat per dB of power
 
 @dataclass(frozen=True)
 class Clutter:
-    """The background where nothing is, beyond exponential noise: with the chance ``share`` a bin
-    holds clutter, exponential power of mean 1 + G over the noise floor, G log-normal with median
-    ``median_db`` and spread ``spread_db`` [dB] (sidelobes of strong echoes, multipath, diffuse
-    scatterers). ``share`` 0: noise alone (a simulator's world without its harder physics)."""
+    """The background where nothing is: exponential noise of mean ``noise_scale`` over the floor
+    the interpreter takes, and with the chance ``share`` clutter on it, exponential power of mean
+    noise_scale + G, G log-normal with median ``median_db`` and spread ``spread_db`` [dB] (sidelobes
+    of strong echoes, multipath, diffuse scatterers). ``share`` 0 and ``noise_scale`` 1: noise
+    alone, as the floor assumes (a simulator's world without its harder physics)."""
 
     share: float = 0.0
     median_db: float = 10.0
     spread_db: float = 10.0
+    noise_scale: float = 1.0
 
     def __post_init__(self):
         if not 0.0 <= self.share < 1.0:
             raise ConfigError(f"the clutter share {self.share!r} is outside [0, 1)")
+        if not self.noise_scale > 0.0:
+            raise ConfigError(f"the noise scale {self.noise_scale!r} must be positive")
 
     def ln_density(self, x):
         """ln pC(x): the log-density of clutter power x (array) over the floor (-inf with share 0)."""
@@ -64,17 +70,20 @@ class Clutter:
         sigma = self.spread_db * DB
         z = np.linspace(-8.0, 8.0, CLUTTER_STEPS) if sigma else np.zeros(1)
         w = np.exp(-0.5 * z * z)
-        mean = 1.0 + np.exp(self.median_db * DB + sigma * z)
+        mean = self.noise_scale + np.exp(self.median_db * DB + sigma * z)
         terms = -x[..., None] / mean - np.log(mean) + np.log(w / w.sum())
         top = terms.max(axis=-1, keepdims=True)
         return top[..., 0] + np.log(np.exp(terms - top).sum(axis=-1))
 
+    def ln_noise(self, x):
+        """ln pN(x): the log-density of noise power x (array)."""
+        return -np.asarray(x, np.float64) / self.noise_scale - math.log(self.noise_scale)
+
     def ln_background(self, x):
         """ln p0(x): noise, or with the chance ``share`` clutter."""
-        x = np.asarray(x, np.float64)
         if not self.share:
-            return -x
-        return np.logaddexp(math.log1p(-self.share) - x, math.log(self.share) + self.ln_density(x))
+            return self.ln_noise(x)
+        return np.logaddexp(math.log1p(-self.share) + self.ln_noise(x), math.log(self.share) + self.ln_density(x))
 
 
 NO_CLUTTER = Clutter()
@@ -133,14 +142,16 @@ def snr_evidence(x, ln_s, spread_db, q, clutter=NO_CLUTTER):
     w = np.exp(-0.5 * z * z)
     w = w / w.sum()
     ln_s = np.asarray(ln_s, np.float64)[..., None] + sigma * z
-    mean = 1.0 + np.exp(np.minimum(ln_s, 700.0))
+    mean = clutter.noise_scale + np.exp(np.minimum(ln_s, 700.0))
     terms = -x[..., None] / mean - np.log(mean) + np.log(w)
     top = terms.max(axis=-1, keepdims=True)
-    ln_l = top[..., 0] + np.log(np.exp(terms - top).sum(axis=-1)) + x       # ln pT(x; s) / e^-x
+    ln_target = top[..., 0] + np.log(np.exp(terms - top).sum(axis=-1))     # ln pT(x; s)
     if clutter.share:
         c, ln_c = clutter.share, clutter.ln_density(x)
-        ln_l = (np.logaddexp(math.log1p(-c) + ln_l - x, math.log(c) + ln_c)
-                - np.logaddexp(math.log1p(-c) - x, math.log(c) + ln_c))
+        ln_l = (np.logaddexp(math.log1p(-c) + ln_target, math.log(c) + ln_c)
+                - np.logaddexp(math.log1p(-c) + clutter.ln_noise(x), math.log(c) + ln_c))
+    else:
+        ln_l = ln_target - clutter.ln_noise(x)
     return ln_l - np.logaddexp(math.log1p(-q), math.log(q) + ln_l)
 
 

@@ -204,6 +204,20 @@ def radar_visible(truth, per_beam, range_min_m, range_max_m):
     return seen
 
 
+def bin_cells(spec, poses, ranges_m):
+    """(iy, ix, inside), each (n_az, n_bins), of the plane grid's cell under every bin of one
+    scan: its azimuths' ``poses`` (n_az, 4, 4), bins at ``ranges_m`` along each beam's axis (the
+    spinning lattice's azimuth i turned by its pose, as ``radar_visible``)."""
+    n_az = len(poses)
+    az = np.arange(n_az) * (2 * math.pi / n_az)
+    dirs = np.einsum("aij,aj->ai", poses[:, :2, :2], np.stack([np.cos(az), np.sin(az)], axis=1))
+    pts = poses[:, None, :2, 3] + np.asarray(ranges_m)[None, :, None] * dirs[:, None, :]
+    ij = np.floor((pts - np.asarray(spec.origin_m[:2])) / spec.voxel_m).astype(np.int64)
+    inside = (ij[..., 0] >= 0) & (ij[..., 0] < spec.shape[0]) & (ij[..., 1] >= 0) & (ij[..., 1] < spec.shape[1])
+    ij = np.where(inside[..., None], ij, 0)
+    return ij[..., 1], ij[..., 0], inside
+
+
 # -- scores --------------------------------------------------------------------------------------------------
 def range_from_path(spec, positions):
     """(ny, nx) distance [m] of each cell centre to the nearest of ``positions`` (n, >= 2)."""

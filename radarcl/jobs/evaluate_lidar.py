@@ -146,6 +146,34 @@ def object_boxes(root, source, track):
     return out
 
 
+def lidar_part(sensor, data, voxel_m=0.3, range_m=L.BANDS_M[-1], poses=None, poses_format=None, clock_offset_s=None,
+               report=print, scan_slice=None):
+    """The recording ``data`` read as ``sensor``, or its scans ``scan_slice`` ((start, stop),
+    ``select_scans``), with the lidar frames taken meanwhile: (the posed ``FrameSource`` of the
+    scans, the scans' description, the lidar frames, their ``LidarTruth`` on a plane grid of
+    ``voxel_m`` reaching ``range_m`` past the radar's path)."""
+    source = open_input(sensor, data, poses=poses, poses_format=poses_format, clock_offset_s=clock_offset_s,
+                        report=report)
+    if not source.posed:
+        raise ConfigError(f"{data}: scoring against the lidar needs the radar's poses (none given or found); give "
+                          f"--poses FILE")
+    all_scans = source.frames.scans
+    start, stop = select_scans(scan_slice, len(all_scans))
+    is_part = (start, stop) != (0, len(all_scans))
+    if is_part:
+        source = scan_part(source, start, stop)
+    scans, per_beam = source.frames.scans, source.poses
+    scan_range = _scan_range(all_scans, start, stop, lidar_within=is_part)
+    window = (int(scans[0].timestamps_ns.min()), int(scans[-1].timestamps_ns.max())) if is_part else None
+    frames = lidar_frames(Path(data), source.trajectory, report, window_ns=window)
+    spec = L.plane_spec(per_beam[..., :3, 3], range_m, voxel_m)
+    truth = L.lidar_truth(spec, [(pose, points) for _, pose, points in frames])
+    report(f"lidar truth from {len(frames)} frames on a {spec.shape[0]} x {spec.shape[1]} grid of {voxel_m:g} m: "
+           f"{int(truth.occupied.sum())} occupied, {int(truth.free.sum())} free cells; each frame reaches "
+           f"{np.min(truth.reach_m):.1f}-{np.max(truth.reach_m):.1f} m ({L.REACH_PERCENTILE:g} % of its points)")
+    return source, scan_range, frames, truth
+
+
 def run(runtime, models, data, voxel_m=0.3, bands=L.BANDS_M, poses=None, poses_format=None, clock_offset_s=None,
         report=print, progress=None, scan_slice=None):
     """Score ``models`` [(label, Resolved)] on the recording ``data``, or on its scans
@@ -154,26 +182,11 @@ def run(runtime, models, data, voxel_m=0.3, bands=L.BANDS_M, poses=None, poses_f
     truth's summary) and the arrays to draw ({name: (ny, nx)}; ``known``: {name: (ny, nx) bool}
     of the maps with the knowledge channel)."""
     sensor = models[0][1].sensor
-    source = open_input(sensor, data, poses=poses, poses_format=poses_format, clock_offset_s=clock_offset_s,
-                        report=report)
-    if not source.posed:
-        raise ConfigError(f"{data}: evaluate-lidar needs the radar's poses (none given or found); give --poses FILE")
-    all_scans = source.frames.scans
-    start, stop = select_scans(scan_slice, len(all_scans))
-    is_part = (start, stop) != (0, len(all_scans))
-    if is_part:
-        source = scan_part(source, start, stop)
+    source, scan_range, frames, truth = lidar_part(sensor, data, voxel_m, bands[-1], poses, poses_format,
+                                                   clock_offset_s, report, scan_slice)
     models = [(label, c.for_sensor(source.sensor)) for label, c in models]
     scans, per_beam, track = source.frames.scans, source.poses, source.trajectory
-    scan_range = _scan_range(all_scans, start, stop, lidar_within=is_part)
-    root = Path(data)
-    window = (int(scans[0].timestamps_ns.min()), int(scans[-1].timestamps_ns.max())) if is_part else None
-    frames = lidar_frames(root, track, report, window_ns=window)
-    spec = L.plane_spec(per_beam[..., :3, 3], bands[-1], voxel_m)
-    truth = L.lidar_truth(spec, [(pose, points) for _, pose, points in frames])
-    report(f"lidar truth from {len(frames)} frames on a {spec.shape[0]} x {spec.shape[1]} grid of {voxel_m:g} m: "
-           f"{int(truth.occupied.sum())} occupied, {int(truth.free.sum())} free cells; each frame reaches "
-           f"{np.min(truth.reach_m):.1f}-{np.max(truth.reach_m):.1f} m ({L.REACH_PERCENTILE:g} % of its points)")
+    spec, root = truth.spec, Path(data)
     maps, known = {}, {}
     for k, (label, config) in enumerate(models):
         if config["grid.voxel_m"] != spec.voxel_m:        # the plane grid's cells: a default prior follows them

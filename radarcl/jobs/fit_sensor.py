@@ -1,0 +1,213 @@
+"""`radarcl fit-sensor`: a real radar's background law and sensitivity fitted from its own scans
+(``evaluation.sensor_fit``), written as a configuration whose every fitted value says where it
+came from and how well the recording determines it."""
+
+import dataclasses
+import math
+
+import numpy as np
+
+from radarcl.errors import ConfigError
+from radarcl.evaluation import sensor_fit
+from radarcl.io import polar_png
+
+
+def scan_selection(text, n):
+    """The scan indices of ``text``, a Python slice "A:B" or "A:B:S" (empty parts: the ends; "all"),
+    of a recording of ``n`` scans; a sentence when it selects none or lies outside."""
+    if text in (None, "", "all"):
+        return list(range(n))
+    parts = text.split(":")
+    try:
+        if len(parts) not in (2, 3):
+            raise ValueError
+        a, b, *s = (int(p) if p.strip() else None for p in parts)
+    except ValueError:
+        raise ConfigError(f"--scans {text!r}: expected A:B or A:B:S (Python slice of the scans in time order, "
+                          f"e.g. 0:6 or 0::2)") from None
+    step = s[0] if s else None
+    if step is not None and step <= 0:
+        raise ConfigError(f"--scans {text!r}: the step must be positive")
+    for v in (a, b):
+        if v is not None and not -n <= v <= n:
+            raise ConfigError(f"--scans {text!r}: the recording has {n} scans (0 to {n - 1})")
+    chosen = list(range(n))[slice(a, b, step)]
+    if not chosen:
+        raise ConfigError(f"--scans {text!r} selects no scan of the {n}")
+    return chosen
+
+
+SENSITIVITY_GRID_DB = tuple(range(30, 111, 10))
+LOOK_LIMITS = (1.0, 2.0)
+PHANTOM_LIMIT = 0.10            # a map with --lidar calls at most this share of the lidar's free cells occupied
+CHOICE_RANGE_M = 30.0           # in every band to this range (where a fog lidar still reaches)
+
+
+def run(config, data_dir, scans="all", lidar=False, runtime=None, report=None):
+    """The fit of ``config``'s sensor (a ``Resolved``) on the scans of ``data_dir`` that ``scans``
+    selects, with the recording's lidar (``lidar``: the background from the cells it calls free,
+    the sensitivity from those it calls occupied; then the map's sensitivity, look limit and
+    clutter chosen with the lidar's cells, ``choose_by_lidar``, on ``runtime``):
+    (the fitted configuration, a dict of the fit for --json and the table)."""
+    say = report or (lambda _: None)
+    sensor = config.sensor
+    if sensor.raw or sensor.input != "profiles":
+        raise ConfigError(f"fit-sensor reads polar scans (a Navtech-like profile); sensor {sensor.name} is "
+                          f"{sensor.input}")
+    sequence = polar_png.read_sequence(data_dir, polar_png.PolarLayout.of(sensor), odometry=False)
+    chosen = scan_selection(scans, len(sequence.scans))
+    say(f"{len(sequence.scans)} scans in {sequence.directory}; fitting on scans {_span(chosen)} ({len(chosen)})")
+    if config.sensor.n_bins() is None:
+        config = config.for_sensor(config.sensor.with_bins(sequence.scans[chosen[0]].n_bins))
+    lo, hi = config["interpret.range_min_m"], config["interpret.range_max_m"]
+    background = targets = None
+    if lidar:
+        powers, free, occupied = _lidar_bins(config, data_dir, chosen, say)
+        background = sensor_fit.power_counts(powers, config.bin_spacing_m, lo, hi, mask=free)
+        targets = sensor_fit.power_counts(powers, config.bin_spacing_m, lo, hi, mask=occupied)
+    else:
+        powers = []
+        for k in chosen:
+            scan = sequence.scans[k]
+            powers.append(np.asarray(scan.power(), np.float64)[np.asarray(scan.valid, bool)])
+    counts = sensor_fit.power_counts(powers, config.bin_spacing_m, lo, hi)
+    geometry = sensor_fit.Geometry(config.model_params(), math.radians(sensor.get("beams", "beamwidth_az_deg")) / 2,
+                                   math.radians(sensor.get("beams", "beamwidth_el_deg")) / 2)
+    result = sensor_fit.fit(counts, geometry, report=say, background=background, targets=targets)
+    source = f"radarcl fit-sensor{' --lidar' if lidar else ''} on scans {_span(chosen)} of {sequence.directory}"
+    fitted = config.replaced(**{k.replace(".", "__"): v for k, v in result.config_values().items()})
+    fit_origins = {}
+    for key, value, se in zip(sensor_fit.FITTED, result.values, result.errors):
+        bounded = "at the search's edge: the recording does not bound it" if key in result.at_edge else \
+            f"+- {1.96 * se:.2g} (95 %, scan jackknife)"
+        fit_origins[f"sensor_model.{key}"] = f"{source}: {value:.4g} {bounded}"
+    origins = {**fitted.origins, **fit_origins}
+    out = dict(sensor=sensor.name, data=str(sequence.directory), scans=chosen, n_powers=result.n_powers,
+               lidar=lidar, fit=result.as_dict(), at_edge=list(result.at_edge), target_shares=list(result.shares),
+               band_ranges_m=[float(r) for r in counts.ranges_m[:, 1]],
+               log_likelihood=result.log_likelihood, noise_only_log_likelihood=result.noise_only)
+    if lidar:
+        out.update(background_powers=int(background.counts.sum()), target_powers=int(targets.counts.sum()))
+        values, chosen_origins, out["maps"] = choose_by_lidar(runtime, fitted, data_dir, chosen, result, source, say)
+        fitted = fitted.replaced(**{k.replace(".", "__"): v for k, v in values.items()})
+        origins = {**fitted.origins, **fit_origins, **chosen_origins}
+    for key in ("block_gamma_db", "blocker_gap") + (() if lidar else ("look_limit",)):
+        origins[f"sensor_model.{key}"] += "; not fitted (what lies behind a first surface has no truth here)"
+    return dataclasses.replace(fitted, origins=origins), out
+
+
+def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
+    """The map's parameters by what a robot meets where the lidar knows, on the fit's scans:
+    over ``SENSITIVITY_GRID_DB`` x ``LOOK_LIMITS`` x (no clutter, the fitted background), the map
+    that calls the most lidar-occupied cells occupied (recall at the costmap's thresholds, the
+    mean over the bands to ``CHOICE_RANGE_M``) among those that call at most ``PHANTOM_LIMIT`` of
+    the lidar-free cells occupied in every band (``evaluation.lidar.costmap_scores``); their
+    likelihood of the lidar's cells is reported beside. Returns (its values, their origins, the
+    rows of every candidate); refuses when no candidate keeps the phantoms within the limit."""
+    from radarcl.evaluation import lidar as L
+    from radarcl.jobs.evaluate_lidar import run as evaluate
+
+    fitted = dict(zip(sensor_fit.FITTED, result.values))
+    clutter = {f"sensor_model.{k}": fitted[k] for k in ("clutter_share", "clutter_db", "clutter_spread_db",
+                                                         "noise_scale")}
+    none = {"sensor_model.clutter_share": 0.0, "sensor_model.noise_scale": 1.0}
+    candidates = {}
+    for sensitivity in SENSITIVITY_GRID_DB:
+        for limit in LOOK_LIMITS:
+            for name, extra in (("no clutter", none), ("the fitted background", clutter)):
+                values = {"sensor_model.snr_1m2_at_10m_db": float(sensitivity), "sensor_model.look_limit": limit,
+                          **extra}
+                label = f"{sensitivity:g} dB, look limit {limit:g}, {name}"
+                candidates[label] = (values, config.replaced(**{k.replace(".", "__"): v for k, v in values.items()}))
+    say(f"choosing with the lidar: {len(candidates)} maps of scans {_span(chosen)} ...")
+    _, arrays = evaluate(runtime, [(label, c) for label, (_, c) in candidates.items()], data_dir,
+                         voxel_m=config["grid.voxel_m"], scan_slice=(chosen[0], chosen[-1] + 1),
+                         report=lambda *_: None)
+    truth = arrays["truth"]
+    distance = L.range_from_path(truth.spec, arrays["per_beam"][..., :3, 3].reshape(-1, 3))
+    bands = [b for b in zip(L.BANDS_M[:-1], L.BANDS_M[1:]) if b[1] <= CHOICE_RANGE_M]
+    rows = []
+    for label in candidates:
+        nats, known = arrays["maps"][label], arrays["known"].get(label)
+        scores = [L.costmap_scores(nats, truth.occupied & band, truth.free & band, known)
+                  for band in ((distance >= lo) & (distance < hi) for lo, hi in bands)]
+        rows.append(dict(candidate=label, recall=float(np.nanmean([s["recall"] for s in scores])),
+                         miss=float(np.nanmean([s["miss"] for s in scores])),
+                         phantom=float(np.nanmax([s["phantom"] for s in scores])),
+                         log_likelihood=sensor_fit.lidar_log_likelihood(nats[truth.known], truth.occupied[truth.known])))
+    admissible = [r for r in rows if r["phantom"] <= PHANTOM_LIMIT]
+    if not admissible:
+        raise ConfigError(f"no map of the {len(rows)} candidates keeps its phantom rate within {PHANTOM_LIMIT:g} in "
+                          f"every band to {CHOICE_RANGE_M:g} m on scans {_span(chosen)} (the least: "
+                          f"{min(r['phantom'] for r in rows):.3f})")
+    best = max(admissible, key=lambda r: (r["recall"], r["log_likelihood"]))
+    values = candidates[best["candidate"]][0]
+    why = (f"{source}: of {len(rows)} maps the most lidar-occupied cells called occupied (recall {best['recall']:.3f} "
+           f"over the bands to {CHOICE_RANGE_M:g} m) among those calling at most {PHANTOM_LIMIT:g} of the free ones "
+           f"occupied in every band")
+    chosen_origins = {"sensor_model.snr_1m2_at_10m_db": why, "sensor_model.look_limit": why}
+    if values["sensor_model.clutter_share"] == 0.0:
+        chosen_origins["sensor_model.clutter_share"] = f"{why}: no clutter (the fitted law's share: {result.values[0]:.3g})"
+        chosen_origins["sensor_model.noise_scale"] = f"{why}: noise alone sets the floor"
+    return values, chosen_origins, dict(chosen=best["candidate"], cells=int(truth.known.sum()), candidates=rows,
+                                        phantom_limit=PHANTOM_LIMIT, range_m=CHOICE_RANGE_M)
+
+
+def _lidar_bins(config, data_dir, chosen, say):
+    """(powers, free, occupied) per scan of ``chosen`` (a contiguous run): each scan's power and
+    the bins whose cell of the lidar's truth (``evaluate_lidar.lidar_part``) is free, occupied."""
+    from radarcl.evaluation.lidar import bin_cells
+    from radarcl.jobs.evaluate_lidar import lidar_part
+
+    if len(chosen) > 1 and set(np.diff(chosen)) != {1}:
+        raise ConfigError("--lidar takes a run of consecutive scans (A:B): the lidar frames are those taken "
+                          "meanwhile")
+    source, _, _, truth = lidar_part(config.sensor, data_dir, scan_slice=(chosen[0], chosen[-1] + 1), report=say)
+    ranges = np.arange(source.frames.scans[0].n_bins) * config.bin_spacing_m
+    powers, free, occupied = [], [], []
+    for scan, poses in zip(source.frames.scans, source.poses):
+        iy, ix, inside = bin_cells(truth.spec, poses, ranges)
+        valid = np.asarray(scan.valid, bool)[:, None]
+        powers.append(np.asarray(scan.power(), np.float64))
+        free.append(inside & truth.free[iy, ix] & valid)
+        occupied.append(inside & truth.occupied[iy, ix] & valid)
+    return powers, free, occupied
+
+
+def _span(chosen):
+    if len(chosen) > 1 and len(set(np.diff(chosen))) == 1:
+        step = chosen[1] - chosen[0]
+        return f"{chosen[0]}-{chosen[-1]}" + (f" every {step}" if step > 1 else "")
+    return ", ".join(map(str, chosen))
+
+
+def format_lines(out):
+    """The fit as tables a person reads at a glance: what the powers say, what the lidar chose,
+    what the configuration holds."""
+    names = {"clutter_share": ("clutter share", ""), "clutter_db": ("clutter median", "dB over the floor"),
+             "clutter_spread_db": ("clutter spread", "dB"), "snr_1m2_at_10m_db": ("sensitivity", "dB, 1 m^2 at 10 m"),
+             "noise_scale": ("noise scale", "x the floor (median / ln 2)")}
+    how = (f"the background from the {out['background_powers']:,} bins of cells the lidar calls free, the sensitivity "
+           f"from the {out['target_powers']:,} of cells it calls occupied" if out["lidar"] else
+           "the mixture of background and typical targets per band of range")
+    lines = [f"{out['sensor']}, scans {_span(out['scans'])}: {out['n_powers']:,} powers; by maximum likelihood of "
+             f"{how}:", f"  {'parameter':<16} {'value':>9} {'95 % interval':>21}  unit"]
+    for key, (label, unit) in names.items():
+        v, se = out["fit"][key]["value"], out["fit"][key]["se"]
+        interval = "not bounded" if key in out["at_edge"] else f"[{v - 1.96 * se:.4g}, {v + 1.96 * se:.4g}]"
+        lines.append(f"  {label:<16} {v:>9.4g} {interval:>21}  {unit}")
+    if out["at_edge"]:
+        lines.append(f"  at the search's edge, so not bounded by these scans: {', '.join(out['at_edge'])}")
+    lines.append(f"  log-likelihood per power {out['log_likelihood']:.4f} nat (noise alone, no clutter: "
+                 f"{out['noise_only_log_likelihood']:.4f}); share of bins holding a typical target by range: "
+                 + ", ".join(f"{r:.0f} m {s:.2f}" for r, s in zip(out["band_ranges_m"], out["target_shares"])))
+    if "maps" in out:
+        m = out["maps"]
+        rows = sorted(m["candidates"], key=lambda r: (r["phantom"] > m["phantom_limit"], -r["recall"]))
+        lines.append(f"the map's sensitivity, look limit and background with the lidar's {m['cells']:,} cells: the "
+                     f"most occupied ones called occupied with at most {m['phantom_limit']:g} of the free ones in "
+                     f"every band to {m['range_m']:g} m (best 5 of {len(rows)}):")
+        lines.append(f"  {'recall':>6} {'miss':>6} {'phantom':>7} {'log-lik':>8}  map")
+        lines += [f"  {r['recall']:6.3f} {r['miss']:6.3f} {r['phantom']:7.3f} {r['log_likelihood']:8.4f}  "
+                  f"{r['candidate']}" + ("   <- chosen" if r["candidate"] == m["chosen"] else "") for r in rows[:5]]
+    return lines
