@@ -67,13 +67,11 @@ def run(runtime, seeds, voxel_m=0.2, report=None, extra=(), physics=0, radar="pa
     per_scene = []
     for n, seed in enumerate(seeds, 1):
         if radar == "spinning":
-            if physics:
-                raise ConfigError("--physics applies to the tilting stand (--radar paper) only")
             scene, described = streets.generate(seed)
             say(f"street {seed} ({n}/{len(seeds)}): sensor at {described['sensor_height_m']} m, "
                 f"{len(described['objects'])} solids ...")
             sensor = configs[0][1].sensor
-            obs = streets.observe(scene, sensor.radar, sensor.lattice(), SPINNING_TURNS, seed=seed)
+            obs = streets.observe(scene, sensor.radar, sensor.lattice(), SPINNING_TURNS, seed=seed, physics=physics)
         else:
             scene, described = generator.generate(seed)
             say(f"scene {seed} ({n}/{len(seeds)}): {described['terrain']} terrain, sensor at "
