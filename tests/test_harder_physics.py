@@ -4,7 +4,7 @@ about -20 dB; multipath adds a ghost at the mirror image's range below the surfa
 smooth wall seen obliquely return (almost) nothing; with the switches off nothing changes.
 The spinning radar on a vehicle (scene.streets) has them too: azimuth sidelobes of its fan beam
 (range sidelobes come from the window, measured), traced mirror paths off the road and smooth
-walls."""
+walls; and, for both radars, a heavy-tailed RCS spread and a K-distributed clutter floor."""
 
 import math
 
@@ -15,7 +15,7 @@ from radarcl import oracle
 from radarcl.config import mapconfig
 from radarcl.config.stage_config import PAPER_RADAR, RadarConfig
 from radarcl.geometry import BeamLattice
-from radarcl.scene import streets
+from radarcl.scene import generator, streets
 from radarcl.scene import observe as ob
 from radarcl.scene.fmcw import simulate_beams
 from radarcl.scene.outdoor import GRASS, METAL, Material, Scene, SceneObject
@@ -128,6 +128,9 @@ SIDELOBE_LEVEL_DB = 0.5
 # incidence on a curved silhouette: relative amplitude and absolute range within these.
 MIRROR_RTOL = 1e-5
 MIRROR_ATOL_M = 1e-4
+# Quantiles of the SPREAD draws over ~16,000 surface cells: the standard error of the 5 % and 95 %
+# quantiles of a t3 of 6 dB scale is ~0.25 dB there (0.1 dB at the median); 4 standard errors.
+SPREAD_QUANTILE_DB = 1.0
 
 
 def spinning_echoes(scene, physics, salt=7):
@@ -254,13 +257,101 @@ def test_spinning_multipath_bounces_off_the_ground():
         assert 12.0 < ratio_db < 17.0
 
 
+def test_spread_draws_each_patchs_rcs_from_a_heavy_tailed_spread():
+    """A road seen by the spinning radar: with SPREAD each echo's power is the plain one times
+    10^(X / 10), X drawn per 0.5 m cell of the surface, so over the ~16,000 cells the rays meet
+    X follows SPREAD_SCALE_DB x t(SPREAD_DOF) clipped at +-SPREAD_CLIP_DB: the quartiles of the
+    7 dB log-normal prior of the spinning profile, 10x its mass beyond +-20 dB. Ranges and
+    phases do not change."""
+    from scipy import stats
+
+    scene = Scene((SceneObject("road", Ground(-2.03), GRASS),), (), (0.0, 0.0, 0.0))
+    a0, r0, p0 = spinning_echoes(scene, 0)
+    a1, r1, p1 = spinning_echoes(scene, ob.SPREAD)
+    assert np.array_equal(r0, r1) and np.array_equal(p0, p1) and np.array_equal(a0 > 0, a1 > 0)
+    x = 20 * np.log10(a1[a0 > 0] / a0[a0 > 0])
+    q = np.array([0.05, 0.1, 0.25, 0.5, 0.75, 0.9, 0.95])
+    want = ob.SPREAD_SCALE_DB * stats.t.ppf(q, ob.SPREAD_DOF)
+    np.testing.assert_allclose(np.quantile(x, q), want, atol=SPREAD_QUANTILE_DB)
+    assert np.abs(x).max() <= ob.SPREAD_CLIP_DB + 1e-9
+    prior_db = mapconfig.resolve("spinning-sim")["sensor_model.target_spread_db"]    # 7 dB
+    beyond = np.mean(np.abs(x) > 20.0)
+    assert beyond == pytest.approx(2 * stats.t.sf(20.0 / ob.SPREAD_SCALE_DB, ob.SPREAD_DOF), abs=0.01)
+    assert beyond > 5 * 2 * stats.norm.sf(20.0 / prior_db)                       # the prior: 0.4 %
+    iqr = np.subtract(*np.quantile(x, [0.75, 0.25]))
+    assert iqr == pytest.approx(2 * stats.norm.ppf(0.75) * prior_db, abs=1.0)     # the prior's core: 9.4 dB
+
+
+def test_spread_applies_to_the_stands_points_and_surfaces():
+    """On the stand too: each point scatterer's echo scales by 10^(spread_db(its index) / 20) in
+    every beam, surfaces by their cell's draw; the same seed draws the same, another seed not."""
+    scene, _ = generator.generate(301)
+    assert scene.points
+    pose = scene.stand_pose(-9.2)
+    a0, r0, p0 = ob.observe_frame(scene, pose, salt=301)
+    a1, r1, p1 = ob.observe_frame(scene, pose, salt=301, physics=ob.SPREAD)
+    n = len(scene.points)
+    assert np.array_equal(r0, r1) and np.array_equal(p0, p1)
+    factor = 10 ** (ob.spread_db(np.arange(n)[:, None], 301, 6) / 20)
+    np.testing.assert_allclose(a1[:, -n:], a0[:, -n:] * factor, rtol=1e-12)
+    surface = a0[:, :-n] > 0
+    assert not np.allclose(a1[:, :-n][surface], a0[:, :-n][surface])
+    assert np.array_equal(a1, ob.observe_frame(scene, pose, salt=301, physics=ob.SPREAD)[0])
+    other = ob.observe_frame(scene, pose, salt=302, physics=ob.SPREAD)[0]
+    assert not np.allclose(other[:, -n:], a0[:, -n:] * factor)
+
+
+def test_clutter_is_a_floor_of_k_distributed_power_up_to_the_first_surface():
+    """CLUTTER (rain): per beam, scatterers at CLUTTER_PER_M per metre from the minimum range to
+    the first surface on the beam's axis, each of mean power CLUTTER_ETA Omega r^2 / CLUTTER_PER_M
+    through the radar equation, K-distributed: normalised by that mean, P(I > x) =
+    2 sqrt(x) K_1(2 sqrt(x)) for shape 1 (an exponential would give e^-x: 5e-5 at x = 10, where K
+    gives 6e-3). A wall 20 m ahead stops it; the other echoes do not change."""
+    from scipy import special
+
+    scene = Scene((SceneObject("far ground", Ground(-1e4), GRASS),
+                   SceneObject("wall", Box((20.03, -5.0, -3.0), (20.5, 5.0, 3.0)), METAL)), (), (0.0, 0.0, 0.0))
+    a0, r0, p0 = spinning_echoes(scene, 0)
+    a1, r1, p1 = ob.observe_frame(scene, STILL, SPINNING.radar, streets.RAYS_ACROSS, salt=7, physics=ob.CLUTTER,
+                                  lattice=SPINNING.lattice(), frame=3)
+    k = a0.shape[1]
+    assert all(np.array_equal(x[:, :k], y) for x, y in ((a1, a0), (r1, r0), (p1, p0)))
+    amp, r = a1[:, k:], r1[:, k:]
+    there = amp > 0
+    radar = SPINNING.radar
+    half_az, half_el = math.radians(radar.beamwidth_az_deg) / 2, math.radians(radar.beamwidth_el_deg) / 2
+    omega = math.pi * half_az * half_el / (2 * math.log(2))
+    mean = ob.A_1M2_AT_10M ** 2 * ob.CLUTTER_ETA * omega * ob.R_REF_M ** 4 / (ob.CLUTTER_PER_M * r[there] ** 2)
+    intensity = amp[there] ** 2 / mean
+    assert intensity.size > 20000 and intensity.mean() == pytest.approx(1.0, abs=0.05)
+    for x in (1.0, 3.0, 10.0):
+        want = 2 * math.sqrt(x) * special.kv(1, 2 * math.sqrt(x))
+        assert np.mean(intensity > x) == pytest.approx(want, abs=4 * math.sqrt(want / intensity.size) + 1e-4)
+    for b in np.r_[0:8, 392:400]:                            # beams whose axis meets the wall's face x = 20.03
+        assert r[b][there[b]].max() < 20.03 / math.cos(math.radians(0.9 * b)) + 1e-9
+    assert r[100][there[100]].max() > 50.0
+    assert (r[there] >= radar.range_min_m).all()
+    counts = there.sum(axis=1)[100:300]                      # 58 m of open range: Poisson(58)
+    assert counts.mean() == pytest.approx(ob.CLUTTER_PER_M * (radar.range_max_m - radar.range_min_m), abs=2.0)
+    # the stand: the same floor after its echoes, the same per (seed, frame), another frame other drops
+    stand, _ = generator.generate(301)
+    pose = stand.stand_pose(-9.2)
+    plain = ob.observe_frame(stand, pose, salt=301)
+    rain = [ob.observe_frame(stand, pose, salt=301, physics=ob.CLUTTER, frame=f) for f in (2, 2, 3)]
+    k = plain[0].shape[1]
+    assert all(np.array_equal(x[:, :k], y) for x, y in zip(rain[0], plain)) and rain[0][0].shape[1] > k
+    assert all(np.array_equal(x, y) for x, y in zip(rain[0], rain[1]))
+    assert rain[2][0].shape != rain[0][0].shape or not np.array_equal(rain[2][0], rain[0][0])
+
+
 def test_spinning_switches_are_deterministic_per_seed_and_off_changes_nothing():
-    """Each switch: the same seed gives the same echoes, another seed other ones; physics=0 is
-    the default; through streets.observe, samples and the recorded switches are reproducible."""
+    """Each switch: the same seed (and frame) gives the same echoes; another seed other ones
+    (CLUTTER: another frame too, rain's drops move); physics=0 is the default; through
+    streets.observe, samples and the recorded switches are reproducible."""
     scene = Scene((SceneObject("road", Ground(-2.03), GRASS), WALL,
                    SceneObject("post", Cylinder((13.0, -3.0), 0.1, -5.0, 5.0), METAL),
                    SceneObject("car", Box((20.03, -4.13, -1.8), (24.53, -2.33, -0.4)), METAL)), (), (0.0, 0.0, 0.0))
-    for bit in (ob.SIDELOBES, ob.MULTIPATH):
+    for bit in (ob.SIDELOBES, ob.MULTIPATH, ob.SPREAD, ob.CLUTTER):
         a = spinning_echoes(scene, bit)
         assert all(np.array_equal(x, y) for x, y in zip(a, spinning_echoes(scene, bit)))
         b = spinning_echoes(scene, bit, salt=8)
@@ -268,11 +359,28 @@ def test_spinning_switches_are_deterministic_per_seed_and_off_changes_nothing():
     plain = spinning_echoes(scene, 0)
     default = ob.observe_frame(scene, STILL, SPINNING.radar, streets.RAYS_ACROSS, salt=7, lattice=SPINNING.lattice())
     assert all(np.array_equal(x, y) for x, y in zip(plain, default))
+    f3 = ob.observe_frame(scene, STILL, SPINNING.radar, streets.RAYS_ACROSS, salt=7, physics=ob.CLUTTER,
+                          lattice=SPINNING.lattice(), frame=3)[0]
+    f4 = ob.observe_frame(scene, STILL, SPINNING.radar, streets.RAYS_ACROSS, salt=7, physics=ob.CLUTTER,
+                          lattice=SPINNING.lattice(), frame=4)[0]
+    assert f3.shape != f4.shape or not np.array_equal(f3, f4)
     small = RadarConfig(n_azimuth=40, n_elevation=1, azimuth_step_deg=9.0, beamwidth_az_deg=6.0, beamwidth_el_deg=8.0)
     lattice = BeamLattice.spinning(40)
-    every = ob.SIDELOBES | ob.MULTIPATH
+    every = ob.SIDELOBES | ob.MULTIPATH | ob.SPREAD | ob.CLUTTER
     one = streets.observe(scene, small, lattice, 2, seed=301, physics=every)
     two = streets.observe(scene, small, lattice, 2, seed=301, physics=every)
     off = streets.observe(scene, small, lattice, 2, seed=301)
     assert one.physics == every and off.physics == 0
     assert np.array_equal(one.samples, two.samples) and not np.array_equal(one.samples, off.samples)
+
+
+def test_bench_scenes_takes_every_switch_by_name():
+    from radarcl.bench.scenes import parse_physics, physics_names
+    from radarcl.errors import ConfigError
+
+    every = parse_physics("sidelobes, multipath,spread,clutter")
+    assert every == ob.SIDELOBES | ob.MULTIPATH | ob.SPREAD | ob.CLUTTER
+    assert physics_names(every) == ["sidelobes", "multipath", "spread", "clutter"]
+    assert parse_physics("") == 0 and physics_names(0) == ["none"] and parse_physics("spread,spread") == ob.SPREAD
+    with pytest.raises(ConfigError, match="rain"):
+        parse_physics("sidelobes,rain")

@@ -25,14 +25,16 @@ noise and the ADC's rounding and clipping, so the whole pipeline runs from raw s
 Harder physics, each a bit of ``physics``, off by default (nothing above changes when off):
 SIDELOBES (a sidelobe ring; the spinning radar's fan beam has it in azimuth only), MULTIPATH
 (specular surfaces; the stand's ground bounce, the spinning radar's mirror paths off the
-terrain and smooth walls, traced). Range sidelobes need no switch: the range FFT's window makes
-them from the samples.
+terrain and smooth walls, traced), SPREAD (a heavy-tailed RCS per surface patch and point),
+CLUTTER (rain: volume scatterers of K-distributed power, new each frame). Range sidelobes need
+no switch: the range FFT's window makes them from the samples.
 """
 
 import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.special import stdtrit
 
 from radarcl.config.stage_config import PAPER_RADAR
 from radarcl.errors import ConfigError, FrameFormatError
@@ -49,11 +51,21 @@ SPECKLE_CELL_M = 0.05        # a scatterer's phase is fixed per cell of this edg
 # Harder physics (the paper's future work), each a switch, off by default (README, "Harder physics"):
 SIDELOBES = 1                # the pattern beyond the main lobe: a sidelobe ring at -20 dB out to SIDELOBE_SPAN
 MULTIPATH = 2                # ghosts of mirror paths (ground, smooth walls) and specular surfaces
+SPREAD = 4                   # each surface patch's and point's RCS drawn from a heavy-tailed spread
+CLUTTER = 8                  # a diffuse clutter floor: volume scatterers of K-distributed power
+PHYSICS_NAMES = {"sidelobes": SIDELOBES, "multipath": MULTIPATH, "spread": SPREAD, "clutter": CLUTTER}
 SIDELOBE_SPAN = 3.0          # sampled radius with sidelobes, in half-power half-widths
 SIDELOBE_DB = -20.0          # the ring's peak: two-way pattern amplitude, so echo power (one-way power: -10 dB)
 GROUND_BOUNCE = 0.5          # amplitude reflection coefficient of the terrain (-6 dB), twice on the image path
 WALL_BOUNCE = 0.4            # of a smooth wall: Fresnel's (n - 1) / (n + 1) for concrete, eps_r ~ 5-6 at 77 GHz
 SPECULAR_EXPONENT = 40       # a specular surface returns gamma cos^41(incidence): at 30 deg, 0.3 % of diffuse
+SPREAD_CELL_M = 0.5          # one RCS draw per cell of this edge on a surface (the size of a facade's feature)
+SPREAD_SCALE_DB = 6.0        # the draw in dB: SPREAD_SCALE_DB x Student's t with SPREAD_DOF degrees of freedom:
+SPREAD_DOF = 3               # median 0 dB (the material's gamma), the quartiles of a 7 dB log-normal, tails heavier
+SPREAD_CLIP_DB = 30.0        # ... clipped at +-30 dB (a 10 cm corner reflector over a 0.5 m patch of brick)
+CLUTTER_ETA = 1e-3           # volume reflectivity [m^2 / m^3]: rain-like, 17 dB over the noise at 10 m (README)
+CLUTTER_PER_M = 1.0          # scatterers per metre of range in each beam (a bin of 0.25 m holds 0 or 1)
+CLUTTER_SHAPE = 1.0          # K-distribution shape nu: texture Gamma(nu, 1 / nu) x exponential speckle
 ADC = Adc(bits=12)           # full scale 1 V
 
 
@@ -68,7 +80,7 @@ class Observations:
     seed: int
     rays_per_beam: int
     n_clipped: int
-    physics: int = 0             # SIDELOBES | MULTIPATH: the switches it was simulated with
+    physics: int = 0             # SIDELOBES | MULTIPATH | SPREAD | CLUTTER: the switches it was simulated with
     offsets_m: np.ndarray = None  # (n_frames, 3) the sensor's offset from the scene's sensor_m per frame (moving), or None
 
     def first(self, n):
@@ -164,18 +176,19 @@ def fan_pattern_amplitude(st, sidelobes=False):
     return np.maximum(main, _ring(np.abs(s)) * 2.0 ** -(t ** 2))
 
 
-def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, salt=0, physics=0, lattice=None):
+def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, salt=0, physics=0, lattice=None, frame=0):
     """Echoes of every beam of one frame: (amplitude, range_m, phase) arrays (n_beams, k).
 
     ``salt`` fixes the recording's scatterers: ray jitter and speckle phases are functions of
     the world direction and of the scatterer, not random draws (``lattice_rays``,
     ``hash_uniform``), so the same salt gives the same echoes at the same pose. ``physics``:
-    SIDELOBES | MULTIPATH (module constants), 0 for neither. ``pose`` (4, 4) puts
+    SIDELOBES | MULTIPATH | SPREAD | CLUTTER (module constants), 0 for none. ``pose`` (4, 4) puts
     the head at the scene's sensor position; (n_beams, 4, 4) gives each beam its own pose and
     origin (a spinning radar on a moving vehicle: ``scene.streets``; no point scatterers; its
     fan beam's sidelobes lie in azimuth only, ``fan_pattern_amplitude``, and its multipath is
     traced, ``_mirror_paths``). ``lattice``: the frame's ``BeamLattice`` (default: the radar's
-    stacked lattice)."""
+    stacked lattice). ``frame``: the frame's index in its recording (CLUTTER's scatterers are
+    drawn anew each frame, as rain's drops move)."""
     lattice = BeamLattice.from_radar(radar) if lattice is None else lattice
     P = np.asarray(pose, float)
     per_beam = P.ndim == 3
@@ -206,6 +219,8 @@ def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, salt=
     if physics & MULTIPATH:              # a specular surface sends the beam away unless it meets it square on
         sigma = np.where(hit & specular[owner], sigma * cos_i ** SPECULAR_EXPONENT, sigma)
     p_hit = starts + np.where(hit, t, 0.0)[:, None] * flat
+    if physics & SPREAD:
+        sigma = sigma * 10 ** (spread_db(np.floor(p_hit / SPREAD_CELL_M), salt) / 10)
     pattern = (fan_pattern_amplitude(st, True) if fan else
                pattern_amplitude(np.sqrt((st ** 2).sum(axis=-1)), sidelobes)).reshape(-1)
     amp = A_1M2_AT_10M * np.sqrt(sigma) * (R_REF_M / r) ** 2 * pattern
@@ -225,13 +240,26 @@ def observe_frame(scene, pose, radar=PAPER_RADAR, rays_across=RAYS_ACROSS, salt=
 
     if scene.points:
         p_amp, p_r = _point_echoes(scene, frames, origin, half_az, half_el)
+        if physics & SPREAD:
+            p_amp = p_amp * 10 ** (spread_db(np.arange(len(scene.points))[:, None], salt, 6) / 20)
         amp = np.concatenate([amp, p_amp], axis=1)
         rng_m = np.concatenate([rng_m, p_r], axis=1)
         fixed = 2 * np.pi * hash_uniform(np.arange(len(scene.points))[:, None], salt, 4)
         phase = np.concatenate([phase, np.broadcast_to(fixed, p_amp.shape)], axis=1)
+    if physics & CLUTTER:
+        beam_origins = P[:, :3, 3] if per_beam else np.broadcast_to(origin, (n_beams, 3))
+        extra.append(_clutter(scene, frames, beam_origins, radar, half_az, half_el, salt, frame))
     for columns in extra:
         amp, rng_m, phase = (np.concatenate([a, c], axis=1) for a, c in zip((amp, rng_m, phase), columns))
     return amp, rng_m, phase
+
+
+def spread_db(keys, salt, stream=5):
+    """SPREAD's RCS draw [dB] per key (..., m) (a surface cell, a point): SPREAD_SCALE_DB times
+    Student's t with SPREAD_DOF degrees of freedom at the key's ``hash_uniform``, clipped to
+    +-SPREAD_CLIP_DB; median 0 dB. The same key and salt draw the same value."""
+    u = hash_uniform(np.asarray(keys).astype(np.int64), salt, stream)
+    return np.clip(SPREAD_SCALE_DB * stdtrit(SPREAD_DOF, u), -SPREAD_CLIP_DB, SPREAD_CLIP_DB)
 
 
 def _beam_offsets(frames, vec, half_az, half_el):
@@ -292,6 +320,8 @@ def _mirror_paths(scene, frames, starts, dirs, t, hit, owner, normal, d_omega, p
     cos2 = np.abs(np.einsum("ij,ij->i", normal2, d2))
     sigma = gamma[owner2] * length ** 2 * d_omega[idx]          # gamma cos_i x the patch L^2 dOmega / cos_i
     sigma = np.where(specular[owner2], sigma * cos2 ** SPECULAR_EXPONENT, sigma)
+    if physics & SPREAD:
+        sigma = sigma * 10 ** (spread_db(np.floor(p / SPREAD_CELL_M), salt) / 10)
     phase = 2 * np.pi * hash_uniform(np.floor(p / SPECKLE_CELL_M).astype(np.int64), salt, 3)
     beam = idx // k
     image_amp = A_1M2_AT_10M * np.sqrt(sigma) * (R_REF_M / length) ** 2 * pattern[idx] * coeff ** 2
@@ -313,6 +343,27 @@ def _mirror_paths(scene, frames, starts, dirs, t, hit, owner, normal, d_omega, p
                     np.concatenate([image_amp, mixed_amp[mixed]]),
                     np.concatenate([length, (length[mixed] + r_p[mixed]) / 2]),
                     np.concatenate([phase, phase[mixed]]))
+
+
+def _clutter(scene, frames, origins, radar, half_az, half_el, salt, frame):
+    """Echoes (amplitude, range, phase) (n_beams, m) of a volume of clutter (rain): per beam,
+    scatterers at CLUTTER_PER_M per metre (Poisson) from the radar's minimum range to the first
+    surface on the beam's axis, each of mean RCS CLUTTER_ETA x its share of the beam's volume,
+    CLUTTER_ETA Omega r^2 / CLUTTER_PER_M (Omega = pi half_az half_el / (2 ln 2), the two-way
+    pattern's solid angle), times a Gamma(CLUTTER_SHAPE) texture and an exponential speckle:
+    K-distributed power. Drawn from (salt, frame): the same recording draws the same drops."""
+    rng = np.random.default_rng([int(salt) % 2 ** 63, int(frame), CLUTTER])
+    n_beams = len(frames)
+    t_axis, _, _ = scene.first_hit(np.ascontiguousarray(origins, float), frames[:, :, 0])
+    near, far = radar.range_min_m, np.minimum(t_axis, radar.range_max_m)
+    count = rng.poisson(CLUTTER_PER_M * np.maximum(far - near, 0.0))
+    beam = np.repeat(np.arange(n_beams), count)
+    r = near + rng.random(len(beam)) * (far - near)[beam]
+    omega = math.pi * half_az * half_el / (2 * math.log(2))
+    texture = rng.gamma(CLUTTER_SHAPE, 1 / CLUTTER_SHAPE, len(beam))
+    sigma = CLUTTER_ETA * omega * r ** 2 / CLUTTER_PER_M * texture * rng.exponential(1.0, len(beam))
+    amp = A_1M2_AT_10M * np.sqrt(sigma) * (R_REF_M / r) ** 2
+    return _by_beam(beam, n_beams, amp, r, 2 * np.pi * rng.random(len(beam)))
 
 
 def _ground_bounce(scene, origin, dirs, t, hit, owner, amp):
@@ -368,7 +419,7 @@ def observe(scene, tilts_deg, radar=PAPER_RADAR, seed=0, rays_across=RAYS_ACROSS
     for j, tilt in enumerate(tilts):
         here = scene if offsets_m is None else replace(scene, sensor_m=tuple(np.add(scene.sensor_m, offsets_m[j])))
         pose = here.stand_pose(float(tilt))
-        amp, r, phase = observe_frame(here, pose, radar, rays_across, salt=seed, physics=physics)
+        amp, r, phase = observe_frame(here, pose, radar, rays_across, salt=seed, physics=physics, frame=j)
         sim = simulate_beams(radar, amp, r, phase, noise_rms=noise_rms, adc=adc, seed=rng.integers(2 ** 63))
         frames.append(sim.samples.reshape(radar.n_azimuth, radar.n_elevation, radar.n_samples))
         poses.append(pose)

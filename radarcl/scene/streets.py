@@ -98,15 +98,16 @@ def observe(scene, radar, lattice, turns, seed=0, noise_rms=NOISE_RMS, adc=ADC, 
     """Simulate ``turns`` turns of a spinning radar (``radar``: a ``RadarConfig`` with one
     elevation, ``lattice``: its spinning ``BeamLattice``) driving through ``scene``; returns
     ``Observations`` whose poses are (turns, n_az, 4, 4). ``poses`` replaces ``beam_poses``;
-    ``physics``: the simulator's harder physics (``scene.observe``: SIDELOBES | MULTIPATH), 0
-    for none."""
+    ``physics``: the simulator's harder physics (``scene.observe``: SIDELOBES | MULTIPATH |
+    SPREAD | CLUTTER), 0 for none."""
     if radar.n_elevation != 1 or lattice.n_el != 1 or not lattice.wraps:
         raise ConfigError("the street simulation is for a spinning radar with one elevation")
     P = beam_poses(lattice, turns) if poses is None else np.asarray(poses, float)
     rng = np.random.default_rng(seed)
     frames, clipped, rays = [], 0, 0
-    for turn in P:
-        amp, r, phase = observe_frame(scene, turn, radar, RAYS_ACROSS, salt=seed, physics=physics, lattice=lattice)
+    for j, turn in enumerate(P):
+        amp, r, phase = observe_frame(scene, turn, radar, RAYS_ACROSS, salt=seed, physics=physics, lattice=lattice,
+                                      frame=j)
         sim = simulate_beams(radar, amp, r, phase, noise_rms=noise_rms, adc=adc, seed=rng.integers(2 ** 63))
         frames.append(sim.samples.reshape(radar.n_azimuth, 1, radar.n_samples))
         clipped += sim.n_clipped
