@@ -72,13 +72,11 @@ def run(runtime, seeds, voxel_m=0.2, report=None, extra=(), physics=0, radar="pa
     per_scene = []
     for n, seed in enumerate(seeds, 1):
         if radar == "spinning":
-            if physics:
-                raise ConfigError("--physics applies to the tilting stand (--radar paper) only")
             scene, described = streets.generate(seed)
             say(f"street {seed} ({n}/{len(seeds)}): sensor at {described['sensor_height_m']} m, "
                 f"{len(described['objects'])} solids ...")
             sensor = configs[0][1].sensor
-            obs = streets.observe(scene, sensor.radar, sensor.lattice(), SPINNING_TURNS, seed=seed)
+            obs = streets.observe(scene, sensor.radar, sensor.lattice(), SPINNING_TURNS, seed=seed, physics=physics)
         else:
             scene, described = generator.generate(seed)
             say(f"scene {seed} ({n}/{len(seeds)}): {described['terrain']} terrain, sensor at "
@@ -117,9 +115,20 @@ def run(runtime, seeds, voxel_m=0.2, report=None, extra=(), physics=0, radar="pa
 
 def physics_names(physics):
     """The simulator switches of a ``physics`` bit mask, as words."""
-    from radarcl.scene.observe import MULTIPATH, SIDELOBES
+    from radarcl.scene.observe import PHYSICS_NAMES
 
-    return [name for bit, name in ((SIDELOBES, "sidelobes"), (MULTIPATH, "multipath")) if physics & bit] or ["none"]
+    return [name for name, bit in PHYSICS_NAMES.items() if physics & bit] or ["none"]
+
+
+def parse_physics(text):
+    """The bit mask of --physics' comma-separated words (``scene.observe.PHYSICS_NAMES``)."""
+    from radarcl.scene.observe import PHYSICS_NAMES
+
+    words = [w.strip() for w in text.split(",") if w.strip()]
+    unknown = [w for w in words if w not in PHYSICS_NAMES]
+    if unknown:
+        raise ConfigError(f"--physics takes {', '.join(PHYSICS_NAMES)} (comma-separated), got {', '.join(unknown)}")
+    return sum(PHYSICS_NAMES[w] for w in set(words))
 
 
 def _cell(v, width=6):
@@ -166,7 +175,8 @@ def add_arguments(parser):
     parser.add_argument("--voxel", type=positive_float, default=0.2, help="voxel [m] (default: %(default)s)")
     parser.add_argument("--seeds", type=int, nargs="+", default=None, help="these scene seeds instead of a split")
     parser.add_argument("--physics", default="", metavar="LIST",
-                        help="harder physics in the simulator: sidelobes, multipath, or both comma-separated")
+                        help="harder physics in the simulator, comma-separated: sidelobes, multipath, spread, clutter "
+                             "(README: Harder physics)")
     parser.add_argument("--with", dest="extra", nargs="+", default=(), metavar="FILE",
                         help="also score these configuration files (e.g. from radarcl calibrate --save)")
 
@@ -180,13 +190,6 @@ def command(args, runtime, say):
         seeds = args.seeds or (streets.HELD_OUT_SEEDS if args.split == "held-out" else streets.TRAIN_SEEDS)
     else:
         seeds = args.seeds or (HELD_OUT_SEEDS if args.split == "held-out" else TRAIN_SEEDS)
-    from radarcl.scene.observe import MULTIPATH, SIDELOBES
-
-    bits = {"sidelobes": SIDELOBES, "multipath": MULTIPATH}
-    words = [w.strip() for w in args.physics.split(",") if w.strip()]
-    unknown = [w for w in words if w not in bits]
-    if unknown:
-        raise ConfigError(f"--physics takes sidelobes and/or multipath, got {', '.join(unknown)}")
-    result = run(runtime(), seeds, args.voxel, report=say, extra=args.extra, physics=sum(bits[w] for w in set(words)),
-                 radar=args.radar)
+    physics = parse_physics(args.physics)
+    result = run(runtime(), seeds, args.voxel, report=say, extra=args.extra, physics=physics, radar=args.radar)
     return result, format_table(result)

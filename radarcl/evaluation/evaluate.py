@@ -160,7 +160,7 @@ def instrument(runtime, scene, obs, reference, progress=None):
     radar = reference.sensor.radar
     if obs.poses.ndim == 4:                  # a spinning radar on a vehicle: one pose per beam (scene.streets)
         quiet = streets.observe(scene, radar, reference.sensor.lattice(), len(obs.poses), seed=obs.seed, noise_rms=0.0,
-                                adc=None, poses=obs.poses)
+                                adc=None, poses=obs.poses, physics=obs.physics)
     else:
         quiet = observe(scene, obs.tilts_deg, radar=radar, seed=obs.seed, noise_rms=0.0, adc=None, physics=obs.physics,
                         offsets_m=obs.offsets_m)

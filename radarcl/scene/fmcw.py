@@ -10,6 +10,7 @@ at the beat frequency B t' / T (eq. 6a). ``amplitude`` here is the tone's amplit
 Noise is white Gaussian receiver noise; the ADC rounds to integer codes and clips at its rails.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,6 +18,9 @@ import numpy as np
 from radarcl.config.stage_config import RadarConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.physics import SPEED_OF_LIGHT
+
+
+CHUNK_BYTES = 1 << 27        # beat_signal's temporaries per block of beams (128 MiB)
 
 
 @dataclass(frozen=True)
@@ -97,9 +101,18 @@ def beat_signal(config: RadarConfig, amplitude, range_m, phase_rad=0.0):
     slope = config.bandwidth_hz / config.sweep_time_s                    # B_s / T_s
     f_beat = slope * delay                                               # eq. 6a
     phase0 = 2 * np.pi * config.carrier_hz * delay - np.pi * slope * delay ** 2 - phase_rad
-    arg = 2 * np.pi * f_beat[..., None] * t + phase0[..., None]           # (..., K, n_samples)
-    tone = np.exp(1j * arg) if config.complex_samples else np.cos(arg)
-    return np.sum(amplitude[..., None] * tone, axis=-2)
+    # a block of beams at a time, so that the (beams, K, n_samples) tones stay near CHUNK_BYTES;
+    # each beam's sum runs over its own targets in order, so blocks change no bit of it
+    lead, k = amplitude.shape[:-1], amplitude.shape[-1]
+    amplitude, f_beat, phase0 = (a.reshape(math.prod(lead), k) for a in (amplitude, f_beat, phase0))
+    out = np.empty((len(amplitude), config.n_samples), np.complex128 if config.complex_samples else np.float64)
+    rows = max(1, CHUNK_BYTES // (16 * max(k, 1) * config.n_samples))
+    for i in range(0, len(amplitude), rows):
+        block = slice(i, i + rows)
+        arg = 2 * np.pi * f_beat[block, :, None] * t + phase0[block, :, None]       # (beams, K, n_samples)
+        tone = np.exp(1j * arg) if config.complex_samples else np.cos(arg)
+        out[block] = np.sum(amplitude[block, :, None] * tone, axis=-2)
+    return out.reshape(lead + (config.n_samples,))
 
 
 def simulate_beams(config: RadarConfig, amplitude, range_m, phase_rad=0.0, *, noise_rms=0.0,

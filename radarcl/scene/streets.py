@@ -10,7 +10,8 @@ spinning radar's one elevation maps the horizontal plane at z = 0 (the grid of i
 ``SPEED_M_S`` along the street while the antenna turns at ``TURN_HZ``, so each azimuth's beam has
 its own origin, as the Oxford and RADIATE scans do), to raw samples with receiver noise and the
 ADC. The whole pipeline runs from those samples; ``evaluation.evaluate.instrument`` gives the
-truth as for the tilting stand.
+truth as for the tilting stand. ``physics`` turns on the simulator's harder physics
+(``scene.observe``), as for the stand.
 
 ``TRAIN_SEEDS`` are for choosing anything, ``HELD_OUT_SEEDS`` for reporting only.
 """
@@ -93,20 +94,23 @@ def beam_poses(lattice, turns, speed_m_s=SPEED_M_S, turn_hz=TURN_HZ):
     return np.stack([[pose_from_xyz_rpy(speed_m_s * tk, 0.0, 0.0) for tk in row] for row in t])
 
 
-def observe(scene, radar, lattice, turns, seed=0, noise_rms=NOISE_RMS, adc=ADC, poses=None):
+def observe(scene, radar, lattice, turns, seed=0, noise_rms=NOISE_RMS, adc=ADC, poses=None, physics=0):
     """Simulate ``turns`` turns of a spinning radar (``radar``: a ``RadarConfig`` with one
     elevation, ``lattice``: its spinning ``BeamLattice``) driving through ``scene``; returns
-    ``Observations`` whose poses are (turns, n_az, 4, 4). ``poses`` replaces ``beam_poses``."""
+    ``Observations`` whose poses are (turns, n_az, 4, 4). ``poses`` replaces ``beam_poses``;
+    ``physics``: the simulator's harder physics (``scene.observe``: SIDELOBES | MULTIPATH |
+    SPREAD | CLUTTER), 0 for none."""
     if radar.n_elevation != 1 or lattice.n_el != 1 or not lattice.wraps:
         raise ConfigError("the street simulation is for a spinning radar with one elevation")
     P = beam_poses(lattice, turns) if poses is None else np.asarray(poses, float)
     rng = np.random.default_rng(seed)
     frames, clipped, rays = [], 0, 0
-    for turn in P:
-        amp, r, phase = observe_frame(scene, turn, radar, RAYS_ACROSS, salt=seed, lattice=lattice)
+    for j, turn in enumerate(P):
+        amp, r, phase = observe_frame(scene, turn, radar, RAYS_ACROSS, salt=seed, physics=physics, lattice=lattice,
+                                      frame=j)
         sim = simulate_beams(radar, amp, r, phase, noise_rms=noise_rms, adc=adc, seed=rng.integers(2 ** 63))
         frames.append(sim.samples.reshape(radar.n_azimuth, 1, radar.n_samples))
         clipped += sim.n_clipped
         rays = amp.shape[1]
-    return Observations(np.stack(frames), P, np.zeros(len(P)), int(seed), int(rays), clipped)
+    return Observations(np.stack(frames), P, np.zeros(len(P)), int(seed), int(rays), clipped, int(physics))
 
