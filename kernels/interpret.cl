@@ -48,8 +48,9 @@
  * (blocked > 0) with blocker_gap g > 0 (a partial blocker): L_b and L_0 from the table read at
  * ln tau + ln_snr and at ln_snr, e = ln(L / (1 - q + q L)) of L = (1 - g) L_b + g L_0, and d =
  * ((1 - w) tau + w) delta where the gap's posterior w = g L_0 / L is above 1/2 (exp_nb, log10_nb).
- * Every look's e is held within +-delta ln(1 / q) (snr_evidence.bounded). A node whose d rounds
- * to 0 gets e = 0, with either evidence (the reading counts only looks with knowledge).
+ * Every look's e is at most known x snr_cap[bin, class, node] (tau, or the gap's, times what a
+ * detection says at the node's opportunity: snr_evidence.bounded). A node whose d rounds to 0
+ * gets e = 0, with either evidence (the reading counts only looks with knowledge).
  *
  * -D constants (set by radarcl/stages/interpret.py):
  *   N_BINS      bins per profile
@@ -204,11 +205,11 @@ static inline float likelihood_ratio(float e, float q)
 }
 
 /* one bin's node pairs from the SNR table: u = ln x, ln tau = -blocked; behind nearer echoes
- * (blocked > 0) the mixture with a gap of chance gap (q: the table's); every look within
- * +-delta bound (bound: ln(1 / q)) */
+ * (blocked > 0) the mixture with a gap of chance gap (q: the table's); every look at most its
+ * known share of the node's cap */
 static inline void write_graded(__global int2 *out, const __global float *ln_s, const __global float *opp,
-                                const __global float *table, float u, float blocked, float tau, float gap, float q,
-                                float bound)
+                                const __global float *cap, const __global float *table, float u, float blocked,
+                                float tau, float gap, float q)
 {
     const float fu = grid_position(u, SNR_U0, SNR_U_SCALE, SNR_NU);
     const int iu = min((int)fu, SNR_NU - 2);
@@ -235,10 +236,9 @@ static inline void write_graded(__global int2 *out, const __global float *ln_s, 
                 v = log10_nb(lm / (1.0f - q + q * lm)) * LN10;
                 known = w > 0.5f ? (1.0f - w) * tau + w : tau;   /* see the oracle */
             }
-            const float delta = known * opp[c * 5 + k];
-            const float cap = delta * bound;           /* a look says at most delta ln(1 / q) */
-            v = v > cap ? cap : (v < -cap ? -cap : v);
-            d[k] = as_int(delta * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
+            const float most = known * cap[c * 5 + k];    /* no more than a detection would say */
+            v = v < most ? v : most;
+            d[k] = as_int(known * opp[c * 5 + k] * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
             e[k] = d[k] ? fixed_nb(v, LOGODDS_SCALE) : 0;  /* no evidence from a look that is not one */
         }
         for (int k = 0; k < 4; ++k)
@@ -268,9 +268,10 @@ __kernel void interpret(
     const float c_det,                  // DETSTATS: (1 - P_fa) / P_fa, P_fa the achieved false-alarm rate
     const __global float *ln_snr,       // GRADED: (N_BINS, 2, 5) ln of the typical target's median SNR at tau = 1
     const __global float *snr_table,    // GRADED: (SNR_NU, SNR_NV) evidence [nat] over (ln x, ln s)
+    const __global float *snr_cap,      // GRADED: (N_BINS, 2, 5) what a detection says at tau = 1 [nat]
     const float noise_floor,            // GRADED: the least noise floor [power] (the CFAR's)
     const float blocker_gap,            // GRADED: the chance of a gap in nearer echoes (0: hard blocking)
-    const float snr_q,                  // GRADED: the table's q (a look says at most delta ln(1 / q))
+    const float snr_q,                  // GRADED: the table's q (the evidence's bound is ln(1 / q))
     const int n_beams,
     __global int *evidence,           // (n_beams, N_BINS) out [logodds units]; DETSTATS: (n_beams, N_BINS, 8) int2
     __global int4 *pulses,            // (n_beams, MAX_PULSES) out: start, end, peak, wide; -1 unused
@@ -326,7 +327,6 @@ __kernel void interpret(
                                                    : 0.0f;
         const float floor_power = median / 0.69314718056f > noise_floor ? median / 0.69314718056f : noise_floor;
         const float ln_floor = log10_nb(floor_power) * LN10;
-        const float snr_bound = -log10_nb(snr_q) * LN10;
 #define NOISE(j) floor_power
 #else
 #define NOISE(j) n[j]
@@ -336,8 +336,8 @@ __kernel void interpret(
         while (j <= last_bin) {
             if (!m[j]) {
 #if GRADED
-                write_graded(nd + j * NODE_WORDS, ln_snr + j * 10, opportunity + j * 10, snr_table,
-                             log10_nb(r[j]) * LN10 - ln_floor, blocked, tau, blocker_gap, snr_q, snr_bound);
+                write_graded(nd + j * NODE_WORDS, ln_snr + j * 10, opportunity + j * 10, snr_cap + j * 10, snr_table,
+                             log10_nb(r[j]) * LN10 - ln_floor, blocked, tau, blocker_gap, snr_q);
 #else
                 if (blocked == 0.0f) {
                     for (int w = 0; w < NODE_WORDS; w++)
@@ -361,8 +361,8 @@ __kernel void interpret(
             const int end = j - 1;
 #if GRADED
             for (int i = start; i <= end; i++)
-                write_graded(nd + i * NODE_WORDS, ln_snr + i * 10, opportunity + i * 10, snr_table,
-                             log10_nb(r[i]) * LN10 - ln_floor, blocked, tau, blocker_gap, snr_q, snr_bound);
+                write_graded(nd + i * NODE_WORDS, ln_snr + i * 10, opportunity + i * 10, snr_cap + i * 10, snr_table,
+                             log10_nb(r[i]) * LN10 - ln_floor, blocked, tau, blocker_gap, snr_q);
 #else
             const float scale = c_det / r[peak];
             for (int i = start; i <= end; i++)

@@ -464,11 +464,10 @@ def _detstats_graded(r, m, first, last, model):
         # behind a blocker tells little of a gap, and each look with any knowledge counts as one
         # in the reading's look limit)
         known[behind] = np.where(w > 0.5, (1.0 - w) * tau[behind] + w, tau[behind])
-    delta = known * model.opportunity[window]
-    opportunity[window] = np.rint(delta * logodds.KNOWLEDGE_SCALE)
-    # a look says at most its opportunity's share of what a look can say, and nothing without an
+    opportunity[window] = np.rint(known * model.opportunity[window] * logodds.KNOWLEDGE_SCALE)
+    # a look says no more than a detection would at its opportunity, and nothing without an
     # opportunity: the reading's look limit counts only looks that could see, and evidence it does
     # not count would grow with every frame
-    e = bounded(e, delta, model.snr_table.bound)
+    e = bounded(e, known, model.opportunity[window], model.snr_table.q)
     evidence[window] = np.where(opportunity[window] != 0, logodds.to_fixed(e), 0)
     return evidence, opportunity

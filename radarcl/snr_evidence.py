@@ -21,8 +21,9 @@ and e -> 0 whatever the power: a bin holding far more than the target could give
 the background, not by v. q, the chance that a free voxel's bin holds v's echo anyway (the CFAR's
 achieved false-alarm rate), bounds the evidence at ln(1 / q), as a detection's is bounded (with
 c = 0 and v = 1, L = E_s[exp(x s / (1 + s)) / (1 + s)]: the model without clutter). ``bounded`` then caps
-each look's evidence at its opportunity delta (the chance a typical target at v would have been
-detected) times ln(1 / q): a look that could hardly have seen v says little of it either way.
+each look's evidence for v occupied at what a CFAR detection says at its opportunity delta (the
+chance a typical target at v would have been detected), ln(1 + delta (1 - q) / q): a look that
+could hardly have seen v says little of it, however strong the echo.
 ``snr_evidence`` is the quadrature, ``SnrTable`` its table.
 """
 
@@ -93,7 +94,7 @@ NO_CLUTTER = Clutter()
 class SnrTable:
     """e(u, v) [nat] on a regular grid (``SNR_U`` x ``SNR_V``): the evidence of a bin whose power
     is x = e^u times the beam's noise floor, for a voxel whose typical target has median SNR e^v
-    there (module docstring), below ``bound`` = ln(1 / q).
+    there (module docstring), below ln(1 / q).
     Read bilinearly (``__call__``; the kernel reads the same float32 table the same way); u and v
     outside the grid are clamped to it, and the first column (v = -40: a target 174 dB under the
     noise, whose prior's tail reaches no measurable power) is 0 exactly, so a voxel no target
@@ -102,11 +103,6 @@ class SnrTable:
     values: np.ndarray               # (SNR_U[2], SNR_V[2]) float64 [nat]
     q: float
     clutter: Clutter = NO_CLUTTER
-
-    @property
-    def bound(self):
-        """ln(1 / q) [nat]: the most one look says, as much as a detection (``bounded``)."""
-        return -math.log(self.q)
 
     @classmethod
     def build(cls, spread_db, q, clutter=NO_CLUTTER):
@@ -187,12 +183,21 @@ def gap_mixture(e_blocked, e_open, q, gap):
     return np.log(lm / (1.0 - q + q * lm)), gap * l0 / lm
 
 
-def bounded(e, delta, bound):
-    """A look's evidence ``e`` [nat] within +-``delta`` x ``bound``: with the opportunity delta
-    (the chance a typical target at the voxel would have been detected, after blocking) a look
-    says at most delta times the most a look says (``SnrTable.bound``), either way."""
-    cap = np.asarray(delta, np.float64) * bound
-    return np.clip(e, -cap, cap)
+def detection_cap(opportunity, q):
+    """ln(1 + delta (1 - q) / q) [nat] of an opportunity delta (array): what a detection says of a
+    voxel that a look sees with the chance delta, q the chance it detects anyway (``bounded``)."""
+    return np.log1p(np.asarray(opportunity, np.float64) * ((1.0 - q) / q))
+
+
+def bounded(e, known, opportunity, q):
+    """A look's evidence ``e`` [nat] for an occupied voxel at most ``known`` x ``detection_cap``
+    of its ``opportunity``: the measured power says no more than a CFAR detection would, scaled by
+    the share of the beam left to see the voxel (``known``: tau, or the gap's posterior; by the
+    cap's concavity at most the cap of the blocked opportunity known x delta). A look that could
+    hardly have seen the voxel so says little of it, however strong the echo; a noise-like bin's
+    free evidence needs no cap (at least -ln(1 + s) nat, small where the typical target's SNR s,
+    and so its opportunity, is)."""
+    return np.minimum(e, np.asarray(known, np.float64) * detection_cap(opportunity, q))
 
 
 def noise_floor(profiles, first, last, floor=1e-30):

@@ -124,7 +124,7 @@ def test_fit_sensor_writes_a_configuration_every_command_reads(tmp_path, capsys)
     assert main(["fit-sensor", DATA, "--sensor", "radiate-cts350x", "--scans", "0:6", "--lidar",
                  "--save", str(out), "--json", str(tmp_path / "fit.json")]) == 0
     text = capsys.readouterr().out
-    assert "with at most 0.1 of the free ones in every band to 30 m" in text and "<- chosen" in text
+    assert "with at most 0.1 of the free ones called occupied in every band" in text and "<- chosen" in text
     config = mapconfig.resolve("radiate-cts350x", str(out))
     lines = {line.split(" = ")[0]: line for line in out.read_text().splitlines() if " = " in line}
     for key in ("snr_1m2_at_10m_db", "look_limit", "clutter_spread_db"):

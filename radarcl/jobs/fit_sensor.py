@@ -37,7 +37,7 @@ def scan_selection(text, n):
     return chosen
 
 
-SENSITIVITY_GRID_DB = tuple(range(30, 111, 10))
+SENSITIVITY_GRID_DB = tuple(range(10, 111, 10))
 LOOK_LIMITS = (1.0, 2.0)
 PHANTOM_LIMIT = 0.10            # a map with --lidar calls at most this share of the lidar's free cells occupied
 CHOICE_RANGE_M = 30.0           # in every band to this range (where a fog lidar still reaches)
@@ -98,13 +98,15 @@ def run(config, data_dir, scans="all", lidar=False, runtime=None, report=None):
 
 def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
     """The map's parameters by what a robot meets where the lidar knows, on the fit's scans:
-    over ``SENSITIVITY_GRID_DB`` x ``LOOK_LIMITS`` x (no clutter, the fitted background), the map
-    that calls the most lidar-occupied cells occupied (recall at the costmap's thresholds, the
-    mean over the bands to ``CHOICE_RANGE_M``) among those that call at most ``PHANTOM_LIMIT`` of
-    the lidar-free cells occupied in every band (``evaluation.lidar.costmap_scores``); their
-    likelihood of the lidar's cells is reported beside. Returns (its values, their origins, the
+    over ``SENSITIVITY_GRID_DB`` x ``LOOK_LIMITS`` x (no clutter, the fitted background), among
+    the maps that call at most ``PHANTOM_LIMIT`` of the lidar-free cells occupied in every band to
+    ``CHOICE_RANGE_M`` (a robot stops for nothing there; ``evaluation.lidar.costmap_scores``), the
+    one that ranks the lidar's occupied cells above its free ones best: the mean over the bands of
+    the ROC area of its log-odds (a map blind in a band ranks at 0.5 there). Their recall, misses
+    and likelihood of the lidar's cells are reported beside. Returns (its values, their origins, the
     rows of every candidate); refuses when no candidate keeps the phantoms within the limit."""
     from radarcl.evaluation import lidar as L
+    from radarcl.evaluation.metrics import roc_auc
     from radarcl.jobs.evaluate_lidar import run as evaluate
 
     fitted = dict(zip(sensor_fit.FITTED, result.values))
@@ -131,7 +133,10 @@ def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
         nats, known = arrays["maps"][label], arrays["known"].get(label)
         scores = [L.costmap_scores(nats, truth.occupied & band, truth.free & band, known)
                   for band in ((distance >= lo) & (distance < hi) for lo, hi in bands)]
-        rows.append(dict(candidate=label, recall=float(np.nanmean([s["recall"] for s in scores])),
+        aucs = [roc_auc(nats[band & truth.known], truth.occupied[band & truth.known])
+                for band in ((distance >= lo) & (distance < hi) for lo, hi in bands)]
+        rows.append(dict(candidate=label, auc=float(np.nanmean(aucs)),
+                         recall=float(np.nanmean([s["recall"] for s in scores])),
                          miss=float(np.nanmean([s["miss"] for s in scores])),
                          phantom=float(np.nanmax([s["phantom"] for s in scores])),
                          log_likelihood=sensor_fit.lidar_log_likelihood(nats[truth.known], truth.occupied[truth.known])))
@@ -140,11 +145,11 @@ def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
         raise ConfigError(f"no map of the {len(rows)} candidates keeps its phantom rate within {PHANTOM_LIMIT:g} in "
                           f"every band to {CHOICE_RANGE_M:g} m on scans {_span(chosen)} (the least: "
                           f"{min(r['phantom'] for r in rows):.3f})")
-    best = max(admissible, key=lambda r: (r["recall"], r["log_likelihood"]))
+    best = max(admissible, key=lambda r: (r["auc"], r["log_likelihood"]))
     values = candidates[best["candidate"]][0]
-    why = (f"{source}: of {len(rows)} maps the most lidar-occupied cells called occupied (recall {best['recall']:.3f} "
-           f"over the bands to {CHOICE_RANGE_M:g} m) among those calling at most {PHANTOM_LIMIT:g} of the free ones "
-           f"occupied in every band")
+    why = (f"{source}: of {len(rows)} maps the best ranking of the lidar's occupied cells above its free ones (ROC "
+           f"area {best['auc']:.3f}, the mean over the bands to {CHOICE_RANGE_M:g} m) among those calling at most "
+           f"{PHANTOM_LIMIT:g} of the free ones occupied in every band")
     chosen_origins = {"sensor_model.snr_1m2_at_10m_db": why, "sensor_model.look_limit": why}
     if values["sensor_model.clutter_share"] == 0.0:
         chosen_origins["sensor_model.clutter_share"] = f"{why}: no clutter (the fitted law's share: {result.values[0]:.3g})"
@@ -203,11 +208,12 @@ def format_lines(out):
                  + ", ".join(f"{r:.0f} m {s:.2f}" for r, s in zip(out["band_ranges_m"], out["target_shares"])))
     if "maps" in out:
         m = out["maps"]
-        rows = sorted(m["candidates"], key=lambda r: (r["phantom"] > m["phantom_limit"], -r["recall"]))
+        rows = sorted(m["candidates"], key=lambda r: (r["phantom"] > m["phantom_limit"], -r["auc"]))
         lines.append(f"the map's sensitivity, look limit and background with the lidar's {m['cells']:,} cells: the "
-                     f"most occupied ones called occupied with at most {m['phantom_limit']:g} of the free ones in "
-                     f"every band to {m['range_m']:g} m (best 5 of {len(rows)}):")
-        lines.append(f"  {'recall':>6} {'miss':>6} {'phantom':>7} {'log-lik':>8}  map")
-        lines += [f"  {r['recall']:6.3f} {r['miss']:6.3f} {r['phantom']:7.3f} {r['log_likelihood']:8.4f}  "
+                     f"best ranking of its occupied cells above its free ones (ROC area, the mean over the bands to "
+                     f"{m['range_m']:g} m) with at most {m['phantom_limit']:g} of the free ones called occupied in every "
+                     f"band (best 5 of {len(rows)}):")
+        lines.append(f"  {'AUC':>6} {'recall':>6} {'miss':>6} {'phantom':>7} {'log-lik':>8}  map")
+        lines += [f"  {r['auc']:6.3f} {r['recall']:6.3f} {r['miss']:6.3f} {r['phantom']:7.3f} {r['log_likelihood']:8.4f}  "
                   f"{r['candidate']}" + ("   <- chosen" if r["candidate"] == m["chosen"] else "") for r in rows[:5]]
     return lines

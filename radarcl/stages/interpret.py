@@ -15,7 +15,7 @@ from radarcl import logodds, oracle
 from radarcl.config.stage_config import InterpretConfig
 from radarcl.errors import ConfigError
 from radarcl.sensor_model import N_CLASSES, NODE_SHAPE, NODES, BinModel, pack_nodes
-from radarcl.snr_evidence import GAP_CAP, SNR_U, SNR_V
+from radarcl.snr_evidence import GAP_CAP, SNR_U, SNR_V, detection_cap
 from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_group_size
 
 # Beams per work-group. One work-item walks one beam; any size is correct.
@@ -102,7 +102,8 @@ class Interpreter(Stage):
         q = self.runtime.queue
         one = cla.zeros(q, (1,), np.float32)
         tables = dict(opportunity=one, miss=one, blocking=one, unblocked=cla.zeros(q, (1, 2), np.int32), c_det=1.0,
-                      ln_snr=one, snr_table=one, noise_floor=1.0, blocker_gap=0.0, snr_q=1.0)
+                      ln_snr=one, snr_table=one, snr_cap=one, noise_floor=1.0, blocker_gap=0.0,
+                      snr_q=1.0)
         if not self.detstats:
             return tables
         m = self.bin_model
@@ -111,6 +112,7 @@ class Interpreter(Stage):
         if m.graded:                     # the table replaces the misses and the exact unblocked nodes
             tables.update(ln_snr=cla.to_device(q, m.ln_snr.astype(np.float32)),
                           snr_table=cla.to_device(q, m.snr_table.values.astype(np.float32)),
+                          snr_cap=cla.to_device(q, detection_cap(m.opportunity, m.snr_table.q).astype(np.float32)),
                           noise_floor=float(m.noise_floor), blocker_gap=float(m.blocker_gap),
                           snr_q=float(m.snr_table.q))
             return tables
