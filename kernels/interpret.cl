@@ -48,7 +48,7 @@
  * (blocked > 0) with blocker_gap g > 0 (a partial blocker): L_b and L_0 from the table read at
  * ln tau + ln_snr and at ln_snr, e = ln(L / (1 - q + q L)) of L = (1 - g) L_b + g L_0, and d =
  * ((1 - w) tau + w) delta where the gap's posterior w = g L_0 / L is above 1/2 (exp_nb, log10_nb).
- * Every look's e is at most known x snr_cap[bin, class, node] (tau, or the gap's, times what a
+ * Every look's e lies within +-known x snr_cap[bin, class, node] (tau, or the gap's, times what a
  * detection says at the node's opportunity: snr_evidence.bounded). A node whose d rounds to 0
  * gets e = 0, with either evidence (the reading counts only looks with knowledge).
  *
@@ -205,8 +205,8 @@ static inline float likelihood_ratio(float e, float q)
 }
 
 /* one bin's node pairs from the SNR table: u = ln x, ln tau = -blocked; behind nearer echoes
- * (blocked > 0) the mixture with a gap of chance gap (q: the table's); every look at most its
- * known share of the node's cap */
+ * (blocked > 0) the mixture with a gap of chance gap (q: the table's); every look within its
+ * known share of the node's cap, either way */
 static inline void write_graded(__global int2 *out, const __global float *ln_s, const __global float *opp,
                                 const __global float *cap, const __global float *table, float u, float blocked,
                                 float tau, float gap, float q)
@@ -236,8 +236,8 @@ static inline void write_graded(__global int2 *out, const __global float *ln_s, 
                 v = log10_nb(lm / (1.0f - q + q * lm)) * LN10;
                 known = w > 0.5f ? (1.0f - w) * tau + w : tau;   /* see the oracle */
             }
-            const float most = known * cap[c * 5 + k];    /* no more than a detection would say */
-            v = v < most ? v : most;
+            const float most = known * cap[c * 5 + k];    /* no more than a detection would say, either way */
+            v = v < most ? (v > -most ? v : -most) : most;
             d[k] = as_int(known * opp[c * 5 + k] * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
             e[k] = d[k] ? fixed_nb(v, LOGODDS_SCALE) : 0;  /* no evidence from a look that is not one */
         }

@@ -465,7 +465,7 @@ def _detstats_graded(r, m, first, last, model):
         # in the reading's look limit)
         known[behind] = np.where(w > 0.5, (1.0 - w) * tau[behind] + w, tau[behind])
     opportunity[window] = np.rint(known * model.opportunity[window] * logodds.KNOWLEDGE_SCALE)
-    # a look says no more than a detection would at its opportunity, and nothing without an
+    # a look says no more than a detection would at its opportunity, either way, and nothing without an
     # opportunity: the reading's look limit counts only looks that could see, and evidence it does
     # not count would grow with every frame
     e = bounded(e, known, model.opportunity[window], model.snr_table.q)

@@ -20,10 +20,10 @@ prior; where clutter is, it masks the target. A weak target (s -> 0) makes p1 ->
 and e -> 0 whatever the power: a bin holding far more than the target could give is explained by
 the background, not by v. q, the chance that a free voxel's bin holds v's echo anyway (the CFAR's
 achieved false-alarm rate), bounds the evidence at ln(1 / q), as a detection's is bounded (with
-c = 0 and v = 1, L = E_s[exp(x s / (1 + s)) / (1 + s)]: the model without clutter). ``bounded`` then caps
-each look's evidence for v occupied at what a CFAR detection says at its opportunity delta (the
-chance a typical target at v would have been detected), ln(1 + delta (1 - q) / q): a look that
-could hardly have seen v says little of it, however strong the echo.
+c = 0 and v = 1, L = E_s[exp(x s / (1 + s)) / (1 + s)]: the model without clutter). ``bounded`` then holds
+each look's evidence within what a CFAR detection says at its opportunity delta (the chance a
+typical target at v would have been detected), +-ln(1 + delta (1 - q) / q): a look that could
+hardly have seen v says little of it either way, however strong or weak the bin.
 ``snr_evidence`` is the quadrature, ``SnrTable`` its table.
 """
 
@@ -190,14 +190,14 @@ def detection_cap(opportunity, q):
 
 
 def bounded(e, known, opportunity, q):
-    """A look's evidence ``e`` [nat] for an occupied voxel at most ``known`` x ``detection_cap``
-    of its ``opportunity``: the measured power says no more than a CFAR detection would, scaled by
-    the share of the beam left to see the voxel (``known``: tau, or the gap's posterior; by the
-    cap's concavity at most the cap of the blocked opportunity known x delta). A look that could
-    hardly have seen the voxel so says little of it, however strong the echo; a noise-like bin's
-    free evidence needs no cap (at least -ln(1 + s) nat, small where the typical target's SNR s,
-    and so its opportunity, is)."""
-    return np.minimum(e, np.asarray(known, np.float64) * detection_cap(opportunity, q))
+    """A look's evidence ``e`` [nat] within +-``known`` x ``detection_cap`` of its ``opportunity``:
+    the measured power says no more than a CFAR detection would at the look's opportunity, either
+    way, scaled by the share of the beam left to see the voxel (``known``: tau, or the gap's
+    posterior; by the cap's concavity at most the cap of the blocked opportunity known x delta). A
+    look that could hardly have seen the voxel so says little of it, however strong or weak the
+    bin; one that sees it says at most ln(1 / q), as a detection does."""
+    most = np.asarray(known, np.float64) * detection_cap(opportunity, q)
+    return np.clip(e, -most, most)
 
 
 def noise_floor(profiles, first, last, floor=1e-30):

@@ -81,7 +81,7 @@ def run(args):
     outputs = None
     if args.out:
         outputs = [files.check(Path(args.out) / name, args.force, inputs=[data], what="output")
-                   for name in ("lidar_truth.png", "lidar_map.png", "evaluate_lidar.json")]
+                   for name in ("lidar_truth.png", "lidar_map.png", "evaluate_lidar.json", "lidar_beside_map.png")]
     json_out = files.check(args.json, args.force, inputs=[data], what="output") if args.json else None
     flags = dict(mapconfig.parse_flag(text) for text in args.set)
     models = job.resolve_models(args.sensor, args.model or ["paper", "detstats"], flags, args.force_sensor)

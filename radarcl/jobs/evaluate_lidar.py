@@ -31,7 +31,7 @@ from radarcl.evaluation import lidar as L
 from radarcl.evaluation.evaluate import read_units
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GridSpec
-from radarcl.io import radiate
+from radarcl.io import files, radiate
 from radarcl.io.inputs import open_input, polar_source
 from radarcl.maps.map import FREE_NATS, KNOWN_LOOKS, OCCUPIED_NATS
 from radarcl.pipeline import Mapping
@@ -357,8 +357,11 @@ def _crop(arrays, margin_m=5.0):
 
 
 def plot(arrays, out_dir, best):
-    """Two top-down PNGs in ``out_dir`` around what the lidar knows: the lidar truth and the map
-    ``best`` with the annotated boxes; returns their paths."""
+    """Top-down PNGs in ``out_dir`` around what the lidar knows: the lidar truth, the map ``best``
+    with the annotated boxes (the cells a map with knowledge does not know grey), and the two side
+    by side; returns their paths."""
+    from PIL import Image
+
     out_dir = Path(out_dir)
     truth = arrays["truth"]
     ys, xs, spec = _crop(arrays)
@@ -368,15 +371,22 @@ def plot(arrays, out_dir, best):
                                    "lidar truth (+1 occupied, -1 free)")
     truth_png = out_dir / "lidar_truth.png"
     figures.save(fig, truth_png, dpi=80)
+    unknown = None if best not in arrays["known"] else ~arrays["known"][best][ys, xs]
     fig = figures.plane_map_figure(arrays["maps"][best][ys, xs], spec, path, f"{best}, annotated vehicles in green",
-                                   "radar path")
+                                   "radar path", unknown=unknown)
     ax = fig.axes[0]
     for _, _, _, corners, _ in arrays["boxes"]:
         c = np.vstack([corners, corners[:1]])
         ax.plot(c[:, 1], c[:, 0], "-", color="tab:green", lw=1.2)
     map_png = out_dir / "lidar_map.png"
     figures.save(fig, map_png, dpi=80)
-    return truth_png, map_png
+    beside_png = out_dir / "lidar_beside_map.png"
+    with Image.open(truth_png) as left, Image.open(map_png) as right, files.atomic(beside_png) as tmp:
+        both = Image.new("RGB", (left.width + right.width, max(left.height, right.height)), "white")
+        both.paste(left, (0, 0))
+        both.paste(right, (left.width, 0))
+        both.save(tmp, format="PNG")
+    return truth_png, map_png, beside_png
 
 
 def write_json(result, path):
