@@ -60,6 +60,7 @@ def register(fmt, first=False):
     return fmt
 
 def _read_store(path, salvage):
+    """A map store's (spec, keys, data, lost, channels), warning of a save that did not complete."""
     spec, keys, data, manifest = store.read(path, salvage=salvage)
     if manifest["incomplete"]:
         log.warning("%s: a save after version %d did not complete (%s left behind); read version %d",
@@ -70,6 +71,7 @@ def _read_store(path, salvage):
 
 
 def _read_npz(path, salvage):
+    """An npz map's (spec, keys, data, [], channels)."""
     spec, keys, data, channels = npz.read_channels(path)     # read whole or refused: nothing to salvage
     return spec, keys, data, [], channels
 
