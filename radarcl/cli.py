@@ -14,7 +14,7 @@ import signal
 import sys
 import threading
 
-from radarcl import bench
+from radarcl import bench, self_test
 from radarcl.commands import (
     calibrate,
     calibrate_scans,
@@ -78,6 +78,7 @@ def main(argv=None):
 
     if threading_main():
         signal.signal(signal.SIGTERM, terminated)
+    self_test.register()            # a device is used only once the pipeline's kernels ran right on it
     try:
         return args.module.run(args)
     except KeyboardInterrupt:

@@ -16,8 +16,10 @@ DEVICES_ENV = "RADARCL_TEST_DEVICES"
 
 
 def _devices():
-    import radarcl.pipeline  # noqa: F401  registers the device check every radarcl process runs before using a device
+    from radarcl import self_test
     from radarcl.cl.runtime import _all_devices, build_problem, choose_device
+
+    self_test.register()          # the device check every radarcl application runs before it uses a device
 
     wanted = os.environ.get(DEVICES_ENV, "").strip().lower()
     if wanted == "all":

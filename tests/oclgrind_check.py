@@ -19,7 +19,8 @@ pytest as a plugin (``-p oclgrind_check``), this module
 - fails each test during which Oclgrind reported anything, with the reports as its failure, and
   hands the counts to ``run_pytest``;
 - keeps radarcl's device check to its small probe kernel: ``runtime.DEVICE_CHECKS`` is emptied
-  before the suite's conftest chooses the device, as ``test_device_check`` does. The full check
+  and ``radarcl.self_test.register`` made a no-op before the suite's conftest registers the
+  check and chooses the device, as ``test_device_check`` does. The full check
   runs every built-in sensor's pipeline against the float64 oracle; under the simulator that
   takes minutes, again after every kernel edit (the verdict is keyed by the kernel sources), and
   it would add nothing here: every test compares its kernel with the float64 oracle, so a
@@ -202,9 +203,10 @@ def pytest_load_initial_conftests(early_config, parser, args):
     import pyopencl.characterize
 
     import radarcl.grid
-    import radarcl.pipeline  # noqa: F401  registers the pipeline's self-test, taken off just below
+    import radarcl.self_test
     from radarcl.cl import runtime
 
+    radarcl.self_test.register = lambda: None        # the suite's conftest registers the full check: not here
     runtime.DEVICE_CHECKS.clear()
     radarcl.grid.CHUNK_BYTES = CHUNK_BYTES
     asked = pyopencl.characterize.nv_compute_capability

@@ -1,5 +1,5 @@
 """Every device's limits honoured, shown on PoCL's CPU device narrowed to GPU classes
-(tests/device_classes.py): the device self-test (radarcl.pipeline.self_test: every built-in
+(tests/device_classes.py): the device self-test (radarcl.self_test.self_test: every built-in
 sensor's pipeline against the float64 oracle) passes on each class; a sensor a device cannot fit
 is refused alone, with a sentence, and the device stays usable for the rest; work-group sizes
 come from the compiled kernels; a device without 64-bit integers gets kernels that use none; the
@@ -20,7 +20,8 @@ from radarcl.cl import runtime as rt_module
 from radarcl.cl.runtime import Runtime
 from radarcl.config import mapconfig
 from radarcl.errors import DeviceCapabilityError
-from radarcl.pipeline import Mapping, self_test
+from radarcl.pipeline import Mapping
+from radarcl.self_test import self_test
 
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
 

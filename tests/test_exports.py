@@ -213,11 +213,16 @@ def test_an_empty_map_exports_valid_empty_files(tmp_path, caplog):
     assert "wrote a valid empty file" in caplog.text
 
 
-def test_cli_export(m, tmp_path, capsys):
-    path = tmp_path / "m.npz"
+def _map_file(m, path):
+    """``m`` as a version-1 map file at ``path``."""
     with open(path, "wb") as f:
         np.savez_compressed(f, version=1, origin_m=np.asarray(SPEC.origin_m), voxel_m=SPEC.voxel_m,
                             shape=np.asarray(SPEC.shape), keys=m.keys, data=m.data)
+    return path
+
+
+def test_cli_export(m, tmp_path, capsys):
+    path = _map_file(m, tmp_path / "m.npz")
     assert main(["export", str(path), "--to", "ply", "--out", str(tmp_path / "o.ply")]) == 0
     assert "wrote" in capsys.readouterr().out
     assert main(["export", str(path), "--to", "costmap", "--out", str(tmp_path / "c.pgm"), "--band", "-0.5", "2"]) == 0
@@ -236,6 +241,52 @@ def test_cli_export(m, tmp_path, capsys):
     assert main(["export", str(path), "--to", "ply", "--out", str(tmp_path / "o.ply")]) == 2
     assert "exists" in capsys.readouterr().err
 
+
+
+def test_a_format_added_to_the_table_alone_is_exported_by_radarcl_export(m, tmp_path, capsys, monkeypatch):
+    """A toy format (the occupied voxel centres as text) registered in ``exports.FORMATS`` and
+    nowhere else: ``radarcl export --to toy`` takes it, its help lists it, its extension is
+    checked, its exporter gets the options it names and the summary states its threshold."""
+    monkeypatch.setattr(exports, "FORMATS", dict(exports.FORMATS))
+
+    def toy(m, path, occupied_nats=1.0, band=None):
+        centres, _ = m.occupied(occupied_nats)
+        np.savetxt(path, centres, fmt="%.3f")
+        return dict(files=[path], points=len(centres), band=int(band is not None))
+
+    exports.register(exports.Export("toy", (".toy",), "the occupied voxel centres as text", toy))
+    path = _map_file(m, tmp_path / "m.npz")
+    assert main(["export", str(path), "--to", "toy", "--out", str(tmp_path / "o.toy"), "--band", "-1", "3"]) == 0
+    said = capsys.readouterr().out
+    want, _ = m.occupied(1.0)
+    assert np.allclose(np.loadtxt(tmp_path / "o.toy"), want, atol=1e-3) and len(want)
+    assert f"(toy: {len(want):,} points, 1 band; occupied above 1 nat)" in said
+    assert main(["export", str(path), "--to", "toy", "--out", str(tmp_path / "o.ply")]) == 2
+    assert "--to toy writes .toy files; " in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["export", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "toy: the occupied voxel centres as text." in text and ".pgm, .toy; a directory for rosbag" in text
+    with pytest.raises(ConfigError, match="registered already"):
+        exports.register(exports.Export("toy", (".toy",), "again", toy))
+    with pytest.raises(ConfigError, match="takes colours, which radarcl export does not give"):
+        exports.register(exports.Export("bad", (".bad",), "bad", lambda m, path, colours: None))
+
+
+def test_the_command_gives_every_option_and_the_readme_lists_every_format():
+    """``radarcl export`` maps each of ``exports.OPTIONS`` from its command line, and the README's
+    table of formats has one row per format of ``exports.FORMATS``, in order, with its files."""
+    from pathlib import Path
+
+    from radarcl.commands import export
+
+    assert list(export.OPTIONS) == list(exports.OPTIONS)
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    table = readme.split("\n| `--to` | file |", 1)[1].split("\n\n", 1)[0]
+    rows = [[c.strip() for c in line.split("|")[1:3]] for line in table.splitlines() if line.startswith("| `")]
+    want = [[f"`{f.name}`", "a directory" if f.suffixes == ("",) else " / ".join(f"`{s}`" for s in f.suffixes)
+             + "".join(f" + `{c}`" for c, _ in f.companions)] for f in exports.FORMATS.values()]
+    assert rows == want
 
 def test_every_format_counts_the_same_voxels_at_the_thresholds(tmp_path):
     """A voxel exactly at a threshold is undecided in every format (occupied means strictly

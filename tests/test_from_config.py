@@ -187,6 +187,65 @@ def test_a_sensor_that_does_not_match_its_input_is_refused(tmp_path, capsys):
         open_input(mapconfig.resolve("paper").sensor, tmp_path / "x.npy")
 
 
+
+TOY_PROFILE = """name = "toy"
+description = "a toy spinning radar whose frames are an .npy of power profiles"
+input = "profiles"
+[range]
+range_min_m = 1.0
+range_max_m = 20.0
+bin_spacing_m = 0.25
+n_bins = 80
+resolution_m = 0.5
+carrier_hz = 76.5e9
+[beams]
+n_azimuth = 32
+n_elevation = 1
+spinning = true
+beamwidth_az_deg = 11.25
+beamwidth_el_deg = 20.0
+[reader]
+format = "toy-npy"
+[defaults.grid]
+voxel_m = 0.5
+"""
+
+
+def test_an_input_format_added_to_the_table_alone_is_fused(runtime, tmp_path, capsys, monkeypatch):
+    """A toy input format (an .npy of power profiles, the radar still) registered in
+    ``io.inputs.READERS`` and nowhere else: a sensor profile may name it, ``radarcl fuse
+    --help`` lists it, and ``radarcl fuse`` reads it and maps its echo."""
+    from radarcl.io import inputs
+
+    monkeypatch.setattr(inputs, "READERS", dict(inputs.READERS))
+
+    def open_npy(sensor, path, **_):
+        frames = np.load(path)
+        return inputs.FrameSource(sensor, frames, np.broadcast_to(np.eye(4), (len(frames), 4, 4)),
+                                  [None] * len(frames), f"{len(frames)} toy frames of {path}", posed=False)
+
+    profile = tmp_path / "toy.toml"
+    profile.write_text(TOY_PROFILE)
+    with pytest.raises(ConfigError, match="must be one of 'recording', 'polar-png', 'ti-openradar', got 'toy-npy'"):
+        mapconfig.resolve(str(profile))
+    inputs.register(inputs.Reader("toy-npy", "a toy .npy", "a toy .npy of power profiles", open_npy))
+    sensor = mapconfig.resolve(str(profile)).sensor
+    rng = np.random.default_rng(5)
+    frames = rng.exponential(1.0, (2, *sensor.frame_shape())).astype(np.float32)
+    frames[..., 40] = 1e4                                        # an echo at 40 x 0.25 = 10 m on every beam
+    np.save(tmp_path / "toy.npy", frames)
+    out = tmp_path / "toy_map.npz"
+    assert main(["fuse", str(tmp_path / "toy.npy"), "--sensor", str(profile), "--still", "--out", str(out),
+                 "--no-report", "--no-progress"]) == 0
+    assert f"fusing 2 toy frames of {tmp_path / 'toy.npy'} with sensor toy" in capsys.readouterr().out
+    centres, _ = Map.open(out).occupied(1.0)
+    reach = np.hypot(centres[:, 0], centres[:, 1])
+    assert len(centres) >= 32 and (np.abs(reach - 10.0) < 0.5).all()
+    with pytest.raises(SystemExit):
+        main(["fuse", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "a TI capture .npy/.txt; a toy .npy of power profiles)" in text and "a TI capture, or a toy .npy" in text
+
 def test_the_paper_profile_rebuilds_the_pre_profile_pipeline_bit_for_bit(runtime):
     """README ("Sensors and configuration"): the paper's profile derives the paper's constants
     from its geometry alone, so `radarcl demo`'s maps are bit-identical to those made before

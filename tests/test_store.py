@@ -133,6 +133,50 @@ def test_convert_between_npz_and_store(tmp_path, capsys):
     assert "a directory that is not a map store" in capsys.readouterr().err
 
 
+
+def test_a_map_format_added_to_the_table_alone_is_written_and_read_everywhere(tmp_path, capsys, monkeypatch):
+    """A toy map format (a JSON file, ``.jmap``) registered in ``disk.FORMATS`` and nowhere else:
+    ``radarcl convert`` writes it (by the name) and reads it back into a store, ``Map.open`` and
+    ``radarcl export`` read it, and the built-in formats keep their files."""
+    from pathlib import Path
+
+    from radarcl.maps import disk
+
+    monkeypatch.setattr(disk, "FORMATS", dict(disk.FORMATS))
+
+    def recognises(path):
+        return Path(path).is_file() and Path(path).suffix == ".jmap"
+
+    def read_json(path, salvage):
+        j = json.loads(Path(path).read_text())
+        return (GridSpec(*j["spec"]), np.array(j["keys"], np.int32).reshape(-1, 3),
+                np.array(j["data"], np.int32).reshape(-1, 8, 8, 8), [], None)
+
+    def writer(path, spec, sensor_toml="", config=None, inputs=(), reading=None):
+        def save(keys, data, poses=None, channels=None, meta=None):
+            Path(path).write_text(json.dumps(dict(spec=[list(spec.origin_m), spec.voxel_m, list(spec.shape)],
+                                                  keys=np.asarray(keys).tolist(), data=np.asarray(data).tolist(),
+                                                  sensor=sensor_toml)))
+        return save
+
+    disk.register(disk.MapFormat("json", (".jmap",), recognises, read_json, lambda path: None,
+                                 lambda path, key: json.loads(Path(path).read_text()).get(key), Path, writer), first=True)
+    keys, data = random_map(3)
+    npz = tmp_path / "m.npz"
+    disk.npz.write(npz, SPEC, keys, data, meta=dict(sensor='name = "x"'))
+    assert main(["convert", str(npz), str(tmp_path / "m.jmap")]) == 0
+    assert f"wrote {tmp_path / 'm.jmap'}: {len(keys)} bricks" in capsys.readouterr().out
+    assert disk.format_of(tmp_path / "m.jmap") == "json" and disk.format_of(npz) == "npz"
+    assert same(SPEC, keys, data, *read(tmp_path / "m.jmap")[1:])
+    assert main(["convert", str(tmp_path / "m.jmap"), str(tmp_path / "back.rcmap")]) == 0
+    assert disk.format_of(tmp_path / "back.rcmap") == "store" and same(SPEC, keys, data, *read(tmp_path / "back.rcmap")[1:])
+    assert disk.read_meta(tmp_path / "back.rcmap", "sensor") == 'name = "x"'
+    assert Map.open(tmp_path / "m.jmap").counts() == Map.open(npz).counts()
+    assert main(["export", str(tmp_path / "m.jmap"), "--to", "vti", "--out", str(tmp_path / "m.vti")]) == 0
+    assert "vti:" in capsys.readouterr().out
+    with pytest.raises(ConfigError, match="registered already"):
+        disk.register(disk.FORMATS["json"])
+
 def test_point_queries_agree_with_the_dense_map(tmp_path):
     keys, data = random_map(3)
     m = Map(SPEC, keys, data)

@@ -210,6 +210,9 @@ def drive_picture(store, trajectory, png, n_frames):
 
 
 def _child(queue, kwargs):
+    from radarcl import self_test
+
+    self_test.register()                         # a spawned process: the device check its parent registered
     try:
         queue.put(("ok", run_drive(**kwargs)))
     except Exception as exc:                     # noqa: BLE001 - said by the parent

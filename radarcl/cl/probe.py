@@ -1,7 +1,7 @@
 """The child program that checks a device before radarcl uses it (``runtime.build_problem``):
 ``python -m radarcl.cl.probe P D [MODULE:FUNCTION ...]`` builds a small kernel on device P:D,
-then runs each named check (``runtime.DEVICE_CHECKS``, registered by the layers above: the
-pipeline's every kernel against the float64 oracle) and prints one line,
+then runs each named check (``runtime.DEVICE_CHECKS``, registered by the application:
+``radarcl.self_test``, every kernel against the float64 oracle) and prints one line,
 ``radarcl-probe: {"problem": null or why, "notes": [what it cannot run]}``.
 A compiler that aborts kills this process, not radarcl; the parent reads the signal."""
 

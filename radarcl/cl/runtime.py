@@ -120,17 +120,21 @@ DEVICE_CHECKS = []
 "module:function" names of checks taking a ``Runtime`` and returning None or the reason the
 device cannot be used, or a dict ``{"problem": None or why, "notes": [sentences]}`` where the
 device is usable but not for everything (a sensor it cannot fit: ``device_notes``). The runtime
-sits below what it checks, so the layers above register their checks (``register_device_check``:
-``radarcl.pipeline`` registers its ``self_test``, which builds every kernel of every built-in
+sits below what it checks, so the application registers the checks (``register_device_check``:
+``radarcl.self_test.register``, whose ``self_test`` builds every kernel of every built-in
 pipeline and compares a frame with the float64 oracle)."""
+_COVERS = {}                                  # check name -> modules whose sources its verdict rests on
 
 
-def register_device_check(function):
+def register_device_check(function, covers=()):
     """Have the child check devices with ``function`` (a module-level function taking a
-    ``Runtime``, returning None or a reason) before any is used; registering twice is once."""
+    ``Runtime``, returning None or a reason) before any is used; registering twice is once.
+    ``covers``: further modules (dotted names) whose sources the verdict rests on besides the
+    function's own (the pipeline it builds): a verdict is kept until one of them changes."""
     name = f"{function.__module__}:{function.__qualname__}"
     if name not in DEVICE_CHECKS:
         DEVICE_CHECKS.append(name)
+        _COVERS[name] = tuple(covers)
         _probed.clear()                         # verdicts without this check do not answer for it
 PROBE_TIMEOUT_S = 600
 VERDICTS = "devices.json"
@@ -192,7 +196,8 @@ def _identity(device):
     try:
         sources = [*sorted(kernels_dir().iterdir()), *sorted((package / "stages").glob("*.py")),
                    *sorted((package / "cl").glob("*.py"))]
-        sources += [package.parent / (name.partition(":")[0].replace(".", "/") + ".py") for name in DEVICE_CHECKS]
+        modules = [m for name in DEVICE_CHECKS for m in (name.partition(":")[0], *_COVERS.get(name, ()))]
+        sources += [package.parent / (m.replace(".", "/") + ".py") for m in modules]
         for p in sources:
             if p.is_file():
                 h.update(p.name.encode() + b"\0" + p.read_bytes())

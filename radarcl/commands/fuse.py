@@ -15,21 +15,33 @@ from radarcl.commands.options import (
     say_notes,
 )
 from radarcl.errors import ConfigError
-from radarcl.io import files
+from radarcl.io import files, inputs
 from radarcl.io.inputs import open_input
 from radarcl.maps import disk
 from radarcl.maps.rolling import WINDOW_RANGE_FACTOR
 
 SUMMARY = "fuse any sensor's frames into a map file (rewritten every --every frames for radarcl view --live)"
-DESCRIPTION = ("Reads INPUT as the sensor's reader says (a radarcl recording; a directory of polar PNG scans in "
-               "the sensor's layout, or a recording's directory holding them, with their poses from --poses or "
-               "found beside them: Oxford's radar_odometry.csv, RADIATE's GPS/IMU, Boreas' applanix poses; a TI "
-               "capture .npy/.txt), fuses every frame with the map configuration and writes the map file. Input "
-               "without poses is fused only with --still (every frame at the origin).")
+
+
+def description():
+    """The command's help text, with what each reader of ``io.inputs.READERS`` reads."""
+    return ("Reads INPUT as the sensor's reader says (" + "; ".join(r.describes for r in inputs.READERS.values())
+            + "), fuses every frame with the map configuration and writes the map file. Input without poses is "
+            "fused only with --still (every frame at the origin).")
+
+
+def input_help():
+    """INPUT's help: what the readers of ``io.inputs.READERS`` read, in a few words each."""
+    what = [r.what for r in inputs.READERS.values()]
+    return what[0] if len(what) == 1 else ", ".join(what[:-1]) + ", or " + what[-1]
+
+
+DESCRIPTION = description()
 
 
 def add_arguments(parser):
-    parser.add_argument("input", help="a recording (.npz), a directory of polar scans, or a TI capture")
+    parser.description = description()              # with the readers registered by now
+    parser.add_argument("input", help=input_help())
     add_output(parser, "--out", "map.rcmap", "map to write: a map store directory (zarr; saved fast, --every then "
                                              "writes only the changed bricks), or an .npz file")
     add_config(parser)

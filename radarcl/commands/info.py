@@ -13,10 +13,7 @@ def add_arguments(parser):
 
 def run(args):
     from radarcl.cl import choose_device, device_report
-    from radarcl.cl.runtime import register_device_check
-    from radarcl.pipeline import self_test
 
-    register_device_check(self_test)     # a device is usable when the pipeline's kernels run right on it
     print("\n".join(device_report()))
     choose_device()  # after the listing: no usable device, or a RADARCL_DEVICE that fits none, is an error
     return 0

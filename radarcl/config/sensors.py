@@ -40,14 +40,14 @@ from radarcl.config.keys import check_value
 from radarcl.config.stage_config import RadarConfig, is_power_of_two
 from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, beam_model
-from radarcl.io.polar_layout import FILE_NAME_UNITS, ORIENTATIONS, TIMESTAMP_AT, TIMESTAMPS, PolarLayout
+from radarcl.io import inputs
+from radarcl.io.polar_layout import FILE_NAME_UNITS, ORIENTATIONS, TIMESTAMP_AT, TIMESTAMPS
 from radarcl.io.stream import PROTOCOLS
 
 PROFILE_DIR = Path(__file__).resolve().parents[1] / "profiles"
 DEFAULT_SENSOR = "paper"
 INPUTS = ("samples", "profiles")
 SAMPLE_TYPES = {"int16": np.int16, "float32": np.float32, "complex64": np.complex64}
-READERS = ("recording", "polar-png", "ti-openradar")
 MAINLOBE_CELLS = 4.0       # Hann mainlobe, null to null, in resolution cells (Harris 1978)
 TRAIN_CELLS = 4.0          # training window per side, in resolution cells
 _NEEDS = {"samples": ("waveform", "beams", "range"), "profiles": ("beams", "range")}
@@ -83,7 +83,7 @@ _SCHEMA = {                # section -> key -> check (value -> value, or ConfigE
     "stream": {"protocol": lambda v: tomlfile.choice(v, PROTOCOLS),
                "range_profile_antennas": lambda v: tomlfile.integer(v, 1, 256),
                "range_profile_q": lambda v: tomlfile.integer(v, 0, 15)},
-    "reader": {"format": lambda v: tomlfile.choice(v, READERS),
+    "reader": {"format": lambda v: tomlfile.choice(v, tuple(inputs.READERS)),
                "orientation": lambda v: tomlfile.choice(v, ORIENTATIONS),
                "meta_columns": lambda v: tomlfile.integer(v, 0, 1 << 16),
                "timestamp_column": lambda v: tomlfile.integer(v, -1, 1 << 16),
@@ -244,9 +244,10 @@ class SensorProfile:
         lo, hi = self.range_interval_m
         if lo >= hi:
             raise ConfigError(f"{where}: need range_min_m < range_max_m, got {lo} and {hi}")
-        if self.get("reader", "format") == "polar-png":
+        reader = inputs.READERS.get(self.get("reader", "format"))
+        if reader is not None and reader.check_profile is not None:
             try:
-                PolarLayout.of(self)
+                reader.check_profile(self)
             except ConfigError as exc:
                 raise ConfigError(f"{where}: {exc}") from None
         if self.spinning and self.get("beams", "azimuth_step_deg") is not None:

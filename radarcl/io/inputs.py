@@ -1,8 +1,10 @@
 """What a sensor's reader opens, as frames with their poses: ``open_input(sensor, path)``.
 
-It opens whatever the sensor profile's reader reads (its [reader] ``format``): a radarcl
-recording (``recording``), a directory of polar PNG scans in any of the published layouts
-(``polar-png``, ``io.polar_layout``), a TI raw ADC capture (``ti-openradar``). It returns a
+It opens whatever the sensor profile's reader reads (its [reader] ``format``, one of
+``READERS``): a radarcl recording (``recording``), a directory of polar PNG scans in any of the
+published layouts (``polar-png``, ``io.polar_layout``), a TI raw ADC capture (``ti-openradar``).
+Each is a ``Reader`` of that table; sensor profiles (``config.sensors``) and ``radarcl fuse
+--help`` take the formats from it, so a new one is a ``register`` here and its test. It returns a
 ``FrameSource``: the sensor (with its bin count filled from the data where the profile leaves
 it out), the frames, one pose (or one per beam) and optional flags per frame, whether the
 poses came from somewhere (``posed``: a caller refuses to fuse a moving radar at the origin),
@@ -17,12 +19,14 @@ azimuth's time, and interpolated per azimuth (the radar moves during its turn).
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
-from radarcl.errors import FrameFormatError
+from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.io import polar_png, recording
 from radarcl.io import poses as pose_files
+from radarcl.io.polar_layout import PolarLayout
 from radarcl.io.ti_adc import load_capture
 from radarcl.io.trajectory import DEFAULT_MAX_SPEED_M_S
 from radarcl.oracle import FLAG_SILENT
@@ -50,21 +54,24 @@ class FrameSource:
 
 def open_input(sensor, path, odometry=None, poses=None, poses_format=None, clock_offset_s=None,
                max_speed_m_s=DEFAULT_MAX_SPEED_M_S, poses_times=None, report=None):
-    """A ``FrameSource`` for ``path`` read as ``sensor``'s [reader] format says. Polar scans:
-    their poses from ``poses`` (a file in ``poses_format``, see ``io.poses``; ``odometry`` is
-    the older name for an Oxford odometry file), else found beside them; ``clock_offset_s``:
-    how far the pose file's clock runs ahead of the radar's; a trajectory faster than
-    ``max_speed_m_s`` is refused with the jump named."""
+    """A ``FrameSource`` for ``path`` read as ``sensor``'s [reader] format says (a file whose
+    extension a reader claims, a recording's ``.npz``, is read by that reader whatever the
+    profile says). Polar scans: their poses from ``poses`` (a file in ``poses_format``, see
+    ``io.poses``; ``odometry`` is the older name for an Oxford odometry file), else found beside
+    them; ``clock_offset_s``: how far the pose file's clock runs ahead of the radar's; a
+    trajectory faster than ``max_speed_m_s`` is refused with the jump named."""
     fmt = sensor.get("reader", "format", "recording")
     path = Path(path)
     if not path.exists():
         raise FrameFormatError(f"{path} does not exist")
-    if fmt == "recording" or (path.is_file() and path.suffix == ".npz"):
-        return _recording(sensor, path)
-    if fmt == "ti-openradar":
-        return _ti_capture(sensor, path)
-    return _polar(sensor, path, poses or odometry, poses_format or ("oxford" if odometry and not poses else None),
-                  clock_offset_s, max_speed_m_s, poses_times, report)
+    if fmt not in READERS:
+        raise ConfigError(f"sensor {sensor.name} is read as {fmt!r}, which no reader reads; readers: "
+                          f"{', '.join(READERS)}")
+    reader = next((r for r in READERS.values() if path.is_file() and path.suffix in r.claims), READERS[fmt])
+    return reader.open(sensor, path, poses=poses or odometry,
+                       poses_format=poses_format or ("oxford" if odometry and not poses else None),
+                       clock_offset_s=clock_offset_s, max_speed_m_s=max_speed_m_s, poses_times=poses_times,
+                       report=report)
 
 
 def _check_frame(sensor, shape, dtype, what):
@@ -78,7 +85,8 @@ def _check_frame(sensor, shape, dtype, what):
                                f"expects {tuple(expected)} {sensor.sample_dtype}{hint}")
 
 
-def _recording(sensor, path):
+def _recording(sensor, path, **_):
+    """A radarcl recording (``io.recording``): frames of any sensor with their poses and flags."""
     rec = recording.load(path)
     if not sensor.raw and sensor.n_bins() is None:
         sensor = sensor.with_bins(rec.frames.shape[-1])
@@ -91,7 +99,8 @@ def _recording(sensor, path):
     return FrameSource(sensor, rec.frames, rec.poses, flags, f"{len(rec)} frames of {path}{note}")
 
 
-def _ti_capture(sensor, path):
+def _ti_capture(sensor, path, **_):
+    """A TI raw ADC capture (``io.ti_adc``): one chirp per frame, the sensor still at the origin."""
     iq = load_capture(path)
     n = sensor.radar.n_samples
     if iq.shape[-1] != n:
@@ -104,7 +113,10 @@ def _ti_capture(sensor, path):
                        f"{len(frames)} chirps of {path} (one per frame, the sensor still at the origin)", posed=False)
 
 
-def _polar(sensor, path, poses, poses_format, clock_offset_s, max_speed_m_s, poses_times, report):
+def _polar(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max_speed_m_s=DEFAULT_MAX_SPEED_M_S,
+           poses_times=None, report=None):
+    """Polar PNG scans (``io.polar_png``) in the sensor's layout, placed by the trajectory given
+    or found beside them (see the module docstring)."""
     layout = polar_png.PolarLayout.of(sensor)
     sequence = polar_png.read_sequence(path, layout, odometry=False)
     scans = sequence.scans
@@ -153,3 +165,40 @@ class _LazyPower:
 
     def __getitem__(self, i):
         return self.scans[i].power()
+
+
+@dataclass(frozen=True)
+class Reader:
+    """One [reader] format of a sensor profile.
+
+    name: the profile's ``[reader] format``; what: what it reads, in a few words (``radarcl fuse``'s
+    INPUT); describes: the same at length (its help); open(sensor, path, poses=, poses_format=,
+    clock_offset_s=, max_speed_m_s=, poses_times=, report=): the ``FrameSource`` (a reader takes
+    the trajectory options it uses and ignores the others); claims: extensions of files it reads
+    whatever the profile's format; check_profile(sensor): raises ``ConfigError`` where the
+    profile's [reader] table does not describe files it can read (run when a profile is loaded),
+    or None."""
+
+    name: str
+    what: str
+    describes: str
+    open: Callable
+    claims: tuple = ()
+    check_profile: Callable = None
+
+
+def register(reader):
+    """Add ``reader`` (a ``Reader``) to ``READERS``: sensor profiles may name it from then on."""
+    if reader.name in READERS:
+        raise ConfigError(f"input format {reader.name!r} is registered already")
+    READERS[reader.name] = reader
+    return reader
+
+
+READERS = {}
+register(Reader("recording", "a recording (.npz)", "a radarcl recording", _recording, claims=(".npz",)))
+register(Reader("polar-png", "a directory of polar scans",
+                "a directory of polar PNG scans in the sensor's layout, or a recording's directory holding them, with "
+                "their poses from --poses or found beside them: Oxford's radar_odometry.csv, RADIATE's GPS/IMU, "
+                "Boreas' applanix poses", _polar, check_profile=PolarLayout.of))
+register(Reader("ti-openradar", "a TI capture", "a TI capture .npy/.txt", _ti_capture))

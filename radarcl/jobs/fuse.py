@@ -13,6 +13,7 @@ sensor returns, so a drive of any length maps in bounded memory; the grid then s
 whole trajectory plus the sensor's range (unless [grid] origin and size were given).
 """
 
+import contextlib
 import math
 import time
 from pathlib import Path
@@ -61,6 +62,28 @@ from radarcl.report import figures, html
 from radarcl.report.summary import map_summary
 
 
+class Tally:
+    """What a fuse run counts beside the map: ``save_s``, the seconds spent saving (timed apart
+    from fusion), and ``device_bytes``, the most device memory ``grid`` held when asked (a
+    rolling map's high-water mark)."""
+
+    def __init__(self, grid):
+        self.grid = grid
+        self.save_s = 0.0
+        self.device_bytes = 0
+
+    @contextlib.contextmanager
+    def saving(self):
+        """Count the time the block takes as saving."""
+        t0 = time.perf_counter()
+        yield
+        self.save_s += time.perf_counter() - t0
+
+    def device_memory(self):
+        """Note the device memory the grid holds now."""
+        self.device_bytes = max(self.device_bytes, self.grid.memory()["device_bytes"])
+
+
 def run(runtime, source, config, out, every=None, progress=None, report=print, inputs=(), page=None, window_m=None,
         window_default=False, overwrite=False):
     """Fuse every frame of ``source`` (an ``io.inputs.FrameSource``) with ``config`` (a
@@ -100,18 +123,16 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
               + ", the others go to the store as they leave" if rolling else ""))
     start = time.perf_counter()
     n = len(source)
-    saving = [0.0]
-    device_max = [0]
+    tally = Tally(mapping.grid)
 
     def save(poses):
         mapping.runtime.queue.finish()                  # the device's work counts as fusion, not saving
-        t0 = time.perf_counter()
-        saver(mapping.grid, poses)
-        saving[0] += time.perf_counter() - t0
+        with tally.saving():
+            saver(mapping.grid, poses)
 
     def before_frame(j, position):
         rolling.update(position)
-        device_max[0] = max(device_max[0], mapping.grid.memory()["device_bytes"])
+        tally.device_memory()
 
     def after_frame(j, trajectory):
         if every and (j + 1) % every == 0 and j + 1 < n:
@@ -131,12 +152,11 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
         except ConfigError as exc:               # the store failed mid-drive: it holds the map up to there
             backing.close()
             raise ConfigError(f"the drive stopped: {exc}") from None
-        device_max[0] = max(device_max[0], mapping.grid.memory()["device_bytes"])
-        t0 = time.perf_counter()
-        bricks = rolling.finish(dict(poses=np.asarray(trajectory).reshape(-1, 16).tolist()))
-        saving[0] += time.perf_counter() - t0
+        tally.device_memory()
+        with tally.saving():
+            bricks = rolling.finish(dict(poses=np.asarray(trajectory).reshape(-1, 16).tolist()))
         mib = bricks * spec.brick_bytes / 2 ** 20
-    save_s = saving[0]
+    save_s = tally.save_s
     ms = ((time.perf_counter() - start) - save_s) * 1e3 / n
     report(f"wrote {out}: {bricks} bricks ({mib:.0f} MiB); fusion {ms:.0f} ms per "
            f"frame, saving {save_s:.2f} s" + (f" ({-(-n // every)} saves, one every {every} frames)" if every else "")
@@ -145,7 +165,7 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
                   memory_mib=mib, every=every, device=runtime.name)
     if rolling is not None:
         st = backing.stats
-        result.update(window_m=rolling.window_m, device_mib_max=device_max[0] / 2 ** 20, evicted=rolling.evicted,
+        result.update(window_m=rolling.window_m, device_mib_max=tally.device_bytes / 2 ** 20, evicted=rolling.evicted,
                       restored=st["restored"], restored_from_disk=st["restored_from_disk"], segments=st["segments"])
         report(f"rolling map: the device held at most {result['device_mib_max']:.0f} MiB; {rolling.evicted} bricks "
                f"left the window, {st['restored']} came back ({st['restored_from_disk']} read from the store)")

@@ -40,6 +40,7 @@ def fuse_one(config_values, sensor_toml, path, spec_tuple, partial):
         os.environ["POCL_AFFINITY"] = "0"       # one thread per worker: pinned, all would share CPU 0
     from pathlib import Path
 
+    from radarcl import self_test
     from radarcl.cl import Runtime
     from radarcl.config import mapconfig
     from radarcl.grid import EvidenceGrid
@@ -51,6 +52,7 @@ def fuse_one(config_values, sensor_toml, path, spec_tuple, partial):
         profile = Path(tmp) / "sensor.toml"
         profile.write_text(sensor_toml)
         config = mapconfig.resolve(str(profile), program=config_values)
+    self_test.register()                        # as the parent checked the device: its cached verdict answers
     runtime = Runtime()
     source = open_input(config.sensor, path)
     config = config.for_sensor(source.sensor) if source.sensor is not config.sensor else config

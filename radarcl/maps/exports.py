@@ -1,26 +1,26 @@
 """Maps out of the engine, in the formats the field's tools read (``radarcl export``).
 
-| format | file | read back by | holds |
-|---|---|---|---|
-| ``octomap`` | ``.bt`` / ``.ot`` | OctoMap (``octomap.OcTree``, octovis) | the occupied and the free voxels on OctoMap's lattice: ``.bt`` their class, ``.ot`` their log-odds (clamped to +-CLAMP_NATS) |
-| ``ply`` | ``.ply`` | plyfile, MeshLab, CloudCompare, Open3D | the occupied voxels: x, y, z [m], red, green, blue (by log-odds or height), log_odds [nat], probability |
-| ``mesh`` | ``.ply`` | plyfile, MeshLab, Open3D | the isosurface at the occupancy threshold (marching cubes, PyMCubes), vertices in metres |
-| ``vti`` | ``.vti`` | VTK, ParaView, pyvista | the dense log-odds [nat] and an ``observed`` mask as zlib-compressed VTK image data |
-| ``costmap`` | ``.pgm`` + ``.yaml`` | ROS map_server / Nav2 | the projection over ``band``: occupied, free, unknown (``maps.ros``) |
-| ``rosbag`` | a ROS 2 bag directory | rosbags, ros2 bag | ``/map`` OccupancyGrid (latched) and ``/map/points`` PointCloud2 (``maps.ros``) |
+The formats are one table, ``FORMATS``: each an ``Export`` naming its ``--to`` name, the
+extensions of the file it writes, what it holds (``radarcl export --help`` says it) and the
+function that writes it. The command, its help and the README's table of formats read this
+table (tests/test_exports.py checks the README against it); a new format is one ``Export``
+here (``register``) and its test.
 
 Every export says what the map says: occupied above the occupancy threshold, free below the
 free threshold, unknown otherwise (``maps.map``), the same thresholds in every format. Every
-exporter takes a ``maps.Map`` and returns a dict with the files it wrote and its counts by
-class; an empty map gives valid empty files. Coordinates are the map's world frame (x forward,
-y left, z up, REP-103).
+exporter takes a ``maps.Map`` and the file to write, and of ``OPTIONS`` only those it names;
+it returns a dict with the files it wrote and its counts by class; an empty map gives valid
+empty files. Coordinates are the map's world frame (x forward, y left, z up, REP-103).
 """
 
 import base64
 import importlib
+import inspect
 import logging
 import zlib
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -33,8 +33,6 @@ from radarcl.maps.map import FREE, FREE_NATS, KNOWN_LOOKS, OCCUPIED, OCCUPIED_NA
 log = logging.getLogger(__name__)
 CLAMP_NATS = 13.8            # OctoMap keeps log-odds within its clamping thresholds: p in [1e-6, 1 - 1e-6]
 LATTICE_TOLERANCE = 1e-6     # of a voxel: an origin closer than this to OctoMap's lattice lies on it
-SUFFIXES = {"octomap": (".bt", ".ot"), "ply": (".ply",), "mesh": (".ply",), "vti": (".vti",), "costmap": (".pgm",),
-            "rosbag": ("",)}
 COLOURS = ("log-odds", "height")
 
 
@@ -46,16 +44,16 @@ def _need(module, extra="export"):
 
 
 def check_suffix(fmt, path):
-    """ConfigError when ``path``'s extension names another format than ``fmt`` (``SUFFIXES``)."""
-    if fmt not in SUFFIXES:
-        raise ConfigError(f"unknown export format {fmt!r}; formats: {', '.join(SUFFIXES)}")
+    """ConfigError when ``path``'s extension names another format than ``fmt`` (its ``Export.suffixes``)."""
+    if fmt not in FORMATS:
+        raise ConfigError(f"unknown export format {fmt!r}; formats: {', '.join(FORMATS)}")
     suffix = Path(path).suffix.lower()
-    allowed = SUFFIXES[fmt]
+    allowed = FORMATS[fmt].suffixes
     if suffix in allowed:
         return
     if allowed == ("",):
         raise ConfigError(f"--to {fmt} writes a directory; give --out a name without an extension, not {path}")
-    owner = next((f for f, s in SUFFIXES.items() if suffix and suffix in s), None)
+    owner = next((f.name for f in FORMATS.values() if suffix and suffix in f.suffixes), None)
     named = f" (a {owner} file)" if owner else ""
     raise ConfigError(f"--to {fmt} writes {' or '.join(allowed)} files; {path} names a {suffix or 'file without an'} "
                       f"extension{named}: give --out {Path(path).with_suffix(allowed[0])}")
@@ -250,6 +248,16 @@ def is_bag(path):
     return (Path(path) / "metadata.yaml").is_file()
 
 
+BAG_FILES = (".db3", ".mcap", ".db3-shm", ".db3-wal", ".db3-journal")
+
+
+def only_a_bag(path):
+    """A directory --force may replace with a bag: a ROS 2 bag (``is_bag``) holding nothing but
+    a bag's files; notes or data of anyone else's beside them keep it."""
+    return is_bag(path) and all(p.is_file() and (p.name == "metadata.yaml" or p.name.endswith(BAG_FILES))
+                                for p in Path(path).iterdir())
+
+
 def costmap(m, path, band=None, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
     """``maps.ros.costmap``, with a warning when no cell of the band is known."""
     out = ros.costmap(m, path, band, occupied_nats, free_nats)
@@ -264,4 +272,74 @@ def rosbag(m, path, band=None, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS,
     return ros.rosbag(m, path, band, occupied_nats, free_nats, frame_id, stamp_ns)
 
 
-FORMATS = {"octomap": octomap, "ply": ply_points, "mesh": ply_mesh, "vti": vti, "costmap": costmap, "rosbag": rosbag}
+# -- the formats ---------------------------------------------------------------------------------------
+OPTIONS = {                       # what ``radarcl export`` hands an exporter that names it
+    "occupied_nats": "--occupied-threshold [nat]",
+    "free_nats": "--free-threshold [nat]",
+    "band": "--band (z_min, z_max) [m], or None for the whole grid",
+    "resample": "--resample",
+    "colour": "--colour, one of COLOURS",
+    "frame_id": "--frame-id",
+    "stamp_ns": "when the map was saved [ns since the epoch]",
+}
+
+
+@dataclass(frozen=True)
+class Export:
+    """One format of ``radarcl export --to NAME``.
+
+    name: the ``--to`` name; suffixes: the extensions ``--out`` may have (``("",)``: it writes a
+    directory, named without one); describes: what it writes, for ``--help``; write: the
+    exporter, ``write(map, path, **options)`` for the ``OPTIONS`` its signature names, returning
+    {"files": [...], counts by class}; companions: (suffix, what) of further files it writes
+    beside ``--out`` (checked as ``--out`` is); directory: (what, is_ours) for a format that
+    writes a directory, which ``--force`` may replace only where ``is_ours(path)``."""
+
+    name: str
+    suffixes: tuple
+    describes: str
+    write: Callable
+    companions: tuple = ()
+    directory: tuple = None
+
+    @property
+    def options(self):
+        """The ``OPTIONS`` the exporter takes, in its signature's order."""
+        return tuple(p for p in inspect.signature(self.write).parameters if p in OPTIONS)
+
+    @property
+    def thresholds(self):
+        """The thresholds its classes follow: ("occupied", "free"), ("occupied",) or () (it writes values)."""
+        return tuple(t for t in ("occupied", "free") if f"{t}_nats" in self.options)
+
+
+def register(export):
+    """Add ``export`` (an ``Export``) to ``FORMATS``: ``radarcl export --to`` and its help take it
+    from there. Its name must be new, its suffixes lower-case extensions (or ``("",)``), and its
+    exporter may take, besides the map and the path, only ``OPTIONS`` (all with defaults but
+    those)."""
+    if export.name in FORMATS:
+        raise ConfigError(f"export format {export.name!r} is registered already")
+    if not export.suffixes or not all(s == s.lower() and (s.startswith(".") or export.suffixes == ("",))
+                                      for s in export.suffixes):
+        raise ConfigError(f"export format {export.name!r}: suffixes must be extensions like '.ply' (or ('',) for "
+                          f"a directory), got {export.suffixes!r}")
+    params = list(inspect.signature(export.write).parameters.values())[2:]
+    unknown = [p.name for p in params if p.name not in OPTIONS and p.default is inspect.Parameter.empty]
+    if unknown:
+        raise ConfigError(f"export format {export.name!r}: its exporter takes {', '.join(unknown)}, which radarcl "
+                          f"export does not give; it gives {', '.join(OPTIONS)}")
+    FORMATS[export.name] = export
+    return export
+
+
+FORMATS = {}
+register(Export("octomap", (".bt", ".ot"), ".bt (occupied/free) or .ot (their log-odds) on OctoMap's lattice, read "
+                                           "by OctoMap and octovis", octomap))
+register(Export("ply", (".ply",), "the occupied voxels with colours, log_odds and probability", ply_points))
+register(Export("mesh", (".ply",), "the isosurface at the occupied threshold as a PLY mesh", ply_mesh))
+register(Export("vti", (".vti",), "the dense log-odds and an observed mask as VTK image data for ParaView", vti))
+register(Export("costmap", (".pgm",), "a ROS map_server PGM + YAML projected over --band (occupied, free, unknown)",
+                costmap, companions=((".yaml", "costmap YAML"),)))
+register(Export("rosbag", ("",), "a ROS 2 bag with the same grid on /map (latched) and the occupied voxels on "
+                                 "/map/points", rosbag, directory=("ROS 2 bag", only_a_bag)))
