@@ -91,9 +91,43 @@ def run(config, data_dir, scans="all", lidar=False, runtime=None, report=None):
         values, chosen_origins, out["maps"] = choose_by_lidar(runtime, fitted, data_dir, chosen, result, source, say)
         fitted = fitted.replaced(**{k.replace(".", "__"): v for k, v in values.items()})
         origins = {**fitted.origins, **fit_origins, **chosen_origins}
-    for key in ("block_gamma_db", "blocker_gap") + (() if lidar else ("look_limit",)):
+    else:
+        # a value the scans do not bound stays the configuration's; the map's sensitivity and look limit
+        # need a truth to choose (held-out detections reward a map that calls nothing occupied: README)
+        kept = {k: config[f"sensor_model.{k}"] for k in result.at_edge}
+        fitted = fitted.replaced(**{f"sensor_model__{k}": v for k, v in kept.items()})
+        origins = {**fitted.origins, **fit_origins}
+        for k in kept:
+            origins[f"sensor_model.{k}"] = f"{config.origins[f'sensor_model.{k}']} (kept: {fit_origins[f'sensor_model.{k}']})"
+        origins["sensor_model.look_limit"] = config.origins["sensor_model.look_limit"]
+    for key in ("block_gamma_db", "blocker_gap"):
         origins[f"sensor_model.{key}"] += "; not fitted (what lies behind a first surface has no truth here)"
     return dataclasses.replace(fitted, origins=origins), out
+
+
+def candidates_of(config, result):
+    """{label: (values, configuration)} of the maps the choice compares: ``SENSITIVITY_GRID_DB`` x
+    ``LOOK_LIMITS`` x (noise alone, the fitted background of ``result``)."""
+    fitted = dict(zip(sensor_fit.FITTED, result.values))
+    clutter = {f"sensor_model.{k}": fitted[k] for k in ("clutter_share", "clutter_db", "clutter_spread_db",
+                                                         "noise_scale")}
+    none = {"sensor_model.clutter_share": 0.0, "sensor_model.noise_scale": 1.0}
+    out = {}
+    for sensitivity in SENSITIVITY_GRID_DB:
+        for limit in LOOK_LIMITS:
+            for name, extra in (("no clutter", none), ("the fitted background", clutter)):
+                values = {"sensor_model.snr_1m2_at_10m_db": float(sensitivity), "sensor_model.look_limit": limit,
+                          **extra}
+                label = f"{sensitivity:g} dB, look limit {limit:g}, {name}"
+                out[label] = (values, config.replaced(**{k.replace(".", "__"): v for k, v in values.items()}))
+    return out
+
+
+def _noise_only_origins(values, why, result):
+    if values["sensor_model.clutter_share"] != 0.0:
+        return {}
+    return {"sensor_model.clutter_share": f"{why}: no clutter (the fitted law's share: {result.values[0]:.3g})",
+            "sensor_model.noise_scale": f"{why}: noise alone sets the floor"}
 
 
 def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
@@ -109,18 +143,7 @@ def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
     from radarcl.evaluation.metrics import roc_auc
     from radarcl.jobs.evaluate_lidar import run as evaluate
 
-    fitted = dict(zip(sensor_fit.FITTED, result.values))
-    clutter = {f"sensor_model.{k}": fitted[k] for k in ("clutter_share", "clutter_db", "clutter_spread_db",
-                                                         "noise_scale")}
-    none = {"sensor_model.clutter_share": 0.0, "sensor_model.noise_scale": 1.0}
-    candidates = {}
-    for sensitivity in SENSITIVITY_GRID_DB:
-        for limit in LOOK_LIMITS:
-            for name, extra in (("no clutter", none), ("the fitted background", clutter)):
-                values = {"sensor_model.snr_1m2_at_10m_db": float(sensitivity), "sensor_model.look_limit": limit,
-                          **extra}
-                label = f"{sensitivity:g} dB, look limit {limit:g}, {name}"
-                candidates[label] = (values, config.replaced(**{k.replace(".", "__"): v for k, v in values.items()}))
+    candidates = candidates_of(config, result)
     say(f"choosing with the lidar: {len(candidates)} maps of scans {_span(chosen)} ...")
     _, arrays = evaluate(runtime, [(label, c) for label, (_, c) in candidates.items()], data_dir,
                          voxel_m=config["grid.voxel_m"], scan_slice=(chosen[0], chosen[-1] + 1),
@@ -150,10 +173,8 @@ def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
     why = (f"{source}: of {len(rows)} maps the best ranking of the lidar's occupied cells above its free ones (ROC "
            f"area {best['auc']:.3f}, the mean over the bands to {CHOICE_RANGE_M:g} m) among those calling at most "
            f"{PHANTOM_LIMIT:g} of the free ones occupied in every band")
-    chosen_origins = {"sensor_model.snr_1m2_at_10m_db": why, "sensor_model.look_limit": why}
-    if values["sensor_model.clutter_share"] == 0.0:
-        chosen_origins["sensor_model.clutter_share"] = f"{why}: no clutter (the fitted law's share: {result.values[0]:.3g})"
-        chosen_origins["sensor_model.noise_scale"] = f"{why}: noise alone sets the floor"
+    chosen_origins = {"sensor_model.snr_1m2_at_10m_db": why, "sensor_model.look_limit": why,
+                      **_noise_only_origins(values, why, result)}
     return values, chosen_origins, dict(chosen=best["candidate"], cells=int(truth.known.sum()), candidates=rows,
                                         phantom_limit=PHANTOM_LIMIT, range_m=CHOICE_RANGE_M)
 
@@ -206,8 +227,13 @@ def format_lines(out):
     lines.append(f"  log-likelihood per power {out['log_likelihood']:.4f} nat (noise alone, no clutter: "
                  f"{out['noise_only_log_likelihood']:.4f}); share of bins holding a typical target by range: "
                  + ", ".join(f"{r:.0f} m {s:.2f}" for r, s in zip(out["band_ranges_m"], out["target_shares"])))
-    if "maps" in out:
-        m = out["maps"]
+    m = out.get("maps")
+    if not m:
+        lines.append("written: the fitted background, and the sensitivity where the scans bound it; the look limit "
+                     "and what they do not bound stay the configuration's. Without a lidar nothing here tells a "
+                     "map that finds obstacles from one that does not: with RADIATE's lidar the fitted background "
+                     "ranked worse than noise alone (README). Check with evaluate-lidar, or fit with --lidar.")
+    else:
         rows = sorted(m["candidates"], key=lambda r: (r["phantom"] > m["phantom_limit"], -r["auc"]))
         lines.append(f"the map's sensitivity, look limit and background with the lidar's {m['cells']:,} cells: the "
                      f"best ranking of its occupied cells above its free ones (ROC area, the mean over the bands to "
