@@ -468,6 +468,6 @@ def _detstats_graded(r, m, first, last, model):
     # a look says no more than a detection would at its opportunity, either way, and nothing without an
     # opportunity: the reading's look limit counts only looks that could see, and evidence it does
     # not count would grow with every frame
-    e = bounded(e, known, model.opportunity[window], model.snr_table.q)
+    e = bounded(e, known, model.opportunity[window], model.snr_table.q, model.bounded)
     evidence[window] = np.where(opportunity[window] != 0, logodds.to_fixed(e), 0)
     return evidence, opportunity

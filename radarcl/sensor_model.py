@@ -163,6 +163,7 @@ RANGES = {   # key: (lo, hi, unit, what it is)
                                    "ln 2; 1: noise alone sets the median)"),
 }
 EVIDENCE_KINDS = ("snr", "detection")             # sensor_model.evidence: the measured SNR, or the CFAR's outcome
+EVIDENCE_BOUNDS = ("detection", "none")           # sensor_model.evidence_bound: a look says no more than a detection
 GROUND_RANGE = (0.0, 1000.0, "m")                 # ground_below_m: the sensor's height above the ground plane (0: none)
 DEFAULT_SNR_DB = 50.0                             # the sensitivity assumed for a profile that gives none
 BLOCKER_GAP = 0.01                                # sensor_model.blocker_gap's default (ModelParams)
@@ -212,6 +213,10 @@ class ModelParams:
     noise_scale: float = 1.0
     ground_below_m: float = 0.0
     evidence: str = "snr"
+    # a look says no more than a detection would at its opportunity (snr_evidence.bounded): a real
+    # radar's strong echo where no typical target could be is a sidelobe, multipath or clutter as
+    # often as a target; "none" for a world without them (the simulator's profiles: README)
+    evidence_bound: str = "detection"
 
     def __post_init__(self):
         for name, (lo, hi, unit, _) in RANGES.items():
@@ -219,6 +224,9 @@ class ModelParams:
         check_range("sensor_model.ground_below_m", self.ground_below_m, *GROUND_RANGE)
         if self.evidence not in EVIDENCE_KINDS:
             raise ConfigError(f"sensor_model.evidence = {self.evidence!r}: expected one of {', '.join(EVIDENCE_KINDS)}")
+        if self.evidence_bound not in EVIDENCE_BOUNDS:
+            raise ConfigError(f"sensor_model.evidence_bound = {self.evidence_bound!r}: expected one of "
+                              f"{', '.join(EVIDENCE_BOUNDS)}")
 
     @classmethod
     def of(cls, values):
@@ -386,8 +394,9 @@ class BinModel:
     when delta is close to 1); ``pfa`` the achieved false-alarm rate. "snr" evidence also needs
     ``ln_snr`` (n_bins, CLASSES, NODES), ln of the typical target's median SNR per bin, class and
     node at tau = 1 (-inf: no such target, e.g. terrain without a ground plane), its ``snr_table``
-    and the CFAR's ``noise_floor``, and ``blocker_gap`` (``ModelParams``); without a table the
-    evidence is the CFAR's outcome (whose blocking is hard: no gap)."""
+    and the CFAR's ``noise_floor``, ``blocker_gap`` and whether each look is ``bounded`` by what a
+    detection says (``ModelParams``); without a table the evidence is the CFAR's outcome (whose
+    blocking is hard: no gap)."""
 
     opportunity: np.ndarray
     miss: np.ndarray
@@ -397,6 +406,7 @@ class BinModel:
     snr_table: SnrTable = None
     noise_floor: float = 1e-30
     blocker_gap: float = 0.0
+    bounded: bool = True
 
     @property
     def graded(self):
@@ -441,7 +451,7 @@ class BinModel:
             return cls(opportunity, 1.0 - opportunity, blocking, pfa)
         return cls(opportunity, 1.0 - opportunity, blocking, pfa, ln_snr,
                    SnrTable.build(params.target_spread_db, min(pfa, 0.5), params.clutter), float(cfar.noise_floor),
-                   params.blocker_gap)
+                   params.blocker_gap, params.evidence_bound == "detection")
 
 
 # -- the reading: correlated evidence and the prior ---------------------------------------------------------------------

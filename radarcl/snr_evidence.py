@@ -183,20 +183,26 @@ def gap_mixture(e_blocked, e_open, q, gap):
     return np.log(lm / (1.0 - q + q * lm)), gap * l0 / lm
 
 
-def detection_cap(opportunity, q):
+NO_CAP = 1e30                    # ``detection_cap`` of a model whose looks are not bounded (finite: 0 x it is 0)
+
+
+def detection_cap(opportunity, q, bounded=True):
     """ln(1 + delta (1 - q) / q) [nat] of an opportunity delta (array): what a detection says of a
-    voxel that a look sees with the chance delta, q the chance it detects anyway (``bounded``)."""
-    return np.log1p(np.asarray(opportunity, np.float64) * ((1.0 - q) / q))
+    voxel that a look sees with the chance delta, q the chance it detects anyway (``bounded``);
+    ``NO_CAP`` everywhere when the looks are not ``bounded``."""
+    d = np.asarray(opportunity, np.float64)
+    return np.log1p(d * ((1.0 - q) / q)) if bounded else np.full(d.shape, NO_CAP)
 
 
-def bounded(e, known, opportunity, q):
+def bounded(e, known, opportunity, q, bound=True):
     """A look's evidence ``e`` [nat] within +-``known`` x ``detection_cap`` of its ``opportunity``:
     the measured power says no more than a CFAR detection would at the look's opportunity, either
     way, scaled by the share of the beam left to see the voxel (``known``: tau, or the gap's
     posterior; by the cap's concavity at most the cap of the blocked opportunity known x delta). A
     look that could hardly have seen the voxel so says little of it, however strong or weak the
-    bin; one that sees it says at most ln(1 / q), as a detection does."""
-    most = np.asarray(known, np.float64) * detection_cap(opportunity, q)
+    bin; one that sees it says at most ln(1 / q), as a detection does. ``bound`` False: ``e``
+    unchanged (``sensor_model.evidence_bound = "none"``)."""
+    most = np.asarray(known, np.float64) * detection_cap(opportunity, q, bound)
     return np.clip(e, -most, most)
 
 

@@ -1,5 +1,6 @@
 """kernels/interpret.cl <-> radarcl/stages/interpret.py against radarcl.oracle.interpret (eq. 12)."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -354,6 +355,13 @@ def test_a_look_that_could_hardly_see_says_at_most_what_a_detection_would_either
     assert model.snr_table(math.log(1e-3), math.log(1e4)) < -5.0                        # the table's free evidence
     assert abs(e[1, at, 0, 0] - math.log(q) * logodds.SCALE) <= EVIDENCE_UNITS_TOL
     assert np.all(np.abs(e[1, at, 0, 1:] + most) <= EVIDENCE_UNITS_TOL)
+    # sensor_model.evidence_bound = "none": the table's evidence as it is, in the kernel as in the oracle
+    free = dataclasses.replace(model, bounded=False)
+    ge = sm.unpack_nodes(Interpreter(runtime, (2,), 256, SPACING, cfg, bin_model=free)(x, np.ones_like(x), mask).evidence)[0]
+    e = oracle.interpret_detstats(x, np.ones_like(x), mask, cfg, SPACING, free)[0]
+    assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL
+    table = model.snr_table(np.log(x[:, at])[:, None], np.full((2, 5), math.log(1e4))) * logodds.SCALE
+    assert np.all(np.abs(e[:, at, 0] - np.rint(table)) <= EVIDENCE_UNITS_TOL)
 
 
 def test_detstats_needs_its_model(runtime):

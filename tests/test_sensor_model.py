@@ -277,6 +277,8 @@ def test_clutter_explains_an_echo_a_weak_target_could_not_give():
     assert np.quantile(err, 0.99) <= SNR_TABLE_P99_NATS and err.max() <= SNR_TABLE_MAX_NATS
     with pytest.raises(ConfigError, match=r"sensor_model.clutter_share = 1 is outside its physical range"):
         sm.ModelParams(clutter_share=1)
+    with pytest.raises(ConfigError, match="sensor_model.evidence_bound = 'soft': expected one of detection, none"):
+        sm.ModelParams(evidence_bound="soft")
 
 
 def snr_beams(profiles, noise_floor_power=1.0):

@@ -60,6 +60,9 @@ KEYS = {
     "sensor_model.evidence": Key(lambda v: tomlfile.choice(v, sensor_model.EVIDENCE_KINDS), "",
                                  "detstats: snr, the likelihood ratio of the measured power over the beam's noise "
                                  "floor; detection, the CFAR's outcome alone"),
+    "sensor_model.evidence_bound": Key(lambda v: tomlfile.choice(v, sensor_model.EVIDENCE_BOUNDS), "",
+                                       "detstats: detection, a look says no more than a CFAR detection would at its "
+                                       "opportunity, either way; none, the measured power's likelihood ratio as it is"),
     "sensor_model.ground_below_m": Key(lambda v: _N(v, *sensor_model.GROUND_RANGE[:2], unit="m"), "m",
                                        "detstats: the sensor's height above the ground plane (0: no terrain class)"),
     "beam.model": Key(lambda v: tomlfile.choice(v, BEAM_MODELS), "", "beam volume (§3.4, Fig. 7c)"),

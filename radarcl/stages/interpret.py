@@ -112,7 +112,7 @@ class Interpreter(Stage):
         if m.graded:                     # the table replaces the misses and the exact unblocked nodes
             tables.update(ln_snr=cla.to_device(q, m.ln_snr.astype(np.float32)),
                           snr_table=cla.to_device(q, m.snr_table.values.astype(np.float32)),
-                          snr_cap=cla.to_device(q, detection_cap(m.opportunity, m.snr_table.q).astype(np.float32)),
+                          snr_cap=cla.to_device(q, detection_cap(m.opportunity, m.snr_table.q, m.bounded).astype(np.float32)),
                           noise_floor=float(m.noise_floor), blocker_gap=float(m.blocker_gap),
                           snr_q=float(m.snr_table.q))
             return tables
