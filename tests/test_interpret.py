@@ -325,7 +325,7 @@ def test_a_gap_in_a_blocker_lets_the_echo_behind_it_count(runtime):
 def test_a_look_that_could_hardly_see_says_at_most_what_a_detection_would_either_way(runtime):
     """A look says of an occupied voxel no more than a CFAR detection would at its opportunity
     delta, ln(1 + delta (1 - q) / q) (snr_evidence.bounded): a 40 dB echo where the typical
-    target's opportunity is 0.02 gives that (about 0.85 nat), not the ln(1 / q) of the table it
+    target's opportunity is 0.02 gives that (about 0.89 nat), not the ln(1 / q) of the table it
     gives where the look sees the voxel; a bin far under the noise no more either way (and where the
     look sees, no more than -ln(1 / q) though the table says more). Kernel and oracle alike."""
     from radarcl import sensor_model as sm
