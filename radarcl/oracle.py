@@ -406,9 +406,10 @@ def interpret_detstats(profiles, noise, mask, config, bin_spacing_m, model, flag
         while j <= last:
             if not mb[j]:
                 tau = math.exp(-blocked)
-                with np.errstate(divide="ignore"):
-                    evidence[b, j] = logodds.to_fixed(np.log((1.0 - tau) + tau * model.miss[j]))
                 opportunity[b, j] = np.rint(tau * model.opportunity[j] * logodds.KNOWLEDGE_SCALE)
+                with np.errstate(divide="ignore"):
+                    evidence[b, j] = np.where(opportunity[b, j] != 0,
+                                              logodds.to_fixed(np.log((1.0 - tau) + tau * model.miss[j])), 0)
                 j += 1
                 continue
             start = j

@@ -215,7 +215,7 @@ class ModelParams:
     evidence: str = "snr"
     # a look says no more than a detection would at its opportunity (snr_evidence.bounded): a real
     # radar's strong echo where no typical target could be is a sidelobe, multipath or clutter as
-    # often as a target; "none" for a world without them (the simulator's profiles: README)
+    # often as a target; "none" scores a world without them (README: the generated scenes with both)
     evidence_bound: str = "detection"
 
     def __post_init__(self):

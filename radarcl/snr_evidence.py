@@ -16,9 +16,10 @@ floor, ``Clutter.spread_db``):
     e = ln(L / (1 - q + q L)),           L = p1 / p0
 
 pT: a Swerling-1 target of median SNR s (exponential power of mean v + s) with a log-normal RCS
-prior; where clutter is, it masks the target. A weak target (s -> 0) makes p1 -> p0
-and e -> 0 whatever the power: a bin holding far more than the target could give is explained by
-the background, not by v. q, the chance that a free voxel's bin holds v's echo anyway (the CFAR's
+prior; where clutter is, it masks the target. With clutter (c > 0) a weak target (s -> 0) makes
+p1 -> p0 and e -> 0 whatever the power: a bin holding far more than the target could give is
+explained by the background, not by v (without clutter, the default and every simulated radar's,
+a bright bin still says ln(1 / q) of a weak target: ``bounded`` caps it there). q, the chance that a free voxel's bin holds v's echo anyway (the CFAR's
 achieved false-alarm rate), bounds the evidence at ln(1 / q), as a detection's is bounded (with
 c = 0 and v = 1, L = E_s[exp(x s / (1 + s)) / (1 + s)]: the model without clutter). ``bounded`` then holds
 each look's evidence within what a CFAR detection says at its opportunity delta (the chance a

@@ -336,3 +336,18 @@ def test_scans_scores_a_part_of_the_recording_and_says_which(recording, tmp_path
     with pytest.raises(SystemExit):
         main(["evaluate-lidar", *common, "--scans", "2-4"])
     assert "expected START:STOP" in capsys.readouterr().err
+
+
+def test_bin_cells_are_the_cells_a_beam_walks(evaluated):
+    """``bin_cells`` (the cell under each bin, for fit-sensor --lidar) puts a scan's bins in the
+    cells ``radar_visible`` walks along the same beams, turned by the same poses: over a truth with
+    nothing occupied, the two mark the same cells."""
+    _, _, _, arrays = evaluated
+    spec, per_beam = arrays["spec"], arrays["per_beam"][:1]
+    shape = arrays["truth"].occupied.shape
+    empty = L.LidarTruth(spec, np.zeros(shape, np.int32), np.ones(shape, np.int32), [])
+    r = np.arange(2.0, 30.0, spec.voxel_m / L.STEPS_PER_CELL)
+    iy, ix, inside = L.bin_cells(spec, per_beam[0], r)
+    mine = np.zeros(shape, bool)
+    mine[iy[inside], ix[inside]] = True
+    assert mine.sum() > 1000 and np.array_equal(mine, L.radar_visible(empty, per_beam, 2.0, 30.0))

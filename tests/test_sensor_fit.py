@@ -133,11 +133,15 @@ def test_fit_sensor_writes_a_configuration_every_command_reads(tmp_path, capsys)
     assert "not fitted" in lines["block_gamma_db"]
     assert main(["fit-sensor", DATA, "--sensor", "radiate-cts350x", "--save", str(out)]) == 2
     assert "exists" in capsys.readouterr().err
-    alone = tmp_path / "alone.toml"                   # without the lidar: the background, and the bounded values
+    alone = tmp_path / "alone.toml"                   # without the lidar: only what the scans bound is written
     assert main(["fit-sensor", DATA, "--sensor", "radiate-cts350x", "--scans", "0:6", "--save", str(alone)]) == 0
-    assert "Without a lidar nothing here tells a map that finds obstacles" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "Without a lidar nothing here tells a map that finds obstacles" in text and "kept)" in text
     lines = {line.split(" = ")[0]: line for line in alone.read_text().splitlines() if " = " in line}
-    assert "# radarcl fit-sensor on scans 0-5" in lines["clutter_share"]
+    # RADIATE's background runs to its search's edges: all four of its values stay the configuration's
+    for key in ("clutter_share", "clutter_db", "clutter_spread_db", "noise_scale"):
+        assert "(kept: the fit's was" in lines[key]
+    assert lines["clutter_share"].startswith("clutter_share = 0.0 ")
     assert "radarcl fit-sensor" not in lines["look_limit"]
     assert main(["fit-sensor", DATA, "--sensor", "radiate-cts350x", "--scans", "0::2", "--lidar"]) == 2
     assert "--lidar takes a run of consecutive scans" in capsys.readouterr().err

@@ -147,9 +147,12 @@ def test_parameters_outside_their_physical_range_are_refused():
 
 def test_a_profile_without_sensitivity_says_which_figure_and_the_default():
     """A profile that gives no sensitivity says so and what it uses; no built-in Navtech profile
-    guesses (each carries a chosen figure and says where it came from)."""
-    for name in ("navtech-cts350x", "radiate-cts350x", "boreas-cir204", "mulran", "polar-png"):
+    guesses (each carries a chosen figure and says where it came from); the polar-png template, which
+    a new radar's profile extends, gives none, so such a profile is told."""
+    for name in ("navtech-cts350x", "radiate-cts350x", "boreas-cir204", "mulran"):
         assert mapconfig.resolve(name).origins["sensor_model.snr_1m2_at_10m_db"].endswith("[sensitivity]")
+    assert mapconfig.resolve("polar-png").origins["sensor_model.snr_1m2_at_10m_db"].endswith(
+        sensors.missing_sensitivity(sensors.load("polar-png")))
     config = mapconfig.resolve("ti-xwr18xx-uart")
     why = config.origins["sensor_model.snr_1m2_at_10m_db"]
     assert "has no [sensitivity] snr_1m2_at_10m_db" in why and f"using {sm.DEFAULT_SNR_DB:g} dB" in why

@@ -4,7 +4,7 @@
 import json
 from pathlib import Path
 
-from radarcl.commands.options import add_config, add_output, default_data, resolve_config, runtime
+from radarcl.commands.options import add_config, default_data, resolve_config, runtime
 from radarcl.errors import ConfigError
 
 SUMMARY = "fit a real radar's clutter law and sensitivity from its own polar scans, with intervals"
@@ -25,9 +25,13 @@ def add_arguments(parser):
                              "default: all)")
     parser.add_argument("--lidar", action="store_true",
                         help="use the recording's lidar (RADIATE's layout): the background from the bins of cells it "
-                             "calls free, then the sensitivity, look limit and clutter of the maps that best predict "
-                             "the lidar's cells; --scans must be a run A:B")
-    add_output(parser, "--save", "", "the fitted configuration (TOML, for --config)")
+                             "calls free, the sensitivity from those it calls occupied, then the map's sensitivity, "
+                             "look limit and background: the best ROC area of the lidar's cells among the maps "
+                             "calling at most 0.10 of its free cells occupied in every band to 30 m; --scans must be "
+                             "a run A:B")
+    parser.add_argument("--save", metavar="FILE", help="write the fitted configuration (TOML, for --config); an "
+                                                       "existing file is kept unless --force")
+    parser.add_argument("--force", action="store_true", help="replace existing output files")
     parser.add_argument("--json", metavar="PATH", help="also write the fit as JSON")
 
 
@@ -45,7 +49,7 @@ def run(args):
     print("\n".join(fit_sensor.format_lines(out)))
     if args.save:
         config.save(args.save, header=("radarcl map configuration fitted by `radarcl fit-sensor`",
-                                       f"{out['sensor']} scans {out['scans']} of {out['data']}"),
+                                       f"{out['sensor']} scans {fit_sensor.span(out['scans'])} of {out['data']}"),
                     overwrite=args.force)
         print(f"wrote {args.save}")
     if args.json:

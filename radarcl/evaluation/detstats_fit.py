@@ -68,7 +68,7 @@ def fit_reading(per_scene, meets=None):
     for limit, prior, looks in itertools.product(*READING_GRID.values()):
         if prior == 0.0 and looks != READING_GRID["prior_looks"][0]:
             continue                                   # prior_looks means nothing without a prior
-        reading = dict(look_limit=limit, prior_nats=prior, prior_looks=looks)
+        reading = dict(look_limit=limit, prior_nats=prior, prior_looks=looks, known_looks=sensor_model.KNOWN_LOOKS)
         scenes = [log_likelihood(e, k, n, y, reading) for e, k, n, y in per_scene]
         n = [len(y) for *_, y in per_scene]
         ranked.append((float(np.average(scenes, weights=n)), reading, scenes))

@@ -39,6 +39,7 @@ def scan_selection(text, n):
 
 SENSITIVITY_GRID_DB = tuple(range(10, 111, 10))
 LOOK_LIMITS = (1.0, 2.0)
+BACKGROUND = ("clutter_share", "clutter_db", "clutter_spread_db", "noise_scale")   # fitted together
 PHANTOM_LIMIT = 0.10            # a map with --lidar calls at most this share of the lidar's free cells occupied
 CHOICE_RANGE_M = 30.0           # in every band to this range (where a fog lidar still reaches)
 
@@ -56,7 +57,7 @@ def run(config, data_dir, scans="all", lidar=False, runtime=None, report=None):
                           f"{sensor.input}")
     sequence = polar_png.read_sequence(data_dir, polar_png.PolarLayout.of(sensor), odometry=False)
     chosen = scan_selection(scans, len(sequence.scans))
-    say(f"{len(sequence.scans)} scans in {sequence.directory}; fitting on scans {_span(chosen)} ({len(chosen)})")
+    say(f"{len(sequence.scans)} scans in {sequence.directory}; fitting on scans {span(chosen)} ({len(chosen)})")
     if config.sensor.n_bins() is None:
         config = config.for_sensor(config.sensor.with_bins(sequence.scans[chosen[0]].n_bins))
     lo, hi = config["interpret.range_min_m"], config["interpret.range_max_m"]
@@ -74,12 +75,12 @@ def run(config, data_dir, scans="all", lidar=False, runtime=None, report=None):
     geometry = sensor_fit.Geometry(config.model_params(), math.radians(sensor.get("beams", "beamwidth_az_deg")) / 2,
                                    math.radians(sensor.get("beams", "beamwidth_el_deg")) / 2)
     result = sensor_fit.fit(counts, geometry, report=say, background=background, targets=targets)
-    source = f"radarcl fit-sensor{' --lidar' if lidar else ''} on scans {_span(chosen)} of {sequence.directory}"
+    source = f"radarcl fit-sensor{' --lidar' if lidar else ''} on scans {span(chosen)} of {sequence.directory}"
     fitted = config.replaced(**{k.replace(".", "__"): v for k, v in result.config_values().items()})
     fit_origins = {}
     for key, value, se in zip(sensor_fit.FITTED, result.values, result.errors):
         bounded = "at the search's edge: the recording does not bound it" if key in result.at_edge else \
-            f"+- {1.96 * se:.2g} (95 %, scan jackknife)"
+            f"+- {1.96 * se:.2g} (1.96 jackknife SEs over {result.n_scans} scans of one recording)"
         fit_origins[f"sensor_model.{key}"] = f"{source}: {value:.4g} {bounded}"
     origins = {**fitted.origins, **fit_origins}
     out = dict(sensor=sensor.name, data=str(sequence.directory), scans=chosen, n_powers=result.n_powers,
@@ -92,14 +93,19 @@ def run(config, data_dir, scans="all", lidar=False, runtime=None, report=None):
         fitted = fitted.replaced(**{k.replace(".", "__"): v for k, v in values.items()})
         origins = {**fitted.origins, **fit_origins, **chosen_origins}
     else:
-        # a value the scans do not bound stays the configuration's; the map's sensitivity and look limit
-        # need a truth to choose (held-out detections reward a map that calls nothing occupied: README)
-        kept = {k: config[f"sensor_model.{k}"] for k in result.at_edge}
-        fitted = fitted.replaced(**{f"sensor_model__{k}": v for k, v in kept.items()})
+        # what the scans do not bound stays the configuration's: the background's four values were fitted
+        # together, so one at its edge keeps them all; the map's look limit needs a truth to choose
+        # (held-out detections reward a map that calls nothing occupied: README)
+        kept = {k for k in result.at_edge}
+        if kept & set(BACKGROUND):
+            kept |= set(BACKGROUND)
+        fitted = fitted.replaced(**{f"sensor_model__{k}": config[f"sensor_model.{k}"] for k in kept})
         origins = {**fitted.origins, **fit_origins}
         for k in kept:
-            origins[f"sensor_model.{k}"] = f"{config.origins[f'sensor_model.{k}']} (kept: {fit_origins[f'sensor_model.{k}']})"
+            why = "at its search's edge" if k in result.at_edge else "fitted together with a value at its edge"
+            origins[f"sensor_model.{k}"] = f"{config.origins[f'sensor_model.{k}']} (kept: the fit's was {why})"
         origins["sensor_model.look_limit"] = config.origins["sensor_model.look_limit"]
+        out["kept"] = sorted(kept)
     for key in ("block_gamma_db", "blocker_gap"):
         origins[f"sensor_model.{key}"] += "; not fitted (what lies behind a first surface has no truth here)"
     return dataclasses.replace(fitted, origins=origins), out
@@ -144,7 +150,7 @@ def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
     from radarcl.jobs.evaluate_lidar import run as evaluate
 
     candidates = candidates_of(config, result)
-    say(f"choosing with the lidar: {len(candidates)} maps of scans {_span(chosen)} ...")
+    say(f"choosing with the lidar: {len(candidates)} maps of scans {span(chosen)} ...")
     _, arrays = evaluate(runtime, [(label, c) for label, (_, c) in candidates.items()], data_dir,
                          voxel_m=config["grid.voxel_m"], scan_slice=(chosen[0], chosen[-1] + 1),
                          report=lambda *_: None)
@@ -166,7 +172,7 @@ def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
     admissible = [r for r in rows if r["phantom"] <= PHANTOM_LIMIT]
     if not admissible:
         raise ConfigError(f"no map of the {len(rows)} candidates keeps its phantom rate within {PHANTOM_LIMIT:g} in "
-                          f"every band to {CHOICE_RANGE_M:g} m on scans {_span(chosen)} (the least: "
+                          f"every band to {CHOICE_RANGE_M:g} m on scans {span(chosen)} (the least: "
                           f"{min(r['phantom'] for r in rows):.3f})")
     best = max(admissible, key=lambda r: (r["auc"], r["log_likelihood"]))
     values = candidates[best["candidate"]][0]
@@ -180,27 +186,30 @@ def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
 
 
 def _lidar_bins(config, data_dir, chosen, say):
-    """(powers, free, occupied) per scan of ``chosen`` (a contiguous run): each scan's power and
-    the bins whose cell of the lidar's truth (``evaluate_lidar.lidar_part``) is free, occupied."""
+    """(powers, free, occupied) per scan of ``chosen`` (a contiguous run): each scan's power of its
+    measured azimuths and the bins whose cell of the lidar's truth (``evaluate_lidar.lidar_part``,
+    on the configuration's voxel) is free, occupied."""
     from radarcl.evaluation.lidar import bin_cells
     from radarcl.jobs.evaluate_lidar import lidar_part
 
     if len(chosen) > 1 and set(np.diff(chosen)) != {1}:
         raise ConfigError("--lidar takes a run of consecutive scans (A:B): the lidar frames are those taken "
                           "meanwhile")
-    source, _, _, truth = lidar_part(config.sensor, data_dir, scan_slice=(chosen[0], chosen[-1] + 1), report=say)
+    source, _, _, truth = lidar_part(config.sensor, data_dir, config["grid.voxel_m"],
+                                     scan_slice=(chosen[0], chosen[-1] + 1), report=say)
     ranges = np.arange(source.frames.scans[0].n_bins) * config.bin_spacing_m
     powers, free, occupied = [], [], []
     for scan, poses in zip(source.frames.scans, source.poses):
-        iy, ix, inside = bin_cells(truth.spec, poses, ranges)
-        valid = np.asarray(scan.valid, bool)[:, None]
-        powers.append(np.asarray(scan.power(), np.float64))
-        free.append(inside & truth.free[iy, ix] & valid)
-        occupied.append(inside & truth.occupied[iy, ix] & valid)
+        valid = np.asarray(scan.valid, bool)                   # measured azimuths only, as without a lidar
+        iy, ix, inside = (a[valid] for a in bin_cells(truth.spec, poses, ranges))
+        powers.append(np.asarray(scan.power(), np.float64)[valid])
+        free.append(inside & truth.free[iy, ix])
+        occupied.append(inside & truth.occupied[iy, ix])
     return powers, free, occupied
 
 
-def _span(chosen):
+def span(chosen):
+    """Scan indices as a person reads them: "0-10 every 2", or a list."""
     if len(chosen) > 1 and len(set(np.diff(chosen))) == 1:
         step = chosen[1] - chosen[0]
         return f"{chosen[0]}-{chosen[-1]}" + (f" every {step}" if step > 1 else "")
@@ -216,23 +225,24 @@ def format_lines(out):
     how = (f"the background from the {out['background_powers']:,} bins of cells the lidar calls free, the sensitivity "
            f"from the {out['target_powers']:,} of cells it calls occupied" if out["lidar"] else
            "the mixture of background and typical targets per band of range")
-    lines = [f"{out['sensor']}, scans {_span(out['scans'])}: {out['n_powers']:,} powers; by maximum likelihood of "
-             f"{how}:", f"  {'parameter':<16} {'value':>9} {'95 % interval':>21}  unit"]
+    lines = [f"{out['sensor']}, scans {span(out['scans'])}: {out['n_powers']:,} powers; by maximum likelihood of "
+             f"{how}:", f"  {'parameter':<16} {'value':>9} {'about 95 %':>21}  unit"]
     for key, (label, unit) in names.items():
         v, se = out["fit"][key]["value"], out["fit"][key]["se"]
         interval = "not bounded" if key in out["at_edge"] else f"[{v - 1.96 * se:.4g}, {v + 1.96 * se:.4g}]"
         lines.append(f"  {label:<16} {v:>9.4g} {interval:>21}  {unit}")
     if out["at_edge"]:
         lines.append(f"  at the search's edge, so not bounded by these scans: {', '.join(out['at_edge'])}")
-    lines.append(f"  log-likelihood per power {out['log_likelihood']:.4f} nat (noise alone, no clutter: "
+    lines.append(f"  log-likelihood per power {out['log_likelihood']:.4f} nat (no clutter, the rest as fitted: "
                  f"{out['noise_only_log_likelihood']:.4f}); share of bins holding a typical target by range: "
                  + ", ".join(f"{r:.0f} m {s:.2f}" for r, s in zip(out["band_ranges_m"], out["target_shares"])))
     m = out.get("maps")
     if not m:
-        lines.append("written: the fitted background, and the sensitivity where the scans bound it; the look limit "
-                     "and what they do not bound stay the configuration's. Without a lidar nothing here tells a "
-                     "map that finds obstacles from one that does not: with RADIATE's lidar the fitted background "
-                     "ranked worse than noise alone (README). Check with evaluate-lidar, or fit with --lidar.")
+        kept = f" ({', '.join(out['kept'])} kept)" if out.get("kept") else ""
+        lines.append(f"written: the fitted values the scans bound; the look limit and the rest stay the "
+                     f"configuration's{kept}. Without a lidar nothing here tells a map that finds obstacles from one "
+                     "that does not: with RADIATE's lidar the fitted background ranked worse than noise alone "
+                     "(README). Check with evaluate-lidar, or fit with --lidar.")
     else:
         rows = sorted(m["candidates"], key=lambda r: (r["phantom"] > m["phantom_limit"], -r["auc"]))
         lines.append(f"the map's sensitivity, look limit and background with the lidar's {m['cells']:,} cells: the "

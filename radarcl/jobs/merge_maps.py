@@ -128,7 +128,8 @@ def open_inputs(paths):
             said = {i: "no knowledge channel (eq. 12)" if i.reading is None else f"the reading {i.reading}"
                     for i in (one, inputs[0])}
             raise ConfigError(f"{p} holds a map with {said[one]}, {inputs[0].path} one with {said[inputs[0]]}; maps "
-                              "merge only with one sensor model and one reading")
+                              "merge only with one sensor model and one reading (a map written before radarcl kept "
+                              "known_looks reads with it 0: fuse it again)")
         inputs.append(one)
     return inputs
 
