@@ -127,21 +127,25 @@ def test_fit_sensor_writes_a_configuration_every_command_reads(tmp_path, capsys)
     assert "with at most 0.1 of the free ones called occupied in every band" in text and "<- chosen" in text
     config = mapconfig.resolve("radiate-cts350x", str(out))
     lines = {line.split(" = ")[0]: line for line in out.read_text().splitlines() if " = " in line}
-    for key in ("snr_1m2_at_10m_db", "look_limit", "clutter_spread_db"):
+    for key in ("snr_1m2_at_10m_db", "look_limit", "clutter_share", "clutter_spread_db"):
         assert "# radarcl fit-sensor --lidar on scans 0-5" in lines[key]
         assert config[f"sensor_model.{key}"] == pytest.approx(float(lines[key].split()[2]))
+    assert config["sensor_model.clutter_share"] == 0.0 and "the fitted law unused" in lines["clutter_spread_db"]
     assert "not fitted" in lines["block_gamma_db"]
     assert main(["fit-sensor", DATA, "--sensor", "radiate-cts350x", "--save", str(out)]) == 2
     assert "exists" in capsys.readouterr().err
     alone = tmp_path / "alone.toml"                   # without the lidar: only what the scans bound is written
     assert main(["fit-sensor", DATA, "--sensor", "radiate-cts350x", "--scans", "0:6", "--save", str(alone)]) == 0
     text = capsys.readouterr().out
-    assert "Without a lidar nothing here tells a map that finds obstacles" in text and "kept)" in text
+    assert "without a lidar nothing here tells a map that finds obstacles" in text and "kept)" in text
     lines = {line.split(" = ")[0]: line for line in alone.read_text().splitlines() if " = " in line}
     # RADIATE's background runs to its search's edges: all four of its values stay the configuration's
     for key in ("clutter_share", "clutter_db", "clutter_spread_db", "noise_scale"):
         assert "(kept: the fit's was" in lines[key]
     assert lines["clutter_share"].startswith("clutter_share = 0.0 ")
     assert "radarcl fit-sensor" not in lines["look_limit"]
+    assert "(kept: the fit's was not the map's: chosen with a lidar only (--lidar))" in lines["snr_1m2_at_10m_db"]
+    assert main(["fit-sensor", DATA, "--scans", "0:6"]) == 2                 # the default sensor reads Oxford's layout
+    assert "read with --sensor radiate-cts350x" in capsys.readouterr().err
     assert main(["fit-sensor", DATA, "--sensor", "radiate-cts350x", "--scans", "0::2", "--lidar"]) == 2
     assert "--lidar takes a run of consecutive scans" in capsys.readouterr().err

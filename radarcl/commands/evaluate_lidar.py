@@ -66,8 +66,9 @@ def add_arguments(parser):
                              "(default: all)")
     add_trajectory_options(parser)
     parser.add_argument("--json", default=None, metavar="FILE", help="also write the figures to this JSON file")
-    parser.add_argument("--out", default=None, metavar="DIR", help="write lidar_truth.png, lidar_map.png and "
-                                                                  "evaluate_lidar.json there")
+    parser.add_argument("--out", default=None, metavar="DIR", help="write lidar_truth.png, lidar_map.png (the best "
+                                                                  "map), lidar_beside_map.png (the two side by side) "
+                                                                  "and evaluate_lidar.json there")
     parser.add_argument("--force", action="store_true", help="replace existing files in --out and --json")
     add_progress(parser)
 

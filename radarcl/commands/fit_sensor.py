@@ -11,9 +11,10 @@ SUMMARY = "fit a real radar's clutter law and sensitivity from its own polar sca
 DESCRIPTION = ("Reads the scans' powers over each beam's noise floor and fits, by maximum likelihood per band of "
                "range, the background the detection-statistics model weighs an echo against (noise, or with a "
                "share of bins clutter of a log-normal power) and the sensitivity that makes a typical target's "
-               "echo fall as r^-4; 95 % intervals from a jackknife over scans. Writes a configuration for --config "
-               "whose fitted values say where they came from. Fit on one part of a recording (--scans) and score "
-               "on another.")
+               "echo fall as r^-4; approximate intervals (1.96 jackknife SEs over scans). Without a lidar it writes "
+               "the values the scans bound; with --lidar it also chooses the map's sensitivity, look limit and "
+               "background by what the lidar's cells say. The configuration (for --config) says where every value "
+               "came from. Fit on one part of a recording (--scans) and score on another (evaluate-lidar --scans).")
 
 
 def add_arguments(parser):
@@ -51,7 +52,7 @@ def run(args):
         config.save(args.save, header=("radarcl map configuration fitted by `radarcl fit-sensor`",
                                        f"{out['sensor']} scans {fit_sensor.span(out['scans'])} of {out['data']}"),
                     overwrite=args.force)
-        print(f"wrote {args.save}")
+        print(f"wrote {args.save} (give it to --config, or to evaluate-lidar as --model {args.save})")
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=2) + "\n")
         print(f"wrote {args.json}")

@@ -4,10 +4,11 @@ came from and how well the recording determines it."""
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 
-from radarcl.errors import ConfigError
+from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.evaluation import sensor_fit
 from radarcl.io import polar_png
 
@@ -55,7 +56,12 @@ def run(config, data_dir, scans="all", lidar=False, runtime=None, report=None):
     if sensor.raw or sensor.input != "profiles":
         raise ConfigError(f"fit-sensor reads polar scans (a Navtech-like profile); sensor {sensor.name} is "
                           f"{sensor.input}")
-    sequence = polar_png.read_sequence(data_dir, polar_png.PolarLayout.of(sensor), odometry=False)
+    try:
+        sequence = polar_png.read_sequence(data_dir, polar_png.PolarLayout.of(sensor), odometry=False)
+    except FrameFormatError as e:
+        hint = ("; RADIATE's recordings (Navtech_Polar/) are read with --sensor radiate-cts350x"
+                if (Path(data_dir) / "Navtech_Polar").is_dir() and sensor.name != "radiate-cts350x" else "")
+        raise FrameFormatError(f"{e}{hint}") from None
     chosen = scan_selection(scans, len(sequence.scans))
     say(f"{len(sequence.scans)} scans in {sequence.directory}; fitting on scans {span(chosen)} ({len(chosen)})")
     if config.sensor.n_bins() is None:
@@ -90,19 +96,24 @@ def run(config, data_dir, scans="all", lidar=False, runtime=None, report=None):
     if lidar:
         out.update(background_powers=int(background.counts.sum()), target_powers=int(targets.counts.sum()))
         values, chosen_origins, out["maps"] = choose_by_lidar(runtime, fitted, data_dir, chosen, result, source, say)
+        if values["sensor_model.clutter_share"] == 0.0:         # noise alone: the fitted law is unused, not written
+            values.update({f"sensor_model.{k}": config[f"sensor_model.{k}"] for k in BACKGROUND[1:3]})
         fitted = fitted.replaced(**{k.replace(".", "__"): v for k, v in values.items()})
         origins = {**fitted.origins, **fit_origins, **chosen_origins}
     else:
         # what the scans do not bound stays the configuration's: the background's four values were fitted
-        # together, so one at its edge keeps them all; the map's look limit needs a truth to choose
-        # (held-out detections reward a map that calls nothing occupied: README)
-        kept = {k for k in result.at_edge}
+        # together, so one at its edge keeps them all; the map's sensitivity and look limit need a truth
+        # to choose (the powers' typical target is not the map's: Oxford's fitted 106 dB erased its
+        # facades; held-out detections reward a map that calls nothing occupied: README)
+        kept = set(result.at_edge) | {"snr_1m2_at_10m_db"}
         if kept & set(BACKGROUND):
             kept |= set(BACKGROUND)
         fitted = fitted.replaced(**{f"sensor_model__{k}": config[f"sensor_model.{k}"] for k in kept})
         origins = {**fitted.origins, **fit_origins}
         for k in kept:
-            why = "at its search's edge" if k in result.at_edge else "fitted together with a value at its edge"
+            why = ("at its search's edge" if k in result.at_edge else
+                   "not the map's: chosen with a lidar only (--lidar)" if k == "snr_1m2_at_10m_db" else
+                   "fitted together with a value at its edge")
             origins[f"sensor_model.{k}"] = f"{config.origins[f'sensor_model.{k}']} (kept: the fit's was {why})"
         origins["sensor_model.look_limit"] = config.origins["sensor_model.look_limit"]
         out["kept"] = sorted(kept)
@@ -132,8 +143,10 @@ def candidates_of(config, result):
 def _noise_only_origins(values, why, result):
     if values["sensor_model.clutter_share"] != 0.0:
         return {}
-    return {"sensor_model.clutter_share": f"{why}: no clutter (the fitted law's share: {result.values[0]:.3g})",
-            "sensor_model.noise_scale": f"{why}: noise alone sets the floor"}
+    unused = f"{why}: noise alone, the fitted law unused (share {result.values[0]:.3g}, median " \
+             f"{result.values[1]:.3g} dB, spread {result.values[2]:.3g} dB)"
+    return {"sensor_model.clutter_share": unused, "sensor_model.clutter_db": unused,
+            "sensor_model.clutter_spread_db": unused, "sensor_model.noise_scale": f"{why}: noise alone sets the floor"}
 
 
 def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
@@ -239,10 +252,11 @@ def format_lines(out):
     m = out.get("maps")
     if not m:
         kept = f" ({', '.join(out['kept'])} kept)" if out.get("kept") else ""
-        lines.append(f"written: the fitted values the scans bound; the look limit and the rest stay the "
-                     f"configuration's{kept}. Without a lidar nothing here tells a map that finds obstacles from one "
-                     "that does not: with RADIATE's lidar the fitted background ranked worse than noise alone "
-                     "(README). Check with evaluate-lidar, or fit with --lidar.")
+        lines.append(f"written: the fitted background where the scans bound it; the map's sensitivity, its look "
+                     f"limit and the rest stay the configuration's{kept}: without a lidar nothing here tells a map "
+                     "that finds obstacles from one that does not (with RADIATE's lidar the fitted background ranked "
+                     "worse than noise alone: README). Check a map made with it: `radarcl navtech-map --config FILE` "
+                     "(its half-map check), or `radarcl evaluate-lidar --model FILE` where the recording has a lidar.")
     else:
         rows = sorted(m["candidates"], key=lambda r: (r["phantom"] > m["phantom_limit"], -r["auc"]))
         lines.append(f"the map's sensitivity, look limit and background with the lidar's {m['cells']:,} cells: the "
