@@ -79,6 +79,10 @@ def test_bad_profiles_name_file_line_key_and_what_is_allowed(tmp_path, monkeypat
 def test_unknown_sensor_lists_the_builtins():
     with pytest.raises(ConfigError, match="no sensor profile 'radar9000': not a built-in \\(boreas-cir204, mulran, navtech-cts350x"):
         sensors.load("radar9000")
+    with pytest.raises(ConfigError, match="and no such file; did you mean radiate-cts350x\\?"):
+        sensors.load("radiate-cts305x")                       # a typo gets the name it is closest to
+    with pytest.raises(ConfigError, match="and no such file$"):
+        sensors.load("radar9000")                             # nothing close: no guess
 
 
 def test_cli_lists_and_prints_profiles(capsys):

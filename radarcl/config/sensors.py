@@ -28,6 +28,7 @@ Defaults derived from the sensor (``derived_defaults``), each with the reason it
   (stacked beams only: a spinning radar's one elevation maps a plane and has no terrain class).
 """
 
+import difflib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -289,8 +290,9 @@ def _read(spec, seen=()):
     if spec in builtin_names() and not path.exists():
         path = PROFILE_DIR / f"{spec}.toml"
     elif not path.is_file():
+        close = difflib.get_close_matches(str(spec), builtin_names(), n=1)
         raise ConfigError(f"no sensor profile {spec!r}: not a built-in ({', '.join(builtin_names())}) "
-                          "and no such file")
+                          "and no such file" + (f"; did you mean {close[0]}?" if close else ""))
     data, source = tomlfile.load(path)
     tables = {"": {k: v for k, v in data.items() if not isinstance(v, dict)}}
     for key, value in data.items():
