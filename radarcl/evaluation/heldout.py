@@ -129,8 +129,14 @@ def score_probability(p, y):
                 coverage=1.0, bins=int(len(y)), detected=int(np.sum(y)))
 
 
+def log_likelihood(L, y):
+    """Mean log p(outcome) [nat] of log-odds ``L`` [nat] against bool outcomes ``y``, p = sigmoid(L)
+    clipped to [P_CLIP, 1 - P_CLIP]."""
+    p = np.clip(1.0 / (1.0 + np.exp(-np.asarray(L, np.float64))), P_CLIP, 1 - P_CLIP)
+    return float(np.mean(np.where(y, np.log(p), np.log1p(-p))))
+
+
 def score(L, y):
     """``auc``, ``log_likelihood`` [nat per bin] and ``coverage`` of predictions ``L`` of ``y``."""
-    p = np.clip(1.0 / (1.0 + np.exp(-L)), P_CLIP, 1 - P_CLIP)
-    return dict(auc=roc_auc(L, y), log_likelihood=float(np.mean(np.where(y, np.log(p), np.log1p(-p)))),
-                coverage=float(np.mean(L != 0)), bins=int(len(y)), detected=int(y.sum()))
+    return dict(auc=roc_auc(L, y), log_likelihood=log_likelihood(L, y), coverage=float(np.mean(L != 0)),
+                bins=int(len(y)), detected=int(y.sum()))

@@ -26,6 +26,7 @@ surface has no truth a recording without a lidar could give (the configuration k
 says so).
 """
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -118,15 +119,11 @@ class Geometry:
     def ln_snr(self, ranges_m, sensitivity_db):
         """(n_bands, 15): ln s of the typical target at the band's three ranges and five offsets
         in the beam (rho2 = 0 .. 1), at ``sensitivity_db``."""
-        p = sensor_model.ModelParams(**{**_fields(self.params), "snr_1m2_at_10m_db": float(sensitivity_db)})
+        p = dataclasses.replace(self.params, snr_1m2_at_10m_db=float(sensitivity_db))
         ln_s, kappa = sensor_model.upright_snr(p, ranges_m.reshape(-1), self.half_az_rad, self.half_el_rad)
         t = np.arange(sensor_model.NODES) / (sensor_model.NODES - 1) * math.log(4.0)
         out = ln_s[:, None] - kappa[:, None] * t[None, :]
         return out.reshape(ranges_m.shape[0], -1)
-
-
-def _fields(params):
-    return {k: getattr(params, k) for k in sensor_model.DEFAULTS}
 
 
 def bin_probabilities(theta, counts, geometry, pi=None):
@@ -297,10 +294,3 @@ def fit(counts, geometry, report=None, background=None, targets=None):
     return SensorFit(tuple(float(v) for v in theta), tuple(float(e) for e in se), tuple(float(s) for s in shares),
                      log_likelihood(theta, counts, geometry), noise_only, m, n, tuple(edge), lidar)
 
-
-def lidar_log_likelihood(nats, occupied):
-    """Mean ln p(lidar's class | map) per cell [nat]: the map's log-odds ``nats`` read as p
-    (clipped to [1e-4, 1 - 1e-4]) against ``occupied`` (bool, the lidar's class of each cell)."""
-    p = np.clip(1.0 / (1.0 + np.exp(-np.asarray(nats, np.float64))), 1e-4, 1.0 - 1e-4)
-    y = np.asarray(occupied, bool)
-    return float(np.mean(np.where(y, np.log(p), np.log1p(-p))))

@@ -159,6 +159,7 @@ def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
     and likelihood of the lidar's cells are reported beside. Returns (its values, their origins, the
     rows of every candidate); refuses when no candidate keeps the phantoms within the limit."""
     from radarcl.evaluation import lidar as L
+    from radarcl.evaluation.heldout import log_likelihood
     from radarcl.evaluation.metrics import roc_auc
     from radarcl.jobs.evaluate_lidar import run as evaluate
 
@@ -169,19 +170,18 @@ def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
                          report=lambda *_: None)
     truth = arrays["truth"]
     distance = L.range_from_path(truth.spec, arrays["per_beam"][..., :3, 3].reshape(-1, 3))
-    bands = [b for b in zip(L.BANDS_M[:-1], L.BANDS_M[1:]) if b[1] <= CHOICE_RANGE_M]
+    bands = [(distance >= lo) & (distance < hi) for lo, hi in zip(L.BANDS_M[:-1], L.BANDS_M[1:])
+             if hi <= CHOICE_RANGE_M]
     rows = []
     for label in candidates:
         nats, known = arrays["maps"][label], arrays["known"].get(label)
-        scores = [L.costmap_scores(nats, truth.occupied & band, truth.free & band, known)
-                  for band in ((distance >= lo) & (distance < hi) for lo, hi in bands)]
-        aucs = [roc_auc(nats[band & truth.known], truth.occupied[band & truth.known])
-                for band in ((distance >= lo) & (distance < hi) for lo, hi in bands)]
+        scores = [L.costmap_scores(nats, truth.occupied & band, truth.free & band, known) for band in bands]
+        aucs = [roc_auc(nats[band & truth.known], truth.occupied[band & truth.known]) for band in bands]
         rows.append(dict(candidate=label, auc=float(np.nanmean(aucs)),
                          recall=float(np.nanmean([s["recall"] for s in scores])),
                          miss=float(np.nanmean([s["miss"] for s in scores])),
                          phantom=float(np.nanmax([s["phantom"] for s in scores])),
-                         log_likelihood=sensor_fit.lidar_log_likelihood(nats[truth.known], truth.occupied[truth.known])))
+                         log_likelihood=log_likelihood(nats[truth.known], truth.occupied[truth.known])))
     admissible = [r for r in rows if r["phantom"] <= PHANTOM_LIMIT]
     if not admissible:
         raise ConfigError(f"no map of the {len(rows)} candidates keeps its phantom rate within {PHANTOM_LIMIT:g} in "
