@@ -124,7 +124,8 @@ def test_fit_sensor_writes_a_configuration_every_command_reads(tmp_path, capsys)
     assert main(["fit-sensor", DATA, "--sensor", "radiate-cts350x", "--scans", "0:6", "--lidar",
                  "--save", str(out), "--json", str(tmp_path / "fit.json")]) == 0
     text = capsys.readouterr().out
-    assert "with at most 0.1 of the free ones called occupied in every band" in text and "<- chosen" in text
+    assert "with at most 0.1 of the free ones and some of the occupied ones called occupied in every band" in text
+    assert "<- chosen" in text
     config = mapconfig.resolve("radiate-cts350x", str(out))
     lines = {line.split(" = ")[0]: line for line in out.read_text().splitlines() if " = " in line}
     for key in ("snr_1m2_at_10m_db", "look_limit", "clutter_share", "clutter_spread_db"):
@@ -149,3 +150,15 @@ def test_fit_sensor_writes_a_configuration_every_command_reads(tmp_path, capsys)
     assert "read with --sensor radiate-cts350x" in capsys.readouterr().err
     assert main(["fit-sensor", DATA, "--sensor", "radiate-cts350x", "--scans", "0::2", "--lidar"]) == 2
     assert "--lidar takes a run of consecutive scans" in capsys.readouterr().err
+
+
+def test_the_lidar_choice_never_takes_a_blind_map():
+    """A map that calls nothing occupied in a band keeps its phantoms at 0 and can rank best; it is
+    not taken, and with no other map within the phantom limit the choice is refused."""
+    from radarcl.jobs.fit_sensor import best_candidate
+    row = lambda name, auc, phantom, blind: dict(candidate=name, auc=auc, phantom=phantom, blind=blind,
+                                                 log_likelihood=-0.4)
+    blind, seeing, noisy = row("110 dB", 0.95, 0.0, True), row("90 dB", 0.90, 0.08, False), row("70 dB", 0.97, 0.3, False)
+    assert best_candidate([blind, seeing, noisy], "here")["candidate"] == "90 dB"
+    with pytest.raises(ConfigError, match="calling some of the lidar's occupied cells occupied"):
+        best_candidate([blind, noisy], "here")

@@ -179,23 +179,32 @@ def choose_by_lidar(runtime, config, data_dir, chosen, result, source, say):
         aucs = [roc_auc(nats[band & truth.known], truth.occupied[band & truth.known]) for band in bands]
         rows.append(dict(candidate=label, auc=float(np.nanmean(aucs)),
                          recall=float(np.nanmean([s["recall"] for s in scores])),
+                         blind=bool(any(s["recall"] == 0 for s in scores)),
                          miss=float(np.nanmean([s["miss"] for s in scores])),
                          phantom=float(np.nanmax([s["phantom"] for s in scores])),
                          log_likelihood=log_likelihood(nats[truth.known], truth.occupied[truth.known])))
-    admissible = [r for r in rows if r["phantom"] <= PHANTOM_LIMIT]
-    if not admissible:
-        raise ConfigError(f"no map of the {len(rows)} candidates keeps its phantom rate within {PHANTOM_LIMIT:g} in "
-                          f"every band to {CHOICE_RANGE_M:g} m on scans {span(chosen)} (the least: "
-                          f"{min(r['phantom'] for r in rows):.3f})")
-    best = max(admissible, key=lambda r: (r["auc"], r["log_likelihood"]))
+    best = best_candidate(rows, f"every band to {CHOICE_RANGE_M:g} m on scans {span(chosen)}")
     values = candidates[best["candidate"]][0]
     why = (f"{source}: of {len(rows)} maps the best ranking of the lidar's occupied cells above its free ones (ROC "
            f"area {best['auc']:.3f}, the mean over the bands to {CHOICE_RANGE_M:g} m) among those calling at most "
-           f"{PHANTOM_LIMIT:g} of the free ones occupied in every band")
+           f"{PHANTOM_LIMIT:g} of the free ones occupied and some occupied ones occupied in every band")
     chosen_origins = {"sensor_model.snr_1m2_at_10m_db": why, "sensor_model.look_limit": why,
                       **_noise_only_origins(values, why, result)}
     return values, chosen_origins, dict(chosen=best["candidate"], cells=int(truth.known.sum()), candidates=rows,
                                         phantom_limit=PHANTOM_LIMIT, range_m=CHOICE_RANGE_M)
+
+
+def best_candidate(rows, where):
+    """The row of the best ROC area (then log-likelihood) among the candidates that call at most
+    ``PHANTOM_LIMIT`` of the lidar's free cells occupied and are not blind in any band. A map that
+    calls nothing occupied in a band meets the phantom limit trivially and may still rank well, but
+    a robot would drive into every obstacle there. Refuses when none qualifies."""
+    admissible = [r for r in rows if r["phantom"] <= PHANTOM_LIMIT and not r["blind"]]
+    if not admissible:
+        raise ConfigError(f"no map of the {len(rows)} candidates keeps its phantom rate within {PHANTOM_LIMIT:g} in "
+                          f"{where} while calling some of the lidar's occupied cells occupied in each (the least "
+                          f"phantom rate: {min(r['phantom'] for r in rows):.3f})")
+    return max(admissible, key=lambda r: (r["auc"], r["log_likelihood"]))
 
 
 def _lidar_bins(config, data_dir, chosen, say):
@@ -258,12 +267,22 @@ def format_lines(out):
                      "worse than noise alone: README). Check a map made with it: `radarcl navtech-map --config FILE` "
                      "(its half-map check), or `radarcl evaluate-lidar --model FILE` where the recording has a lidar.")
     else:
-        rows = sorted(m["candidates"], key=lambda r: (r["phantom"] > m["phantom_limit"], -r["auc"]))
+        rows = sorted(m["candidates"], key=lambda r: (r["phantom"] > m["phantom_limit"] or r.get("blind", False),
+                                                      -r["auc"]))
         lines.append(f"the map's sensitivity, look limit and background with the lidar's {m['cells']:,} cells: the "
                      f"best ranking of its occupied cells above its free ones (ROC area, the mean over the bands to "
-                     f"{m['range_m']:g} m) with at most {m['phantom_limit']:g} of the free ones called occupied in every "
-                     f"band (best 5 of {len(rows)}):")
+                     f"{m['range_m']:g} m) with at most {m['phantom_limit']:g} of the free ones and some of the occupied ones "
+                     f"called occupied in every band (best 5 of {len(rows)}):")
         lines.append(f"  {'AUC':>6} {'recall':>6} {'miss':>6} {'phantom':>7} {'log-lik':>8}  map")
         lines += [f"  {r['auc']:6.3f} {r['recall']:6.3f} {r['miss']:6.3f} {r['phantom']:7.3f} {r['log_likelihood']:8.4f}  "
-                  f"{r['candidate']}" + ("   <- chosen" if r["candidate"] == m["chosen"] else "") for r in rows[:5]]
+                  f"{r['candidate']}" + _verdict(r, m) for r in rows[:5]]
     return lines
+
+
+def _verdict(row, maps):
+    """Why a candidate of the lidar's choice was or was not taken, for its table's line."""
+    if row["candidate"] == maps["chosen"]:
+        return "   <- chosen"
+    if row.get("blind", False):
+        return "   (calls none occupied in a band)"
+    return "   (too many phantoms)" if row["phantom"] > maps["phantom_limit"] else ""
