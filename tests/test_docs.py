@@ -59,6 +59,14 @@ def test_the_site_builds_strict_with_every_guide_page_and_figure(site):
         assert (site / figure).is_file(), figure
 
 
+def test_getting_started_is_the_readme(site):
+    """The README is included, not copied: its every command is on the site's first page."""
+    text = page_text(site, "getting-started")
+    readme = (ROOT / "README.md").read_text()
+    commands = re.findall(r"^radarcl [^#\n]*?(?=\s*(?:#|$))", readme, re.M)
+    assert len(commands) > 20 and [c for c in commands if c not in text] == []
+
+
 def test_the_cli_reference_is_every_parser_s_help(site):
     """Each subcommand's usage line, as argparse writes it, is on the page (nothing hand-kept)."""
     from radarcl.cli import COMMANDS
