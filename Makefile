@@ -20,12 +20,12 @@ SYSTEM_PACKAGES_OPENCL := pocl-opencl-icd
 # misuse: `make check-kernels` runs the kernels' tests on it, `make test` a small slice of them.
 SYSTEM_PACKAGES_OCLGRIND := oclgrind
 
-.PHONY: demo test check-kernels fuzz bench bench-device info clean system
+.PHONY: demo test docs check-kernels fuzz bench bench-device info clean system
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,serial,viewer,export,fleet]'
+	$(BIN)/python -m pip install --quiet -e '.[test,serial,viewer,export,fleet,docs]'
 	touch $@
 
 system:
@@ -75,8 +75,12 @@ bench: $(BIN)/.installed
 bench-device: $(BIN)/.installed
 	$(BIN)/radarcl bench all --json out/bench-device.json
 
+# The documentation site into site/ (mkdocs.yml; `$(BIN)/mkdocs serve` to browse it while editing).
+docs: $(BIN)/.installed
+	$(BIN)/mkdocs build --strict --site-dir site
+
 info: $(BIN)/.installed
 	$(BIN)/radarcl info
 
 clean:
-	rm -rf $(VENV) out build *.egg-info
+	rm -rf $(VENV) out build site *.egg-info

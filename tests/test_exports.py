@@ -274,19 +274,23 @@ def test_a_format_added_to_the_table_alone_is_exported_by_radarcl_export(m, tmp_
 
 
 def test_the_command_gives_every_option_and_the_readme_lists_every_format():
-    """``radarcl export`` maps each of ``exports.OPTIONS`` from its command line, and the README's
-    table of formats has one row per format of ``exports.FORMATS``, in order, with its files."""
+    """``radarcl export`` maps each of ``exports.OPTIONS`` from its command line, the docs' table
+    of formats (docs/guide/maps.md) has one row per format of ``exports.FORMATS``, in order, with
+    its files, and the README's "Export it" names every format."""
     from pathlib import Path
 
     from radarcl.commands import export
 
     assert list(export.OPTIONS) == list(exports.OPTIONS)
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    table = readme.split("\n| `--to` | file |", 1)[1].split("\n\n", 1)[0]
+    root = Path(__file__).resolve().parents[1]
+    page = (root / "docs" / "guide" / "maps.md").read_text()
+    table = page.split("\n| `--to` | file |", 1)[1].split("\n\n", 1)[0]
     rows = [[c.strip() for c in line.split("|")[1:3]] for line in table.splitlines() if line.startswith("| `")]
     want = [[f"`{f.name}`", "a directory" if f.suffixes == ("",) else " / ".join(f"`{s}`" for s in f.suffixes)
              + "".join(f" + `{c}`" for c, _ in f.companions)] for f in exports.FORMATS.values()]
     assert rows == want
+    readme = (root / "README.md").read_text().split("\n## Export it\n", 1)[1].split("\n## ", 1)[0]
+    assert [name for name in exports.FORMATS if f"`{name}`" not in readme] == []
 
 def test_every_format_counts_the_same_voxels_at_the_thresholds(tmp_path):
     """A voxel exactly at a threshold is undecided in every format (occupied means strictly

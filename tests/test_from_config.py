@@ -247,7 +247,7 @@ def test_an_input_format_added_to_the_table_alone_is_fused(runtime, tmp_path, ca
     assert "a TI capture .npy/.txt; a toy .npy of power profiles)" in text and "a TI capture, or a toy .npy" in text
 
 def test_the_paper_profile_rebuilds_the_pre_profile_pipeline_bit_for_bit(runtime):
-    """README ("Sensors and configuration"): the paper's profile derives the paper's constants
+    """docs/guide/sensors.md: the paper's profile derives the paper's constants
     from its geometry alone, so `radarcl demo`'s maps are bit-identical to those made before
     profiles existed. The pipeline of then, with its constants written out as they stood in
     commit d49131d (the last before sensor profiles; ``evaluation/evaluate.py``'s ``MapConfig``

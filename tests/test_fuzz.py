@@ -398,7 +398,7 @@ STREAM_COUNTS = {"streams": 0, "packets_delivered": 0, "exceptions": 0, "over_wo
 # at most WORK_PER_BYTE per byte fed, beside at most a header's bytes per look at a header (a
 # packet still incomplete is looked at again when more bytes arrive; a look reads at most
 # MAX_HEADER_SIZE bytes of it). Measured: at most 3.1 per byte on the 20,000 streams of the CI
-# run (README, "Bad input"); a search that restarts at a frame's start on every chunk goes
+# run (docs/guide/bad-input.md); a search that restarts at a frame's start on every chunk goes
 # quadratic (test_parsers_work_linearly_on_a_packet_that_arrives_byte_by_byte).
 WORK_PER_BYTE = 4
 WORK_PER_LOOK = MAX_HEADER_SIZE

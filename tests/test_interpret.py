@@ -196,7 +196,7 @@ __kernel void probe_log10(const __global float *x, __global float *scalar, __glo
 
 
 def test_log10_nb8_is_log10_nb_lane_for_lane(runtime):
-    """README ("Eq. 12"): a chunk of eight bins takes its logs as one vector, ``log10_nb8``, lane
+    """docs/guide/pipeline.md ("Eq. 12"): a chunk of eight bins takes its logs as one vector, ``log10_nb8``, lane
     for lane the same floats as the scalar ``log10_nb`` the other bins take. Both on the device,
     compared bit for bit: every exponent of the float range, subnormals, 0, the mantissa around
     sqrt(2) where the reduction switches, random bit patterns, in every lane; NaN for negatives in

@@ -156,19 +156,19 @@ def test_the_layer_check_catches_an_upward_import():
 
 
 def layers_line():
-    """The README's one-line picture of LAYERS."""
+    """The one-line picture of LAYERS on the docs' development page."""
     named = ([r for r in rooms if r not in ("__main__", "__init__")] for rooms in LAYERS)
     return " -> ".join(", ".join(rooms) for rooms in named if rooms)
 
 
-def test_readme_layout_follows_the_layer_table():
-    text = (ROOT / "README.md").read_text()
+def test_the_documented_layout_follows_the_layer_table():
+    text = (ROOT / "docs" / "development.md").read_text()
     section = text.split("\n## Layout\n", 1)[1].split("\n## ", 1)[0]
     assert f"`{layers_line()}`" in section.replace("\n", " ").replace("  ", " "), layers_line()
     for rooms in LAYERS:
         for room in rooms:
             if room not in ("__main__", "__init__"):
-                assert f"  {room}" in section, f"README's layout leaves out {room}"
+                assert f"  {room}" in section, f"docs/development.md's layout leaves out {room}"
 
 
 def resolves(dotted):
@@ -189,33 +189,35 @@ def resolves(dotted):
     return False
 
 
-def test_every_name_the_code_and_the_readme_cite_exists():
-    """Kernel headers say which oracle they equal, docstrings and the README point to modules:
-    every ``radarcl.x.y`` they name must import (a renamed module leaves no stale pointer)."""
+def test_every_name_the_code_and_the_docs_cite_exists():
+    """Kernel headers say which oracle they equal, docstrings, the README and the docs pages
+    point to modules: every ``radarcl.x.y`` they name must import (a renamed module leaves no
+    stale pointer)."""
     import re
 
     pattern = re.compile(r"\bradarcl(?:\.[A-Za-z_]\w*)+")
     sources = [*(ROOT / "kernels").glob("*.cl"), *(ROOT / "radarcl").rglob("*.py"), *(ROOT / "viewer").rglob("*.py"),
-               ROOT / "README.md"]
+               ROOT / "README.md", *(ROOT / "docs").rglob("*.md")]
     stale = sorted({f"{path.relative_to(ROOT)}: {name}" for path in sources
                     for name in pattern.findall(path.read_text()) if not resolves(name.rstrip("."))})
     assert stale == []
 
 
-def test_every_file_the_code_and_the_readme_cite_exists():
+def test_every_file_the_code_and_the_docs_cite_exists():
     import re
 
     pattern = re.compile(r"\b(?:radarcl|viewer|kernels|tests|docs)/[\w/.-]*\w\.(?:py|cl|h|toml|glsl|png|md)\b")
     sources = [*(ROOT / "kernels").glob("*.cl"), *(ROOT / "radarcl").rglob("*.py"), *(ROOT / "viewer").rglob("*.py"),
-               *(ROOT / "tests").glob("*.py"), ROOT / "README.md", ROOT / "Makefile", ROOT / "pyproject.toml"]
+               *(ROOT / "tests").glob("*.py"), ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), ROOT / "Makefile",
+               ROOT / "pyproject.toml"]
     missing = sorted({f"{path.relative_to(ROOT)}: {name}" for path in sources for name in pattern.findall(path.read_text())
                       if "*" not in name and not (ROOT / name).exists()})
     assert missing == []
 
 
 def test_the_readme_lists_every_command_and_every_built_in_profile():
-    """The README's first section after set-up lists every subcommand, one line each, and its
-    profile table every built-in sensor profile."""
+    """The README's Commands section lists every subcommand, one line each, and its table of
+    profiles (under "Map your own recording") every built-in sensor profile."""
     from radarcl.cli import COMMANDS
     from radarcl.config import sensors
 
@@ -223,7 +225,7 @@ def test_the_readme_lists_every_command_and_every_built_in_profile():
     block = text.split("\n## Commands\n", 1)[1].split("```sh\n", 1)[1].split("```", 1)[0]
     listed = {line.split()[1] for line in block.splitlines() if line.startswith("radarcl ")}
     assert listed == set(COMMANDS), set(COMMANDS) ^ listed
-    assert text.index("\n## Commands\n") < text.index("\n## What exists today\n")
-    table = text.split("\n## Sensors and configuration", 1)[1].split("\n\n| profile |", 1)[1].split("\n\n", 1)[0]
+    assert text.index("\n## Commands\n") < text.index("\n## Map your own recording\n")
+    table = text.split("\n## Map your own recording\n", 1)[1].split("\n\n| profile |", 1)[1].split("\n\n", 1)[0]
     rows = {line.split("`")[1] for line in table.splitlines() if line.startswith("| `")}
     assert rows == set(sensors.builtin_names()), set(sensors.builtin_names()) ^ rows

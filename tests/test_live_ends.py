@@ -325,7 +325,7 @@ def test_the_status_latency_is_windowed(runtime):
 def test_float32_poses_differ_from_the_offline_map_within_the_stated_bound(runtime):
     """A radar that sends its poses in float32 (flags bit 0): the voxels whose centre lies within
     the poses' rounding of a beam's edge or a bin's border take or miss one update, at most
-    ``EVIDENCE_LIMIT`` units each (README, "Live radar"); float64 poses give the offline map."""
+    ``EVIDENCE_LIMIT`` units each (docs/guide/live.md); float64 poses give the offline map."""
     from radarcl import logodds
     from radarcl.livemap import Session
     from radarcl.pipeline import Mapping

@@ -10,15 +10,16 @@ Checked here against what does not come from that code:
 - the same sweep computed independently: the windowed beat tones' spectrum in closed form (the
   periodic Hann window's DTFT is three Dirichlet kernels), sampled at the padded FFT's bins, in
   float64, with the peaks counted by the rule written out below; it must give the kernel's
-  fractions and peaks, and the README's table (``README_FRACTIONS``);
+  fractions and peaks, and the docs' table (docs/guide/pipeline.md, ``documented_fractions``);
 - the window's theory: two equal echoes in phase at the window's centre show a dip only when
   they lie farther apart than twice the inflection point of the Hann mainlobe, sin(pi f) /
   (pi f (1 - f^2)): 1.884 bins = 0.942 m for the paper's 0.5 m cells (eq. 7), so 1.0 m apart
   resolves once the spectrum is sampled finely enough and 0.5 m never does; in opposite phase
-  they cancel at their midpoint and always show two humps (the notch the README warns about).
+  they cancel at their midpoint and always show two humps (the notch the docs warn about).
 """
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,8 +31,19 @@ from radarcl.stages.range_fft import RangeFFT
 
 C = 299_792_458.0
 NEAR_M, N_PHASES, N_OFFSETS = 7.0, 12, 10
-# README, "What the paper's §4.1 looks like here": fraction of the 120 cases with two peaks
-README_FRACTIONS = {1.0: {256: 0.76, 512: 1.00, 1024: 1.00}, 0.5: {256: 0.22, 512: 0.35, 1024: 0.42}}
+PAGE = Path(__file__).resolve().parents[1] / "docs" / "guide" / "pipeline.md"
+
+
+def documented_fractions():
+    """{separation: {n_fft: fraction with two peaks}} as the table of docs/guide/pipeline.md ("What
+    the paper's §4.1 looks like here") gives them, columns n_fft 256, 512, 1024."""
+    rows = [line for line in PAGE.read_text().splitlines() if " m: fraction with two peaks |" in line]
+    table = {}
+    for row in rows:
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        table[float(cells[0].split(" m")[0])] = dict(zip((256, 512, 1024), map(float, cells[1:4])))
+    assert set(table) == {1.0, 0.5}, rows
+    return table
 
 
 @pytest.fixture(scope="module")
@@ -122,7 +134,7 @@ def hann_sparrow_limit_bins():
 def test_the_sweep_matches_its_closed_form(kernel_transform, separation):
     """The kernel's sweep (float32 range FFT, ``count_peaks``) and the closed form agree case by
     case: the same fraction with two peaks (a float32 tie may move one case of 120), the same
-    peaks, and the README's table."""
+    peaks, and the docs' table."""
     got = two_target_experiment(PAPER_RADAR, NEAR_M, separation, transform=kernel_transform)
     want = independent_sweep(separation)
     assert got.n_cases == N_PHASES * N_OFFSETS == 120
@@ -130,10 +142,9 @@ def test_the_sweep_matches_its_closed_form(kernel_transform, separation):
         assert abs(got.resolved_fraction[n_fft] - fraction) <= 1 / 120, (n_fft, got.resolved_fraction[n_fft], fraction)
         same = [g == pytest.approx(w, abs=1e-9) for g, w in zip(got.peak_ranges[n_fft], found)]
         assert sum(not s for s in same) <= 1, n_fft
-        assert round(fraction, 2) == README_FRACTIONS[separation][n_fft]
+        assert round(fraction, 2) == documented_fractions()[separation][n_fft]
     if separation == 1.0:
-        # the README's "interference pulls resolved peaks off the targets by up to 0.26 m with 256
-        # zeros and 0.21 m with 768"
+        # interference pulls resolved peaks off the targets: by up to 0.26 m with 256 zeros, 0.21 m with 768
         assert got.peak_error_m(512) == pytest.approx(0.26, abs=0.005)
         assert got.peak_error_m(1024) == pytest.approx(0.21, abs=0.005)
 

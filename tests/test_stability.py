@@ -1,5 +1,5 @@
 """The stability suite: stiff and extreme cases, each named, each with an assertion and a float64
-comparison where one applies (README, "Stability suite"). The map must stay finite, exact
+comparison where one applies (docs/guide/evaluation.md, "Stability suite"). The map must stay finite, exact
 where integers are exact, and intact when an input is refused."""
 
 import math

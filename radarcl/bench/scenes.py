@@ -176,7 +176,7 @@ def add_arguments(parser):
     parser.add_argument("--seeds", type=int, nargs="+", default=None, help="these scene seeds instead of a split")
     parser.add_argument("--physics", default="", metavar="LIST",
                         help="harder physics in the simulator, comma-separated: sidelobes, multipath, spread, clutter "
-                             "(README: Harder physics)")
+                             "(docs/guide/evaluation.md: Calibration and harder physics)")
     parser.add_argument("--with", dest="extra", nargs="+", default=(), metavar="FILE",
                         help="also score these configuration files (e.g. from radarcl calibrate --save)")
 

@@ -176,7 +176,7 @@ def _viewer_rows(r):
 
 # Sizes: a full run stays within 5 minutes on a GPU, where what runs on the host (the numpy
 # baselines, PNG decoding, the pty's airtime, the first kernel builds) takes about as long as on a
-# CPU, so a CPU's run time bounds it (the README gives one). The drive's car stands still for its
+# CPU, so a CPU's run time bounds it (docs/guide/drives.md gives one). The drive's car stands still for its
 # first ~250 scans: 480 scans (2 minutes of driving, ~300 m) take the rolling window past its
 # 120 m, so bricks leave it.
 SUITE = {

@@ -39,7 +39,7 @@ AFFINITY_ENV = "POCL_AFFINITY"
 before PoCL starts, unless it is set already (``POCL_AFFINITY=0`` keeps the scheduler free)
 or this process may not run on every CPU (PoCL stops the process when a pin is refused).
 Unpinned, the workers follow the host thread between the planning and the kernels and lose
-their caches (README, "Why the code is shaped so")."""
+their caches (docs/measured-figures.md, "Why the code is shaped so")."""
 
 
 def pin_pocl_workers(environ=None):

@@ -83,7 +83,7 @@ BUILTIN = {
 (k_occ 1, E_h -1 from Fig. 10; E_l -0.1 ours, the paper gives none), Rohling's OS rank 3/4,
 the paper's beam (Fig. 7c) and voxel (0.1 m); the interpreter: the detection-statistics model
 (the instrument shows it better than eq. 12 on both simulated radars and against RADIATE's lidar:
-README), with its parameters (``sensor_model.DEFAULTS``); eq. 12 is interpret.model = "paper"."""
+docs/guide/sensor-models.md), with its parameters (``sensor_model.DEFAULTS``); eq. 12 is interpret.model = "paper"."""
 
 
 def check_value(name, value):

@@ -12,7 +12,7 @@ Two likelihoods, each for what it can identify:
   voxels do not inform the target's RCS (a free voxel's bin detects with P_fa whatever it is),
   so 97 % free air cannot drag the fit. (Fitted instead on the map's visible voxels, with every
   candidate a map, a coordinate search chose the brightest targets and the weakest terrain its
-  grid allowed: free evidence everywhere, as the last release's calibration did; the README
+  grid allowed: free evidence everywhere, as an earlier calibration did; docs/guide/sensor-models.md
   gives its scores.)
 - The reading (``sensor_model.READING``) is how a map's sums become probabilities: fitted on the
   maps of the fitted model, by the Bernoulli log-likelihood of the visible voxels (DETECTABLE or
@@ -63,7 +63,7 @@ def fit_reading(per_scene, meets=None):
     """The ``READING_GRID`` point of the best pooled log-likelihood over scenes' (e, k, n, y):
     (reading, pooled log-lik, per-scene log-liks). With ``meets`` (reading -> bool), the best of
     those that meet it, tried in order of likelihood (the unconstrained best of the visible voxels'
-    likelihood, made by the free air, calls obstacles free: README)."""
+    likelihood, made by the free air, calls obstacles free: docs/guide/sensor-models.md)."""
     ranked = []
     for limit, prior, looks in itertools.product(*READING_GRID.values()):
         if prior == 0.0 and looks != READING_GRID["prior_looks"][0]:

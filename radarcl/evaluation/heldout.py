@@ -26,8 +26,9 @@ from radarcl.grid import EvidenceGrid
 from radarcl.pipeline import Mapping, bin_model, evidence_config
 
 P_CLIP = 1e-4
-FREQUENCY_SIGMA_VOXELS = 1.0       # ``frequency_map``: one voxel, one look (README: the best of a sweep over 0.5-3
-                                   # voxels and 1 and 5 looks on the held-out scans themselves scores 0.001 AUC more)
+FREQUENCY_SIGMA_VOXELS = 1.0       # ``frequency_map``: one voxel, one look (docs/guide/sensor-models.md: the best of a
+                                   # sweep over 0.5-3 voxels and 1 and 5 looks on the held-out scans themselves scores
+                                   # 0.001 AUC more)
 FREQUENCY_PRIOR_LOOKS = 1.0
 
 

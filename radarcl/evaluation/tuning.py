@@ -31,7 +31,7 @@ WIDE_CANDIDATES = (None, 1.0, 0.5, 0.25, 0.07)
 EVIDENCE_CANDIDATES = tuple((e_h, e_l) for e_h in (-1.0, -0.3, -0.1) for e_l in (-0.1, -0.03, 0.0))
 SCALE_CANDIDATES = (1.0, 0.5, 0.25, 2.0)
 
-# The result of `radarcl tune` (seed 2, 0.2 m; README, "Tuning"): SO-CFAR at P_fa 1e-2 (the
+# The result of `radarcl tune` (seed 2, 0.2 m; docs/guide/evaluation.md, "Tuning"): SO-CFAR at P_fa 1e-2 (the
 # smallest-of average keeps the leading edge of a grazing ground return, where one training
 # window is still noise), wide pulses from 1.0 m (the detected leading edges of the ground are
 # shorter than the paper's 1.87 m), E_h / k_occ = -0.1 and E_l = 0 (noise behind a surface says

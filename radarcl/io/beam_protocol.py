@@ -88,7 +88,7 @@ def encode(sequence, frame, azimuth, elevation, timestamp_ns, samples, pose=None
     """The bytes of one beam packet. ``samples`` int16, complex64 (sent as complex int16: its
     parts must be whole numbers within int16) or float32; ``pose`` (4, 4) or None, sent as
     float64 (``pose_bits`` 64: the map equals the offline one bit for bit) or float32 (32: what
-    a radar with a float32 navigation solution sends; the map then differs, see the README)."""
+    a radar with a float32 navigation solution sends; the map then differs, see docs/guide/live.md)."""
     samples = np.asarray(samples)
     kind = sample_type_of(samples.dtype)
     for name, value, bits in (("sequence", sequence, None), ("frame", frame, None), ("azimuth", azimuth, 16),

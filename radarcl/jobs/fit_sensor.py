@@ -104,7 +104,7 @@ def run(config, data_dir, scans="all", lidar=False, runtime=None, report=None):
         # what the scans do not bound stays the configuration's: the background's four values were fitted
         # together, so one at its edge keeps them all; the map's sensitivity and look limit need a truth
         # to choose (the powers' typical target is not the map's: Oxford's fitted 106 dB erased its
-        # facades; held-out detections reward a map that calls nothing occupied: README)
+        # facades; held-out detections reward a map that calls nothing occupied: docs/guide/sensor-models.md)
         kept = set(result.at_edge) | {"snr_1m2_at_10m_db"}
         if kept & set(BACKGROUND):
             kept |= set(BACKGROUND)
@@ -264,8 +264,9 @@ def format_lines(out):
         lines.append(f"written: the fitted background where the scans bound it; the map's sensitivity, its look "
                      f"limit and the rest stay the configuration's{kept}: without a lidar nothing here tells a map "
                      "that finds obstacles from one that does not (with RADIATE's lidar the fitted background ranked "
-                     "worse than noise alone: README). Check a map made with it: `radarcl navtech-map --config FILE` "
-                     "(its half-map check), or `radarcl evaluate-lidar --model FILE` where the recording has a lidar.")
+                     "worse than noise alone: docs/guide/sensor-models.md). Check a map made with it: "
+                     "`radarcl navtech-map --config FILE` (its half-map check), or `radarcl evaluate-lidar --model FILE` "
+                     "where the recording has a lidar.")
     else:
         rows = sorted(m["candidates"], key=lambda r: (r["phantom"] > m["phantom_limit"] or r.get("blind", False),
                                                       -r["auc"]))

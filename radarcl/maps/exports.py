@@ -2,8 +2,8 @@
 
 The formats are one table, ``FORMATS``: each an ``Export`` naming its ``--to`` name, the
 extensions of the file it writes, what it holds (``radarcl export --help`` says it) and the
-function that writes it. The command, its help and the README's table of formats read this
-table (tests/test_exports.py checks the README against it); a new format is one ``Export``
+function that writes it. The command, its help and the table of formats in docs/guide/maps.md read this
+table (tests/test_exports.py checks that page against it); a new format is one ``Export``
 here (``register``) and its test.
 
 Every export says what the map says: occupied above the occupancy threshold, free below the

@@ -2,7 +2,7 @@
 atomically for readers.
 
 Why zarr: it saved the paper's 0.1 m map fastest of the formats tried, and rewrote changed
-bricks fastest (``radarcl bench store``; the README's figures). Beyond speed, a directory of
+bricks fastest (``radarcl bench store``; docs/guide/maps.md has the figures). Beyond speed, a directory of
 immutable chunk files makes a save atomic for readers without locks, where an HDF5 file
 modified in place is torn by a killed writer.
 

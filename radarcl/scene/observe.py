@@ -48,7 +48,7 @@ A_1M2_AT_10M = 0.05          # tone amplitude [V] of a 1 m^2 target at 10 m on t
 R_REF_M = 10.0
 NOISE_RMS = 1e-3             # receiver noise per sample [V]
 SPECKLE_CELL_M = 0.05        # a scatterer's phase is fixed per cell of this edge on the surface
-# Harder physics (the paper's future work), each a switch, off by default (README, "Harder physics"):
+# Harder physics (the paper's future work), each a switch, off by default (docs/guide/evaluation.md):
 SIDELOBES = 1                # the pattern beyond the main lobe: a sidelobe ring at -20 dB out to SIDELOBE_SPAN
 MULTIPATH = 2                # ghosts of mirror paths (ground, smooth walls) and specular surfaces
 SPREAD = 4                   # each surface patch's and point's RCS drawn from a heavy-tailed spread
@@ -63,7 +63,7 @@ SPREAD_CELL_M = 0.5          # one RCS draw per cell of this edge on a surface (
 SPREAD_SCALE_DB = 6.0        # the draw in dB: SPREAD_SCALE_DB x Student's t with SPREAD_DOF degrees of freedom:
 SPREAD_DOF = 3               # median 0 dB (the material's gamma), the quartiles of a 7 dB log-normal, tails heavier
 SPREAD_CLIP_DB = 30.0        # ... clipped at +-30 dB (a 10 cm corner reflector over a 0.5 m patch of brick)
-CLUTTER_ETA = 1e-3           # volume reflectivity [m^2 / m^3]: rain-like, 17 dB over the noise at 10 m (README)
+CLUTTER_ETA = 1e-3           # volume reflectivity [m^2 / m^3]: rain-like, 17 dB over noise at 10 m (docs/guide/evaluation.md)
 CLUTTER_PER_M = 1.0          # scatterers per metre of range in each beam (a bin of 0.25 m holds 0 or 1)
 CLUTTER_SHAPE = 1.0          # K-distribution shape nu: texture Gamma(nu, 1 / nu) x exponential speckle
 ADC = Adc(bits=12)           # full scale 1 V

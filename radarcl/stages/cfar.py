@@ -18,7 +18,7 @@ from radarcl.stages import Port, Stage, beam_batch, build, count, work_group_siz
 
 _KINDS = {"ca": 0, "go": 1, "so": 2, "os": 3}
 # Beams as the lanes of a vector on CPUs (PoCL does not vectorise across work-items): the widest
-# was the fastest (README, "Why the code is shaped so"). Any size is correct (the tests run
+# was the fastest (docs/measured-figures.md, "Why the code is shaped so"). Any size is correct (the tests run
 # several).
 DEFAULT_LOCAL_SIZE = 64
 CPU_VECTOR_WIDTH = 16

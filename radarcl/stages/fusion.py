@@ -35,7 +35,7 @@ from radarcl.stages.fusion_plan import (BLOCK, FramePlan, FusionPlanner, HeadFra
                                         candidate_windows, nonempty, pool_order, take_rows)
 
 # A work-item per block of rows of 8 voxels (as float8), its beams' windows planned on the
-# host per brick: the shape that measured fastest of those tried (README, "Why the code is
+# host per brick: the shape that measured fastest of those tried (docs/measured-figures.md, "Why the code is
 # shaped so"); the local size hardly matters. The per-row filter skips 3/4 of the rows, which
 # counts on devices where rows are not the cost.
 DEFAULT_LOCAL_SIZE = 64

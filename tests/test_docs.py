@@ -1,0 +1,112 @@
+"""The documentation site (mkdocs.yml, docs/): it builds with warnings as errors, so a broken
+link, a missing anchor or an API reference to a name that does not exist fails the suite; a
+page added under docs/ joins the site with no nav to edit; the CLI reference is the parsers'
+own help, and the API reference the docstrings."""
+
+import html
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def build(config, site):
+    """``mkdocs build --strict`` of ``config`` into ``site``; the finished process."""
+    return subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--config-file", str(config),
+                           "--site-dir", str(site)], capture_output=True, text=True, timeout=300,
+                          env={**_env(), "NO_MKDOCS_2_WARNING": "1"})
+
+
+def _env():
+    import os
+
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+
+
+def page_text(site, page):
+    """The visible text of a built page (tags dropped, entities decoded)."""
+    return html.unescape(re.sub(r"<[^>]+>", "", (site / page / "index.html").read_text()))
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    """The site as the repository holds it, built once for the tests of this file."""
+    out = tmp_path_factory.mktemp("site")
+    done = build(ROOT / "mkdocs.yml", out)
+    assert done.returncode == 0, done.stdout + done.stderr
+    return out
+
+
+@pytest.fixture
+def copy(tmp_path):
+    """A copy of mkdocs.yml and docs/ to plant faults in; the package itself is linked, not copied."""
+    shutil.copy(ROOT / "mkdocs.yml", tmp_path / "mkdocs.yml")
+    shutil.copytree(ROOT / "docs", tmp_path / "docs")
+    (tmp_path / "radarcl").symlink_to(ROOT / "radarcl")
+    return tmp_path
+
+
+def test_the_site_builds_strict_with_every_guide_page_and_figure(site):
+    for page in ("guide/pipeline", "guide/sensors", "guide/maps", "guide/live", "reference/cli", "reference/api"):
+        assert (site / page / "index.html").is_file(), page
+    for figure in re.findall(r"\]\(\.\./([\w.-]+\.png)\)", (ROOT / "docs" / "guide" / "maps.md").read_text()
+                             + (ROOT / "docs" / "guide" / "datasets.md").read_text()):
+        assert (site / figure).is_file(), figure
+
+
+def test_getting_started_is_the_readme(site):
+    """The README is included, not copied: its every command is on the site's first page."""
+    text = page_text(site, "getting-started")
+    readme = (ROOT / "README.md").read_text()
+    commands = re.findall(r"^radarcl [^#\n]*?(?=\s*(?:#|$))", readme, re.M)
+    assert len(commands) > 20 and [c for c in commands if c not in text] == []
+
+
+def test_the_cli_reference_is_every_parser_s_help(site):
+    """Each subcommand's usage line, as argparse writes it, is on the page (nothing hand-kept)."""
+    from radarcl.cli import COMMANDS
+
+    text = page_text(site, "reference/cli")
+    for name in COMMANDS:
+        assert f"usage: radarcl {name} " in text, name
+    assert "usage: radarcl bench range-fft" in text                 # subcommands of subcommands too
+    assert "--occupied-threshold" in text and "--window [R]" in text
+
+
+def test_the_api_reference_holds_the_docstrings(site):
+    from radarcl.maps.map import Map
+
+    text = " ".join(page_text(site, "reference/api").split())
+    first_line = " ".join(Map.probability_at.__doc__.split())
+    assert first_line in text
+    assert "Mapping" in text and "open_input" in text
+
+
+@pytest.mark.parametrize("planted, says", [
+    ("See [the missing page](nowhere.md).", "nowhere.md"),
+    ("See [the maps page's missing part](guide/maps.md#no-such-heading).", "no-such-heading"),
+    ("::: radarcl.maps.map.NoSuchThing", "NoSuchThing"),
+])
+def test_a_broken_link_or_reference_fails_the_build(copy, planted, says):
+    """The check can fail: each planted fault alone stops the strict build and is named."""
+    page = copy / "docs" / "index.md"
+    page.write_text(page.read_text() + "\n" + planted + "\n")
+    done = build(copy / "mkdocs.yml", copy / "site")
+    assert done.returncode != 0
+    assert says in done.stdout + done.stderr
+
+
+def test_a_new_page_joins_the_site_without_a_nav(copy):
+    """Pages other work adds (docs/design/*.md and the like) are picked up with no nav to edit,
+    and their links are checked like every other page's."""
+    (copy / "docs" / "design").mkdir()
+    (copy / "docs" / "design" / "a-choice.md").write_text("# A choice\n\nSee [the maps](../guide/maps.md).\n")
+    done = build(copy / "mkdocs.yml", copy / "site")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "A choice" in (copy / "site" / "design" / "a-choice" / "index.html").read_text()
+    assert "design/a-choice/" in (copy / "site" / "index.html").read_text()      # in the navigation
