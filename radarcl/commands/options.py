@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from radarcl.config import mapconfig, sensors
+from radarcl.errors import ConfigError
 
 DATA_ENV = "RADARCL_DATA"
 
@@ -77,10 +78,28 @@ def resolve_config(args, program=None):
     flags = dict(mapconfig.parse_flag(text) for text in args.set)
     if args.voxel is not None:
         flags["grid.voxel_m"] = args.voxel
-    sensor = args.sensor if args.sensor is not None or args.config is not None else args.sensor_default
+    sensor = args.sensor if args.sensor is not None or args.config is not None else default_sensor(args)
     config = mapconfig.resolve(sensor, args.config, flags, program, force_sensor=getattr(args, "force_sensor", False))
     say_notes(config.notes)
     return config
+
+
+def default_sensor(args):
+    """The sensor when neither --sensor nor --config names one: the one a directory INPUT's
+    layout says (``io.polar_layout.recognise``), said on stderr; the command's default for a
+    file; for a directory of no known layout, a ConfigError naming the profiles to try."""
+    from radarcl.io import polar_layout
+
+    path = getattr(args, "input", None)
+    if not isinstance(path, str) or not Path(path).is_dir():
+        return args.sensor_default
+    found = polar_layout.recognise(path)
+    if found is None:
+        raise ConfigError(f"{path} is a directory of no recording layout radarcl knows (Oxford, RADIATE, Boreas, "
+                          f"MulRan); give --sensor: one of {', '.join(sensors.builtin_names())} (polar-png for other "
+                          "polar PNG scans), or a profile file")
+    print(f"radarcl: {path} is laid out as {found[1]}: --sensor {found[0]}", file=sys.stderr)
+    return found[0]
 
 
 def say_notes(notes, said=()):

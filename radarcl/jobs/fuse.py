@@ -156,6 +156,12 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
         with tally.saving():
             bricks = rolling.finish(dict(poses=np.asarray(trajectory).reshape(-1, 16).tolist()))
         mib = bricks * spec.brick_bytes / 2 ** 20
+    from radarcl.jobs.api import write_trajectory
+
+    with tally.saving():
+        track = write_trajectory(source, np.asarray(trajectory), out)
+    if track is not None:
+        report(f"wrote {track}: the sensor's trajectory in TUM form (evo, SLAM tools)")
     save_s = tally.save_s
     ms = ((time.perf_counter() - start) - save_s) * 1e3 / n
     report(f"wrote {out}: {bricks} bricks ({mib:.0f} MiB); fusion {ms:.0f} ms per "
