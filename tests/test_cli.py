@@ -36,7 +36,7 @@ def test_demo_quick_runs_the_main_job_and_replays_its_recording(tmp_path, capsys
     assert 'data-images="7/7"' in dom and 'data-errors="0"' in dom and console == [], (dom[-300:], console)
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     assert summary["view"]["mode"] == "iso" and "error" not in summary["view"]
-    assert summary["observations"] == 3840
+    assert summary["observations"] == 3840 and summary["voxel_m"] == 0.4
     assert len(summary["fig9"]["pair_peaks_m"]["256"]) == 1 and len(summary["fig9"]["pair_peaks_m"]["1024"]) == 2
     q = summary["quality"]
     keys = {"auc_detectable", "auc_obstacles", "auc_weak", "false_free", "shadow_unknown", "ece", "brier",
@@ -54,6 +54,22 @@ def test_demo_quick_runs_the_main_job_and_replays_its_recording(tmp_path, capsys
     again = json.loads((tmp_path / "b" / "summary.json").read_text())
     for name in ("paper constants", "tuned"):
         assert again["maps"][name]["metrics"] == summary["maps"][name]["metrics"]
+
+
+def test_demo_sizes_are_one_choice(tmp_path, capsys):
+    """The default demo runs at 0.2 m (a laptop's memory), --full at the paper's 0.1 m, --quick at
+    0.4 m; asking for two sizes is a usage error before anything runs."""
+    import pytest
+
+    from radarcl.commands import demo as command
+    from radarcl.jobs import demo
+
+    assert (demo.DEFAULT_VOXEL_M, demo.FULL_VOXEL_M, demo.QUICK_VOXEL_M) == (0.2, 0.1, 0.4)
+    assert "0.2 m" in command.SUMMARY and "--full" in command.SUMMARY
+    with pytest.raises(SystemExit) as exc:
+        main(["demo", "--quick", "--full", "--out", str(tmp_path / "d")])
+    assert exc.value.code == 2 and "not allowed with argument" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()
 
 
 def test_fuse_writes_a_map_the_viewer_reads(tmp_path, capsys):
