@@ -14,7 +14,6 @@ whole trajectory plus the sensor's range (unless [grid] origin and size were giv
 """
 
 import contextlib
-import math
 import time
 from pathlib import Path
 
@@ -22,7 +21,7 @@ import numpy as np
 
 from radarcl.errors import ConfigError
 from radarcl.grid import EvidenceGrid
-from radarcl.gridspec import GridSpec
+from radarcl.gridspec import GridSpec, lattice_box
 from radarcl.io.files import scratch
 from radarcl.maps.disk import MapSaver, output_format, reading_of
 from radarcl.maps.map import Map
@@ -44,11 +43,11 @@ def drive_spec(config, positions):
     if not all(str(config.origins.get(k, "")).endswith("field of view") for k in ("grid.origin_m", "grid.size_m")):
         return spec
     reach = float(config["interpret.range_max_m"])
-    lo = np.minimum(positions[:, :2].min(axis=0) - reach, spec.origin_m[:2])
-    hi = positions[:, :2].max(axis=0) + reach
     v = spec.voxel_m
-    shape = tuple(max(1, math.ceil(float(x) / v)) for x in hi - lo) + (spec.shape[2],)
-    return GridSpec((float(lo[0]), float(lo[1]), spec.origin_m[2]), v, shape, spec.brick_z)
+    lo, size = lattice_box(np.minimum(positions[:, :2].min(axis=0) - reach, spec.origin_m[:2]),
+                           positions[:, :2].max(axis=0) + reach, v)           # on OctoMap's lattice
+    shape = tuple(max(1, round(x / v)) for x in size) + (spec.shape[2],)
+    return GridSpec((lo[0], lo[1], spec.origin_m[2]), v, shape, spec.brick_z)
 
 
 def frame_positions(source):
