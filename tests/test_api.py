@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -129,3 +130,29 @@ def test_a_loop_of_ones_own_saves_its_reading_untold(tmp_path):
     assert stored.reading == m.reading and stored.counts() == m.counts()
     with pytest.raises(radarcl.ConfigError, match="exists"):
         m.save(tmp_path / "three.npz")
+
+
+@pytest.mark.skipif(not OXFORD.is_dir(), reason="the shared Oxford scans are not here")
+def test_a_planar_map_renders_its_classes_from_above_by_default(tmp_path, capsys):
+    """radarcl render of a planar map draws occupied, free, undecided and unknown apart, seen
+    from above with metre axes (matplotlib); a mode or camera asked for gets the 3D render."""
+    from PIL import Image
+
+    import radarcl
+    from radarcl.cli import main
+    from radarcl.report import figures
+
+    m = radarcl.fuse(OXFORD, scans=3, out=tmp_path / "m.npz")
+    top = m.classes_from_above()
+    counts = m.counts()
+    assert int((top == radarcl.OCCUPIED).sum()) == counts["occupied"]       # one layer: a cell is its voxel
+    assert int((top == radarcl.FREE).sum()) == counts["free"] and int((top == radarcl.UNDECIDED).sum()) == counts["undecided"]
+    assert main(["render", str(tmp_path / "m.npz"), "--out", str(tmp_path / "top.png")]) == 0
+    assert "classes seen from above" in capsys.readouterr().out
+    rgb = np.asarray(Image.open(tmp_path / "top.png").convert("RGB")).reshape(-1, 3)
+    for _, _, colour in figures.CLASS_COLOURS:                              # all four classes drawn, apart
+        want = np.array([int(colour[i:i + 2], 16) for i in (1, 3, 5)])
+        assert (np.abs(rgb.astype(int) - want).max(axis=1) <= 2).sum() > 200, colour
+    assert main(["render", str(tmp_path / "m.npz"), "--mode", "classes", "--threshold", "nan",
+                 "--out", str(tmp_path / "bad.png")]) == 2
+    assert not (tmp_path / "bad.png").exists()

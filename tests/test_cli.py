@@ -34,6 +34,7 @@ def test_demo_quick_runs_the_main_job_and_replays_its_recording(tmp_path, capsys
         assert (tmp_path / "a" / name).stat().st_size > 0
     dom, console = open_in_browser(tmp_path / "a" / "report.html", tmp_path)
     assert 'data-images="7/7"' in dom and 'data-errors="0"' in dom and console == [], (dom[-300:], console)
+    assert 'data-overflow="0"' in dom, dom[-300:]                      # every table fits a laptop's window
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     assert summary["view"]["mode"] == "iso" and "error" not in summary["view"]
     assert summary["observations"] == 3840 and summary["voxel_m"] == 0.4
@@ -90,6 +91,7 @@ def test_fuse_writes_a_map_the_viewer_reads(tmp_path, capsys):
     assert not list(tmp_path.glob("*.tmp"))
     dom, console = open_in_browser(tmp_path / "map.html", tmp_path)       # the run's page, beside the map
     assert 'data-images="2/2"' in dom and 'data-errors="0"' in dom and console == [], (dom[-300:], console)
+    assert 'data-overflow="0"' in dom
     assert "2 frames" in dom or "<td class=\"n\">2</td>" in dom
     assert main(["fuse", str(rec), "--out", str(tmp_path / "again.npz"), "--voxel", "0.4", "--no-progress",
                  "--report", str(tmp_path / "map.html")]) == 2             # the page is kept like any output

@@ -203,7 +203,14 @@ def write_report(page, out, source, config, result, map_, trajectory):
         shown = [html.Figure(top.read_bytes(), "Each column's largest log-odds where positive, else its "
                                                  "smallest: red occupied, blue free, white unseen"
                                                  + ("; grey: never observed (unknown)" if unknown is not None else ""))]
-        shown.append(_render(out, Path(tmp) / "view.png"))
+        if spec.shape[2] == 1:                   # a planar map: its classes, as `radarcl render` draws it
+            classes = Path(tmp) / "classes.png"
+            figures.save(figures.classes_figure(map_.classes_from_above(), spec, trajectory,
+                                                f"{config.sensor.name}: {Path(str(out)).name}"), classes)
+            shown.append(html.Figure(classes.read_bytes(), "Each cell's class: occupied, free, observed but "
+                                                           "undecided, or never observed (radarcl render)"))
+        else:
+            shown.append(_render(out, Path(tmp) / "view.png"))
     html.write(page, f"radarcl fuse: {Path(str(out)).name}", [
         ("Summary", map_summary(map_, out)), ("Run", [html.Pairs(run)]), ("Map", shown),
         ("Configuration", [html.configuration(config)])],
@@ -219,5 +226,6 @@ def _render(map_path, png):
         render_map(map_path, png, "iso", size=(800, 500), report=lambda _: None)
     except (ImportError, ViewerError) as exc:
         return html.Text(f"No render: {exc}")
-    return html.Figure(png.read_bytes(), "The viewer's isosurface at 1 nat, coloured by height (radarcl render)")
+    return html.Figure(png.read_bytes(), "The viewer's isosurface at 1 nat (radarcl render --mode iso); its colour "
+                                         "bar says what the colours are")
 

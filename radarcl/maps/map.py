@@ -387,6 +387,19 @@ class Map:
             np.logical_or.at(out, (self.keys[:, 1], self.keys[:, 0]), (inside[:, :, None, None] & self.known()).any(axis=1))
         return out.transpose(0, 2, 1, 3).reshape(nby * BRICK, nbx * BRICK)[:ny, :nx]
 
+    def classes_from_above(self, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
+        """int8 (ny, nx) class of each column seen from above (``classes``' values): OCCUPIED
+        when some voxel of it is occupied, else FREE when some is free, else UNDECIDED when the
+        map observed one, else UNOBSERVED; for a planar map, its one layer's classes. Brick by
+        brick: never the dense volume."""
+        occ, free = check_thresholds(occupied_nats, free_nats)
+        hi, lo = self._column_hi_lo()
+        out = np.full(hi.shape, UNOBSERVED, np.int8)
+        out[self.known_columns()] = UNDECIDED
+        out[lo < free * logodds.SCALE] = FREE
+        out[hi > occ * logodds.SCALE] = OCCUPIED
+        return out
+
     def counts(self, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
         """Voxels of the grid by class: {"occupied", "free", "undecided", "unobserved"}."""
         _, units = self.voxels()
