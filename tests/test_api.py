@@ -156,3 +156,49 @@ def test_a_planar_map_renders_its_classes_from_above_by_default(tmp_path, capsys
     assert main(["render", str(tmp_path / "m.npz"), "--mode", "classes", "--threshold", "nan",
                  "--out", str(tmp_path / "bad.png")]) == 2
     assert not (tmp_path / "bad.png").exists()
+
+
+def test_a_geo_anchor_composes_with_poses():
+    """A frame 100 m east and 50 m north of an anchor, turned 90 deg: its origin moves by those
+    metres on the Earth and its heading by the turn; the identity keeps the anchor."""
+    import math
+
+    from radarcl.io.trajectory import EARTH_RADIUS_M, geo_anchor
+
+    a = dict(latitude_deg=55.0, longitude_deg=-3.0, altitude_m=200.0, heading_deg=0.0)
+    assert geo_anchor(a, np.eye(4)) == a
+    pose = np.eye(4)
+    pose[:3, 3] = (100.0, 50.0, 2.0)
+    pose[:2, :2] = [[0.0, -1.0], [1.0, 0.0]]
+    b = geo_anchor(a, pose)
+    assert math.isclose(math.radians(b["latitude_deg"] - 55.0) * EARTH_RADIUS_M, 50.0, abs_tol=1e-6)
+    assert math.isclose(math.radians(b["longitude_deg"] + 3.0) * EARTH_RADIUS_M * math.cos(math.radians(55.0)), 100.0,
+                        abs_tol=1e-6)
+    assert b["altitude_m"] == 202.0 and math.isclose(b["heading_deg"], 90.0)
+    c = geo_anchor(dict(a, heading_deg=90.0), pose)               # x north: 100 m along x is north
+    assert math.isclose(math.radians(c["latitude_deg"] - 55.0) * EARTH_RADIUS_M, 100.0, abs_tol=1e-6)
+    assert math.isclose(c["heading_deg"], 180.0) or math.isclose(c["heading_deg"], -180.0)
+
+
+RADIATE = ROOT.parent / "shared" / "data" / "radiate_fog"
+
+
+@pytest.mark.skipif(not RADIATE.is_dir(), reason="the shared RADIATE sequence is not here")
+def test_a_map_placed_by_gps_carries_its_geo_anchor(tmp_path):
+    import math
+
+    import radarcl
+    from radarcl.io import radiate
+    from radarcl.io.trajectory import EARTH_RADIUS_M
+    from radarcl.maps.disk import read_meta
+
+    radarcl.fuse(RADIATE, scans=3, out=tmp_path / "r.npz")
+    anchor = read_meta(tmp_path / "r.npz", "geo_anchor")
+    gps = radiate.read_gps_imu(RADIATE)
+    north = math.radians(anchor["latitude_deg"] - gps.lat[0]) * EARTH_RADIUS_M
+    east = math.radians(anchor["longitude_deg"] - gps.lon[0]) * EARTH_RADIUS_M * math.cos(math.radians(gps.lat[0]))
+    assert 0 < math.hypot(north, east) < 200 and -180 <= anchor["heading_deg"] < 180     # near the first fix
+    header = (tmp_path / "r.npz.tum").read_text().splitlines()[1].split()
+    assert header[:3] == ["#", "geo_anchor", "latitude_deg"] and float(header[3]) == anchor["latitude_deg"]
+    oxford = radarcl.fuse(OXFORD, scans=2, out=tmp_path / "o.npz")
+    assert oxford.counts()["occupied"] > 0 and read_meta(tmp_path / "o.npz", "geo_anchor") is None   # odometry only

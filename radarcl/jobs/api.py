@@ -47,8 +47,10 @@ def fuse(path, sensor=None, *, out=None, config=None, set=None, scans=None, pose
     scans: fuse only the first that many frames; poses: a trajectory file (default: found
     beside the scans); still: fuse input without poses with every frame at the origin;
     out: also write the map there (``.npz`` or a map store), with the sensor's poses and the
-    trajectory beside it as ``<out>.tum`` where the input's frames have times (an existing
-    ``out`` only with ``overwrite``); runtime: a ``radarcl.cl.Runtime`` (default: a new one)."""
+    trajectory beside it as ``<out>.tum`` where the input's frames have times, and where GPS
+    placed them (RADIATE) the map frame's ``geo_anchor`` (latitude, longitude, altitude,
+    heading; ``maps.disk.read_meta``) in both (an existing ``out`` only with ``overwrite``);
+    runtime: a ``radarcl.cl.Runtime`` (default: a new one)."""
     from radarcl.pipeline import Mapping
 
     profile = sensor_of(path, sensor)
@@ -73,9 +75,17 @@ def fuse(path, sensor=None, *, out=None, config=None, set=None, scans=None, pose
     trajectory, _ = mapping.fuse_source(source)
     result = Map.of_grid(mapping.grid)
     if out is not None:
-        result.save(out, poses=trajectory if len(trajectory) else None, overwrite=True)
+        anchor = geo_anchor_of(source)
+        result.save(out, poses=trajectory if len(trajectory) else None, overwrite=True,
+                    meta=None if anchor is None else dict(geo_anchor=anchor))
         write_trajectory(source, trajectory, out)
     return result
+
+
+def geo_anchor_of(source):
+    """Where the map frame of ``source`` (a ``FrameSource``: its first scan's pose) lies on the
+    Earth, a dict (``io.trajectory.geo_anchor``), for input placed by GPS (RADIATE); else None."""
+    return None if source.trajectory is None else source.trajectory.anchor
 
 
 def trajectory_path(out):
@@ -94,7 +104,8 @@ def write_trajectory(source, trajectory, out):
     if source.times_ns is None or not len(trajectory):
         return None
     path = trajectory_path(out)
-    track = Trajectory(source.times_ns, trajectory, source=f"the frames fused into {Path(out).name}")
+    track = Trajectory(source.times_ns, trajectory, source=f"the frames fused into {Path(out).name}",
+                       anchor=geo_anchor_of(source))
     with files.atomic(path) as tmp:
         tmp.write_text(track.tum_text())
     return path

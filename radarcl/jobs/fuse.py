@@ -124,10 +124,15 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
     n = len(source)
     tally = Tally(mapping.grid)
 
+    from radarcl.jobs.api import geo_anchor_of, write_trajectory
+
+    anchor = geo_anchor_of(source)
+    kept = {} if anchor is None else dict(geo_anchor=anchor)      # where the map frame lies on the Earth
+
     def save(poses):
         mapping.runtime.queue.finish()                  # the device's work counts as fusion, not saving
         with tally.saving():
-            saver(mapping.grid, poses)
+            saver(mapping.grid, poses, **kept)
 
     def before_frame(j, position):
         rolling.update(position)
@@ -153,14 +158,16 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
             raise ConfigError(f"the drive stopped: {exc}") from None
         tally.device_memory()
         with tally.saving():
-            bricks = rolling.finish(dict(poses=np.asarray(trajectory).reshape(-1, 16).tolist()))
+            bricks = rolling.finish(dict(poses=np.asarray(trajectory).reshape(-1, 16).tolist(), **kept))
         mib = bricks * spec.brick_bytes / 2 ** 20
-    from radarcl.jobs.api import write_trajectory
-
     with tally.saving():
         track = write_trajectory(source, np.asarray(trajectory), out)
     if track is not None:
         report(f"wrote {track}: the sensor's trajectory in TUM form (evo, SLAM tools)")
+    if anchor is not None:
+        report("the map frame (the first scan's pose) lies at latitude {latitude_deg:.7f}, longitude "
+               "{longitude_deg:.7f} deg, altitude {altitude_m:.1f} m, its x axis {heading_deg:.1f} deg counter-clockwise "
+               "from east (from GPS; kept in the map as geo_anchor)".format(**anchor))
     save_s = tally.save_s
     ms = ((time.perf_counter() - start) - save_s) * 1e3 / n
     report(f"wrote {out}: {bricks} bricks ({mib:.0f} MiB); fusion {ms:.0f} ms per "

@@ -106,15 +106,15 @@ class Map:
             reading = reading_of(reading)
         return cls(grid.spec, keys, data, grid.knowledge_bricks(), grid.knowledge_bricks("looks"), reading)
 
-    def save(self, path, poses=None, overwrite=False):
+    def save(self, path, poses=None, overwrite=False, meta=None):
         """Write the map to ``path``: an ``.npz`` file, or a map store for any other name
-        (``maps.disk.output_format``), with its knowledge channel and reading when it has them
-        and the sensor ``poses`` (n, 4, 4) when given. An existing ``path`` is refused unless
-        ``overwrite``. Returns the path."""
+        (``maps.disk.output_format``), with its knowledge channel and reading when it has them,
+        the sensor ``poses`` (n, 4, 4) and ``meta`` (a JSON-able dict, ``maps.disk.read_meta``)
+        when given. An existing ``path`` is refused unless ``overwrite``. Returns the path."""
         path = disk.check_output(path, force=overwrite)
         channels = None if not self.has_knowledge else npz.Channels(self.knowledge, self.looks, self.reading)
         writer = disk.FORMATS[disk.output_format(path)].writer(path, self.spec, reading=self.reading)
-        writer(self.keys.astype(np.int32), self.data, poses=poses, channels=channels)
+        writer(self.keys.astype(np.int32), self.data, poses=poses, channels=channels, meta=meta)
         return path
 
     def costmap(self, band, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
