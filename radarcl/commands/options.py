@@ -54,12 +54,15 @@ def add_output(p, flag, default, what):
         p.add_argument("--force", action="store_true", help="replace existing output files")
 
 
-def add_config(p, sensor_default=None):
-    """--sensor, --config, --set, --voxel: the map configuration (``config.mapconfig``)."""
+def add_config(p, sensor_default=None, by_layout=False):
+    """--sensor, --config, --set, --voxel: the map configuration (``config.mapconfig``);
+    ``by_layout``: a directory INPUT picks the sensor its layout says (``default_sensor``)."""
     default = sensor_default or sensors.DEFAULT_SENSOR
+    layout = "for a recording's directory (Oxford, RADIATE, Boreas, MulRan) the profile its layout says, " if by_layout else ""
     p.add_argument("--sensor", default=None, metavar="NAME|FILE",
                    help=f"sensor profile: {', '.join(sensors.builtin_names())} or a TOML file "
-                        f"(default: the --config file's sensor, else {default}; `radarcl sensors` lists them)")
+                        f"(default: the --config file's sensor, else {layout}else {default}; `radarcl sensors` lists "
+                        "them)")
     p.add_argument("--config", default=None, metavar="FILE", help="map configuration file (TOML), e.g. from "
                                                                   "`radarcl tune --save`")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
@@ -69,7 +72,7 @@ def add_config(p, sensor_default=None):
     p.add_argument("--force-sensor", action="store_true",
                    help="use a --config made for another sensor: keep its constants, derive its windows, range and "
                         "grid for this sensor (with a warning)")
-    p.set_defaults(sensor_default=default)
+    p.set_defaults(sensor_default=default, sensor_by_layout=by_layout)
 
 
 def resolve_config(args, program=None):
@@ -91,7 +94,7 @@ def default_sensor(args):
     from radarcl.io import polar_layout
 
     path = getattr(args, "input", None)
-    if not isinstance(path, str) or not Path(path).is_dir():
+    if not getattr(args, "sensor_by_layout", False) or not isinstance(path, str) or not Path(path).is_dir():
         return args.sensor_default
     found = polar_layout.recognise(path)
     if found is None:
