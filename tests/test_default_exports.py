@@ -19,12 +19,16 @@ RECORDINGS = [name for name in ("navtech_oxford", "radiate_fog") if (DATA / name
 @pytest.fixture(scope="module", params=RECORDINGS)
 def default_map(request, tmp_path_factory):
     """(path, Map) of the recording fused as a user would first fuse it."""
+    from radarcl.maps.disk import read_meta, read_poses
     from radarcl.maps.map import Map
 
     out = tmp_path_factory.mktemp(request.param) / "map.npz"
     assert main(["fuse", str(DATA / request.param), "--out", str(out), "--no-report", "--no-progress"]) == 0
     m = Map.open(out)
     assert m.counts()["occupied"] > 1000
+    track = out.with_name(out.name + ".tum").read_text().splitlines()       # the trajectory, beside the map
+    assert len([line for line in track if not line.startswith("#")]) == len(read_poses(out)) > 1
+    assert (read_meta(out, "geo_anchor") is not None) == (request.param == "radiate_fog")    # GPS: RADIATE only
     return out, m
 
 
