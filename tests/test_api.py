@@ -202,3 +202,24 @@ def test_a_map_placed_by_gps_carries_its_geo_anchor(tmp_path):
     assert header[:3] == ["#", "geo_anchor", "latitude_deg"] and float(header[3]) == anchor["latitude_deg"]
     oxford = radarcl.fuse(OXFORD, scans=2, out=tmp_path / "o.npz")
     assert oxford.counts()["occupied"] > 0 and read_meta(tmp_path / "o.npz", "geo_anchor") is None   # odometry only
+
+
+@pytest.mark.skipif(not OXFORD.is_dir(), reason="the shared Oxford scans are not here")
+def test_a_sensor_name_is_taken_where_a_configuration_is(tmp_path):
+    """Every function that takes a configuration takes a sensor's name for its defaults: the
+    pipeline, the fuse job, the live mapper, the configuration itself."""
+    import radarcl
+    from radarcl.config import mapconfig
+    from radarcl.jobs import fuse
+    from radarcl.livemap import LiveMapper
+
+    runtime = radarcl.Runtime()
+    assert mapconfig.as_resolved("navtech-cts350x").sensor.name == "navtech-cts350x"
+    config = mapconfig.resolve("navtech-cts350x")
+    assert mapconfig.as_resolved(config) is config
+    assert LiveMapper(runtime, "navtech-cts350x").config.sensor.name == "navtech-cts350x"
+    source = radarcl.open_input("navtech-cts350x", OXFORD).head(2)
+    result = fuse.run(runtime, source, "navtech-cts350x", tmp_path / "m.npz", report=lambda line: None)
+    assert result["frames"] == 2 and radarcl.Map.open(tmp_path / "m.npz").counts()["occupied"] > 0
+    with pytest.raises(radarcl.ConfigError, match="nosuch"):
+        mapconfig.as_resolved("nosuch")

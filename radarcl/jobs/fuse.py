@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GridSpec, lattice_box
@@ -86,7 +87,7 @@ class Tally:
 def run(runtime, source, config, out, every=None, progress=None, report=print, inputs=(), page=None, window_m=None,
         window_default=False, overwrite=False):
     """Fuse every frame of ``source`` (an ``io.inputs.FrameSource``) with ``config`` (a
-    ``mapconfig.Resolved``) and write the map to ``out``: an ``.npz`` file, or a map store
+    ``mapconfig.Resolved``, or a sensor's name for its defaults) and write the map to ``out``: an ``.npz`` file, or a map store
     (``maps.store``, any other name: only changed bricks are written after the first save).
     ``inputs`` go into the store's provenance; ``page`` names the HTML report to write
     (``write_report``). ``window_m``: a rolling map (see the module docstring; ``out`` must be
@@ -94,6 +95,7 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
     Returns a dict with the frame count, milliseconds per frame of fusion (the device's work
     included) and seconds of saving, timed apart (and, rolling, the device's high-water mark
     and the bricks that left and came back)."""
+    config = mapconfig.as_resolved(config)              # a sensor's name takes its defaults
     rolling = None
     if window_m is not None:
         if output_format(out) == "npz":
