@@ -1,5 +1,6 @@
 """Every default map of the shared recordings (``radarcl fuse DIR`` with nothing else: the
-sensor from the directory's layout, the default grid) exports to every format of
+sensor from the directory's layout, the default grid; the TI capture with its sensor, still)
+exports to every format of
 ``radarcl export`` without ``--resample``, and reads back in that format's own library
 (octomap-python, plyfile, vtk, Pillow for map_server's PGM, rosbags) with the map's occupied
 count; PLY and .vti carry their frame, units and voxel size."""
@@ -13,21 +14,27 @@ from radarcl.cli import main
 from radarcl.maps import exports
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-RECORDINGS = [name for name in ("navtech_oxford", "radiate_fog") if (DATA / name).is_dir()]
+RECORDINGS = {                      # the command line a user first fuses each with (a directory: its layout says)
+    "navtech_oxford": ["navtech_oxford"],
+    "radiate_fog": ["radiate_fog"],
+    "ti_adc_openradar": ["ti_adc_openradar/simple_frame_1.npy", "--sensor", "ti-xwr-openradar", "--still"],
+}
 
 
-@pytest.fixture(scope="module", params=RECORDINGS)
+@pytest.fixture(scope="module", params=[name for name in RECORDINGS if (DATA / name).is_dir()])
 def default_map(request, tmp_path_factory):
     """(path, Map) of the recording fused as a user would first fuse it."""
     from radarcl.maps.disk import read_meta, read_poses
     from radarcl.maps.map import Map
 
     out = tmp_path_factory.mktemp(request.param) / "map.npz"
-    assert main(["fuse", str(DATA / request.param), "--out", str(out), "--no-report", "--no-progress"]) == 0
+    data, *options = RECORDINGS[request.param]
+    assert main(["fuse", str(DATA / data), *options, "--out", str(out), "--no-report", "--no-progress"]) == 0
     m = Map.open(out)
     assert m.counts()["occupied"] > 1000
-    track = out.with_name(out.name + ".tum").read_text().splitlines()       # the trajectory, beside the map
-    assert len([line for line in track if not line.startswith("#")]) == len(read_poses(out)) > 1
+    if request.param != "ti_adc_openradar":                       # a still radar has no trajectory
+        track = out.with_name(out.name + ".tum").read_text().splitlines()   # the trajectory, beside the map
+        assert len([line for line in track if not line.startswith("#")]) == len(read_poses(out)) > 1
     assert (read_meta(out, "geo_anchor") is not None) == (request.param == "radiate_fog")    # GPS: RADIATE only
     return out, m
 
@@ -39,7 +46,8 @@ def occupied_read_back(fmt, path):
 
         tree = octomap.OcTree(0.1)
         assert tree.readBinary(str(path).encode())
-        return sum(1 for leaf in tree.begin_leafs() if tree.isNodeOccupied(leaf))
+        res = tree.getResolution()                   # a pruned leaf stands for all the voxels it covers
+        return sum(round((leaf.getSize() / res) ** 3) for leaf in tree.begin_leafs() if tree.isNodeOccupied(leaf))
     if fmt == "ply":
         import plyfile
 
@@ -84,10 +92,13 @@ def test_every_default_map_exports_to_every_format_with_its_occupied_count(defau
         xyz = np.stack([mesh["vertex"][a] for a in "xyz"], 1)
         lo = np.asarray(m.spec.origin_m) - m.spec.voxel_m
         assert len(mesh["face"]) > 0 and (xyz >= lo).all()
+    elif fmt == "costmap":                       # cells seen from above: a 3D map's columns, a planar map's voxels
+        assert occupied_read_back(fmt, out) == int((m.projection() == 100).sum())
+        assert m.spec.shape[2] > 1 or int((m.projection() == 100).sum()) == occupied
     else:
         assert occupied_read_back(fmt, out) == occupied, said
     if fmt == "octomap":
-        assert "on OctoMap's lattice; the planar map's one layer" in said
+        assert "on OctoMap's lattice" in said and ("the planar map's one layer" in said) == (m.spec.shape[2] == 1)
     if fmt in ("ply", "mesh"):
         import plyfile
 
