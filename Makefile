@@ -1,4 +1,4 @@
-# The README's two commands: `make demo` (the main job on the paper's radar) and `make test`.
+# The README's two commands: `make demo` (the main job on the paper's radar, 0.2 m voxels) and `make test`.
 # Both build a virtual environment in .venv from pyproject.toml first (PoCL, the OpenCL CPU
 # device, comes from PyPI) and check the system libraries the viewer needs: Mesa's EGL for
 # headless rendering and Xvfb for the window test; `make test` also Chromium (the reports are
@@ -20,7 +20,7 @@ SYSTEM_PACKAGES_OPENCL := pocl-opencl-icd
 # misuse: `make check-kernels` runs the kernels' tests on it, `make test` a small slice of them.
 SYSTEM_PACKAGES_OCLGRIND := oclgrind
 
-.PHONY: demo test docs check-kernels fuzz bench bench-device info clean system
+.PHONY: demo demo-full test docs check-kernels fuzz bench bench-device info clean system
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -47,6 +47,10 @@ system:
 
 demo: system $(BIN)/.installed
 	$(BIN)/radarcl demo --out out/demo
+
+# The main job at the paper's 0.1 m voxels: eight times the voxels of `make demo`, several GiB.
+demo-full: system $(BIN)/.installed
+	$(BIN)/radarcl demo --full --out out/demo-full
 
 test: NEED_BROWSER := 1
 test: NEED_OCLGRIND := 1

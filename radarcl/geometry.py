@@ -22,6 +22,7 @@ paper disregards evidence outside the half-power volume, and so do we.
 """
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,6 +80,13 @@ class BeamModel:
     gaussian: bool = True
 
     def __post_init__(self):
+        for name in ("beamwidth_az_rad", "beamwidth_el_rad", "half_aperture_az_m", "half_aperture_el_m"):
+            value = getattr(self, name)
+            if isinstance(value, (bool, str, bytes)) or not isinstance(value, numbers.Real):
+                raise ConfigError(f"{name} must be a number, got {value!r} ({type(value).__name__})")
+        for name in ("near_field", "gaussian"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ConfigError(f"{name} must be True or False, got {getattr(self, name)!r}")
         for name in ("beamwidth_az_rad", "beamwidth_el_rad"):
             value = getattr(self, name)
             if not (math.isfinite(value) and 0 < value < math.pi):

@@ -65,6 +65,7 @@ class EvidenceGrid:
         if self.chunk_bricks < 1 or self.chunk_bricks * spec.brick_bytes > limit:
             raise ConfigError(f"chunk_bricks must be in [1, {limit // spec.brick_bytes}], got {chunk_bricks!r}")
         self.has_knowledge = bool(knowledge)
+        self.reading = None             # how a grid with knowledge reads (set by ``Mapping.from_config``)
         # pools with the same slots, grown and evicted together
         self.channels = self.KNOWLEDGE_CHANNELS if self.has_knowledge else ("evidence",)
         self.pools = {name: [] for name in self.channels}       # channel -> its chunks (device buffers)
@@ -211,7 +212,13 @@ class EvidenceGrid:
     def allocate(self, bricks):
         """Slots of bricks (n, 3) (bx, by, bz), allocating the missing ones in the order of their
         index in the brick table (``allocate_index``). Returns (n,) int32 slots."""
-        b = np.asarray(bricks, dtype=np.int64).reshape(-1, 3)
+        try:
+            b = np.asarray(bricks, dtype=np.float64).reshape(-1, 3)
+        except (TypeError, ValueError):
+            raise ConfigError(f"bricks must be integer brick indices (n, 3) (bx, by, bz), got {bricks!r}") from None
+        if not (np.isfinite(b).all() and (b == np.round(b)).all()):
+            raise ConfigError("bricks must be whole finite brick indices (bx, by, bz), got non-integer or NaN values")
+        b = b.astype(np.int64)
         if len(b) and ((b < 0).any() or (b >= np.asarray(self.spec.brick_shape)).any()):
             raise ConfigError(f"brick indices must lie in [0, {self.spec.brick_shape}), got {b.min(0)}..{b.max(0)}")
         nbx, nby, _ = self.spec.brick_shape

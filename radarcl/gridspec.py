@@ -217,3 +217,16 @@ def rebrick(spec, keys, data, brick_z):
     inside = new_keys[:, 2] * brick_z < spec.shape[2]
     keep = inside & (out.reshape(len(out), -1) != 0).any(axis=1)
     return target, new_keys[keep].astype(np.int32), out[keep]
+
+
+def lattice_box(lo, hi, voxel_m, axes=3):
+    """(origin_m, size_m) of the smallest box holding [lo, hi] (per axis, metres) whose origin is
+    a whole number of voxels on its first ``axes`` axes: on the lattice that starts at 0, as
+    OctoMap's does, so a map of a default grid exports to OctoMap voxel for voxel. Axes beyond
+    ``axes`` keep ``lo`` and their size ``hi - lo``."""
+    v = float(voxel_m)
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    snapped_lo = np.where(np.arange(len(lo)) < axes, np.floor(lo / v + 1e-9) * v, lo)
+    snapped_hi = np.where(np.arange(len(hi)) < axes, np.ceil(hi / v - 1e-9) * v, hi)
+    origin = tuple(round(float(x), 9) + 0.0 for x in snapped_lo)
+    return origin, tuple(round(float(x), 9) for x in snapped_hi - snapped_lo)

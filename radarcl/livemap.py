@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
 from radarcl.geometry import check_pose, interpolate_pose
 from radarcl.io import beam_protocol, ti_uart
@@ -91,14 +92,14 @@ class LiveMapper:
     the order of the beams alone. So the live map, the replay of its recording and the offline
     map of the same beams are bit-identical.
 
-    runtime: an OpenCL ``Runtime``; config: a ``mapconfig.Resolved``; saver: a ``maps.disk.MapSaver``
+    runtime: an OpenCL ``Runtime``; config: a ``mapconfig.Resolved`` (or a sensor's name); saver: a ``maps.disk.MapSaver``
     (or None); poses: a ``PoseSource``; on_fused(bricks): told the bricks each fuse changed,
     rows (bx, by, bz, pool slot) (the view stream)."""
 
     LATENCY_WINDOW_S = 10.0     # the status line's latency covers the beams of the last 10 s
 
     def __init__(self, runtime, config, saver=None, poses=None, on_fused=None):
-        self.runtime, self.config, self.saver = runtime, config, saver
+        self.runtime, self.config, self.saver = runtime, mapconfig.as_resolved(config), saver
         self.poses = poses or PoseSource()
         self.on_fused = on_fused
         self.mapping = None

@@ -12,7 +12,8 @@ def chromium():
 
 
 BROWSER_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                 "--window-size=1280,900"]                 # a laptop's window: the pages' tables must fit it
 
 
 def open_in_browser(page, tmp_path):

@@ -34,9 +34,10 @@ def test_demo_quick_runs_the_main_job_and_replays_its_recording(tmp_path, capsys
         assert (tmp_path / "a" / name).stat().st_size > 0
     dom, console = open_in_browser(tmp_path / "a" / "report.html", tmp_path)
     assert 'data-images="7/7"' in dom and 'data-errors="0"' in dom and console == [], (dom[-300:], console)
+    assert 'data-overflow="0"' in dom, dom[-300:]                      # every table fits a laptop's window
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     assert summary["view"]["mode"] == "iso" and "error" not in summary["view"]
-    assert summary["observations"] == 3840
+    assert summary["observations"] == 3840 and summary["voxel_m"] == 0.4
     assert len(summary["fig9"]["pair_peaks_m"]["256"]) == 1 and len(summary["fig9"]["pair_peaks_m"]["1024"]) == 2
     q = summary["quality"]
     keys = {"auc_detectable", "auc_obstacles", "auc_weak", "false_free", "shadow_unknown", "ece", "brier",
@@ -54,6 +55,22 @@ def test_demo_quick_runs_the_main_job_and_replays_its_recording(tmp_path, capsys
     again = json.loads((tmp_path / "b" / "summary.json").read_text())
     for name in ("paper constants", "tuned"):
         assert again["maps"][name]["metrics"] == summary["maps"][name]["metrics"]
+
+
+def test_demo_sizes_are_one_choice(tmp_path, capsys):
+    """The default demo runs at 0.2 m (a laptop's memory), --full at the paper's 0.1 m, --quick at
+    0.4 m; asking for two sizes is a usage error before anything runs."""
+    import pytest
+
+    from radarcl.commands import demo as command
+    from radarcl.jobs import demo
+
+    assert (demo.DEFAULT_VOXEL_M, demo.FULL_VOXEL_M, demo.QUICK_VOXEL_M) == (0.2, 0.1, 0.4)
+    assert "0.2 m" in command.SUMMARY and "--full" in command.SUMMARY
+    with pytest.raises(SystemExit) as exc:
+        main(["demo", "--quick", "--full", "--out", str(tmp_path / "d")])
+    assert exc.value.code == 2 and "not allowed with argument" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()
 
 
 def test_fuse_writes_a_map_the_viewer_reads(tmp_path, capsys):
@@ -74,6 +91,7 @@ def test_fuse_writes_a_map_the_viewer_reads(tmp_path, capsys):
     assert not list(tmp_path.glob("*.tmp"))
     dom, console = open_in_browser(tmp_path / "map.html", tmp_path)       # the run's page, beside the map
     assert 'data-images="2/2"' in dom and 'data-errors="0"' in dom and console == [], (dom[-300:], console)
+    assert 'data-overflow="0"' in dom
     assert "2 frames" in dom or "<td class=\"n\">2</td>" in dom
     assert main(["fuse", str(rec), "--out", str(tmp_path / "again.npz"), "--voxel", "0.4", "--no-progress",
                  "--report", str(tmp_path / "map.html")]) == 2             # the page is kept like any output

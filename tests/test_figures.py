@@ -103,6 +103,21 @@ def test_a_report_opens_in_a_real_browser(tmp_path):
     assert 'data-images="0/1"' in dom                   # the check can fail
 
 
+def test_a_wide_table_fits_the_window_and_the_check_can_fail(tmp_path):
+    """A run-time table of sixteen columns with long configurations fits a laptop's window (its
+    text wraps, its numbers do not); a table no window can hold is counted as not fitting."""
+    headers = ["run", "configuration"] + [f"metric {k}" for k in range(14)]
+    rows = [[k, "reference: kind=so, pfa=0.01, k_occ=0.25, e_high=-0.025, wide_pulse_m=1, model=paper, voxel_m=0.4"]
+            + [0.123456 * (k + j) for j in range(14)] for k in range(12)]
+    page = html.write(tmp_path / "wide.html", "a wide table", [("Runs", [html.Table(headers, rows)])])
+    dom, console = open_in_browser(page, tmp_path)
+    assert 'data-overflow="0"' in dom and 'data-errors="0"' in dom and console == [], dom[-300:]
+    huge = html.write(tmp_path / "huge.html", "a table too wide", [
+        ("Runs", [html.Table([f"c{k}" for k in range(60)], [[123456.789] * 60])])])
+    dom, _ = open_in_browser(huge, tmp_path)
+    assert 'data-overflow="1"' in dom, dom[-300:]
+
+
 def test_the_bench_quality_page_opens_with_its_table_and_chart(tmp_path):
     from radarcl.report import quality
 

@@ -217,3 +217,134 @@ def test_force_replaces_a_bag_only_when_it_holds_nothing_else(small_map, tmp_pat
 def test_a_threshold_beyond_any_value_is_not_a_bug(small_map, tmp_path, capsys, to):
     out = tmp_path / ("cm.pgm" if to == "costmap" else "bag")
     sentence(capsys, ["export", small_map, "--to", to, "--out", out, "--threshold", "1e308"], status=0)
+
+
+# -- public constructors: a sentence, never a raw exception ---------------------------------------------
+def test_constructors_answer_bad_numbers_with_a_sentence():
+    import math
+
+    from radarcl.cl import Runtime
+    from radarcl.errors import ConfigError
+    from radarcl.geometry import BeamModel
+    from radarcl.grid import EvidenceGrid
+    from radarcl.gridspec import GridSpec
+    from radarcl.stages.range_fft import RangeFFT
+
+    runtime = Runtime()
+    for clip in ("abc", "0.5", True, [1.0]):
+        with pytest.raises(ConfigError, match="clip_level must be a positive number"):
+            RangeFFT(runtime, (2, 1), 8, 16, dtype=np.float32, clip_level=clip)
+    assert RangeFFT(runtime, (2, 1), 8, 16, dtype=np.float32, clip_level=np.float32(5.0)).clip_level == 5.0
+    with pytest.raises(ConfigError, match=r"beamwidth_az_rad must be a number, got '0.1' \(str\)"):
+        BeamModel(beamwidth_az_rad="0.1", beamwidth_el_rad=0.1, half_aperture_az_m=0.0, half_aperture_el_m=0.0)
+    with pytest.raises(ConfigError, match="half_aperture_el_m must be a number"):
+        BeamModel(0.1, 0.1, 0.0, [0.0])
+    with pytest.raises(ConfigError, match="near_field must be True or False"):
+        BeamModel(0.1, 0.1, 0.0, 0.0, near_field="no")
+    assert BeamModel(np.float64(0.1), math.radians(2.0), 0, np.float32(0.1)).beamwidth_az_rad == 0.1
+    grid = EvidenceGrid(runtime, GridSpec((0.0, 0.0, 0.0), 0.5, (16, 16, 16)))
+    for bricks in ([[np.nan, 0, 0]], [[0.5, 0, 0]], [["a", 0, 0]], [[0, 0]], [[np.inf, 0, 0]]):
+        with pytest.raises(ConfigError, match="bricks must be"):
+            grid.allocate(bricks)
+    assert grid.memory()["bricks"] == 0                      # nothing allocated by a refused call
+    assert list(grid.allocate([[1.0, 0, 0], [0, 1, 1]])) == [0, 1]
+
+
+# -- a file whose version and members disagree: refused naming both ------------------------------------
+def knowledge_map(path):
+    """A small map of the detection-statistics model written as radarcl writes it (version 3)."""
+    from radarcl.gridspec import GridSpec
+    from radarcl.maps import npz
+    from radarcl.sensor_model import READING
+
+    keys = np.array([[0, 0, 0]], np.int32)
+    data = np.full((1, 8, 8, 8), 3000, np.int32)
+    reading = dict(look_limit=2.0, prior_nats=-3.0, prior_looks=1.0, known_looks=0.5)
+    assert set(reading) == set(READING)
+    channels = npz.Channels(np.full_like(data, 4096), np.full_like(data, 2), reading)
+    npz.write(path, GridSpec((0.0, 0.0, 0.0), 0.5, (16, 8, 8)), keys, data, channels=channels)
+    return path
+
+
+@pytest.mark.parametrize("version,drop,says", [
+    (3, ("knowledge", "looks", "reading"), "version 3 map .* lacks its knowledge, looks, reading"),
+    (3, ("reading",), "version 3 map .* lacks its reading"),
+    (2, ("knowledge", "looks", "reading"), "version 2 map, which is planar .* holds neither"),
+    (2, ("looks",), "version 2 map with knowledge, reading lacks its looks"),
+    (1, (), "version 1 map but holds knowledge-channel members"),
+])
+def test_an_npz_whose_version_and_members_disagree_is_refused(tmp_path, capsys, version, drop, says):
+    from radarcl.errors import FrameFormatError
+    from radarcl.maps.map import Map
+
+    good = knowledge_map(tmp_path / "good.npz")
+    z = dict(np.load(good))
+    assert int(z["version"]) == 3 and Map.open(good).has_knowledge
+    z["version"] = np.asarray(version)
+    for name in drop:
+        del z[name]
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **z)
+    with pytest.raises(FrameFormatError, match=says):
+        Map.open(bad)
+    err = sentence(capsys, ["export", bad, "--to", "ply", "--out", tmp_path / "x.ply"])
+    assert "version" in err and not (tmp_path / "x.ply").exists()
+
+
+def test_a_legacy_version_2_knowledge_map_still_reads(tmp_path):
+    from radarcl.maps.map import Map
+
+    z = dict(np.load(knowledge_map(tmp_path / "k.npz")))
+    z["version"] = np.asarray(2)                                 # as radarcl wrote knowledge maps before
+    np.savez(tmp_path / "v2.npz", **z)
+    assert Map.open(tmp_path / "v2.npz").counts() == Map.open(tmp_path / "k.npz").counts()
+
+
+@pytest.mark.parametrize("edit", ["reading", "reading and its checksums", "everything"])
+def test_a_store_that_lost_its_reading_is_refused(tmp_path, edit):
+    import json
+    import shutil
+
+    from radarcl.errors import FrameFormatError
+    from radarcl.maps import store
+    from radarcl.maps.map import Map
+
+    Map.open(knowledge_map(tmp_path / "k.npz")).save(tmp_path / "k.rcmap")
+    manifest = json.loads((tmp_path / "k.rcmap" / store.MANIFEST).read_text())
+    del manifest["reading"]
+    if edit != "reading":
+        del manifest["checksums"]["knowledge"], manifest["checksums"]["looks"]
+    if edit == "everything":
+        for name in ("knowledge_0", "looks_0"):
+            shutil.rmtree(tmp_path / "k.rcmap" / name)
+    manifest["crc32"] = store.seal(manifest)                     # edited with care: the seal matches
+    (tmp_path / "k.rcmap" / store.MANIFEST).write_text(json.dumps(manifest))
+    says = {"reading": "gives no reading, yet the store lists checksums of knowledge, looks and holds knowledge_0",
+            "reading and its checksums": "gives no reading, yet the store holds knowledge_0, looks_0",
+            "everything": "store format 3 is written for planar bricks or the knowledge channel, but this store is cubic"}
+    with pytest.raises(FrameFormatError, match=says[edit]):
+        Map.open(tmp_path / "k.rcmap")
+
+
+def test_an_npz_write_killed_leaves_a_temp_file_the_next_run_removes_and_names(tmp_path, caplog):
+    """kill -9 while the map's temporary file is open: it may survive the kill (nothing can
+    remove it then), and the next write of the same map removes it and says so."""
+    import logging
+
+    from radarcl.gridspec import GridSpec
+    from radarcl.maps import npz
+
+    out = tmp_path / "map.npz"
+    script = ("import sys, time\nfrom radarcl.io.files import atomic\n"
+              "with atomic(sys.argv[1]) as tmp:\n    tmp.write_bytes(b'half a map')\n    print(tmp, flush=True)\n"
+              "    time.sleep(60)\n")
+    proc = subprocess.Popen([sys.executable, "-c", script, str(out)], stdout=subprocess.PIPE, text=True)
+    tmp = proc.stdout.readline().strip()
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert tmp.endswith(f".map.npz.{proc.pid}.tmp") and os.path.exists(tmp)        # what the kill left
+    with caplog.at_level(logging.WARNING, logger="radarcl.io.files"):
+        npz.write(out, GridSpec((0.0, 0.0, 0.0), 0.5, (8, 8, 8)), np.zeros((0, 3), np.int32),
+                  np.zeros((0, 8, 8, 8), np.int32))
+    assert not os.path.exists(tmp) and sorted(p.name for p in tmp_path.iterdir()) == ["map.npz"]
+    assert f"removed {tmp}, left by a run that was killed while writing map.npz" in caplog.text

@@ -94,13 +94,15 @@ def test_cli_lists_and_prints_profiles(capsys):
 
 
 def test_field_of_view_boxes():
-    """A spinning radar with one elevation maps its plane, one voxel thick; the TI board's 60 x 30
-    deg beam to 6 m fits its box; the paper's profile gives its own grid."""
+    """A spinning radar with one elevation maps its plane, one voxel thick, centred on it; the TI
+    board's 60 x 30 deg beam to 6 m fits its box; every box starts on the voxel lattice that
+    starts at 0 (OctoMap's), widened to the next voxel; the paper's profile gives its own grid."""
     origin, size = sensors.field_of_view_box(sensors.load("navtech-cts350x"), 0.3, 80.0)
-    assert origin == (-80.0, -80.0, -0.15) and size == (160.0, 160.0, 0.3)
+    assert origin == (-80.1, -80.1, -0.15) and size == (160.2, 160.2, 0.3)       # 267 voxels each side of 0
     origin, size = sensors.field_of_view_box(sensors.load("ti-xwr-openradar"), 0.05, 6.0)
     assert origin[0] == 0.0 and size[0] == pytest.approx(6.0) and size[1] == pytest.approx(6.0)
-    assert size[2] == pytest.approx(2 * 6.0 * math.sin(math.radians(15)))
+    half = 6.0 * math.sin(math.radians(15))                                         # 1.553 m
+    assert origin[2] == pytest.approx(-1.6) and size[2] == pytest.approx(3.2) and 3.2 - 2 * half < 0.1
     spec = mapconfig.resolve("paper").grid_spec()
     assert spec.shape == (800, 700, 200) and spec.origin_m == (-8.0, -35.0, -10.0)
     assert np.isclose(mapconfig.resolve("paper", flags={"grid.voxel_m": 0.4}).grid_spec().voxel_m, 0.4)

@@ -218,7 +218,7 @@ def knowledge_map(seed=1):
 
 
 def test_knowledge_round_trips_through_npz_store_and_conversion(tmp_path):
-    """A version 2 npz and a format 3 store hold the same sums, knowledge and reading, and convert
+    """A version 3 npz and a format 3 store hold the same sums, knowledge and reading, and convert
     into each other; a map without knowledge is still written as npz version 1."""
     from radarcl.maps import npz
     from radarcl.maps.disk import convert, read_channels

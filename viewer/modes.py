@@ -41,7 +41,8 @@ class Mode:
 MODES = {m.name: m for m in (
     Mode("occupancy", "1", "volume", "MODE_OCCUPANCY", "translucent occupancy (positive evidence as opacity)"),
     Mode("mip", "2", "volume", "MODE_MIP", "maximum-evidence projection"),
-    Mode("iso", "3", "volume", "MODE_ISO", "isosurface at the occupancy threshold, coloured by height"),
+    Mode("iso", "3", "volume", "MODE_ISO", "isosurface at the occupancy threshold, coloured by height (by log-odds "
+                                           "for a map too flat for height)"),
     Mode("spheres", "4", "spheres", "MODE_SPHERES", "Fig. 11: a sphere per positive cell, radius ~ log-odds"),
     Mode("free", "5", "volume", "MODE_FREE", "free space (blue haze) and occupancy: where can I drive", False),
 )}

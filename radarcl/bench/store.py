@@ -16,7 +16,6 @@ import numpy as np
 
 from radarcl.maps import store
 from radarcl.maps.disk import read
-from radarcl.maps.npz import FILE_VERSION
 
 
 def reference_map(voxel_m=0.1, report=None):
@@ -54,7 +53,7 @@ def run(map_path=None, repeat=3, changed=4096, report=None):
         for _ in range(repeat):
             start = time.perf_counter()
             with open(npz, "wb") as f:
-                np.savez_compressed(f, version=FILE_VERSION, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
+                np.savez_compressed(f, version=1, origin_m=np.asarray(spec.origin_m), voxel_m=spec.voxel_m,
                                     shape=np.asarray(spec.shape), keys=keys, data=data)
             times["npz_save"].append(time.perf_counter() - start)
             start = time.perf_counter()

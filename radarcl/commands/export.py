@@ -45,7 +45,8 @@ def add_arguments(parser):
                    help="octomap: interpolate a map whose origin is off OctoMap's lattice onto it (else refused)")
     p.add_argument("--colour", choices=exports.COLOURS, default="log-odds", help="ply: colour the points by (default: "
                                                                                "%(default)s)")
-    p.add_argument("--frame-id", default="map", help="rosbag: the frame of the messages (default: %(default)s)")
+    p.add_argument("--frame-id", default="map",
+                   help="the map's frame: rosbag's messages, PLY's and .vti's header (default: %(default)s)")
     add_salvage(p)
 
 

@@ -44,7 +44,7 @@ def add_arguments(parser):
     parser.add_argument("input", help=input_help())
     add_output(parser, "--out", "map.rcmap", "map to write: a map store directory (zarr; saved fast, --every then "
                                              "writes only the changed bricks), or an .npz file")
-    add_config(parser)
+    add_config(parser, by_layout=True)
     parser.add_argument("--odometry", default=None, help="polar scans: an Oxford radar_odometry.csv (= --poses FILE "
                                                           "--poses-format oxford)")
     add_trajectory_options(parser)

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from radarcl.config import mapconfig, sensors
+from radarcl.errors import ConfigError
 
 DATA_ENV = "RADARCL_DATA"
 
@@ -53,12 +54,15 @@ def add_output(p, flag, default, what):
         p.add_argument("--force", action="store_true", help="replace existing output files")
 
 
-def add_config(p, sensor_default=None):
-    """--sensor, --config, --set, --voxel: the map configuration (``config.mapconfig``)."""
+def add_config(p, sensor_default=None, by_layout=False):
+    """--sensor, --config, --set, --voxel: the map configuration (``config.mapconfig``);
+    ``by_layout``: a directory INPUT picks the sensor its layout says (``default_sensor``)."""
     default = sensor_default or sensors.DEFAULT_SENSOR
+    layout = "for a recording's directory (Oxford, RADIATE, Boreas, MulRan) the profile its layout says, " if by_layout else ""
     p.add_argument("--sensor", default=None, metavar="NAME|FILE",
                    help=f"sensor profile: {', '.join(sensors.builtin_names())} or a TOML file "
-                        f"(default: the --config file's sensor, else {default}; `radarcl sensors` lists them)")
+                        f"(default: the --config file's sensor, else {layout}else {default}; `radarcl sensors` lists "
+                        "them)")
     p.add_argument("--config", default=None, metavar="FILE", help="map configuration file (TOML), e.g. from "
                                                                   "`radarcl tune --save`")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
@@ -68,7 +72,7 @@ def add_config(p, sensor_default=None):
     p.add_argument("--force-sensor", action="store_true",
                    help="use a --config made for another sensor: keep its constants, derive its windows, range and "
                         "grid for this sensor (with a warning)")
-    p.set_defaults(sensor_default=default)
+    p.set_defaults(sensor_default=default, sensor_by_layout=by_layout)
 
 
 def resolve_config(args, program=None):
@@ -77,10 +81,28 @@ def resolve_config(args, program=None):
     flags = dict(mapconfig.parse_flag(text) for text in args.set)
     if args.voxel is not None:
         flags["grid.voxel_m"] = args.voxel
-    sensor = args.sensor if args.sensor is not None or args.config is not None else args.sensor_default
+    sensor = args.sensor if args.sensor is not None or args.config is not None else default_sensor(args)
     config = mapconfig.resolve(sensor, args.config, flags, program, force_sensor=getattr(args, "force_sensor", False))
     say_notes(config.notes)
     return config
+
+
+def default_sensor(args):
+    """The sensor when neither --sensor nor --config names one: the one a directory INPUT's
+    layout says (``io.polar_layout.recognise``), said on stderr; the command's default for a
+    file; for a directory of no known layout, a ConfigError naming the profiles to try."""
+    from radarcl.io import polar_layout
+
+    path = getattr(args, "input", None)
+    if not getattr(args, "sensor_by_layout", False) or not isinstance(path, str) or not Path(path).is_dir():
+        return args.sensor_default
+    found = polar_layout.recognise(path)
+    if found is None:
+        raise ConfigError(f"{path} is a directory of no recording layout radarcl knows (Oxford, RADIATE, Boreas, "
+                          f"MulRan); give --sensor: one of {', '.join(sensors.builtin_names())} (polar-png for other "
+                          "polar PNG scans), or a profile file")
+    print(f"radarcl: {path} is laid out as {found[1]}: --sensor {found[0]}", file=sys.stderr)
+    return found[0]
 
 
 def say_notes(notes, said=()):

@@ -1,7 +1,7 @@
 """`radarcl view`: the interactive volume viewer (``viewer.app``)."""
 
 from radarcl.commands.options import positive_int
-from radarcl.commands.render import add_view_options, settings
+from radarcl.commands.render import DEFAULT_CAMERA, DEFAULT_MODE, add_view_options, settings
 from radarcl.errors import ConfigError
 from radarcl.io import files
 
@@ -32,7 +32,8 @@ def run(args):
     if (args.map is None) == (args.follow is None):
         raise ConfigError("give a MAP file to view, or --follow HOST:PORT of a running radarcl live --serve (not both)")
     shot = files.check(args.screenshot, args.force, inputs=[args.map], what="screenshot") if args.screenshot else None
-    status = run_viewer(args.map, mode_name=args.mode, camera=args.camera, size=tuple(args.size), settings=settings(args),
+    status = run_viewer(args.map, mode_name=args.mode or DEFAULT_MODE, camera=args.camera or DEFAULT_CAMERA,
+                        size=tuple(args.size), settings=settings(args),
                         live=args.live, frames=args.frames, screenshot=shot, keys=args.keys, window=args.window,
                         follow=args.follow)
     if shot:

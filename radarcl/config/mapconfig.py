@@ -215,6 +215,13 @@ def _short(v):
     return f"{v:g}" if isinstance(v, float) else str(list(v) if isinstance(v, tuple) else v)
 
 
+def as_resolved(config):
+    """``config`` as a ``Resolved``: itself, or for a sensor (a built-in name, a profile file or
+    a ``SensorProfile``) its default configuration (``resolve``): what a function that takes a
+    configuration takes."""
+    return config if isinstance(config, Resolved) else resolve(config)
+
+
 def resolve(sensor=None, path=None, flags=None, program=None, force_sensor=False):
     """The ``Resolved`` configuration of ``sensor`` (a SensorProfile, a name or a path; default
     the file's ``sensor = ...`` or the paper's radar) with the file at ``path``, ``flags``

@@ -41,6 +41,7 @@ from radarcl.config.keys import check_value
 from radarcl.config.stage_config import RadarConfig, is_power_of_two
 from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, beam_model
+from radarcl.gridspec import lattice_box
 from radarcl.io import inputs
 from radarcl.io.polar_layout import FILE_NAME_UNITS, ORIENTATIONS, TIMESTAMP_AT, TIMESTAMPS
 from radarcl.io.stream import PROTOCOLS
@@ -444,11 +445,12 @@ def brick_depth(sensor):
 
 def field_of_view_box(sensor, voxel_m, range_max_m):
     """(origin_m, size_m) of the grid that holds the field of view around a sensor at the
-    origin: the bounding box of its beams out to ``range_max_m``; one voxel thick in z for a
-    spinning radar with one elevation."""
+    origin: the bounding box of its beams out to ``range_max_m``, its origin on the voxel
+    lattice that starts at 0 (``gridspec.lattice_box``: OctoMap's); one voxel thick in z,
+    centred on the sensor's plane, for a spinning radar with one elevation."""
     r = float(range_max_m)
-    if sensor.spinning and sensor.n_elevation == 1:
-        return (-r, -r, -0.5 * voxel_m), (2 * r, 2 * r, voxel_m)
+    if sensor.spinning and sensor.n_elevation == 1:       # the plane's one layer stays centred on the sensor
+        return lattice_box((-r, -r, -0.5 * voxel_m), (r, r, 0.5 * voxel_m), voxel_m, axes=2)
     lat = sensor.lattice()
     half_az = math.radians(sensor.get("beams", "beamwidth_az_deg")) / 2
     half_el = math.radians(sensor.get("beams", "beamwidth_el_deg")) / 2
@@ -458,8 +460,7 @@ def field_of_view_box(sensor, voxel_m, range_max_m):
     d = r * np.stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)], axis=1)
     d = np.vstack([d, np.zeros(3)])
     lo, hi = d.min(axis=0), d.max(axis=0)
-    return (tuple(round(float(v), 6) for v in lo),
-            tuple(round(float(v), 6) for v in np.maximum(hi - lo, voxel_m)))
+    return lattice_box(lo, np.maximum(hi, lo + voxel_m), voxel_m)
 
 
 def frame_volume_m3(sensor, range_min_m, range_max_m, voxel_m):

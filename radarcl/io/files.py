@@ -12,6 +12,7 @@ was killed (``kill -9``) are removed by the next ``check`` or ``atomic`` of the 
 """
 
 import contextlib
+import logging
 import os
 import re
 import shutil
@@ -24,6 +25,7 @@ import numpy as np
 
 from radarcl.errors import ConfigError, FrameFormatError
 
+log = logging.getLogger(__name__)
 _TMP = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.tmp$")
 
 
@@ -52,6 +54,7 @@ def clean_stale(path):
                 else:
                     tmp.unlink()
                 removed.append(tmp)
+                log.warning("removed %s, left by a run that was killed while writing %s", tmp, path.name)
     return removed
 
 

@@ -17,6 +17,7 @@ applanix poses), put in the first scan's frame, checked for jumps and for coveri
 azimuth's time, and interpolated per azimuth (the radar moves during its turn).
 """
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -37,7 +38,8 @@ class FrameSource:
     """What ``open_input`` read: ``frames[i]`` with ``poses[i]`` ((4, 4) or (n_beams, 4, 4))
     and ``flags[i]`` (or None), for ``sensor``; ``summary`` says what was read, ``posed``
     whether the poses came from the data (False: every frame at the origin), ``notes`` what
-    the readers repaired or assumed, ``trajectory`` the ``Trajectory`` the poses came from."""
+    the readers repaired or assumed, ``trajectory`` the ``Trajectory`` the poses came from,
+    ``times_ns`` each frame's UNIX time [ns] (its middle beam's; None where the input has none)."""
 
     sensor: object
     frames: object
@@ -47,9 +49,32 @@ class FrameSource:
     posed: bool = True
     notes: tuple = ()
     trajectory: object = None
+    times_ns: object = None
 
     def __len__(self):
         return len(self.frames)
+
+    def head(self, n):
+        """The first ``n`` frames (all when there are fewer), read as lazily as these are."""
+        n = min(int(n), len(self))
+        return dataclasses.replace(self, frames=_Head(self.frames, n), poses=self.poses[:n], flags=self.flags[:n],
+                                   summary=f"the first {n} of {self.summary}",
+                                   times_ns=None if self.times_ns is None else self.times_ns[:n])
+
+
+class _Head:
+    """The first ``n`` items of a sequence that may read its items only when asked."""
+
+    def __init__(self, items, n):
+        self.items, self.n = items, n
+
+    def __len__(self):
+        return self.n
+
+    def __getitem__(self, i):
+        if not -self.n <= i < self.n:
+            raise IndexError(i)
+        return self.items[i % self.n]
 
 
 def open_input(sensor, path, odometry=None, poses=None, poses_format=None, clock_offset_s=None,
@@ -60,6 +85,9 @@ def open_input(sensor, path, odometry=None, poses=None, poses_format=None, clock
     ``io.poses``; ``odometry`` is the older name for an Oxford odometry file), else found beside
     them; ``clock_offset_s``: how far the pose file's clock runs ahead of the radar's; a
     trajectory faster than ``max_speed_m_s`` is refused with the jump named."""
+    if isinstance(sensor, (str, Path)):
+        raise ConfigError(f"open_input takes a sensor profile, got the name {str(sensor)!r}: load it with "
+                          "radarcl.config.sensors.load, or call radarcl.open_input, which takes names")
     fmt = sensor.get("reader", "format", "recording")
     path = Path(path)
     if not path.exists():
@@ -143,6 +171,8 @@ def _polar(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max
     per_beam = polar_png.beam_poses(scans, track, sensor.n_azimuth)
     source = polar_source(sensor, scans, per_beam, f"{len(scans)} polar scans of {sequence.directory} ({how})")
     source.posed, source.notes, source.trajectory = track is not None, notes, track
+    if track is not None:
+        source.times_ns = np.array([s.timestamps_ns[len(s.timestamps_ns) // 2] for s in scans], np.int64)
     return source
 
 

@@ -223,3 +223,27 @@ def scan_times_ns(paths, layout, directory):
             raise FrameFormatError(f"{side}: no time for scan {Path(p).name} (frame {Path(p).stem!r})")
         out.append(t + offset)
     return out
+
+
+# -- which published recording a directory is ------------------------------------------------------------
+# (built-in profile, what marks it, the test): a recording's own files, narrowest first (Boreas and
+# Oxford both keep their scans in radar/; Boreas alone has applanix/).
+RECORDINGS = (
+    ("radiate-cts350x", "RADIATE (Navtech_Polar/)", lambda d: (d / "Navtech_Polar").is_dir() or d.name == "Navtech_Polar"),
+    ("mulran", "MulRan (sensor_data/radar/polar/)",
+     lambda d: (d / "sensor_data" / "radar" / "polar").is_dir() or d.parts[-3:] == ("sensor_data", "radar", "polar")),
+    ("boreas-cir204", "Boreas (radar/ beside applanix/)",
+     lambda d: (d / "applanix").is_dir() or (d.name == "radar" and (d.parent / "applanix").is_dir())),
+    ("navtech-cts350x", "Oxford Radar RobotCar (radar/ with radar.timestamps or gt/radar_odometry.csv)",
+     lambda d: any((b / "radar.timestamps").is_file() or (b / "gt" / "radar_odometry.csv").is_file()
+                   for b in (d, d.parent)) and ((d / "radar").is_dir() or d.name == "radar")),
+)
+
+
+def recognise(path):
+    """(built-in sensor profile name, the layout's name) of a directory laid out as one of the
+    published recordings (``RECORDINGS``: RADIATE, MulRan, Boreas, Oxford), or None."""
+    d = Path(path)
+    if not d.is_dir():
+        return None
+    return next(((name, what) for name, what, test in RECORDINGS if test(d.resolve())), None)

@@ -45,10 +45,9 @@ import numpy as np
 
 from radarcl.errors import FrameFormatError
 from radarcl.io.polar_layout import read_side_file
-from radarcl.io.trajectory import Trajectory
+from radarcl.io.trajectory import EARTH_RADIUS_M, Trajectory
 
 LIDAR_IN_RADAR_M = (0.6003, -0.120102, 0.250012)   # x right, y forward, z up (see the module)
-EARTH_RADIUS_M = 6378137.0          # WGS-84 equatorial radius: the local plane around the first fix
 CARTESIAN_PIXELS, CARTESIAN_M_PER_PIXEL = 1152, 0.173611
 TRACK_WINDOW_M = 1.0                # the track's heading from positions at least this far apart
 STILL_M_S = 0.5                     # slower than this, the heading is held (a parked car has no track)
@@ -207,7 +206,9 @@ def gps_trajectory(gps, clock_offset_s):
     notes.append(f"{gps.source}: GPS/IMU clock {clock_offset_s:+.3f} s from the radar's; planar poses (x east, "
                  "y north of the first fix), heading along the track")
     offset = int(round(clock_offset_s * 1e9))
-    return Trajectory(gps.times_ns - offset, poses, f"RADIATE GPS/IMU {gps.source}", tuple(notes))
+    anchor = dict(latitude_deg=float(gps.lat[0]), longitude_deg=float(gps.lon[0]), altitude_m=float(gps.alt[0]),
+                  heading_deg=0.0)                          # x east, y north of the first fix
+    return Trajectory(gps.times_ns - offset, poses, f"RADIATE GPS/IMU {gps.source}", tuple(notes), anchor)
 
 
 # -- the lidar --------------------------------------------------------------------------------------------

@@ -36,6 +36,7 @@ class Trajectory:
     poses: np.ndarray
     source: str = "poses"
     notes: tuple = ()
+    anchor: dict = None             # where the world frame lies on the Earth, when known (``GeoAnchor``)
 
     def __post_init__(self):
         t = np.asarray(self.times_ns, np.int64).reshape(-1)
@@ -131,23 +132,48 @@ class Trajectory:
 
     def relative_to(self, t_ns):
         """The same motion in the frame of the pose at ``t_ns`` (that pose becomes the identity)."""
-        origin = np.linalg.inv(self.at([t_ns])[0])
-        return Trajectory(self.times_ns, origin @ self.poses, self.source, self.notes)
+        pose = self.at([t_ns])[0]
+        anchor = None if self.anchor is None else geo_anchor(self.anchor, pose)
+        return Trajectory(self.times_ns, np.linalg.inv(pose) @ self.poses, self.source, self.notes, anchor)
 
     def shifted(self, offset_ns):
         """The same poses with ``offset_ns`` subtracted from every time (a sensor clock running
         ``offset_ns`` ahead of the radar's)."""
-        return Trajectory(self.times_ns - np.int64(offset_ns), self.poses, self.source, self.notes)
+        return Trajectory(self.times_ns - np.int64(offset_ns), self.poses, self.source, self.notes, self.anchor)
 
     def tum_text(self):
         """The trajectory in TUM form: ``t tx ty tz qx qy qz qw`` per line (seconds, metres, a unit
         quaternion with the scalar last), the format of the TUM RGB-D benchmark and evo."""
         q = quaternions(self.poses[:, :3, :3])
         lines = [f"# radarcl trajectory from {self.source}: t[s] tx ty tz qx qy qz qw (T_world_sensor, REP-103)"]
+        if self.anchor is not None:
+            lines.append("# geo_anchor " + " ".join(f"{k} {v!r}" for k, v in self.anchor.items()))
         for t, p, (w, x, y, z) in zip(self.times_ns, self.poses, q):
             lines.append(f"{t // 10 ** 9}.{t % 10 ** 9:09d} {p[0, 3]:.6f} {p[1, 3]:.6f} {p[2, 3]:.6f} "
                          f"{x:.9f} {y:.9f} {z:.9f} {w:.9f}")
         return "\n".join(lines) + "\n"
+
+
+# -- where a frame lies on the Earth ------------------------------------------------------------------------
+EARTH_RADIUS_M = 6378137.0          # WGS-84 equatorial radius: a local plane around a fix (equirectangular)
+
+
+def geo_anchor(anchor, pose):
+    """The anchor of the frame at ``pose`` (4x4 in the frame ``anchor`` places): a dict of the
+    frame origin's ``latitude_deg``, ``longitude_deg``, ``altitude_m`` (WGS-84) and the
+    direction of its x axis, ``heading_deg`` counter-clockwise from east (ENU yaw). ``anchor`` is
+    such a dict for a frame whose x, y, z are east, north, up (heading 0) or turned by its
+    heading; positions go through the local plane of its origin (equirectangular: a map's
+    extent, not a continent's)."""
+    yaw = np.radians(anchor["heading_deg"])
+    c, s = np.cos(yaw), np.sin(yaw)
+    x, y, z = np.asarray(pose, np.float64)[:3, 3]
+    east, north = c * x - s * y, s * x + c * y
+    lat0 = np.radians(anchor["latitude_deg"])
+    heading = anchor["heading_deg"] + np.degrees(np.arctan2(pose[1][0], pose[0][0]))
+    return dict(latitude_deg=float(anchor["latitude_deg"] + np.degrees(north / EARTH_RADIUS_M)),
+                longitude_deg=float(anchor["longitude_deg"] + np.degrees(east / (EARTH_RADIUS_M * np.cos(lat0)))),
+                altitude_m=float(anchor["altitude_m"] + z), heading_deg=float((heading + 180.0) % 360.0 - 180.0))
 
 
 # -- rotations as quaternions (w, x, y, z), vectorised -----------------------------------------------------

@@ -8,8 +8,8 @@
 3. The maps with radarcl's default, the detection-statistics model (``sensor_model``: the one
    written and shown unless ``shown`` names another), the paper's eq. 12 constants, the tuned
    ones (``tuning.TUNED``) and the calibrated occlusion-aware interpreter
-   (``calibration.CALIBRATED``) at 0.1 m.
-   (--quick: 0.4 m), the OctoMap-style baseline on the same detections, and their metrics
+   (``calibration.CALIBRATED``) at ``DEFAULT_VOXEL_M`` (0.2 m: a laptop's memory; --full: the
+   paper's 0.1 m, --quick: 0.4 m), the OctoMap-style baseline on the same detections, and their metrics
    against the exact ground truth (``metrics``), with timings.
 4. Plots: ``fig10_scene.png`` (two beams of the scene like the paper's Fig. 10),
    ``topdown.png`` (the map seen from above beside the truth), ``quality.png`` (error against
@@ -45,7 +45,9 @@ from radarcl.report.summary import map_summary
 from radarcl.scene.observe import load_observations, observe
 from radarcl.scene.outdoor import OCCUPIED, PAPER_TILTS_DEG, paper_scene
 
-QUICK_VOXEL_M = 0.4
+QUICK_VOXEL_M = 0.4                   # --quick (CI-sized)
+DEFAULT_VOXEL_M = 0.2                 # the default: the same figures within a laptop's memory
+FULL_VOXEL_M = 0.1                    # --full: the paper's voxel (eight times the voxels and the memory)
 VIEW_CAMERA = "-160,30"               # behind and left of the stand, looking down the field
 METRIC_KEYS = ("auc_detectable", "iou_detectable", "auc_obstacles", "auc_weak", "false_free", "shadow_unknown", "ece",
                "brier")
@@ -61,19 +63,24 @@ def _metrics_line(name, m, ms):
 SHOWN = "detection statistics"        # radarcl's default model: the map written, rendered and plotted
 
 
-def run(runtime, out_dir, seed=EVALUATION_SEED, quick=False, replay=None, report=print, progress=None, shown=SHOWN):
-    """Run the main job into ``out_dir``; ``report`` gets lines, ``progress(done, total, what)``
-    counts simulated frames and fused observations. Returns the summary dict."""
+def run(runtime, out_dir, seed=EVALUATION_SEED, voxel_m=DEFAULT_VOXEL_M, replay=None, report=print, progress=None,
+        shown=SHOWN):
+    """Run the main job into ``out_dir`` with the maps at ``voxel_m`` [m] (``QUICK_VOXEL_M``,
+    ``DEFAULT_VOXEL_M`` or ``FULL_VOXEL_M``); ``report`` gets lines, ``progress(done, total,
+    what)`` counts simulated frames and fused observations. Returns the summary dict."""
     out = Path(out_dir)
     replayed = load_observations(replay) if replay else None     # a bad file stops here
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {out} is not a directory")
     out.mkdir(parents=True, exist_ok=True)
     tick = (lambda what: (lambda d, t: progress(d, t, what))) if progress else (lambda what: None)
-    summary = dict(device=runtime.name, quick=bool(quick))
+    voxel = float(voxel_m)
+    if not 0.05 <= voxel <= 1.0:
+        raise ConfigError(f"the demo's voxel must lie in [0.05, 1] m, got {voxel_m!r}")
+    summary = dict(device=runtime.name, voxel_m=voxel, quick=voxel >= QUICK_VOXEL_M)
     summary["fig9"] = demo_fig9.run(runtime, out, report=report)
 
-    scene, voxel = paper_scene(), QUICK_VOXEL_M if quick else 0.1
+    scene = paper_scene()
     start = time.perf_counter()
     if replay:
         obs = replayed
@@ -163,7 +170,7 @@ def _write_report(out, summary, maps, base, q, shown_map):
         ("Summary", [page.Text(verdict)] + map_summary(shown_map, out / "map.npz", band_hint=(-0.5, 2.0))),
         ("Run", [page.Pairs({"device": summary["device"], "recording": summary["recording"],
                              "observations": summary["observations"], "seed": summary["seed"],
-                             "voxel [m]": QUICK_VOXEL_M if summary["quick"] else 0.1,
+                             "voxel [m]": summary["voxel_m"],
                              "simulation [s]": round(summary["simulate_s"], 1)})]),
         ("Metrics on the fixed voxel set", [page.Text(summary["voxel_set"]), page.Table(headers, rows),
                                             page.Text(METRICS_TEXT)]),

@@ -14,15 +14,15 @@ whole trajectory plus the sensor's range (unless [grid] origin and size were giv
 """
 
 import contextlib
-import math
 import time
 from pathlib import Path
 
 import numpy as np
 
+from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
 from radarcl.grid import EvidenceGrid
-from radarcl.gridspec import GridSpec
+from radarcl.gridspec import GridSpec, lattice_box
 from radarcl.io.files import scratch
 from radarcl.maps.disk import MapSaver, output_format, reading_of
 from radarcl.maps.map import Map
@@ -44,11 +44,11 @@ def drive_spec(config, positions):
     if not all(str(config.origins.get(k, "")).endswith("field of view") for k in ("grid.origin_m", "grid.size_m")):
         return spec
     reach = float(config["interpret.range_max_m"])
-    lo = np.minimum(positions[:, :2].min(axis=0) - reach, spec.origin_m[:2])
-    hi = positions[:, :2].max(axis=0) + reach
     v = spec.voxel_m
-    shape = tuple(max(1, math.ceil(float(x) / v)) for x in hi - lo) + (spec.shape[2],)
-    return GridSpec((float(lo[0]), float(lo[1]), spec.origin_m[2]), v, shape, spec.brick_z)
+    lo, size = lattice_box(np.minimum(positions[:, :2].min(axis=0) - reach, spec.origin_m[:2]),
+                           positions[:, :2].max(axis=0) + reach, v)           # on OctoMap's lattice
+    shape = tuple(max(1, round(x / v)) for x in size) + (spec.shape[2],)
+    return GridSpec((lo[0], lo[1], spec.origin_m[2]), v, shape, spec.brick_z)
 
 
 def frame_positions(source):
@@ -87,7 +87,7 @@ class Tally:
 def run(runtime, source, config, out, every=None, progress=None, report=print, inputs=(), page=None, window_m=None,
         window_default=False, overwrite=False):
     """Fuse every frame of ``source`` (an ``io.inputs.FrameSource``) with ``config`` (a
-    ``mapconfig.Resolved``) and write the map to ``out``: an ``.npz`` file, or a map store
+    ``mapconfig.Resolved``, or a sensor's name for its defaults) and write the map to ``out``: an ``.npz`` file, or a map store
     (``maps.store``, any other name: only changed bricks are written after the first save).
     ``inputs`` go into the store's provenance; ``page`` names the HTML report to write
     (``write_report``). ``window_m``: a rolling map (see the module docstring; ``out`` must be
@@ -95,6 +95,7 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
     Returns a dict with the frame count, milliseconds per frame of fusion (the device's work
     included) and seconds of saving, timed apart (and, rolling, the device's high-water mark
     and the bricks that left and came back)."""
+    config = mapconfig.as_resolved(config)              # a sensor's name takes its defaults
     rolling = None
     if window_m is not None:
         if output_format(out) == "npz":
@@ -125,10 +126,15 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
     n = len(source)
     tally = Tally(mapping.grid)
 
+    from radarcl.jobs.api import geo_anchor_of, write_trajectory
+
+    anchor = geo_anchor_of(source)
+    kept = {} if anchor is None else dict(geo_anchor=anchor)      # where the map frame lies on the Earth
+
     def save(poses):
         mapping.runtime.queue.finish()                  # the device's work counts as fusion, not saving
         with tally.saving():
-            saver(mapping.grid, poses)
+            saver(mapping.grid, poses, **kept)
 
     def before_frame(j, position):
         rolling.update(position)
@@ -154,8 +160,16 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
             raise ConfigError(f"the drive stopped: {exc}") from None
         tally.device_memory()
         with tally.saving():
-            bricks = rolling.finish(dict(poses=np.asarray(trajectory).reshape(-1, 16).tolist()))
+            bricks = rolling.finish(dict(poses=np.asarray(trajectory).reshape(-1, 16).tolist(), **kept))
         mib = bricks * spec.brick_bytes / 2 ** 20
+    with tally.saving():
+        track = write_trajectory(source, np.asarray(trajectory), out)
+    if track is not None:
+        report(f"wrote {track}: the sensor's trajectory in TUM form (evo, SLAM tools)")
+    if anchor is not None:
+        report("the map frame (the first scan's pose) lies at latitude {latitude_deg:.7f}, longitude "
+               "{longitude_deg:.7f} deg, altitude {altitude_m:.1f} m, its x axis {heading_deg:.1f} deg counter-clockwise "
+               "from east (from GPS; kept in the map as geo_anchor)".format(**anchor))
     save_s = tally.save_s
     ms = ((time.perf_counter() - start) - save_s) * 1e3 / n
     report(f"wrote {out}: {bricks} bricks ({mib:.0f} MiB); fusion {ms:.0f} ms per "
@@ -198,7 +212,14 @@ def write_report(page, out, source, config, result, map_, trajectory):
         shown = [html.Figure(top.read_bytes(), "Each column's largest log-odds where positive, else its "
                                                  "smallest: red occupied, blue free, white unseen"
                                                  + ("; grey: never observed (unknown)" if unknown is not None else ""))]
-        shown.append(_render(out, Path(tmp) / "view.png"))
+        if spec.shape[2] == 1:                   # a planar map: its classes, as `radarcl render` draws it
+            classes = Path(tmp) / "classes.png"
+            figures.save(figures.classes_figure(map_.classes_from_above(), spec, trajectory,
+                                                f"{config.sensor.name}: {Path(str(out)).name}"), classes)
+            shown.append(html.Figure(classes.read_bytes(), "Each cell's class: occupied, free, observed but "
+                                                           "undecided, or never observed (radarcl render)"))
+        else:
+            shown.append(_render(out, Path(tmp) / "view.png"))
     html.write(page, f"radarcl fuse: {Path(str(out)).name}", [
         ("Summary", map_summary(map_, out)), ("Run", [html.Pairs(run)]), ("Map", shown),
         ("Configuration", [html.configuration(config)])],
@@ -214,5 +235,6 @@ def _render(map_path, png):
         render_map(map_path, png, "iso", size=(800, 500), report=lambda _: None)
     except (ImportError, ViewerError) as exc:
         return html.Text(f"No render: {exc}")
-    return html.Figure(png.read_bytes(), "The viewer's isosurface at 1 nat, coloured by height (radarcl render)")
+    return html.Figure(png.read_bytes(), "The viewer's isosurface at 1 nat (radarcl render --mode iso); its colour "
+                                         "bar says what the colours are")
 

@@ -24,6 +24,7 @@ import time
 
 import numpy as np
 
+from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
 from radarcl.io.files import scratch
 from radarcl.io.inputs import open_input
@@ -89,6 +90,7 @@ def run(config, paths, out, scheduler=None, workers=2, report=print, client=None
     """Fuse ``paths`` on a Dask cluster (``client``, a ``scheduler`` address, or a local
     cluster of ``workers`` processes) into ``out`` (.npz or a map store), merged on the same
     workers; returns a dict of timings. The grid is the configuration's."""
+    config = mapconfig.as_resolved(config)              # a sensor's name takes its defaults
     if len(set(map(str, paths))) != len(paths):
         raise ConfigError("an input appears twice; each recording is fused once")
     shapes = check_inputs(config, paths)

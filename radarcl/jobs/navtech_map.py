@@ -27,7 +27,7 @@ from radarcl.errors import FrameFormatError
 from radarcl.evaluation.evaluate import read_map, read_units
 from radarcl.geometry import se2_pose
 from radarcl.grid import EvidenceGrid
-from radarcl.gridspec import GridSpec
+from radarcl.gridspec import GridSpec, lattice_box
 from radarcl.io import polar_png
 from radarcl.io import poses as pose_files
 from radarcl.io.inputs import polar_source
@@ -43,9 +43,9 @@ def grid_for(poses, range_m, voxel_m, brick_z=1):
     """A one-voxel-thick grid in the radar's plane covering every pose plus ``range_m``, in
     planar bricks (8 x 8 x 1) unless ``brick_z`` says 8."""
     xy = poses[..., :2, 3].reshape(-1, 2)
-    lo, hi = xy.min(axis=0) - range_m, xy.max(axis=0) + range_m
-    nx, ny = (int(math.ceil(v)) for v in (hi - lo) / voxel_m)
-    return GridSpec((lo[0], lo[1], -0.5 * voxel_m), voxel_m, (nx, ny, 1), brick_z)
+    (x0, y0), size = lattice_box(xy.min(axis=0) - range_m, xy.max(axis=0) + range_m, voxel_m)
+    nx, ny = (max(1, round(s / voxel_m)) for s in size)
+    return GridSpec((x0, y0, -0.5 * voxel_m), voxel_m, (nx, ny, 1), brick_z)
 
 
 def build_map(runtime, config, spec, scans, per_beam, progress=None):

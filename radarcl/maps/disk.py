@@ -176,6 +176,8 @@ def _channels(grid, reading):
     if not getattr(grid, "has_knowledge", False):
         return None
     if reading is None:
+        reading = getattr(grid, "reading", None)       # a pipeline's grid knows it (Mapping.from_config)
+    if reading is None:
         raise ConfigError("a map with the knowledge channel is saved with its reading (the [sensor_model] keys "
                           "look_limit, prior_nats, prior_looks): pass reading= the configuration it was made with")
     if not isinstance(reading, dict):
@@ -251,7 +253,8 @@ def convert(source, target, salvage=False):
 def save_grid(grid, path, poses=None, reading=None):
     """Write an ``EvidenceGrid`` (spec and allocated bricks, not the dense volume) to an npz
     file, with the sensor's ``poses`` (n, 4, 4) when given (the viewer draws them); a grid with
-    the knowledge channel with it and its ``reading``: a dict (``reading_of``) or the
+    the knowledge channel with it and its reading: the grid's own (a pipeline's grid,
+    ``Mapping.from_config``, knows it), or ``reading``: a dict (``reading_of``) or the
     ``mapconfig.Resolved`` the map was made with."""
     npz.write(path, grid.spec, *grid.bricks(), poses=poses, channels=_channels(grid, reading))
 

@@ -110,6 +110,12 @@ def octomap(m, path, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS, binary=No
     binary = path.suffix == ".bt" if binary is None else binary
     res = m.spec.voxel_m
     shift = lattice_shift(m.spec)
+    planar = m.spec.shape[2] == 1 and abs(abs(shift[2]) - 0.5 * res) <= LATTICE_TOLERANCE * res
+    if planar and not np.any(np.abs(shift[:2]) > LATTICE_TOLERANCE * res):
+        # a planar sensor's map is one layer centred on its plane, which OctoMap's lattice cannot
+        # centre a layer on: the layer goes whole into the lattice layer above the plane (no voxel
+        # split in two, as a resampling would), and the note says so
+        shift = np.array([shift[0], shift[1], 0.0])
     off = np.any(np.abs(shift) > LATTICE_TOLERANCE * res)
     if resample and off:
         keys, nats = resample_to_lattice(m, m.voxels()[1])
@@ -123,9 +129,14 @@ def octomap(m, path, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS, binary=No
     else:
         idx, units = m.decided(occ, free)              # the undecided voxels never leave the bricks
         # on the lattice: OctoMap's key of voxel i is i plus the origin's whole voxels
-        keys = idx + (np.round(np.asarray(m.spec.origin_m) / res).astype(np.int64) + octree.CENTRE_KEY)
+        first = np.floor((np.asarray(m.spec.origin_m) + 0.5 * res) / res + LATTICE_TOLERANCE).astype(np.int64)
+        keys = idx + (first + octree.CENTRE_KEY)
         nats = units.astype(np.float64) / logodds.SCALE
         note = "on OctoMap's lattice"
+        if planar:
+            z = float(m.spec.origin_m[2]) + 0.5 * res
+            note += (f"; the planar map's one layer (centred at z = {z:g} m) is OctoMap's layer from "
+                     f"{first[2] * res:g} to {(first[2] + 1) * res:g} m")
     if len(keys) and (keys.min() < 0 or keys.max() >= 2 * octree.CENTRE_KEY):
         raise ConfigError(f"the map does not fit OctoMap's tree of {2 * octree.CENTRE_KEY} voxels per axis")
     c = classes(np.rint(nats * logodds.SCALE).astype(np.int64), occ, free)
@@ -150,9 +161,18 @@ def _colours(values, scheme):
     return (cmap(t)[:, :3] * 255 + 0.5).astype(np.uint8)
 
 
-def ply_points(m, path, occupied_nats=OCCUPIED_NATS, colour="log-odds"):
+def _ply_comments(m, frame_id, what):
+    """The header comments of a PLY export: what it holds, its frame, units and voxel size (a
+    PLY has no fields for them; readers show comments, plyfile gives them as ``comments``)."""
+    spec = m.spec
+    return [f"radarcl {what}", f"frame_id {frame_id}", "units m", f"voxel_m {spec.voxel_m:g}",
+            "origin_m " + " ".join(f"{v:g}" for v in spec.origin_m), "shape " + " ".join(map(str, spec.shape))]
+
+
+def ply_points(m, path, occupied_nats=OCCUPIED_NATS, colour="log-odds", frame_id="map"):
     """The occupied voxels as a PLY point cloud: x, y, z [m], red, green, blue (``colour`` by
-    log-odds or height), log_odds [nat], probability."""
+    log-odds or height), log_odds [nat], probability; the header's comments name the frame
+    (``frame_id``), the units and the voxel size."""
     plyfile = _need("plyfile")
     if colour not in COLOURS:
         raise ConfigError(f"colour must be one of {', '.join(COLOURS)}, got {colour!r}")
@@ -165,13 +185,16 @@ def ply_points(m, path, occupied_nats=OCCUPIED_NATS, colour="log-odds"):
     v["log_odds"], v["probability"] = nats, 1.0 / (1.0 + np.exp(-nats))
     _warn_empty(path, len(v))
     with atomic(path) as tmp:
-        plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")], text=False).write(str(tmp))
+        plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")], text=False,
+                        comments=_ply_comments(m, frame_id, f"occupied voxel centres above {occupied_nats:g} nat")
+                        ).write(str(tmp))
     return dict(files=[Path(path)], points=len(v))
 
 
-def ply_mesh(m, path, occupied_nats=OCCUPIED_NATS, band=None):
+def ply_mesh(m, path, occupied_nats=OCCUPIED_NATS, band=None, frame_id="map"):
     """The isosurface at ``occupied_nats`` (marching cubes over the dense log-odds as read,
-    ``Map.dense``: unseen 0, or a knowledge map's prior) as a PLY mesh in metres."""
+    ``Map.dense``: unseen 0, or a knowledge map's prior) as a PLY mesh in metres, the frame,
+    units and voxel size in its header's comments."""
     plyfile = _need("plyfile")
     mcubes = _need("mcubes")
     occ, _ = check_thresholds(occupied_nats, 0.0)
@@ -198,7 +221,8 @@ def ply_mesh(m, path, occupied_nats=OCCUPIED_NATS, band=None):
     _warn_empty(path, len(vertex))
     with atomic(path) as tmp:
         plyfile.PlyData([plyfile.PlyElement.describe(vertex, "vertex"), plyfile.PlyElement.describe(face, "face")],
-                        text=False).write(str(tmp))
+                        text=False, comments=_ply_comments(m, frame_id, f"isosurface at {occupied_nats:g} nat")
+                        ).write(str(tmp))
     return dict(files=[Path(path)], vertices=len(vertex), faces=len(face))
 
 
@@ -216,10 +240,17 @@ def _vti_array(name, vtk_type, values):
     return f'        <DataArray type="{vtk_type}" Name="{name}" format="binary">\n{payload}\n        </DataArray>\n'
 
 
-def vti(m, path, band=None):
+def _vti_string(name, text):
+    """A one-string DataArray of VTK's XML field data (ASCII: the characters' codes, 0-ended)."""
+    codes = " ".join(str(b) for b in text.encode("utf-8")) + " 0"
+    return f'      <DataArray type="String" Name="{name}" NumberOfTuples="1" format="ascii">{codes}</DataArray>\n'
+
+
+def vti(m, path, band=None, frame_id="map"):
     """Dense log-odds [nat] (float32) and an ``observed`` mask (uint8: some beam reached the
     voxel; with the knowledge channel: the map knows it, ``Map.known``) as VTK XML image data:
-    origin at the first voxel centre, spacing the voxel size, x fastest (VTK's point order)."""
+    origin at the first voxel centre, spacing the voxel size, x fastest (VTK's point order);
+    its field data name the frame (``frame_id``), the units and the voxel size."""
     d = m.dense(band)
     z0 = 0 if band is None else m._band(band)[0]
     nz, ny, nx = d.shape
@@ -234,6 +265,9 @@ def vti(m, path, band=None):
            f'compressor="vtkZLibDataCompressor">\n'
            f'  <ImageData WholeExtent="{extent}" '
            f'Origin="{float(origin[0])!r} {float(origin[1])!r} {float(origin[2])!r}" Spacing="{s!r} {s!r} {s!r}">\n'
+           '    <FieldData>\n' + _vti_string("frame_id", frame_id) + _vti_string("units", "m") +
+           f'      <DataArray type="Float64" Name="voxel_m" NumberOfTuples="1" format="ascii">{s!r}</DataArray>\n'
+           '    </FieldData>\n'
            f'    <Piece Extent="{extent}">\n'
            f'      <PointData Scalars="log_odds">\n'
            + _vti_array("log_odds", "Float32", nats) + _vti_array("observed", "UInt8", observed) +

@@ -32,6 +32,7 @@ from radarcl import logodds, sensor_model
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.gridspec import BRICK, GridSpec
 from radarcl.io.files import memory_budget
+from radarcl.maps import disk, npz
 from radarcl.maps.disk import read_map, reading_of
 from radarcl.sensor_model import KNOWN_LOOKS
 
@@ -93,16 +94,36 @@ class Map:
     @classmethod
     def of_grid(cls, grid, reading=None):
         """The map held by an ``EvidenceGrid`` (copied from the device); a grid with the knowledge
-        channel needs its ``reading``: a dict (``maps.disk.reading_of``) or the ``mapconfig.Resolved``
-        it was made with."""
+        channel is read with its own reading (a pipeline's grid knows it) or ``reading``: a dict
+        (``maps.disk.reading_of``) or the ``mapconfig.Resolved`` it was made with."""
         keys, data = grid.bricks()
         if not grid.has_knowledge:
             return cls(grid.spec, keys, data)
+        reading = reading if reading is not None else grid.reading     # a pipeline's grid knows it
         if reading is None:
             raise ConfigError("a grid with the knowledge channel is read with its reading: Map.of_grid(grid, reading)")
         if not isinstance(reading, dict):
             reading = reading_of(reading)
         return cls(grid.spec, keys, data, grid.knowledge_bricks(), grid.knowledge_bricks("looks"), reading)
+
+    def save(self, path, poses=None, overwrite=False, meta=None):
+        """Write the map to ``path``: an ``.npz`` file, or a map store for any other name
+        (``maps.disk.output_format``), with its knowledge channel and reading when it has them,
+        the sensor ``poses`` (n, 4, 4) and ``meta`` (a JSON-able dict, ``maps.disk.read_meta``)
+        when given. An existing ``path`` is refused unless ``overwrite``. Returns the path."""
+        path = disk.check_output(path, force=overwrite)
+        channels = None if not self.has_knowledge else npz.Channels(self.knowledge, self.looks, self.reading)
+        writer = disk.FORMATS[disk.output_format(path)].writer(path, self.spec, reading=self.reading)
+        writer(self.keys.astype(np.int32), self.data, poses=poses, channels=channels, meta=meta)
+        return path
+
+    def costmap(self, band, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
+        """A ground robot's 2D occupancy grid over the height ``band`` (z_min, z_max) [m]:
+        ``Costmap`` (``projection``'s int8 cells, 100 occupied, 0 free, -1 unknown, with the
+        world position of cell (0, 0)'s corner and the cell size, as ROS's OccupancyGrid
+        carries them)."""
+        cells = self.projection(band, occupied_nats, free_nats)
+        return Costmap(cells, tuple(float(v) for v in self.spec.origin_m[:2]), float(self.spec.voxel_m))
 
     def __post_init__(self):
         if not isinstance(self.spec, GridSpec):
@@ -366,6 +387,19 @@ class Map:
             np.logical_or.at(out, (self.keys[:, 1], self.keys[:, 0]), (inside[:, :, None, None] & self.known()).any(axis=1))
         return out.transpose(0, 2, 1, 3).reshape(nby * BRICK, nbx * BRICK)[:ny, :nx]
 
+    def classes_from_above(self, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
+        """int8 (ny, nx) class of each column seen from above (``classes``' values): OCCUPIED
+        when some voxel of it is occupied, else FREE when some is free, else UNDECIDED when the
+        map observed one, else UNOBSERVED; for a planar map, its one layer's classes. Brick by
+        brick: never the dense volume."""
+        occ, free = check_thresholds(occupied_nats, free_nats)
+        hi, lo = self._column_hi_lo()
+        out = np.full(hi.shape, UNOBSERVED, np.int8)
+        out[self.known_columns()] = UNDECIDED
+        out[lo < free * logodds.SCALE] = FREE
+        out[hi > occ * logodds.SCALE] = OCCUPIED
+        return out
+
     def counts(self, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
         """Voxels of the grid by class: {"occupied", "free", "undecided", "unobserved"}."""
         _, units = self.voxels()
@@ -390,6 +424,26 @@ class Map:
         out[lo < free * logodds.SCALE] = 0
         out[hi > occ * logodds.SCALE] = 100
         return out
+
+
+@dataclass(frozen=True)
+class Costmap:
+    """A 2D occupancy grid: ``cells`` int8 (ny, nx), 100 occupied, 0 free, -1 unknown (ROS's
+    OccupancyGrid convention); ``origin_m`` (x, y) [m] the corner of cell (0, 0) in the map's
+    frame; ``resolution_m`` the cell size [m]. Row j, column i covers x from
+    origin_m[0] + i * resolution_m and y from origin_m[1] + j * resolution_m."""
+
+    cells: np.ndarray
+    origin_m: tuple
+    resolution_m: float
+
+    def cell_of(self, xy):
+        """(..., 2) int64 (column i, row j) of world points (..., 2) [m]; cells outside the grid
+        come out of range (compare with ``cells.shape``)."""
+        p = np.asarray(xy, np.float64)
+        if p.shape[-1:] != (2,):
+            raise ShapeError(f"points must be (..., 2) x, y [m], got {p.shape}")
+        return np.floor((p - np.asarray(self.origin_m)) / self.resolution_m).astype(np.int64)
 
 
 def _points(points):

@@ -1,19 +1,22 @@
 """The map as one ``.npz`` file: the grid spec, the allocated bricks, the sensor's poses.
 
-Members: ``version`` (1; 2 for planar bricks, which adds ``brick_z``, or the knowledge channel), ``origin_m``, ``voxel_m``,
+Members: ``version`` (1; 2 for planar bricks, which adds ``brick_z``; 3 for the knowledge channel), ``origin_m``, ``voxel_m``,
 ``shape`` (the ``GridSpec``), ``keys`` (n, 3) int32 bricks (bx, by, bz), ``data`` (n, *brick) int32
 [z, y, x] (brick (8, 8, 8), or (1, 8, 8) planar) in
 ``radarcl.logodds`` units, optional ``poses`` (m, 4, 4) float64 and ``meta`` (a JSON object).
 A map of the detection-statistics model (``radarcl.sensor_model``) adds three members and is
-version ``KNOWLEDGE_VERSION`` (2): ``knowledge`` (n, *brick) int32 [z, y, x], the summed
+version ``KNOWLEDGE_VERSION`` (3; radarcl wrote such maps as version 2 before, which still
+read): ``knowledge`` (n, *brick) int32 [z, y, x], the summed
 detection opportunity in ``logodds.KNOWLEDGE_SCALE`` units per look (same bricks, same order as
 ``data``; 0 where never observed), ``looks`` (n, *brick) int32, the number of those looks, and
 ``reading`` (a JSON object of ``sensor_model.READING``: look_limit, prior_nats, prior_looks, known_looks): a
 voxel's log-odds is ``sensor_model.read_log_odds(data, knowledge, looks, reading)``, not
 ``data`` itself. A map without
-them is written as version 1, byte for byte as before; version 1 files read as maps without
-knowledge. A radarcl that reads only version 1 refuses version 2 instead of showing unread sums
-as log-odds.
+them is written as version 1 (2 when planar), byte for byte as before. A file whose version
+and members disagree (a version 3 file without its knowledge members, a version 1 file with
+them, a version 2 file with neither ``brick_z`` nor the knowledge channel) is refused naming
+both, never read as a map of sums; a radarcl that reads only version 1 refuses version 2
+instead of showing unread sums as log-odds.
 Written through a temporary file renamed over the target, so a reader (``radarcl view --live``)
 sees the old map or the new one, never half of one. Read member by member with every size
 checked against its header and the memory budget (``io.files.safe_npz``), never unpickled.
@@ -31,9 +34,10 @@ from radarcl.gridspec import BRICK, GRID_LIMIT, GridSpec
 from radarcl.io.files import atomic, safe_npz
 from radarcl.sensor_model import READING
 
-FILE_VERSION = 2            # the newest this radarcl reads; a cubic map without knowledge is still written as 1
+FILE_VERSION = 3            # the newest this radarcl reads; a cubic map without knowledge is still written as 1
 PLANAR_VERSION = 2          # adds brick_z: an older reader refuses such a file naming both versions
-KNOWLEDGE_VERSION = 2       # adds the knowledge channel (see the module docstring); with or without brick_z
+KNOWLEDGE_VERSION = 3       # the knowledge channel, which this version requires (see the module docstring)
+LEGACY_KNOWLEDGE_VERSION = 2   # knowledge maps written before version 3: the channel was optional in them
 MAX_POSES = 10000          # a map keeps at most this many sensor poses (evenly subsampled)
 
 
@@ -137,10 +141,8 @@ def read_channels(path):
             raise FrameFormatError(f"{path}: {n_keys[0]} bricks in a grid of only {spec.brick_shape} bricks")
         keys, data = f["keys"], f["data"]
         channels = None
-        if version >= KNOWLEDGE_VERSION and {"knowledge", "looks", "reading"} & set(f.files):
-            missing = {"knowledge", "looks", "reading"} - set(f.files)
-            if missing:
-                raise FrameFormatError(f"{path}: a version {version} map lacks its {', '.join(sorted(missing))}")
+        _check_members(path, version, set(f.files))
+        if version >= LEGACY_KNOWLEDGE_VERSION and {"knowledge", "looks", "reading"} & set(f.files):
             planes = {}
             for name in ("knowledge", "looks"):
                 if f.header(name)[0] != n_data:
@@ -166,6 +168,27 @@ def read_channels(path):
         raise FrameFormatError(f"{path}: values beyond the grid's saturation +-{GRID_LIMIT} units; "
                                "radarcl never writes them")
     return spec, keys, data, channels
+
+
+def _check_members(path, version, members):
+    """FrameFormatError naming the version and the members when they disagree (see the module
+    docstring): a file edited or damaged would otherwise read its sums as log-odds."""
+    channel = {"knowledge", "looks", "reading"}
+    present, missing = sorted(channel & members), sorted(channel - members)
+    if version >= KNOWLEDGE_VERSION and missing:
+        raise FrameFormatError(f"{path} is a version {version} map (the knowledge channel) but lacks its "
+                               f"{', '.join(missing)}; refused rather than read as a map of plain sums")
+    if version < LEGACY_KNOWLEDGE_VERSION and present:
+        raise FrameFormatError(f"{path} is a version {version} map but holds knowledge-channel members "
+                               f"({', '.join(present)}), which only versions {LEGACY_KNOWLEDGE_VERSION} and "
+                               f"{KNOWLEDGE_VERSION} have; refused")
+    if version == LEGACY_KNOWLEDGE_VERSION and present and missing:
+        raise FrameFormatError(f"{path}: a version {version} map with {', '.join(present)} lacks its "
+                               f"{', '.join(missing)}; refused rather than read as a map of plain sums")
+    if version == PLANAR_VERSION and "brick_z" not in members and not present:
+        raise FrameFormatError(f"{path} is a version {version} map, which is planar (brick_z) or has the knowledge "
+                               "channel (knowledge, looks, reading), but holds neither; refused rather than read "
+                               "as a map of plain sums")
 
 
 def check_trajectory(poses):

@@ -191,6 +191,26 @@ def kinds_of(manifest):
     return KINDS if manifest["format_version"] >= KNOWLEDGE_FORMAT and "reading" in manifest else KINDS[:1]
 
 
+def _check_channels(path, manifest, kinds):
+    """FrameFormatError naming both when the manifest gives no reading (a map of sums) while the
+    store lists or holds knowledge channels for its segments: a store edited or damaged so, read
+    as its manifest says, would show unread sums as log-odds."""
+    if "knowledge" in kinds:
+        return
+    sums = manifest.get("checksums")
+    listed = sorted(_SUMS[k] for k in KINDS[1:] if isinstance(sums, dict) and _SUMS[k] in sums)
+    held = sorted(f"{k}_{s}" for k in KINDS[1:] for s in manifest["segments"] if (Path(path) / f"{k}_{s}").exists())
+    if listed or held:
+        raise FrameFormatError(f"{path}: its manifest (store format {manifest['format_version']}) gives no reading, "
+                               f"yet the store {'lists checksums of ' + ', '.join(listed) if listed else 'holds '}"
+                               f"{' and holds ' if listed and held else ''}{', '.join(held)}: a map of the "
+                               "knowledge channel that lost its reading; refused rather than read as plain sums")
+    if manifest["format_version"] >= KNOWLEDGE_FORMAT and manifest["spec"].brick_z == BRICK:
+        raise FrameFormatError(f"{path}: store format {manifest['format_version']} is written for planar bricks or "
+                               "the knowledge channel, but this store is cubic and its manifest gives no reading; "
+                               "refused rather than read as plain sums")
+
+
 def read(path, salvage=False):
     """(spec, keys (n, 3) int32, data (n, *brick) int32, manifest) of the last complete save
     (a map of the detection-statistics model: ``manifest["knowledge"]`` and ``["looks"]`` its
@@ -216,6 +236,7 @@ def read(path, salvage=False):
     lost = _Lost(index[:, :3])
     _check_index(index, spec, manifest, lost)
     kinds = kinds_of(manifest)
+    _check_channels(path, manifest, kinds)
     planes = {kind: np.zeros((len(index), *spec.brick_data_shape), np.int32) for kind in kinds}  # never uninitialised
     for kind in kinds:
         filled = np.zeros(len(index), bool)

@@ -253,6 +253,39 @@ def plane_map_figure(nats, spec, poses, title, pose_label="scan poses", label="l
     return fig
 
 
+CLASS_COLOURS = ((-1, "unknown (never observed)", "#c8c8c8"), (0, "free", "#ffffff"),
+                 (1, "observed, undecided", "#f2d49b"), (2, "occupied", "#b2182b"))   # the values of maps.map.classes
+
+
+def classes_figure(classes, spec, poses, title, pose_label="sensor path", what="seen from above"):
+    """A map's classes (ny, nx) (``Map.classes_from_above``: occupied, free, undecided, unknown)
+    seen from above in four flat colours with a legend, x forward up and y left, metre axes, and
+    the sensor's poses (n, 4, 4) as its path."""
+    plt = _pyplot()
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    x0, y0, _ = spec.origin_m
+    nx, ny, _ = spec.shape
+    extent = (y0, y0 + ny * spec.voxel_m, x0, x0 + nx * spec.voxel_m)
+    fig, ax = plt.subplots(figsize=(8.4, float(np.clip(8.4 * nx / ny, 4.0, 12.0))), dpi=120)
+    index = np.asarray(classes, np.int64).T + 1                     # rows = x, columns = y; -1..2 -> 0..3
+    ax.imshow(index, origin="lower", extent=extent, cmap=ListedColormap([c for _, _, c in CLASS_COLOURS]),
+              vmin=-0.5, vmax=3.5, interpolation="nearest")
+    handles = [Patch(facecolor=c, edgecolor="0.4", label=f"{name}: {int((np.asarray(classes) == v).sum()):,}")
+               for v, name, c in CLASS_COLOURS]
+    if len(poses):
+        handles += ax.plot(poses[:, 1, 3], poses[:, 0, 3], "k.-", ms=3, lw=1, label=pose_label)
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), title=f"cells of {spec.voxel_m:g} m")
+    ax.invert_xaxis()                                           # y points left
+    ax.set_xlabel("y, left [m]")
+    ax.set_ylabel("x, forward [m]")
+    ax.set_aspect("equal")
+    ax.set_title(f"{title}, {what}")
+    fig.tight_layout()
+    return fig
+
+
 # -- error against run time ------------------------------------------------------------------------------
 DIMENSION_MARKERS = {"reference": "*", "zero padding": "o", "beam model": "s", "voxel": "D", "cfar": "^"}
 

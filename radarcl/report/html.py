@@ -23,9 +23,11 @@ body { font-family: "DejaVu Sans", Arial, sans-serif; margin: 2em auto; max-widt
 h1 { font-size: 1.6em; margin-bottom: 0.2em; } h2 { font-size: 1.25em; margin-top: 1.6em;
      border-bottom: 1px solid #ccc; }
 .meta { color: #555; }
-table { border-collapse: collapse; margin: 0.6em 0; font-size: 0.95em; }
-th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: left; }
-td.n { text-align: right; font-variant-numeric: tabular-nums; }
+table { border-collapse: collapse; margin: 0.6em 0; font-size: 0.9em; display: block; max-width: 100%;
+        overflow-x: auto; }
+th, td { border: 1px solid #ccc; padding: 0.2em 0.4em; text-align: left; }
+td { max-width: 26em; overflow-wrap: break-word; }
+td.n { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; overflow-wrap: normal; }
 th { background: #f0f0f0; }
 figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #ddd; }
 figcaption { color: #444; font-size: 0.95em; }
@@ -40,6 +42,10 @@ SCRIPT = """
     var loaded = images.filter(function (i) { return i.complete && i.naturalWidth > 0; }).length;
     document.body.setAttribute('data-images', loaded + '/' + images.length);
     document.body.setAttribute('data-errors', String(errors));
+    // what does not fit: the page wider than the window, and each table that must scroll
+    var tables = Array.prototype.slice.call(document.querySelectorAll('table'));
+    var wide = tables.filter(function (t) { return t.scrollWidth > t.clientWidth + 1; }).length;
+    document.body.setAttribute('data-overflow', String(wide + (document.documentElement.scrollWidth > window.innerWidth ? 1 : 0)));
   });
 })();
 """

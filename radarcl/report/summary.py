@@ -18,15 +18,18 @@ def threshold_text(occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS):
 
 
 def map_summary(m, path, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS, band_hint=None):
-    """Blocks: the voxels by class with their volumes, the area seen from above by class, the
+    """Blocks: the voxels by class with their volumes (a planar map: cells with their areas), the area seen from above by class, the
     thresholds, and the commands to run next on the map at ``path`` (``band_hint``: a height
     band for the costmap command, (z_min, z_max) [m])."""
     v = m.spec.voxel_m
     counts = m.counts(occupied_nats, free_nats)
     top = m.projection(None, occupied_nats, free_nats)
     cell = v * v
-    rows = {f"{name} voxels": f"{n:,} ({n * v ** 3:,.1f} m³)" for name, n in counts.items() if name != "unobserved"}
-    rows["voxels never observed"] = f"{counts['unobserved']:,}"
+    if m.spec.shape[2] == 1:            # one voxel thick: a planar map's cells cover an area, not a volume
+        rows = {f"{name} cells": f"{n:,} ({n * v * v:,.0f} m²)" for name, n in counts.items() if name != "unobserved"}
+    else:
+        rows = {f"{name} voxels": f"{n:,} ({n * v ** 3:,.1f} m³)" for name, n in counts.items() if name != "unobserved"}
+    rows[f"{'cells' if m.spec.shape[2] == 1 else 'voxels'} never observed"] = f"{counts['unobserved']:,}"
     rows["seen from above [m²]"] = (f"occupied {(top == 100).sum() * cell:,.0f}, free {(top == 0).sum() * cell:,.0f}, "
                                     f"unknown {(top == -1).sum() * cell:,.0f}")
     rows["what the classes mean"] = threshold_text(occupied_nats, free_nats)

@@ -21,6 +21,7 @@ included. Both paths do the same arithmetic in the same order.
 """
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -127,6 +128,9 @@ class RangeFFT(Stage):
             per_bin = per_bin * gain
         if clip_level is None:
             clip_level = 32767.0 if self.dtype == np.int16 else math.inf
+        if isinstance(clip_level, (bool, str, bytes)) or not isinstance(clip_level, numbers.Real):
+            raise ConfigError(f"clip_level must be a positive number (|sample| that flags a beam clipped), "
+                              f"got {clip_level!r}")
         self.clip_level = float(clip_level)
         if math.isnan(self.clip_level) or self.clip_level <= 0:
             raise ConfigError(f"clip_level must be positive, got {clip_level!r}")
