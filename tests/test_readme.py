@@ -236,7 +236,7 @@ RUNS = {
     "radarcl export oxford.rcmap --to ply --out oxford.ply": verbatim,
     "radarcl export oxford.rcmap --to costmap --band -0.5 2 --out oxford.pgm": verbatim,
     "radarcl export oxford.rcmap --to rosbag --out oxford_bag": verbatim,
-    "radarcl export oxford.rcmap --to octomap --resample --out oxford.bt": verbatim,
+    "radarcl export oxford.rcmap --to octomap --out oxford.bt": verbatim,
     "radarcl live /dev/ttyUSB0 --sensor ti-xwr18xx-uart --mount 0,0,1.5,0,-10,0 --out ti-live.rcmap "
     "--record ti-live.rcs": ti_live,
     "radarcl replay ti-live.rcs --out ti-again.rcmap": verbatim,
