@@ -27,10 +27,9 @@ def report(runtime, config, scan_path, azimuth, out, say):
     spacing = sensor.bin_spacing_m()
     cfar_config, interpret_config = config.cfar_config(), config.interpret_config()
     power = scan.power()
-    detstats = interpret_config.model == "detstats"
-    if detstats and sensor.n_bins() is None:
+    if interpret_config.evidence_model.knowledge and sensor.n_bins() is None:     # its tables are per bin
         config = config.for_sensor(sensor.with_bins(scan.n_bins))
-    model = bin_model(config, config["grid.voxel_m"]) if detstats else None
+    model = bin_model(config, config["grid.voxel_m"])
     detection = Detection(runtime, (n_az,), scan.n_bins, spacing, cfar_config, interpret_config, bin_model=model)
     detection(power)                                     # build and warm up
     start = time.perf_counter()
