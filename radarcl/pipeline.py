@@ -4,6 +4,8 @@ by events, with no host round trip in between.
 ``Detection`` runs range profiles (a Navtech scan, or a frame after the range FFT in power)
 through CFAR and the eq. 12 interpreter. ``Mapping`` runs raw frames (range FFT first) or
 range profiles through detection and fuses the evidence into an ``EvidenceGrid`` (eq. 9).
+What differs between evidence models is asked of the model (``radarcl.models``). The design, its
+invariants and where to change what: docs/design/pipeline.md.
 """
 
 import logging
