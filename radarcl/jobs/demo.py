@@ -26,12 +26,12 @@ from pathlib import Path
 import numpy as np
 
 from radarcl import oracle
-from radarcl.config.presets import EQ12, paper_config
+from radarcl.config.presets import EQ12, EVALUATION_SEED, paper_config
 from radarcl.config.stage_config import PAPER_RADAR
 from radarcl.errors import ConfigError
 from radarcl.evaluation import quality
 from radarcl.evaluation.evaluate import baselines, instrument, map_observations, radar_score
-from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
+from radarcl.evaluation.tuning import TUNED
 from radarcl.geometry import BeamLattice
 from radarcl.io import recording
 from radarcl.jobs import demo_fig9
