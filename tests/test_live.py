@@ -184,7 +184,7 @@ def _live(args, name):
 
 def test_the_cli_saves_and_says_so_when_the_pty_closes(tmp_path, scene):
     """The far end of a pty closing part way (the emulator's disconnect fault) is the end of the
-    stream (issue 30): saved, said, exit 0; `radarcl replay` of its --record gives the same map,
+    stream: saved, said, exit 0; `radarcl replay` of its --record gives the same map,
     bit for bit (README, "Live radar"); a device that goes away is tested in test_live_ends."""
     from radarcl.cli import main
 

@@ -163,6 +163,11 @@ class Resolved:
         """True when neither [grid] origin nor size was given: both are the field of view's box."""
         return all(self.origins.get(k, "").endswith(FIELD_OF_VIEW) for k in ("grid.origin_m", "grid.size_m"))
 
+    def derived_from_sensor(self, name):
+        """True when key ``name`` holds what radarcl derived from the sensor's description (its
+        mounting, range, resolution or field of view): nobody gave it."""
+        return self.origins.get(name, "").startswith(f"sensor {self.sensor.name}: ")
+
     def sensitivity_missing(self):
         """True when the sensor's profile gives no sensitivity and the default stands in
         (``sensors.missing_sensitivity`` says so)."""
