@@ -47,18 +47,16 @@ def count_free(m, path):
 
 
 @pytest.fixture
-def toy_model():
-    model = models.register(Constant())
-    yield model
-    del models.MODELS[model.name]
+def toy_model(monkeypatch):
+    monkeypatch.setattr(models, "MODELS", dict(models.MODELS))       # the registry as it was, after the test
+    return models.register(Constant())
 
 
 @pytest.fixture
-def toy_format():
-    fmt = exports.register(exports.Export("count", (".txt",), "the number of voxels below 0 nat, as text",
-                                          count_free))
-    yield fmt
-    del exports.FORMATS[fmt.name]
+def toy_format(monkeypatch):
+    monkeypatch.setattr(exports, "FORMATS", dict(exports.FORMATS))
+    return exports.register(exports.Export("count", (".txt",), "the number of voxels below 0 nat, as text",
+                                           count_free))
 
 
 def test_a_toy_model_and_a_toy_format_through_the_registries_alone(runtime, toy_model, toy_format, tmp_path, capsys):
