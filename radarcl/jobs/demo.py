@@ -204,7 +204,7 @@ def _plot_profiles(obs, config, path, name, beams=((2, 32, 0), (14, 20, 3))):
         azimuth = np.degrees(BeamLattice.from_radar(PAPER_RADAR).azimuths[az])
         panels.append((np.arange(len(prof)) * spacing, prof, cfar.alpha * noise[0], mask[0], evidence,
                        f"beam at {elevation:.1f} deg elevation, {azimuth:+.1f} deg azimuth"))
-    label = "evidence on the axis [nat]" if detstats else "eq. 12 evidence [nat]"
+    label = evidence_model.axis_label
     figures.save(figures.beams_figure(panels, f"Two beams of the reference scene (as the paper's Fig. 10), {name}",
                                       label), path, dpi=100)
 

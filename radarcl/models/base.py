@@ -35,6 +35,7 @@ class EvidenceModel:
     name: its ``interpret.model`` value; summary: one line for the key's help.
     keys: its own configuration keys {"section.key": Number | Choice} (the interpreter's common keys,
         range and pulses, are everyone's and live in ``radarcl.config.keys``).
+    axis_label: the axis of a plot of one beam's evidence (``on_axis``).
     label_keys: key prefixes a configuration's short label names for this model.
     knowledge: the model fuses node pairs (evidence and opportunity per target class and rho2 node,
         ``sensor_model.NODE_SHAPE``) built from the sensor's ``sensor_model.BinModel`` into a map
@@ -50,6 +51,7 @@ class EvidenceModel:
 
     name = None
     summary = ""
+    axis_label = "evidence [nat]"
     keys = {}
     label_keys = ("interpret.k_occ", "interpret.e_", "interpret.wide")
     knowledge = False
@@ -62,6 +64,11 @@ class EvidenceModel:
         """What a map of this model keeps to be read ({"look_limit": ...}), from the configuration's
         ``values``; None for a map read as its sums."""
         return None
+
+    def describe(self, values):
+        """A few words naming the model and its constants in the configuration's ``values``, for a
+        figure's title."""
+        return self.summary
 
     # -- the host's tables ---------------------------------------------------------------------------
     def bin_model(self, params, cfar, beam):

@@ -17,6 +17,7 @@ class DetStats(EvidenceModel):
 
     name = "detstats"
     summary = "detection statistics"
+    axis_label = "evidence on the axis [nat]"
     keys = {
         **{f"sensor_model.{name}": Number(lo, hi, unit, f"detstats: {why}")
            for name, (lo, hi, unit, why) in sensor_model.RANGES.items()},
@@ -37,6 +38,9 @@ class DetStats(EvidenceModel):
 
     def reading(self, values):
         return sensor_model.ModelParams.of(values).reading
+
+    def describe(self, values):
+        return f"detection statistics ({values['sensor_model.evidence']} evidence) on the beam's axis"
 
     def bin_model(self, params, cfar, beam):
         return sensor_model.BinModel.build(params, cfar, beam.n_bins, beam.bin_spacing_m, beam.oversampling,

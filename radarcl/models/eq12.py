@@ -13,11 +13,16 @@ class Eq12(EvidenceModel):
 
     name = "paper"
     summary = "eq. 12"
+    axis_label = "eq. 12 evidence [nat]"
     per_bin = "paper"
     fitted = ("interpret.k_occ", "interpret.e_high", "interpret.e_low")
 
+    def describe(self, values):
+        return (f"eq. 12 with k_occ {values['interpret.k_occ']:g}, E_h {values['interpret.e_high']:g}, "
+                f"E_l {values['interpret.e_low']:g}")
 
-class Occlusion(EvidenceModel):
+
+class Occlusion(Eq12):
     """Eq. 12 with free evidence only up to the first surface (a wide pulse, or one whose peak
     reaches surface_db), E_h interpolated in range from e_high to e_high_far."""
 
