@@ -53,7 +53,7 @@ class EvidenceModel:
     summary = ""
     axis_label = "evidence [nat]"
     keys = {}
-    label_keys = ("interpret.k_occ", "interpret.e_", "interpret.wide")
+    label_keys = ()
     knowledge = False
     occludes = False
     per_bin = None

@@ -14,6 +14,7 @@ class Eq12(EvidenceModel):
     name = "paper"
     summary = "eq. 12"
     axis_label = "eq. 12 evidence [nat]"
+    label_keys = ("interpret.k_occ", "interpret.e_", "interpret.wide")
     per_bin = "paper"
     fitted = ("interpret.k_occ", "interpret.e_high", "interpret.e_low")
 
