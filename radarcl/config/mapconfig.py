@@ -157,7 +157,7 @@ class Resolved:
 
     def reading(self):
         """What a map of this configuration keeps to be read (``EvidenceModel.reading``), or None."""
-        return self.evidence_model().reading(self.values)
+        return self.evidence_model().reading(self.model_params())
 
     def grid_follows_sensor(self):
         """True when neither [grid] origin nor size was given: both are the field of view's box."""

@@ -48,7 +48,7 @@ def report(runtime, config, scan_path, azimuth, out, say):
     threshold = detection.cfar.alpha * cfar.noise[a]
     evidence_model = interpret_config.evidence_model
     evidence = evidence_model.on_axis(evidence_model.comparable(interp.evidence[a]))
-    model_text = evidence_model.describe(config.values)
+    model_text = evidence_model.describe(interpret_config, config.model_params())
     title = (f"{sensor.name} {Path(scan_path).stem}, azimuth {a} ({np.degrees(scan.angles_rad[a]):.1f} deg): "
              f"{interp.n_pulses[a]} pulses, {cfar_config.kind.upper()}-CFAR Pfa {cfar_config.pfa:g}, {model_text}")
     fig = figures.interpretation_figure(np.arange(scan.n_bins) * spacing, power[a], threshold, rows,

@@ -60,14 +60,14 @@ class EvidenceModel:
     fitted = ()
 
     # -- the configuration -------------------------------------------------------------------------
-    def reading(self, values):
-        """What a map of this model keeps to be read ({"look_limit": ...}), from the configuration's
-        ``values``; None for a map read as its sums."""
+    def reading(self, params):
+        """What a map of this model keeps to be read ({"look_limit": ...}) with the [sensor_model]
+        values ``params`` (``sensor_model.ModelParams``); None for a map read as its sums."""
         return None
 
-    def describe(self, values):
-        """A few words naming the model and its constants in the configuration's ``values``, for a
-        figure's title."""
+    def describe(self, interpret, params):
+        """A few words naming the model and its constants (``interpret``: the ``InterpretConfig``;
+        ``params``: the ``sensor_model.ModelParams``), for a figure's title."""
         return self.summary
 
     # -- the host's tables ---------------------------------------------------------------------------

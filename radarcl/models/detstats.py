@@ -36,11 +36,11 @@ class DetStats(EvidenceModel):
     knowledge = True
     per_bin = "paper"          # eq. 12's path fuses one value per bin; its constants go unused there
 
-    def reading(self, values):
-        return sensor_model.ModelParams.of(values).reading
+    def reading(self, params):
+        return params.reading
 
-    def describe(self, values):
-        return f"detection statistics ({values['sensor_model.evidence']} evidence) on the beam's axis"
+    def describe(self, interpret, params):
+        return f"detection statistics ({params.evidence} evidence) on the beam's axis"
 
     def bin_model(self, params, cfar, beam):
         return sensor_model.BinModel.build(params, cfar, beam.n_bins, beam.bin_spacing_m, beam.oversampling,

@@ -18,9 +18,8 @@ class Eq12(EvidenceModel):
     per_bin = "paper"
     fitted = ("interpret.k_occ", "interpret.e_high", "interpret.e_low")
 
-    def describe(self, values):
-        return (f"eq. 12 with k_occ {values['interpret.k_occ']:g}, E_h {values['interpret.e_high']:g}, "
-                f"E_l {values['interpret.e_low']:g}")
+    def describe(self, interpret, params):
+        return f"eq. 12 with k_occ {interpret.k_occ:g}, E_h {interpret.e_high:g}, E_l {interpret.e_low:g}"
 
 
 class Occlusion(Eq12):
