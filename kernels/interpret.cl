@@ -28,7 +28,8 @@
  * OCCLUSION=0 is eq. 12 exactly; e_high_far and surface_decades are then unused.
  *
  * With -D DETSTATS=1, the detection-statistics model (radarcl.sensor_model; equivalent to
- * radarcl.oracle.interpret_detstats): evidence[] is (n_beams, N_BINS, 2 classes, 4 segments)
+ * radarcl.oracle.interpret_detstats; -D NODES is sensor_model.NODES, the rho2 nodes per class):
+ * evidence[] is (n_beams, N_BINS, 2 classes, 4 segments)
  * int2 node pairs (sensor_model.pack_nodes) of the evidence e [logodds units] and the detection
  * opportunity d [KNOWLEDGE_SCALE units] at rho2 = 0, 1/4, ..., 1, per class of target:
  *   tau = exp(-X), X the blocking of the pulses that ended before the bin (a pulse's summed
@@ -130,10 +131,10 @@ static inline void write_nodes(__global int2 *out, const __global float *opp, co
                                float tau, float omt, int detected, float share_c)
 {
     for (int c = 0; c < 2; ++c) {
-        int e[5], d[5];
-        for (int k = 0; k < 5; ++k) {
-            const float delta = tau * opp[c * 5 + k];
-            const float arg = detected ? 1.0f + delta * share_c : omt + tau * miss[c * 5 + k];
+        int e[NODES], d[NODES];
+        for (int k = 0; k < NODES; ++k) {
+            const float delta = tau * opp[c * NODES + k];
+            const float arg = detected ? 1.0f + delta * share_c : omt + tau * miss[c * NODES + k];
             d[k] = as_int(delta * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
             e[k] = d[k] ? fixed_nb(log10_nb(arg) * LN10, LOGODDS_SCALE) : 0;   /* no look, no evidence */
         }
@@ -216,29 +217,29 @@ static inline void write_graded(__global int2 *out, const __global float *ln_s, 
     const float du = fu - (float)iu;
     const __global float *row0 = table + iu * SNR_NV, *row1 = row0 + SNR_NV;
     for (int c = 0; c < 2; ++c) {
-        int e[5], d[5];
-        for (int k = 0; k < 5; ++k) {
+        int e[NODES], d[NODES];
+        for (int k = 0; k < NODES; ++k) {
             /* knowledge is at most opp (tau, w <= 1): a node it rounds to 0 for is a look that is
              * not one, with no evidence (below), so it needs no table read */
-            if (opp[c * 5 + k] * (float)KNOWLEDGE_SCALE <= 0.5f) {
+            if (opp[c * NODES + k] * (float)KNOWLEDGE_SCALE <= 0.5f) {
                 e[k] = d[k] = 0;
                 continue;
             }
-            float v = table_at(row0, row1, du, ln_s[c * 5 + k] - blocked);
+            float v = table_at(row0, row1, du, ln_s[c * NODES + k] - blocked);
             float known = tau;
             /* only behind an echo, and only for a target there is (ln_s at the table's first
              * column, e.g. terrain without a ground plane: both reads are 0, the mixture too) */
-            if (gap > 0.0f && blocked > 0.0f && ln_s[c * 5 + k] > SNR_V0) {
+            if (gap > 0.0f && blocked > 0.0f && ln_s[c * NODES + k] > SNR_V0) {
                 const float lb = likelihood_ratio(v, q);
-                const float l0 = likelihood_ratio(table_at(row0, row1, du, ln_s[c * 5 + k]), q);
+                const float l0 = likelihood_ratio(table_at(row0, row1, du, ln_s[c * NODES + k]), q);
                 const float lm = (1.0f - gap) * lb + gap * l0;
                 const float w = gap * l0 / lm;       /* the gap's posterior chance */
                 v = log10_nb(lm / (1.0f - q + q * lm)) * LN10;
                 known = w > 0.5f ? (1.0f - w) * tau + w : tau;   /* see the oracle */
             }
-            const float most = known * cap[c * 5 + k];    /* no more than a detection would say, either way */
+            const float most = known * cap[c * NODES + k];    /* no more than a detection would say, either way */
             v = v < most ? (v > -most ? v : -most) : most;
-            d[k] = as_int(known * opp[c * 5 + k] * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
+            d[k] = as_int(known * opp[c * NODES + k] * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
             e[k] = d[k] ? fixed_nb(v, LOGODDS_SCALE) : 0;  /* no evidence from a look that is not one */
         }
         for (int k = 0; k < 4; ++k)
@@ -261,14 +262,14 @@ __kernel void interpret(
     const int wide_bins,              // a pulse this wide or wider is wide [bins]
     const int e_high_far,             // OCCLUSION: E_h at last_bin [logodds units]
     const float surface_decades,      // OCCLUSION: a pulse whose peak log10(r/n) reaches this is a surface
-    const __global float *opportunity,  // DETSTATS: (N_BINS, 2, 5) delta at tau = 1 per class and node
-    const __global float *miss,         // DETSTATS: (N_BINS, 2, 5) 1 - opportunity, exact from the host
+    const __global float *opportunity,  // DETSTATS: (N_BINS, 2, NODES) delta at tau = 1 per class and node
+    const __global float *miss,         // DETSTATS: (N_BINS, 2, NODES) 1 - opportunity, exact from the host
     const __global float *blocking,     // DETSTATS: (N_BINS,) a pulse's blocking per unit of (r/n - 1)+ at its peak
     const __global int2 *unblocked,     // DETSTATS: (N_BINS, 8) a noise bin's node pairs at tau = 1
     const float c_det,                  // DETSTATS: (1 - P_fa) / P_fa, P_fa the achieved false-alarm rate
-    const __global float *ln_snr,       // GRADED: (N_BINS, 2, 5) ln of the typical target's median SNR at tau = 1
+    const __global float *ln_snr,       // GRADED: (N_BINS, 2, NODES) ln of the typical target's median SNR at tau = 1
     const __global float *snr_table,    // GRADED: (SNR_NU, SNR_NV) evidence [nat] over (ln x, ln s)
-    const __global float *snr_cap,      // GRADED: (N_BINS, 2, 5) what a detection says at tau = 1 [nat]
+    const __global float *snr_cap,      // GRADED: (N_BINS, 2, NODES) what a detection says at tau = 1 [nat]
     const float noise_floor,            // GRADED: the least noise floor [power] (the CFAR's)
     const float blocker_gap,            // GRADED: the chance of a gap in nearer echoes (0: hard blocking)
     const float snr_q,                  // GRADED: the table's q (the evidence's bound is ln(1 / q))

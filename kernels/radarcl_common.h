@@ -3,7 +3,7 @@
  * The constants the kernels share with Python have one source, Python: radarcl.stages.
  * COMMON_DEFINES passes them to every build as -D (beam flags, the pair ratio and the profile
  * limit from radarcl.oracle, the fixed-point log-odds unit from radarcl.logodds, the grid's
- * saturation from radarcl.grid).
+ * saturation from radarcl.gridspec.GRID_LIMIT).
  * A build without them stops here instead of compiling with values that may have drifted.
  */
 #ifndef RADARCL_COMMON_H

@@ -10,12 +10,13 @@ The Python API (docs/python-api.md), named here and imported only when first use
     m.state_at([[10.0, 0.0, 0.5]]) == radarcl.OCCUPIED
     costmap = m.costmap(band=(0.2, 1.5))
 
-Layout, top to bottom (docs/development.md, "Layout"; ``tests/test_layout.py`` holds the table): the
-``cli`` and its ``commands`` and ``bench``marks run ``jobs``, which use ``report``,
-``evaluation``, ``livemap`` and ``pipeline``; the pipeline chains ``stages`` (one per kernel);
-below them ``scene`` (simulation), ``viewer``, ``config``, ``maps`` (the map on disk), ``io``,
-``oracle`` (float64 reference of every stage), ``geometry``, ``grid``, the paper's equations
-(``physics``, ``cfar_theory``, ``logodds``), ``cl`` (OpenCL runtime) and ``errors``.
+Layers, top to bottom (docs/design/layers.md states the rule; ``tests/test_layout.py`` holds the
+table): applications (the ``cli`` and its ``commands`` and ``bench``marks run ``jobs``, which use
+``report``); ``evaluation``; the engine (``livemap``, ``self_test``, the ``pipeline`` chaining
+``stages``, one per kernel, ``scene`` simulation, ``viewer``); the configuration and the map
+(``config``, ``maps``); the evidence ``models`` and the input readers (``io``); core numerics and
+device (``oracle``, the float64 reference of every stage, ``geometry``, ``grid``, the
+detection-statistics physics, the paper's equations, ``cl``, the OpenCL runtime, and ``errors``).
 """
 
 __version__ = "0.1.0"

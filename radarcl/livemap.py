@@ -7,6 +7,7 @@ restricted to the azimuths that arrived (``Fusion.restrict``), so the map lags t
 fuse, not by a frame. A part of a frame fused this way sums to exactly what the whole frame gives
 (integer log-odds). A frame's pose comes from the packets, a pose file or a fixed mount
 (``PoseSource``). The loop that runs them, with checkpoints and status, is ``jobs.live``.
+The live path's design and invariants: docs/design/live.md.
 """
 
 import bisect

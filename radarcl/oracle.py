@@ -226,7 +226,7 @@ def _profiles_noise_mask(profiles, noise, mask):
 
 
 def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
-    """The down-range interpreter, eq. 12 (or, with ``config.model == "occlusion"``, radarcl's
+    """The down-range interpreter, eq. 12 (or, with ``config.occludes``, radarcl's
     occlusion-aware variant: ``InterpretConfig``), on (..., n_bins) arrays, plainly, beam by beam.
 
     profiles: power r_i; noise, mask: from ``cfar``; flags: per-beam flags from range
@@ -245,7 +245,7 @@ def interpret(profiles, noise, mask, config, bin_spacing_m, flags=None):
     first, last = config.bin_interval(bin_spacing_m, n_bins)
     wide_bins = config.wide_bins(bin_spacing_m)
     e_high, e_low, e_far = (int(v) for v in logodds.to_fixed([config.e_high, config.e_low, config.e_high_far]))
-    occlusion, span = config.model == "occlusion", max(last - first, 1)
+    occlusion, span = config.occludes, max(last - first, 1)
     evidence = np.zeros(r.shape, np.int32)
     pulses = np.full((*batch, config.max_pulses, 4), -1, np.int32)
     n_pulses = np.zeros(batch, np.int32)
@@ -361,8 +361,8 @@ def fusion_at_points(centres, evidence, lattice, model, poses, bin_spacing_m, fi
 
 
 def interpret_detstats(profiles, noise, mask, config, bin_spacing_m, model, flags=None):
-    """The detection-statistics interpreter (``sensor_model``; ``InterpretConfig.model ==
-    "detstats"``) on (..., n_bins) arrays, in float64.
+    """The detection-statistics interpreter (``sensor_model``; ``radarcl.models.detstats``) on
+    (..., n_bins) arrays, in float64.
 
     ``model`` is a ``sensor_model.BinModel``. Per beam and bin j inside the range window, with
     pulses as runs of detections (as ``interpret``):

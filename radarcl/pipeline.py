@@ -4,6 +4,8 @@ by events, with no host round trip in between.
 ``Detection`` runs range profiles (a Navtech scan, or a frame after the range FFT in power)
 through CFAR and the eq. 12 interpreter. ``Mapping`` runs raw frames (range FFT first) or
 range profiles through detection and fuses the evidence into an ``EvidenceGrid`` (eq. 9).
+What differs between evidence models is asked of the model (``radarcl.models``). The design, its
+invariants and where to change what: docs/design/pipeline.md.
 """
 
 import logging
@@ -12,11 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl import sensor_model
 from radarcl.config import mapconfig, sensors
 from radarcl.errors import ConfigError, DeviceCapabilityError
 from radarcl.geometry import BeamLattice, BeamModel
 from radarcl.grid import EvidenceGrid
+from radarcl.models import BeamGeometry
 from radarcl.stages.cfar import Cfar, CfarResult
 from radarcl.stages.fusion import Fusion
 from radarcl.stages.interpret import Interpreter, InterpretResult
@@ -75,9 +77,9 @@ class Mapping:
     Profile input (Navtech): give ``n_bins`` and ``bin_spacing_m``; frames are power profiles
     (*lattice.batch, n_bins) float32 and enter at CFAR.
     cfar_config, interpret_config: as for ``Detection``; per_beam_poses: as for ``Fusion``.
-    The detection-statistics model (interpret_config.model "detstats") needs ``bin_model`` (a
-    ``sensor_model.BinModel``), a grid with the knowledge channel and its ``terrain_dz``
-    (``sensor_model.terrain_dz``); ``from_config`` builds all three.
+    An evidence model with node pairs (``EvidenceModel.knowledge``: the detection-statistics
+    model) needs ``bin_model`` (a ``sensor_model.BinModel``), a grid with the knowledge channel and
+    its ``terrain_dz``; ``from_config`` builds all three.
     """
 
     def __init__(self, runtime, grid, lattice, model, *, radar=None, n_fft=None, dtype=np.int16, n_bins=None,
@@ -106,7 +108,7 @@ class Mapping:
                                    bin_model=bin_model)
         it = self.detection.interpreter
         self.fusion = Fusion(runtime, grid, lattice, model, n_bins, bin_spacing_m, it.first_bin, it.last_bin,
-                             per_beam_poses=per_beam_poses, detstats=it.detstats, terrain_dz=terrain_dz)
+                             per_beam_poses=per_beam_poses, detstats=it.node_pairs, terrain_dz=terrain_dz)
         self.frames = 0
         self.config = None          # the mapconfig.Resolved it was built from (from_config)
 
@@ -126,9 +128,9 @@ class Mapping:
         sensor = config.sensor
         spec = grid.spec if grid is not None else config.grid_spec()
         _check_fits(runtime, config, spec)
-        detstats = config["interpret.model"] == "detstats"
+        evidence_model = config.evidence_model()
         if grid is None:
-            grid = EvidenceGrid(runtime, spec, knowledge=detstats)
+            grid = new_grid(runtime, config, spec)
         model = sensor.beam_model(config["beam.model"], grid.spec.voxel_m)
         per_beam = sensor.spinning if per_beam_poses is None else per_beam_poses
         common = dict(cfar_config=config.cfar_config(), interpret_config=config.interpret_config(),
@@ -136,9 +138,9 @@ class Mapping:
         if not sensor.raw and sensor.n_bins() is None:
             raise ConfigError(f"sensor {sensor.name} does not say how many range bins it has; the reader "
                               "learns it from the data (SensorProfile.with_bins)")
-        if detstats:
+        if evidence_model.knowledge:
             common.update(bin_model=bin_model(config, grid.spec.voxel_m),
-                          terrain_dz=sensor_model.terrain_dz(config.model_params()))
+                          terrain_dz=evidence_model.terrain_dz(config.model_params()))
         if sensor.raw:
             mapping = cls(runtime, grid, sensor.lattice(), model, radar=sensor.radar, n_fft=config.n_fft,
                           dtype=sensor.sample_dtype, window=config["range_fft.window"], **common)
@@ -216,30 +218,42 @@ class Mapping:
         return self.grid.snapshot()
 
 
+def new_grid(runtime, config, spec):
+    """A new ``EvidenceGrid`` of ``spec`` for maps of ``config`` (a ``Resolved``): with the knowledge
+    channel when its evidence model keeps one (``EvidenceModel.knowledge``)."""
+    return EvidenceGrid(runtime, spec, knowledge=config.evidence_model().knowledge)
+
+
 def evidence_config(config):
     """The configuration a job fuses its own per-bin evidence with (raw intensity, counts, oracle
-    detections): ``config``'s sensor, grid, beams and beam model on eq. 12's fusion path, since
-    the detection-statistics path fuses node tables, not one evidence value per bin."""
-    return config.replaced(interpret__model="paper") if config["interpret.model"] == "detstats" else config
+    detections): ``config``'s sensor, grid, beams and beam model on the one-value-per-bin fusion
+    path (``EvidenceModel.per_bin``), since a model with node pairs fuses tables, not one evidence
+    value per bin."""
+    model = config.evidence_model()
+    return config.replaced(interpret__model=model.per_bin) if model.knowledge else config
 
 
 def bin_model(config, voxel_m):
-    """The ``sensor_model.BinModel`` of a detection-statistics configuration (a ``Resolved``) at
-    ``voxel_m``: the correlated training cells of its x(n_fft / n_samples) zero padding (raw
-    sensors) or of its bins per resolution cell (profiles, read as a Hann-windowed FFT's). A
+    """The host tables (``EvidenceModel.bin_model``: the detection-statistics model's
+    ``sensor_model.BinModel``) of a configuration (a ``Resolved``) at ``voxel_m``, or None for a
+    model that needs none: the correlated training cells of its x(n_fft / n_samples) zero padding
+    (raw sensors) or of its bins per resolution cell (profiles, read as a Hann-windowed FFT's). A
     profile without the sensitivity the model needs gets its sentence, once, as a warning."""
+    model = config.evidence_model()
+    if not model.knowledge:
+        return None
     sensor = config.sensor
-    if config.origins.get("sensor_model.snr_1m2_at_10m_db", "").endswith(sensors.missing_sensitivity(sensor)):
+    if config.sensitivity_missing():
         _warn_once(sensors.missing_sensitivity(sensor))
     if sensor.raw:
         oversampling = config.n_fft / sensor.radar.n_samples
     else:
         oversampling = max(1.0, sensor.range_resolution_m / sensor.bin_spacing_m())
-    n_bins = sensor.n_bins(config.n_fft)
-    half_az = math.radians(sensor.get("beams", "beamwidth_az_deg")) / 2
-    half_el = math.radians(sensor.get("beams", "beamwidth_el_deg")) / 2
-    return sensor_model.BinModel.build(config.model_params(), config.cfar_config(), n_bins, config.bin_spacing_m,
-                                       oversampling, half_az, half_el, voxel_m, config["interpret.range_min_m"])
+    beam = BeamGeometry(sensor.n_bins(config.n_fft), config.bin_spacing_m, oversampling,
+                        math.radians(sensor.get("beams", "beamwidth_az_deg")) / 2,
+                        math.radians(sensor.get("beams", "beamwidth_el_deg")) / 2, voxel_m,
+                        config["interpret.range_min_m"])
+    return model.bin_model(config.model_params(), config.cfar_config(), beam)
 
 
 _WARNED = set()

@@ -12,7 +12,7 @@ runtime's small probe kernel only.
 
 import numpy as np
 
-from radarcl import oracle, sensor_model
+from radarcl import models, oracle
 from radarcl.cl.runtime import register_device_check
 from radarcl.config import mapconfig, sensors
 from radarcl.errors import DeviceCapabilityError
@@ -56,7 +56,7 @@ def self_test(runtime):
                 # needs (some sensors' readers learn the count from the data)
                 n = int(np.ceil(SELF_TEST_RANGE_M * SELF_TEST_BIN_MARGIN / config.sensor.bin_spacing_m())) + 1
                 config = config.for_sensor(config.sensor.with_bins(min(n, config.sensor.n_bins() or n)))
-            what = f"sensor {name} ({'eq. 12' if model == 'paper' else 'detection statistics'})"
+            what = f"sensor {name} ({models.get(model).summary})"
             try:
                 problem = _self_test_one(runtime, config, rng)
             except DeviceCapabilityError as exc:
@@ -94,18 +94,13 @@ def _self_test_one(runtime, config, rng):
     p = profiles.reshape(n_beams, -1)[rows]
     noise, _, mask = oracle.cfar(p, m.detection.cfar.config)
     row_flags = None if flags is None else flags.reshape(-1)[rows]
-    if it.detstats:
-        want_ev = np.stack(oracle.interpret_detstats(p, noise, mask, it.config, it.bin_spacing_m, it.bin_model,
-                                                     row_flags)[:2])
-        got_ev = np.stack(sensor_model.unpack_nodes(evidence[rows]))
-    else:
-        want_ev = oracle.interpret(p, noise, mask, it.config, it.bin_spacing_m, row_flags)[0]
-        got_ev = evidence[rows]
+    want_ev = it.model.oracle(p, noise, mask, it.config, it.bin_spacing_m, it.bin_model, row_flags)
+    got_ev = it.model.comparable(evidence[rows])
     share = float((np.abs(got_ev.astype(np.int64) - want_ev) <= 1).mean())
     if share < SELF_TEST_MATCH or not (want_ev != 0).any():
         return f"CFAR and the interpreter agree with the float64 oracle on only {share:.1%} of the bins"
-    nodes = sensor_model.unpack_nodes(evidence) if it.detstats else None
-    sums, updates, ambiguous = oracle.fusion(m.grid.spec, None if it.detstats else evidence.reshape(n_beams, -1),
+    nodes = it.model.nodes(evidence)
+    sums, updates, ambiguous = oracle.fusion(m.grid.spec, None if nodes is not None else evidence.reshape(n_beams, -1),
                                              lattice, m.fusion.model, poses, m.fusion.bin_spacing_m, m.fusion.first_bin,
                                              m.fusion.last_bin, margin=1e-3, nodes=nodes,
                                              terrain_dz=m.fusion.terrain_dz)[:3]

@@ -180,27 +180,25 @@ class ModelParams:
     spinning radar's one horizontal beam)."""
 
     snr_1m2_at_10m_db: float = DEFAULT_SNR_DB
-    # the typical target and the terrain: `radarcl calibrate --model detstats --voxel 0.4` (the
-    # likelihood of 216,766 looks at the occupied voxels of training scenes 101-104; jackknife SEs
-    # 8.5 dB, 0.75 dB, 0.08 m, 2.6 dB: docs/guide/sensor-models.md). A simulator's world: a real radar's may differ.
+    # the typical target and the terrain: fitted by maximum likelihood on the training scenes
+    # (`radarcl calibrate --model detstats`; the fit and its errors: docs/design/models.md). A
+    # simulator's world: a real radar's may differ.
     target_gamma_db: float = -20.0
     target_spread_db: float = 10.0
     target_extent_m: float = 0.4
     terrain_gamma_db: float = -24.0
     terrain_band_m: float = 0.3
     # how much echo blocks the beam: no likelihood identifies it (what lies behind the first surface
-    # has no truth a radar could know), so the instrument chose it on the training scenes (stand
-    # 101-104, streets 301-304, 0.2 m): the least blocking of -20 / -23 / -26 / -29 dB whose maps
-    # call at most 5 % of the obstacle voxels free on both radars (docs/guide/sensor-models.md)
+    # has no truth a radar could know), so it is the least blocking whose maps of the training
+    # scenes keep the obstacles from reading free (the rule and the candidates: docs/design/models.md)
     block_gamma_db: float = -26.0
     # a blocker is often partial (a car below a fan beam, a post in a wide one): behind nearer echoes
     # the power's likelihood is a mixture, the blocked target's and (with this chance) the unblocked
-    # one's; chosen as block_gamma_db on the training scenes (docs/guide/sensor-models.md)
+    # one's; chosen as block_gamma_db is
     blocker_gap: float = BLOCKER_GAP
-    # the reading: of the readings whose maps of training scenes 101-104 (0.2 m) meet both the ECE
-    # and the false-free goal (<= 0.05), the one of the best likelihood of the visible voxels (an
-    # unconstrained fit reads a look's mean and a prior of -6 nat: every free voxel right, a
-    # quarter of the obstacles free; docs/guide/sensor-models.md). The prior is the base rate: it falls with the voxel.
+    # the reading: an unconstrained fit would call obstacles free to get the free air right, so it
+    # is the best likelihood among the readings whose training maps meet the calibration and
+    # false-free goals (docs/design/models.md). The prior is the base rate: it falls with the voxel.
     look_limit: float = 2.0
     prior_nats: float = -4.0
     prior_looks: float = 0.0
@@ -215,7 +213,7 @@ class ModelParams:
     evidence: str = "snr"
     # a look says no more than a detection would at its opportunity (snr_evidence.bounded): a real
     # radar's strong echo where no typical target could be is a sidelobe, multipath or clutter as
-    # often as a target; "none" scores a world without them (docs/guide/sensor-models.md: generated scenes, both)
+    # often as a target; "none" scores a world without them
     evidence_bound: str = "detection"
 
     def __post_init__(self):

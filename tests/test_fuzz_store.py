@@ -1,4 +1,4 @@
-"""Hostile input for the map store and the stream recordings (issue 29), beside tests/test_fuzz.py:
+"""Hostile input for the map store and the stream recordings, beside tests/test_fuzz.py:
 property-based damage (hypothesis) to a store's manifest, its index and its chunk files, and to a
 `--record` stream's records. Every case must end in a radarcl error (a sentence) or in exactly
 what was written: a store read back whole is the original brick for brick; a store read with

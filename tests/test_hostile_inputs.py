@@ -1,4 +1,4 @@
-"""Every example of issue 29 that was an "unexpected error" (exit 70), a raw exception from the
+"""Every example of the hostile corpus that was an "unexpected error" (exit 70), a raw exception from the
 API, a hang, a silent wrong answer, an overwrite or a leftover: each now a sentence (exit 2),
 a right answer, or nothing left behind."""
 

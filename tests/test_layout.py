@@ -1,5 +1,5 @@
 """House rules: one name, three files; the installed package carries kernels/ and viewer/ (GLSL too);
-library below applications (``LAYERS``)."""
+library below applications (``LAYERS``, docs/design/layers.md)."""
 
 import os
 import subprocess
@@ -44,37 +44,37 @@ def test_installed_copy_runs_a_kernel(tmp_path):
 
 
 # -- layers: library below applications ------------------------------------------------------------------
-# The one table of the package's layers, top to bottom. A module may import a module of a lower
-# layer, or a sibling in its own folder (no circle); never one of its own layer's other rooms or
-# above. Imports inside functions count: one that only dodges a circle is a circle.
+# The rule, stated once (docs/design/layers.md says it for people): the package is a few named
+# layers, top to bottom; inside a layer its rooms (top-level modules and folders) stand in tiers,
+# top to bottom. A module may import a module of a lower tier (of its layer or of any layer below),
+# or a sibling in its own room (no circle); never a room of its own tier or above. Imports inside
+# functions count: one that only dodges a circle is a circle.
 LAYERS = (
-    ("__main__",),
-    ("cli",),
-    ("bench",),
-    ("commands",),
-    ("jobs",),
-    ("report",),
-    ("evaluation",),
-    ("livemap", "self_test"),
-    ("pipeline",),
-    ("stages", "scene", "viewer"),
-    ("config", "maps"),
-    ("io",),
-    ("oracle",),
-    ("geometry", "grid", "sensor_model"),
-    ("physics", "cfar_theory", "cl", "logodds", "gridspec", "snr_evidence"),
-    ("errors", "__init__"),
+    ("applications", (("__main__",), ("cli",), ("bench",), ("commands",), ("jobs",), ("report",))),
+    ("evaluation", (("evaluation",),)),
+    ("engine", (("livemap", "self_test"), ("pipeline",), ("stages", "scene", "viewer"))),
+    ("configuration and the map", (("config", "maps"),)),
+    ("models and inputs", (("io", "models"),)),
+    ("core numerics and device", (("oracle",), ("geometry", "grid", "sensor_model"),
+                                  ("physics", "cfar_theory", "cl", "logodds", "gridspec", "snr_evidence"),
+                                  ("errors", "__init__"))),
 )
+TIERS = tuple(rooms for _, tiers in LAYERS for rooms in tiers)
 
 
 def layer_of(module):
-    """(layer index, room) of a dotted module name of the package (radarcl.x.y -> room x)."""
+    """(tier index, room) of a dotted module name of the package (radarcl.x.y -> room x)."""
     parts = module.split(".")
     room = parts[1] if len(parts) > 1 else "__init__"
-    for depth, rooms in enumerate(LAYERS):
+    for depth, rooms in enumerate(TIERS):
         if room in rooms:
             return depth, room
     raise AssertionError(f"{module}: room {room!r} is in no layer of LAYERS")
+
+
+def layer_name(room):
+    """The named layer holding ``room``."""
+    return next(name for name, tiers in LAYERS if any(room in rooms for rooms in tiers))
 
 
 def _is_module(name):
@@ -122,8 +122,8 @@ def layer_violations(imports):
         if room_a == room_b:
             graph.setdefault(importer, set()).add(imported)
         elif b <= a:
-            bad.append(f"{importer}:{line} imports {imported} ({room_b!r}, layer {b}, is not below {room_a!r}, "
-                       f"layer {a})")
+            bad.append(f"{importer}:{line} imports {imported} ({room_b!r}, tier {b} in {layer_name(room_b)!r}, is "
+                       f"not below {room_a!r}, tier {a} in {layer_name(room_a)!r})")
     # circles inside a room (a folder's modules importing each other)
     state = {}
 
@@ -147,28 +147,29 @@ def test_imports_run_downward():
 
 
 def test_the_layer_check_catches_an_upward_import():
-    """A planted import of the CLI from the grid, and a planted circle, are both reported."""
+    """A planted import of the CLI from the grid, one of a job from a model, one sideways between
+    two rooms of a tier, and a planted circle, are all reported."""
     planted = package_imports() + [("radarcl.grid", "radarcl.cli", 1), ("radarcl.maps.npz", "radarcl.maps.store", 1),
-                                   ("radarcl.maps.store", "radarcl.maps.npz", 1)]
+                                   ("radarcl.maps.store", "radarcl.maps.npz", 1),
+                                   ("radarcl.models.eq12", "radarcl.jobs.fuse", 2), ("radarcl.io.inputs", "radarcl.models", 3)]
     found = layer_violations(planted)
-    assert any(v.startswith("radarcl.grid:1 imports radarcl.cli") for v in found), found
+    assert any(v.startswith("radarcl.grid:1 imports radarcl.cli") and "'applications'" in v for v in found), found
+    assert any(v.startswith("radarcl.models.eq12:2 imports radarcl.jobs.fuse") for v in found), found
+    assert any(v.startswith("radarcl.io.inputs:3 imports radarcl.models") for v in found), found
     assert any(v.startswith("circle:") and "radarcl.maps.store" in v for v in found), found
+    assert layer_violations(package_imports()) == []
 
 
-def layers_line():
-    """The one-line picture of LAYERS on the docs' development page."""
-    named = ([r for r in rooms if r not in ("__main__", "__init__")] for rooms in LAYERS)
-    return " -> ".join(", ".join(rooms) for rooms in named if rooms)
-
-
-def test_the_documented_layout_follows_the_layer_table():
-    text = (ROOT / "docs" / "development.md").read_text()
-    section = text.split("\n## Layout\n", 1)[1].split("\n## ", 1)[0]
-    assert f"`{layers_line()}`" in section.replace("\n", " ").replace("  ", " "), layers_line()
-    for rooms in LAYERS:
-        for room in rooms:
-            if room not in ("__main__", "__init__"):
-                assert f"  {room}" in section, f"docs/development.md's layout leaves out {room}"
+def test_the_layers_page_states_the_layer_table():
+    """docs/design/layers.md lists every named layer with its tiers of rooms, in this order."""
+    text = (ROOT / "docs" / "design" / "layers.md").read_text()
+    table = text.split("\n## The layers\n", 1)[1].split("\n## ", 1)[0]
+    rows = [line for line in table.splitlines() if line.startswith("| ") and not line.startswith("| layer")]
+    listed = [(r.split("|")[1].strip(), r.split("|")[2].strip()) for r in rows]
+    want = [(name, " > ".join(", ".join(f"`{room}`" for room in rooms if room not in ("__main__", "__init__"))
+                              for rooms in tiers if [r for r in rooms if r not in ("__main__", "__init__")]))
+            for name, tiers in LAYERS]
+    assert listed == want, (listed, want)
 
 
 def resolves(dotted):

@@ -1,4 +1,4 @@
-"""The map store believes nothing it reads (issue 29): each damage the hostile corpus found is
+"""The map store believes nothing it reads: each damage the hostile corpus found is
 refused with what is wrong, or read with --salvage that lists exactly the bricks lost; never
 uninitialised memory; only radarcl's own directories are replaced; poses survive convert."""
 

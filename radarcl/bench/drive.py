@@ -108,12 +108,11 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
     ``window_m`` into the store ``store``, or unbounded (``window_m`` None); ``range_m``: map out
     to this range (default: the sensor's). Returns its figures (a dict)."""
     from radarcl.cl import Runtime
-    from radarcl.grid import EvidenceGrid
     from radarcl.io import polar_png
     from radarcl.jobs.fuse import drive_spec
     from radarcl.maps.rolling import RollingStore, RollingWindow
     from radarcl.oracle import FLAG_SILENT
-    from radarcl.pipeline import Mapping
+    from radarcl.pipeline import Mapping, new_grid
 
     scans, _ = _paths(data)
     track, stamps = drive_track(data)
@@ -129,15 +128,14 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
         from radarcl.gridspec import GridSpec
 
         spec = GridSpec(spec.origin_m, spec.voxel_m, spec.shape, brick_z)
-    detstats = config["interpret.model"] == "detstats"
-    grid = EvidenceGrid(runtime, spec, knowledge=detstats)
+    grid = new_grid(runtime, config, spec)
     mapping = Mapping.from_config(runtime, config=config, grid=grid, per_beam_poses=True)
     rolling = backing = None
     if window_m is not None:
         rolling = RollingWindow(grid, None, window_m)
         rolling.check_reach(mapping.fusion.r_hi)
         backing = RollingStore(store, spec, config.sensor.toml(), config.as_dict(), overwrite=True,
-                               reading=config.model_params().reading if detstats else None)
+                               reading=config.reading())
         rolling.backing = grid.backing = backing
     latencies, device_max, host_max, trajectory, bricks_max = [], 0, _rss_bytes(), [], 0
     stage = _stage_bytes(mapping)

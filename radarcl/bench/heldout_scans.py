@@ -24,6 +24,7 @@ from radarcl.evaluation.heldout import (detection_probability, frequency_map, pr
                                          score_probability)
 from radarcl.io import polar_png
 from radarcl.jobs import navtech_map
+from radarcl.pipeline import evidence_config
 
 
 def run(runtime, config, data_dir, report=None):
@@ -37,8 +38,8 @@ def run(runtime, config, data_dir, report=None):
     train, test = list(range(0, len(scans), 2)), list(range(1, len(scans), 2))
     say(f"{len(scans)} scans: map of scans {train}, held out {test}")
     # the configuration's map, and beside it eq. 12's or the detection-statistics model's
-    if config["interpret.model"] == "detstats":
-        detstats, models = config, {"map": config, "eq. 12": config.replaced(interpret__model="paper")}
+    if config.evidence_model().knowledge:
+        detstats, models = config, {"map": config, "eq. 12": evidence_config(config)}
     else:
         detstats = config.replaced(interpret__model="detstats")
         models = {"map": config, "detection statistics": detstats}

@@ -20,7 +20,7 @@ BAUD = 921600
 
 
 def _scene(frames):
-    from radarcl.evaluation.tuning import EVALUATION_SEED
+    from radarcl.config.presets import EVALUATION_SEED
     from radarcl.scene.observe import observe
     from radarcl.scene.outdoor import PAPER_TILTS_DEG, paper_scene
 

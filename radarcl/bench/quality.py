@@ -2,10 +2,10 @@
 (``evaluation.quality`` measures, ``report.quality`` shows)."""
 
 from radarcl.commands.options import add_output, positive_float
-from radarcl.config.presets import EQ12, paper_config
+from radarcl.config.presets import EQ12, EVALUATION_SEED, paper_config
 from radarcl.evaluation import quality
 from radarcl.evaluation.quality import VOXELS
-from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
+from radarcl.evaluation.tuning import TUNED
 from radarcl.io import files
 from radarcl.report.quality import chart, format_table, write_report
 

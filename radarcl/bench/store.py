@@ -22,7 +22,8 @@ def reference_map(voxel_m=0.1, report=None):
     """(spec, keys, data) of the reference scene fused at ``voxel_m`` with the tuned constants."""
     from radarcl.cl import Runtime
     from radarcl.config.presets import paper_config
-    from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
+    from radarcl.config.presets import EVALUATION_SEED
+    from radarcl.evaluation.tuning import TUNED
     from radarcl.pipeline import Mapping
     from radarcl.scene.observe import observe
     from radarcl.scene.outdoor import PAPER_TILTS_DEG, paper_scene

@@ -3,6 +3,7 @@ scenes (``jobs.calibrate``); what both calibration commands write (``fit_outputs
 
 import json
 
+from radarcl import models
 from radarcl.commands.options import bounded_int, positive_float, runtime
 from radarcl.errors import ConfigError
 from radarcl.io import files
@@ -71,7 +72,7 @@ def run(args):
     if args.seeds is not None and len(set(args.seeds)) != len(args.seeds):
         raise ConfigError(f"--seeds {' '.join(map(str, args.seeds))}: a scene seed appears twice (fitting and "
                           "validating on the same scene proves nothing)")
-    if args.model == "detstats":
+    if models.get(args.model).knowledge:      # its own fit: the detection statistics' parameters
         from radarcl.jobs import calibrate_detstats as calibrate
 
         config, result = calibrate.run(runtime(), args.voxel or 0.4, args.seeds, report=print, radar=args.radar)

@@ -209,7 +209,7 @@ def shown(grid, keys, channels, config):
     knowledge and looks bricks of ``keys``): as the map reads them where it knows, 0 where it
     does not (``Map.shown_units``), not the raw sums."""
     return Map(grid.spec, keys, channels["evidence"], channels["knowledge"], channels["looks"],
-               config.model_params().reading).shown_units()
+               config.reading()).shown_units()
 
 
 class _ViewServer:

@@ -1,6 +1,7 @@
 """`radarcl tune`: the documented search for the CFAR settings and eq. 12's constants."""
 
 from radarcl.commands.options import add_progress, positive_float, progress, runtime
+from radarcl.config.presets import TUNING_SEED, TUNING_VOXEL_M
 from radarcl.io import files
 
 SUMMARY = ("the documented search for the CFAR settings and the eq. 12 constants on the reference scene; --save "
@@ -11,9 +12,10 @@ DESCRIPTION = ("Runs the coordinate search of radarcl/evaluation/tuning.py (CFAR
 
 
 def add_arguments(parser):
-    parser.add_argument("--seed", type=int, default=2, help="simulation seed (default: %(default)s, the tuning seed)")
+    parser.add_argument("--seed", type=int, default=TUNING_SEED,
+                        help="simulation seed (default: %(default)s, the tuning seed)")
     parser.add_argument("--replay", default=None, help="tune on a recording of the reference scene instead of simulating")
-    parser.add_argument("--voxel", type=positive_float, default=0.2, help="voxel edge [m] (default: %(default)s)")
+    parser.add_argument("--voxel", type=positive_float, default=TUNING_VOXEL_M, help="voxel edge [m] (default: %(default)s)")
     parser.add_argument("--save", default=None, metavar="FILE", help="write the chosen configuration to FILE")
     parser.add_argument("--force", action="store_true", help="replace an existing --save file")
     add_progress(parser)

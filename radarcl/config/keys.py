@@ -6,10 +6,10 @@ Below both ``sensors`` (a profile's ``[defaults.*]`` tables are checked here) an
 
 from dataclasses import dataclass
 
-from radarcl import sensor_model
+from radarcl import models, sensor_model
 from radarcl.cfar_theory import CFAR_KINDS
 from radarcl.config import tomlfile
-from radarcl.config.stage_config import INTERPRETERS, is_power_of_two
+from radarcl.config.stage_config import is_power_of_two
 from radarcl.errors import ConfigError
 from radarcl.geometry import BEAM_MODELS
 from radarcl.oracle import WINDOWS
@@ -22,6 +22,13 @@ def _pow2(v):
     if not is_power_of_two(v):
         raise ConfigError(f"must be a power of two, got {v}")
     return v
+
+
+def _model_key(spec):
+    """The ``Key`` of a key an evidence model declares (``models.Number`` or ``models.Choice``)."""
+    if isinstance(spec, models.Choice):
+        return Key(lambda v: tomlfile.choice(v, spec.choices), "", spec.help)
+    return Key(lambda v: _N(v, spec.lo, spec.hi, lo_open=spec.lo_open, unit=spec.unit), spec.unit, spec.help)
 
 
 @dataclass(frozen=True)
@@ -49,22 +56,9 @@ KEYS = {
     "interpret.range_min_m": Key(lambda v: _N(v, 0, 1e5, unit="m"), "m", "no evidence nearer"),
     "interpret.range_max_m": Key(lambda v: _N(v, 0, 1e5, lo_open=True, unit="m"), "m", "no evidence farther"),
     "interpret.max_pulses": Key(lambda v: tomlfile.integer(v, 1, 1 << 16), "", "pulse rows kept per beam"),
-    "interpret.model": Key(lambda v: tomlfile.choice(v, INTERPRETERS), "",
-                           "paper: eq. 12; occlusion: free evidence only up to the first surface"),
-    "interpret.surface_db": Key(lambda v: _N(v, -100, 100, unit="dB"), "dB",
-                                "occlusion: a pulse whose peak r/n reaches this is a surface"),
-    "interpret.e_high_far": Key(lambda v: _N(v, -16, 0, unit="nat"), "nat",
-                                "occlusion: E_h at the far end of the range (e_high at the near end)"),
-    **{f"sensor_model.{name}": Key(lambda v, lo=lo, hi=hi, unit=unit: _N(v, lo, hi, unit=unit), unit, f"detstats: {why}")
-       for name, (lo, hi, unit, why) in sensor_model.RANGES.items()},
-    "sensor_model.evidence": Key(lambda v: tomlfile.choice(v, sensor_model.EVIDENCE_KINDS), "",
-                                 "detstats: snr, the likelihood ratio of the measured power over the beam's noise "
-                                 "floor; detection, the CFAR's outcome alone"),
-    "sensor_model.evidence_bound": Key(lambda v: tomlfile.choice(v, sensor_model.EVIDENCE_BOUNDS), "",
-                                       "detstats: detection, a look says no more than a CFAR detection would at its "
-                                       "opportunity, either way; none, the measured power's likelihood ratio as it is"),
-    "sensor_model.ground_below_m": Key(lambda v: _N(v, *sensor_model.GROUND_RANGE[:2], unit="m"), "m",
-                                       "detstats: the sensor's height above the ground plane (0: no terrain class)"),
+    "interpret.model": Key(lambda v: tomlfile.choice(v, models.names()), "",
+                           "; ".join(f"{m.name}: {m.summary}" for m in models.MODELS.values())),
+    **{name: _model_key(spec) for model in models.MODELS.values() for name, spec in model.keys.items()},
     "beam.model": Key(lambda v: tomlfile.choice(v, BEAM_MODELS), "", "beam volume (§3.4, Fig. 7c)"),
     "grid.voxel_m": Key(lambda v: _N(v, 1e-4, 1e3, unit="m"), "m", "voxel edge"),
     "grid.origin_m": Key(lambda v: tomlfile.vector(v, unit="m"), "m", "low corner (x, y, z), world frame"),

@@ -28,12 +28,14 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from radarcl import sensor_model
+from radarcl import models, sensor_model
 from radarcl.config import sensors, tomlfile
 from radarcl.config.keys import BUILTIN, KEYS, SECTIONS, check_value
 from radarcl.config.stage_config import CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError
 from radarcl.gridspec import GridSpec
+
+FIELD_OF_VIEW = "field of view"     # the origin of a [grid] box derived from the sensor (``grid_follows_sensor``)
 
 # Metre-valued keys that follow from the sensor a configuration was made for (its resolution,
 # range and field of view): derived again when a configuration is forced onto another sensor.
@@ -95,7 +97,7 @@ class Resolved:
         cfar__kind="so"), marked as set by the program."""
         values, origins = dict(self.values), dict(self.origins)
         for name in ("grid.origin_m", "grid.size_m"):     # a field-of-view box follows the new values
-            if origins[name].endswith("field of view"):
+            if origins[name].endswith(FIELD_OF_VIEW):
                 del values[name], origins[name]
         for key, value in changes.items():
             name = key.replace("__", ".")
@@ -117,7 +119,7 @@ class Resolved:
             values["interpret.range_max_m"] = hi
             origins["interpret.range_max_m"] += ", clipped to the last bin"
             for name in ("grid.origin_m", "grid.size_m"):
-                if origins[name].endswith("field of view"):
+                if origins[name].endswith(FIELD_OF_VIEW):
                     del values[name], origins[name]
         return _checked(sensor, values, origins, notes)
 
@@ -149,6 +151,28 @@ class Resolved:
                                surface_db=self["interpret.surface_db"],
                                e_high_far=self.values.get("interpret.e_high_far"))   # unset: E_h (no ramp)
 
+    def evidence_model(self):
+        """The evidence model in force (``radarcl.models``): what differs between models is asked of it."""
+        return models.get(self["interpret.model"])
+
+    def reading(self):
+        """What a map of this configuration keeps to be read (``EvidenceModel.reading``), or None."""
+        return self.evidence_model().reading(self.model_params())
+
+    def grid_follows_sensor(self):
+        """True when neither [grid] origin nor size was given: both are the field of view's box."""
+        return all(self.origins.get(k, "").endswith(FIELD_OF_VIEW) for k in ("grid.origin_m", "grid.size_m"))
+
+    def derived_from_sensor(self, name):
+        """True when key ``name`` holds what radarcl derived from the sensor's description (its
+        mounting, range, resolution or field of view): nobody gave it."""
+        return self.origins.get(name, "").startswith(f"sensor {self.sensor.name}: ")
+
+    def sensitivity_missing(self):
+        """True when the sensor's profile gives no sensitivity and the default stands in
+        (``sensors.missing_sensitivity`` says so)."""
+        return self.origins.get("sensor_model.snr_1m2_at_10m_db", "").endswith(sensors.missing_sensitivity(self.sensor))
+
     def model_params(self):
         """The detection-statistics model's ``sensor_model.ModelParams`` of [sensor_model]."""
         return sensor_model.ModelParams.of(self.values)
@@ -174,8 +198,7 @@ class Resolved:
         CFAR and interpreter choices: eq. 12's constants, or the detection-statistics model's evidence."""
         keys = [k for k in self.values if base is None or base.values.get(k) != self.values[k]]
         if base is None:
-            own = ("sensor_model.evidence",) if self["interpret.model"] == "detstats" else (
-                "interpret.k_occ", "interpret.e_", "interpret.wide")
+            own = self.evidence_model().label_keys
             keys = [k for k in keys if k.startswith(("cfar.kind", "cfar.pfa", "interpret.model", *own, "grid.voxel"))]
         return ", ".join(f"{k.split('.')[1]}={_short(self.values[k])}" for k in keys) or "the same"
 
@@ -281,9 +304,9 @@ def _checked(sensor, values, origins, notes=()):
     if "grid.size_m" not in values or "grid.origin_m" not in values:
         origin, size = sensors.field_of_view_box(sensor, values["grid.voxel_m"], values["interpret.range_max_m"])
         if "grid.origin_m" not in values:
-            values["grid.origin_m"], origins["grid.origin_m"] = origin, f"sensor {sensor.name}: field of view"
+            values["grid.origin_m"], origins["grid.origin_m"] = origin, f"sensor {sensor.name}: {FIELD_OF_VIEW}"
         if "grid.size_m" not in values:
-            values["grid.size_m"], origins["grid.size_m"] = size, f"sensor {sensor.name}: field of view"
+            values["grid.size_m"], origins["grid.size_m"] = size, f"sensor {sensor.name}: {FIELD_OF_VIEW}"
     _scale_default_prior(sensor, values, origins)
     order = {k: i for i, k in enumerate(KEYS)}
     values = dict(sorted(values.items(), key=lambda kv: order[kv[0]]))

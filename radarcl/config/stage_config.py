@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl import cfar_theory, physics
+from radarcl import cfar_theory, models, physics
 from radarcl.errors import ConfigError
 
 # The paper states 64 m at exactly the Nyquist frequency using c = 3e8 m/s. With the exact
@@ -282,9 +282,6 @@ class CfarConfig:
         return int(n_bins)
 
 
-INTERPRETERS = ("paper", "occlusion", "detstats")
-
-
 @dataclass(frozen=True)
 class InterpretConfig:
     """The down-range interpreter, eq. 12, with the paper's defaults.
@@ -302,13 +299,13 @@ class InterpretConfig:
         (sensor 1.5 m above flat ground - our assumption, the paper does not say), lowest
         elevation -14 deg, 2 deg beam, 0.5 m resolution: 1.87 m.
     max_pulses: pulses kept per beam (more are counted, and still give evidence).
-    model: "paper" (eq. 12 as above) or "occlusion" (radarcl's, beyond the paper): noise bins
-        before the first surface get E_h interpolated in range from e_high (first bin) to
-        e_high_far (last bin), noise bins after it E_l; a pulse is a surface when it is wide or
-        its peak 10 log10(r / n) reaches surface_db. (kernels/interpret.cl says why.)
-        "detstats": the detection-statistics model (``radarcl.sensor_model``): evidence from the
-        CFAR's own detection statistics; eq. 12's constants are unused, its own parameters are
-        the ``sensor_model`` keys.
+    model: the registered evidence model (``radarcl.models.MODELS``; docs/design/models.md): "paper"
+        (eq. 12 as above), "occlusion" (radarcl's, beyond the paper: noise bins before the first
+        surface get E_h interpolated in range from e_high (first bin) to e_high_far (last bin),
+        noise bins after it E_l; a pulse is a surface when it is wide or its peak 10 log10(r / n)
+        reaches surface_db; kernels/interpret.cl says why) or "detstats" (``radarcl.sensor_model``:
+        evidence from the CFAR's own detection statistics; eq. 12's constants are unused, its own
+        parameters are the ``sensor_model`` keys).
     """
 
     k_occ: float = 1.0
@@ -339,11 +336,21 @@ class InterpretConfig:
                  f"need 0 <= range_min_m < range_max_m, got {self.range_min_m} and {self.range_max_m}")
         _require(self.wide_pulse_m > 0, f"wide_pulse_m must be positive, got {self.wide_pulse_m}")
         _positive_int("max_pulses", self.max_pulses)
-        _require(self.model in INTERPRETERS, f"model must be one of {INTERPRETERS}, got {self.model!r}")
+        _require(self.model in models.MODELS, f"model must be one of {models.names()}, got {self.model!r}")
         _require(_is_real(self.surface_db) and math.isfinite(self.surface_db),
                  f"surface_db must be a finite number, got {self.surface_db!r}")
         _require(_is_real(self.e_high_far) and math.isfinite(self.e_high_far) and self.e_high_far <= 0,
                  f"e_high_far is evidence of emptiness and must be a finite number <= 0, got {self.e_high_far!r}")
+
+    @property
+    def evidence_model(self):
+        """The ``models.EvidenceModel`` registered as ``model``."""
+        return models.get(self.model)
+
+    @property
+    def occludes(self):
+        """The first surface ends the free evidence and E_h ramps to e_high_far (``EvidenceModel.occludes``)."""
+        return self.evidence_model.occludes
 
     def bin_interval(self, bin_spacing_m, n_bins):
         """[first, last] bins (inclusive) whose range lies in [range_min_m, range_max_m]:

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl import logodds
+from radarcl import logodds, models
 from radarcl.errors import ConfigError
 from radarcl.evaluation import visibility as vis
 from radarcl.grid import EvidenceGrid
@@ -46,8 +46,6 @@ CALIBRATED = {"cfar.kind": "ca", "cfar.pfa": 1e-3, "interpret.model": "occlusion
 # The detection-statistics model read as the last release read it: no prior, so a voxel never
 # observed reads 0 (p 1/2) and the known free voxels read near it (the bench's comparison row).
 DETSTATS_NO_PRIOR = {"interpret.model": "detstats", "sensor_model.prior_nats": 0.0}
-NAMES = {"occlusion": ("interpret.k_occ", "interpret.e_high", "interpret.e_high_far", "interpret.e_low"),
-         "paper": ("interpret.k_occ", "interpret.e_high", "interpret.e_low")}
 SIGNS = {"interpret.k_occ": 1, "interpret.e_high": -1, "interpret.e_high_far": -1, "interpret.e_low": -1}
 
 
@@ -60,7 +58,7 @@ def bin_features(profiles, noise, mask, config, bin_spacing_m):
     m = np.asarray(mask).astype(bool).reshape(r.shape)
     first, last = config.bin_interval(bin_spacing_m, r.shape[1])
     wide_bins = config.wide_bins(bin_spacing_m)
-    surface_decades = config.surface_db / 10.0 if config.model == "occlusion" else math.inf
+    surface_decades = config.surface_db / 10.0 if config.occludes else math.inf
     out = np.zeros(r.shape + (4,))
     if first > last:
         return out
@@ -107,15 +105,21 @@ def fused_features(runtime, obs, config, spec, progress=None):
     return np.stack([c.grid.snapshot() for c in channels], axis=-1) / float(logodds.SCALE)
 
 
+def merged(X, model):
+    """The feature columns the constants of ``model`` (an ``interpret.model`` name) weigh: F_near
+    and F_far one feature for a model whose E_h does not ramp (eq. 12)."""
+    if models.get(model).occludes:
+        return X
+    return np.column_stack([X[:, 0], X[:, 1] + X[:, 2], X[:, 3]])
+
+
 def design(features, truth, model):
     """(X, y) of the visible voxels of ``truth`` (a ``VisibilityTruth``): the fused features
-    (merged to the paper's three for model "paper") and occupied (DETECTABLE or WEAK) or not."""
+    (merged to the paper's three for a model without the ramp, ``merged``) and occupied
+    (DETECTABLE or WEAK) or not."""
     c = truth.classes
     keep = (c == vis.FREE_VISIBLE) | (c == vis.DETECTABLE) | (c == vis.WEAK)
-    X = features[keep]
-    if model == "paper":
-        X = np.column_stack([X[:, 0], X[:, 1] + X[:, 2], X[:, 3]])
-    return X.astype(np.float32), (c[keep] != vis.FREE_VISIBLE)      # float32: half the memory; fit in float64
+    return merged(features[keep], model).astype(np.float32), (c[keep] != vis.FREE_VISIBLE)      # float32: half the memory; fit in float64
 
 
 @dataclass
@@ -139,7 +143,7 @@ def log_likelihood(X, y, beta):
 def fit(X, y, model, max_iter=100, zero=()):
     """Maximum-likelihood ``Fit`` of y on X without intercept, with eq. 12's signs; the
     constants named in ``zero`` are held at 0 (e.g. E_l: unknown behind the first surface)."""
-    names = NAMES[model]
+    names = models.get(model).fitted
     signs = np.array([SIGNS[k] for k in names])
     free = np.array([k not in zero for k in names])
     X = np.asarray(X, np.float64)

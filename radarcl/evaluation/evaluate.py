@@ -104,8 +104,8 @@ def read_units(grid, config):
 def for_scene(config, described):
     """``config`` for a generated scene: the detection-statistics model gets the scene's mounting
     (the sensor's height above its ground plane, as a user gives their own); others unchanged."""
-    if config["interpret.model"] != "detstats" or config.origins["sensor_model.ground_below_m"] != \
-            f"sensor {config.sensor.name}: the sensor's [mounting] height_m: the ground plane below it":
+    key = "sensor_model.ground_below_m"
+    if key not in config.evidence_model().keys or not config.derived_from_sensor(key):
         return config
     return config.replaced(sensor_model__ground_below_m=described["sensor_height_m"])
 

@@ -1,6 +1,6 @@
 """Map error against run time on the reference scene: the sweep of `radarcl bench quality`.
 
-One recording of the paper's 3,840 observations (``tuning.EVALUATION_SEED``) is mapped with the
+One recording of the paper's 3,840 observations (``config.presets.EVALUATION_SEED``) is mapped with the
 tuned configuration (``tuning.TUNED``) and with one setting changed at a time: zero padding
 (n_fft 256 = none, 512 = x2, 1024 = x4), the beam model (``geometry.BEAM_MODELS``), the voxel
 size (0.4, 0.2, 0.1 m) and the CFAR kind. Every run is scored on one fixed voxel set per voxel

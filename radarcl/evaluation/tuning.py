@@ -2,9 +2,9 @@
 
 The paper asks for "a more rigorous method to set the thresholds". Ours, run by `radarcl tune`:
 
-1. Data: the reference scene simulated with ``TUNING_SEED`` (its own noise and speckle), never
-   the seed the demo and the quality bench report on (``EVALUATION_SEED``).
-2. Resolution: 0.2 m voxels (the metrics move little from 0.2 to 0.1 m and a run takes seconds).
+1. Data: the reference scene simulated with ``config.presets.TUNING_SEED`` (its own noise and
+   speckle), never the seed the demo and the quality bench report on (``EVALUATION_SEED``).
+2. Resolution: ``config.presets.TUNING_VOXEL_M``, 0.2 m voxels (the metrics move little from 0.2 to 0.1 m and a run takes seconds).
 3. Objective: ROC-AUC over the observed voxels; within ``AUC_TIE`` of the best, the lower
    false-free rate wins (the dangerous error), then the earlier candidate (the paper's value
    is listed first in each stage).
@@ -22,9 +22,6 @@ simulator means running it again.
 
 from radarcl.evaluation.evaluate import map_observations, score
 
-TUNING_SEED = 2
-EVALUATION_SEED = 0
-TUNING_VOXEL_M = 0.2
 AUC_TIE = 0.002
 CFAR_CANDIDATES = (("ca", 1e-3), ("ca", 1e-2), ("ca", 1e-4), ("go", 1e-3), ("so", 1e-3), ("so", 1e-2), ("os", 1e-3))
 WIDE_CANDIDATES = (None, 1.0, 0.5, 0.25, 0.07)

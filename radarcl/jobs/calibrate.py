@@ -17,6 +17,7 @@ log-likelihood on validation scenes, and a configuration file every command read
 
 import numpy as np
 
+from radarcl import models
 from radarcl.config.presets import EQ12, paper_config
 from radarcl.errors import ConfigError
 from radarcl.evaluation import calibration as cal
@@ -33,7 +34,7 @@ SURFACE_CANDIDATES_DB = (6.0, 10.0, 15.0, 20.0)
 
 def candidates(base, model):
     """The configurations compared by validation likelihood (constants still the base's)."""
-    surfaces = SURFACE_CANDIDATES_DB if model == "occlusion" else (base["interpret.surface_db"],)
+    surfaces = SURFACE_CANDIDATES_DB if models.get(model).occludes else (base["interpret.surface_db"],)
     return [base.replaced(cfar__kind=k, cfar__pfa=p, interpret__model=model, interpret__surface_db=s)
             for k, p in CFAR_CANDIDATES for s in surfaces]
 

@@ -22,7 +22,7 @@ outcome:
 
 import numpy as np
 
-from radarcl import logodds
+from radarcl import logodds, models
 from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
 from radarcl.evaluation import calibration as cal
@@ -32,7 +32,7 @@ from radarcl.grid import EvidenceGrid
 from radarcl.io import polar_png
 from radarcl.jobs import navtech_map
 from radarcl.jobs.calibrate import with_fit
-from radarcl.pipeline import Mapping
+from radarcl.pipeline import Mapping, evidence_config
 from radarcl.report import figures
 from radarcl.stages.fusion import Fusion
 
@@ -73,17 +73,14 @@ def design(runtime, config, outcome, spec, scans, per_beam, map_idx, test_idx, m
         y.append(detected)
         which.append(np.full(len(values), k))
     X, y = np.concatenate(X), np.concatenate(y)
-    if model == "paper":
-        X = np.column_stack([X[:, 0], X[:, 1] + X[:, 2], X[:, 3]])
-    return X.astype(np.float32), y, np.concatenate(which)
+    return cal.merged(X, model).astype(np.float32), y, np.concatenate(which)
 
 
 def run(runtime, config, data_dir, model="occlusion", report=None):
     """Calibrate ``config`` (a ``Resolved`` for a polar-scan sensor) on ``data_dir``; returns
     (the calibrated ``Resolved``, the result dict)."""
     say = report or (lambda _: None)
-    if config["interpret.model"] == "detstats":      # this fits eq. 12's constants: "profile constants" are eq. 12's
-        config = config.replaced(interpret__model="paper")
+    config = evidence_config(config)       # this fits eq. 12's constants: "profile constants" are eq. 12's
     scans, poses, _, _ = navtech_map.load(config, data_dir)
     if len(scans) < 8:
         raise ConfigError(f"calibrating on scans needs at least 8 (4 to fit, 4 to report on), found {len(scans)}")
@@ -98,7 +95,7 @@ def run(runtime, config, data_dir, model="occlusion", report=None):
     outcome = mapconfig.resolve(config.sensor, program={"grid.voxel_m": config["grid.voxel_m"]})
     say(f"{len(scans)} scans: fit on {fit_part} (map {fit_map} predicts {fit_test}); report on {report_part} "
         f"(map {rep_map} predicts {rep_test})")
-    surfaces = SURFACE_CANDIDATES_DB if model == "occlusion" else (config["interpret.surface_db"],)
+    surfaces = SURFACE_CANDIDATES_DB if models.get(model).occludes else (config["interpret.surface_db"],)
     rows, best = [], None
     for kind, pfa in CFAR_CANDIDATES:
         for surface in surfaces:

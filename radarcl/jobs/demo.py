@@ -26,12 +26,12 @@ from pathlib import Path
 import numpy as np
 
 from radarcl import oracle
-from radarcl.config.presets import EQ12, paper_config
+from radarcl.config.presets import EQ12, EVALUATION_SEED, paper_config
 from radarcl.config.stage_config import PAPER_RADAR
 from radarcl.errors import ConfigError
 from radarcl.evaluation import quality
 from radarcl.evaluation.evaluate import baselines, instrument, map_observations, radar_score
-from radarcl.evaluation.tuning import EVALUATION_SEED, TUNED
+from radarcl.evaluation.tuning import TUNED
 from radarcl.geometry import BeamLattice
 from radarcl.io import recording
 from radarcl.jobs import demo_fig9
@@ -201,21 +201,17 @@ def _plot_profiles(obs, config, path, name, beams=((2, 32, 0), (14, 20, 3))):
     or the detection-statistics model's for a voxel on the beam's axis (an upright target)."""
     spacing = config.bin_spacing_m
     interpret, cfar = config.interpret_config(), config.cfar_config()
-    detstats = config["interpret.model"] == "detstats"
-    model = bin_model(config, config["grid.voxel_m"]) if detstats else None
+    evidence_model, model = config.evidence_model(), bin_model(config, config["grid.voxel_m"])
     panels = []
     for frame, az, el in beams:
         prof = oracle.range_profile(obs.samples[frame, az, el].astype(np.float64), config.n_fft, output="power")
         noise, _, mask = oracle.cfar(prof[None], cfar)
-        if detstats:
-            evidence = oracle.interpret_detstats(prof[None], noise, mask, interpret, spacing, model)[0][0, :, 0, 0]
-        else:
-            evidence = oracle.interpret(prof[None], noise, mask, interpret, spacing)[0][0]
+        evidence = evidence_model.on_axis(evidence_model.oracle(prof[None], noise, mask, interpret, spacing, model))[0]
         elevation = obs.tilts_deg[frame] + PAPER_RADAR.elevation_step_deg * el
         azimuth = np.degrees(BeamLattice.from_radar(PAPER_RADAR).azimuths[az])
         panels.append((np.arange(len(prof)) * spacing, prof, cfar.alpha * noise[0], mask[0], evidence,
                        f"beam at {elevation:.1f} deg elevation, {azimuth:+.1f} deg azimuth"))
-    label = "evidence on the axis [nat]" if detstats else "eq. 12 evidence [nat]"
+    label = evidence_model.axis_label
     figures.save(figures.beams_figure(panels, f"Two beams of the reference scene (as the paper's Fig. 10), {name}",
                                       label), path, dpi=100)
 

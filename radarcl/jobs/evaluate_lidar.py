@@ -29,12 +29,11 @@ from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.evaluation import calibration, heldout, tuning
 from radarcl.evaluation import lidar as L
 from radarcl.evaluation.evaluate import read_units
-from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GridSpec
 from radarcl.io import files, radiate
 from radarcl.io.inputs import open_input, polar_source
 from radarcl.maps.map import FREE_NATS, KNOWN_LOOKS, OCCUPIED_NATS
-from radarcl.pipeline import Mapping
+from radarcl.pipeline import Mapping, new_grid
 from radarcl.report import figures
 
 MODELS = {"paper": ("paper constants", EQ12), "tuned": ("tuned", tuning.TUNED),
@@ -191,13 +190,12 @@ def run(runtime, models, data, voxel_m=0.3, bands=L.BANDS_M, poses=None, poses_f
     for k, (label, config) in enumerate(models):
         if config["grid.voxel_m"] != spec.voxel_m:        # the plane grid's cells: a default prior follows them
             config = config.replaced(grid__voxel_m=spec.voxel_m)
-        detstats = config["interpret.model"] == "detstats"
-        mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec, knowledge=detstats),
+        mapping = Mapping.from_config(runtime, config=config, grid=new_grid(runtime, config, spec),
                                       per_beam_poses=True)
         mapping.fuse_source(source)
         # a map of the detection-statistics model is scored as it reads (its reading), not its sums,
         # and a cell it does not know is unknown whatever it reads (the costmap export's rule)
-        if detstats:
+        if mapping.grid.has_knowledge:
             units, knows = read_units(mapping.grid, config)
             maps[label], known[label] = L.nats_of(units), knows[0]
         else:

@@ -21,13 +21,12 @@ import numpy as np
 
 from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
-from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GridSpec, lattice_box
 from radarcl.io.files import scratch
 from radarcl.maps.disk import MapSaver, output_format, reading_of
 from radarcl.maps.map import Map
 from radarcl.maps.rolling import WINDOW_RANGE_FACTOR, RollingStore, RollingWindow
-from radarcl.pipeline import Mapping
+from radarcl.pipeline import Mapping, new_grid
 
 
 def default_window_m(config):
@@ -41,7 +40,7 @@ def drive_spec(config, positions):
     configured box widened in x and y to every sensor position (n, 3) plus the mapped range
     (bricks shaped to the sensor as ``grid_spec`` says)."""
     spec = config.grid_spec()
-    if not all(str(config.origins.get(k, "")).endswith("field of view") for k in ("grid.origin_m", "grid.size_m")):
+    if not config.grid_follows_sensor():
         return spec
     reach = float(config["interpret.range_max_m"])
     v = spec.voxel_m
@@ -106,12 +105,11 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
                               "bricks that leave the window); leave out --every")
         spec = drive_spec(config, frame_positions(source))
         # before the drive: a window a frame does not fit, a store that cannot be written
-        detstats = config["interpret.model"] == "detstats"
-        mapping = Mapping.from_config(runtime, config=config, grid=EvidenceGrid(runtime, spec, knowledge=detstats))
+        mapping = Mapping.from_config(runtime, config=config, grid=new_grid(runtime, config, spec))
         rolling = RollingWindow(mapping.grid, None, window_m)
         rolling.check_reach(mapping.fusion.r_hi)
         backing = RollingStore(out, spec, config.sensor.toml(), config.as_dict(), inputs, overwrite=overwrite,
-                               reading=config.model_params().reading if detstats else None)
+                               reading=config.reading())
         rolling.backing = mapping.grid.backing = backing
     else:
         saver = MapSaver(out, config.sensor.toml(), config.as_dict(), inputs)

@@ -44,10 +44,9 @@ def fuse_one(config_values, sensor_toml, path, spec_tuple, partial):
     from radarcl import self_test
     from radarcl.cl import Runtime
     from radarcl.config import mapconfig
-    from radarcl.grid import EvidenceGrid
     from radarcl.gridspec import GridSpec
     from radarcl.maps.store import StoreWriter
-    from radarcl.pipeline import Mapping
+    from radarcl.pipeline import Mapping, new_grid
 
     with tempfile.TemporaryDirectory() as tmp:
         profile = Path(tmp) / "sensor.toml"
@@ -57,16 +56,15 @@ def fuse_one(config_values, sensor_toml, path, spec_tuple, partial):
     runtime = Runtime()
     source = open_input(config.sensor, path)
     config = config.for_sensor(source.sensor) if source.sensor is not config.sensor else config
-    detstats = config["interpret.model"] == "detstats"
-    grid = EvidenceGrid(runtime, GridSpec(*spec_tuple), knowledge=detstats)
+    grid = new_grid(runtime, config, GridSpec(*spec_tuple))
     mapping = Mapping.from_config(runtime, config=config, grid=grid)
     start = time.perf_counter()
     mapping.fuse_source(source)
     runtime.queue.finish()
     keys, data = grid.bricks()
     order = np.argsort(key_ids(keys), kind="stable")          # key order: a partition reads contiguous chunks
-    if detstats:                                              # the knowledge channel, in the same order
-        StoreWriter(partial, grid.spec, reading=config.model_params().reading).save(
+    if grid.has_knowledge:                                    # the knowledge channel, in the same order
+        StoreWriter(partial, grid.spec, reading=config.reading()).save(
             keys[order], data[order], knowledge=grid.knowledge_bricks()[order],
             looks=grid.knowledge_bricks("looks")[order])
     else:

@@ -26,14 +26,13 @@ from radarcl.config import sensors
 from radarcl.errors import FrameFormatError
 from radarcl.evaluation.evaluate import read_map, read_units
 from radarcl.geometry import se2_pose
-from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GridSpec, lattice_box
 from radarcl.io import polar_png
 from radarcl.io import poses as pose_files
 from radarcl.io.inputs import polar_source
 from radarcl.io.trajectory import DEFAULT_MAX_SPEED_M_S
 from radarcl.maps.map import KNOWN_LOOKS
-from radarcl.pipeline import Detection, Mapping
+from radarcl.pipeline import Detection, Mapping, new_grid
 from radarcl.report import figures
 
 OCCUPIED_NATS = 1.0                 # occupied in the consistency overlap: log-odds above this
@@ -51,7 +50,7 @@ def grid_for(poses, range_m, voxel_m, brick_z=1):
 def build_map(runtime, config, spec, scans, per_beam, progress=None):
     """Fuse ``scans`` taken at ``per_beam`` poses (n, n_az, 4, 4) into a new grid of ``spec``
     with ``config`` (a ``mapconfig.Resolved``); returns the grid."""
-    grid = EvidenceGrid(runtime, spec, knowledge=config["interpret.model"] == "detstats")
+    grid = new_grid(runtime, config, spec)
     mapping = Mapping.from_config(runtime, config=config, grid=grid, per_beam_poses=True)
     source = polar_source(config.sensor, scans, per_beam, f"{len(scans)} polar scans")
     mapping.fuse_source(source, None if progress is None else lambda j, _: progress(j + 1, len(scans)))

@@ -5,7 +5,6 @@ from pathlib import Path
 
 import numpy as np
 
-from radarcl import sensor_model
 from radarcl.errors import ConfigError
 from radarcl.io import polar_png
 from radarcl.pipeline import Detection, bin_model
@@ -27,10 +26,9 @@ def report(runtime, config, scan_path, azimuth, out, say):
     spacing = sensor.bin_spacing_m()
     cfar_config, interpret_config = config.cfar_config(), config.interpret_config()
     power = scan.power()
-    detstats = interpret_config.model == "detstats"
-    if detstats and sensor.n_bins() is None:
+    if interpret_config.evidence_model.knowledge and sensor.n_bins() is None:     # its tables are per bin
         config = config.for_sensor(sensor.with_bins(scan.n_bins))
-    model = bin_model(config, config["grid.voxel_m"]) if detstats else None
+    model = bin_model(config, config["grid.voxel_m"])
     detection = Detection(runtime, (n_az,), scan.n_bins, spacing, cfar_config, interpret_config, bin_model=model)
     detection(power)                                     # build and warm up
     start = time.perf_counter()
@@ -48,13 +46,9 @@ def report(runtime, config, scan_path, azimuth, out, say):
     a = azimuth
     rows = interp.pulses[a, :min(interp.n_pulses[a], interpret_config.max_pulses)]
     threshold = detection.cfar.alpha * cfar.noise[a]
-    if detstats:
-        evidence = sensor_model.unpack_nodes(interp.evidence[a])[0][:, 0, 0]       # upright class, rho2 = 0
-        model_text = f"detection statistics ({config['sensor_model.evidence']} evidence) on the beam's axis"
-    else:
-        evidence = interp.evidence[a]
-        model_text = (f"eq. 12 with k_occ {interpret_config.k_occ:g}, E_h {interpret_config.e_high:g}, "
-                      f"E_l {interpret_config.e_low:g}")
+    evidence_model = interpret_config.evidence_model
+    evidence = evidence_model.on_axis(evidence_model.comparable(interp.evidence[a]))
+    model_text = evidence_model.describe(interpret_config, config.model_params())
     title = (f"{sensor.name} {Path(scan_path).stem}, azimuth {a} ({np.degrees(scan.angles_rad[a]):.1f} deg): "
              f"{interp.n_pulses[a]} pulses, {cfar_config.kind.upper()}-CFAR Pfa {cfar_config.pfa:g}, {model_text}")
     fig = figures.interpretation_figure(np.arange(scan.n_bins) * spacing, power[a], threshold, rows,

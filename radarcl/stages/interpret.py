@@ -14,8 +14,7 @@ import numpy as np
 from radarcl import logodds, oracle
 from radarcl.config.stage_config import InterpretConfig
 from radarcl.errors import ConfigError
-from radarcl.sensor_model import N_CLASSES, NODE_SHAPE, NODES, BinModel, pack_nodes
-from radarcl.snr_evidence import GAP_CAP, SNR_U, SNR_V, detection_cap
+from radarcl.sensor_model import N_CLASSES, NODE_SHAPE, NODES, BinModel
 from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_group_size
 
 # Beams per work-group. One work-item walks one beam; any size is correct.
@@ -42,9 +41,10 @@ class Interpreter(Stage):
 
     runtime: a ``radarcl.cl.Runtime``; batch: the beam shape, e.g. (64, 4) or (400,);
     n_bins: bins per profile; bin_spacing_m: range between bins (bin j sits at j x spacing);
-    config: an ``InterpretConfig``; local_size: beams per work-group; bin_model: for
-    ``config.model == "detstats"``, the ``sensor_model.BinModel`` of this sensor, CFAR and voxel
-    (its tables go to the device once). With detstats the evidence is
+    config: an ``InterpretConfig``; local_size: beams per work-group; bin_model: for a model with
+    node pairs (``EvidenceModel.knowledge``: the detection-statistics model), the
+    ``sensor_model.BinModel`` of this sensor, CFAR and voxel (its tables go to the device once;
+    ``radarcl.models`` says what each model puts there). With detstats the evidence is
     (*batch, n_bins, *sensor_model.NODE_SHAPE) int32 node pairs (``sensor_model.unpack_nodes``),
     equivalent to ``radarcl.oracle.interpret_detstats``: node values identical to the oracle's
     until a beam's first pulse and within ``EVIDENCE_UNITS_TOL`` after it (except, with "snr"
@@ -64,67 +64,31 @@ class Interpreter(Stage):
         self.wide_bins = self.config.wide_bins(self.bin_spacing_m)
         self.e_high, self.e_low, self.e_high_far = (int(v) for v in logodds.to_fixed(
             [self.config.e_high, self.config.e_low, self.config.e_high_far]))
-        self.detstats = self.config.model == "detstats"
-        if self.detstats and not isinstance(bin_model, BinModel):
-            raise ConfigError("the detection-statistics interpreter needs its sensor_model.BinModel (bin_model=...)")
-        if self.detstats and bin_model.opportunity.shape != (self.n_bins, N_CLASSES, NODES):
+        self.model = self.config.evidence_model
+        self.node_pairs = self.model.knowledge       # evidence per class and rho2 node, not one value per bin
+        if self.node_pairs and not isinstance(bin_model, BinModel):
+            raise ConfigError(f"the {self.model.summary} interpreter needs its sensor_model.BinModel (bin_model=...)")
+        if self.node_pairs and bin_model.opportunity.shape != (self.n_bins, N_CLASSES, NODES):
             raise ConfigError(f"the bin model has {bin_model.opportunity.shape[0]} bins; the profiles have {self.n_bins}")
-        self.bin_model = bin_model if self.detstats else None
-        graded = self.detstats and bin_model.graded
-        if graded and np.shape(bin_model.ln_snr) != bin_model.opportunity.shape:
+        self.bin_model = bin_model if self.node_pairs else None
+        if self.node_pairs and bin_model.graded and np.shape(bin_model.ln_snr) != bin_model.opportunity.shape:
             raise ConfigError(f"the bin model's ln_snr is {np.shape(bin_model.ln_snr)}, its opportunity "
                               f"{bin_model.opportunity.shape}: 'snr' evidence needs both per bin, class and node")
-        grid = dict(SNR_NU=SNR_U[2], SNR_NV=SNR_V[2], SNR_U0=float(SNR_U[0]), SNR_V0=float(SNR_V[0]),
-                    SNR_U_SCALE=(SNR_U[2] - 1) / (SNR_U[1] - SNR_U[0]),
-                    SNR_V_SCALE=(SNR_V[2] - 1) / (SNR_V[1] - SNR_V[0]), GAP_CAP=GAP_CAP) if graded else {}
         self._kernel = build(runtime, "interpret", dict(N_BINS=self.n_bins, MAX_PULSES=self.config.max_pulses,
-                                                        OCCLUSION=int(self.config.model == "occlusion"),
-                                                        DETSTATS=int(self.detstats), GRADED=int(graded),
-                                                        **grid))["interpret"]
+                                                        NODES=NODES, **self.model.defines(self.bin_model)))["interpret"]
         self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
         f32, u8, i32 = np.dtype(np.float32), np.dtype(np.uint8), np.dtype(np.int32)
         shape = self.input_shape
-        out_shape = (*shape, *NODE_SHAPE) if self.detstats else shape
+        out_shape = (*shape, *NODE_SHAPE) if self.node_pairs else shape
         self._allocate([Port("profiles", shape, f32, "profiles"), Port("noise", shape, f32, "noise"),
                         Port("mask", shape, u8, "mask"), Port("flags_in", self.batch, u8, "flags")],
-                       [Port("evidence", out_shape, i32, "evidence nodes" if self.detstats else "evidence"),
+                       [Port("evidence", out_shape, i32, "evidence nodes" if self.node_pairs else "evidence"),
                         Port("pulses", (*self.batch, self.config.max_pulses, 4), i32, "pulses"),
                         Port("n_pulses", self.batch, i32, "pulse counts"),
                         Port("flags_out", self.batch, u8, "flags")])
         self._no_flags = self.arrays["flags_in"].copy()     # all zero: "no flags from upstream"
         self._no_flags.fill(0)
-        self._tables = self._model_tables()
-
-    def _model_tables(self):
-        """The detstats tables on the device (placeholders for the other models)."""
-        import pyopencl.array as cla
-
-        q = self.runtime.queue
-        one = cla.zeros(q, (1,), np.float32)
-        tables = dict(opportunity=one, miss=one, blocking=one, unblocked=cla.zeros(q, (1, 2), np.int32), c_det=1.0,
-                      ln_snr=one, snr_table=one, snr_cap=one, noise_floor=1.0, blocker_gap=0.0,
-                      snr_q=1.0)
-        if not self.detstats:
-            return tables
-        m = self.bin_model
-        tables.update(opportunity=cla.to_device(q, m.opportunity.astype(np.float32)),
-                      blocking=cla.to_device(q, m.blocking.astype(np.float32)), c_det=(1.0 - m.pfa) / m.pfa)
-        if m.graded:                     # the table replaces the misses and the exact unblocked nodes
-            tables.update(ln_snr=cla.to_device(q, m.ln_snr.astype(np.float32)),
-                          snr_table=cla.to_device(q, m.snr_table.values.astype(np.float32)),
-                          snr_cap=cla.to_device(q, detection_cap(m.opportunity, m.snr_table.q, m.bounded).astype(np.float32)),
-                          noise_floor=float(m.noise_floor), blocker_gap=float(m.blocker_gap),
-                          snr_q=float(m.snr_table.q))
-            return tables
-        first, last = self.first_bin, self.last_bin
-        unblocked = np.zeros((self.n_bins, N_CLASSES, NODES), np.int64), np.zeros((self.n_bins, N_CLASSES, NODES), np.int64)
-        if first <= last:
-            with np.errstate(divide="ignore"):
-                unblocked[0][first:last + 1] = logodds.to_fixed(np.log(m.miss[first:last + 1]))
-            unblocked[1][first:last + 1] = np.rint(m.opportunity[first:last + 1] * logodds.KNOWLEDGE_SCALE)
-            unblocked[0][unblocked[1] == 0] = 0                 # no look, no evidence (as the kernel's nodes)
-        tables.update(miss=cla.to_device(q, m.miss.astype(np.float32)), unblocked=cla.to_device(q, pack_nodes(*unblocked)))
-        return tables
+        self._tables = self.model.device_tables(runtime.queue, self)
 
     @property
     def input_shape(self):
@@ -143,7 +107,7 @@ class Interpreter(Stage):
         ls = self.local_size
         gsize = (-(-self.n_beams // ls) * ls,)
         a = self.arrays
-        return self._kernel(self.runtime.queue, gsize, (ls,), wait_for=wait_for,
+        done = self._kernel(self.runtime.queue, gsize, (ls,), wait_for=wait_for,
                             profiles=self.device("profiles", profiles), noise=self.device("noise", noise),
                             mask=self.device("mask", mask),
                             flags_in=self._no_flags if flags is None else self.device("flags_in", flags),
@@ -153,6 +117,7 @@ class Interpreter(Stage):
                             **self._tables,
                             n_beams=self.n_beams, evidence=a["evidence"], pulses=a["pulses"],
                             n_pulses=a["n_pulses"], flags_out=a["flags_out"])
+        return self.model.after_kernel(self, done)
 
     def _result(self, evidence, pulses, n_pulses, flags_out):
         return InterpretResult(evidence, pulses, n_pulses, flags_out)
