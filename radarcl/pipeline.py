@@ -148,8 +148,9 @@ class Mapping:
             mapping = cls(runtime, grid, sensor.lattice(), model, n_bins=sensor.n_bins(),
                           bin_spacing_m=sensor.bin_spacing_m(), **common)
         mapping.config, mapping.sensor = config, sensor
-        if detstats:                                # a saved map carries how it reads, untold
-            grid.reading = config.model_params().reading
+        reading = config.reading()
+        if reading is not None:                     # a saved map carries how it reads, untold
+            grid.reading = reading
         return mapping
 
     @property

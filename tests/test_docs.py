@@ -104,7 +104,7 @@ def test_a_broken_link_or_reference_fails_the_build(copy, planted, says):
 def test_a_new_page_joins_the_site_without_a_nav(copy):
     """Pages other work adds (docs/design/*.md and the like) are picked up with no nav to edit,
     and their links are checked like every other page's."""
-    (copy / "docs" / "design").mkdir()
+    (copy / "docs" / "design").mkdir(exist_ok=True)
     (copy / "docs" / "design" / "a-choice.md").write_text("# A choice\n\nSee [the maps](../guide/maps.md).\n")
     done = build(copy / "mkdocs.yml", copy / "site")
     assert done.returncode == 0, done.stdout + done.stderr
