@@ -1,0 +1,75 @@
+"""Reading ahead: the next frames decoded on a reader thread while the device fuses this one.
+
+A drive's host work (a PNG decoded, levels turned into power, per-azimuth poses) and the
+device's fusion of the frame before are independent, so a reader thread makes them overlap:
+``prefetched(read, n)`` yields ``read(0)``, ``read(1)``, ... in order, with at most ``depth``
+of them read ahead and waiting (a bounded queue: memory stays ``depth`` frames, whatever the
+drive's length). PIL's decoding and numpy's conversions release the GIL, and so does waiting
+for the device, which is why a thread (not a process, whose frames would be pickled across)
+is enough.
+
+An exception in the reader (a corrupt scan's ``FrameFormatError``) is raised in the consumer
+at the frame it belongs to, the same exception with its own sentence, after every frame
+before it has been yielded; the consumer leaving early (an error of its own, Ctrl-C) stops
+the reader and joins it, so no thread outlives the drive.
+"""
+
+import queue
+import threading
+
+DEFAULT_DEPTH = 2                  # frames read ahead: one being fused, one ready, one in decoding
+
+
+class _Failed:
+    """The reader's exception, carried through the queue to the consumer."""
+
+    def __init__(self, exc):
+        self.exc = exc
+
+
+_DONE = object()
+
+
+def prefetched(read, n, depth=DEFAULT_DEPTH):
+    """Yield ``read(j)`` for j in 0 .. n-1, in order, read on a thread up to ``depth`` items
+    ahead (``depth`` 0: read inline, no thread). ``read``'s exception for item j is raised
+    here when item j is due."""
+    if depth <= 0:
+        for j in range(n):
+            yield read(j)
+        return
+    items = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+
+    def put(item):
+        while not stop.is_set():                # a bounded wait, so a consumer that left is noticed
+            try:
+                items.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def reader():
+        try:
+            for j in range(n):
+                if stop.is_set() or not put(read(j)):
+                    return
+        except BaseException as exc:            # noqa: BLE001 - re-raised in the consumer
+            put(_Failed(exc))
+            return
+        put(_DONE)
+
+    thread = threading.Thread(target=reader, name="radarcl-reader", daemon=True)
+    thread.start()
+    try:
+        while True:
+            item = items.get()
+            if item is _DONE:
+                return
+            if isinstance(item, _Failed):
+                raise item.exc
+            yield item
+    finally:
+        stop.set()
+        thread.join()
