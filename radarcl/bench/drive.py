@@ -12,7 +12,8 @@ Measured per run, each run in a process of its own (so one run's memory is not a
 scans per second against the radar's 4 Hz (the real-time factor), the device's high-water mark
 (the grid's pool chunks plus the pipeline's buffers; on a CPU device that memory is host memory
 too), the host's (the process's resident set, sampled every frame), the store's size, and the
-frame latency (from reading the PNG to the frame fused on the device) p50 and p99. The next
+frame latency (from reading the PNG to the frame fused on the device, its wait for the device
+included) p50 and p99. The next
 scans are decoded on a reader thread while the device fuses (``io.prefetch``); the same drive
 read inline (decode, then fuse) times the two apart: decode-alone and fuse-alone rates beside
 the end-to-end one, and the two maps' digests (they must agree). The baseline,
@@ -346,12 +347,15 @@ def run(data, minutes=None, scans=None, voxel_m=DEFAULT_VOXEL_M, window_m=None, 
 def overlap_figures(overlapped, inline):
     """The reader thread's worth, from two runs of the same drive: end-to-end scans/s with the
     reader thread, decode-alone and fuse-alone scans/s (the inline run's reading and fusing
-    timed apart), the end-to-end rate over the fuse-alone one, and whether the maps agree."""
+    timed apart), the end-to-end rate over the fuse-alone one, the share of the overlapped run's
+    wall time its device spent fusing (its own end-to-end over fuse-alone, from one process), and
+    whether the maps agree."""
     n = inline["frames"]
     fuse_alone = n / inline["fuse_s"]
     return dict(end_to_end_per_s=overlapped["scans_per_s"], inline_per_s=inline["scans_per_s"],
                 decode_alone_per_s=n / inline["read_s"], fuse_alone_per_s=fuse_alone,
                 end_to_end_over_fuse_alone=overlapped["scans_per_s"] / fuse_alone,
+                fusing_share=overlapped["fuse_s"] / overlapped["wall_s"],
                 same_map=overlapped["map_digest"] == inline["map_digest"])
 
 
@@ -370,6 +374,7 @@ def format_table(r):
     lines.append(f"  reading ahead on a thread: end-to-end {o['end_to_end_per_s']:.2f} scans/s = "
                  f"{o['end_to_end_over_fuse_alone']:.2f}x fuse-alone {o['fuse_alone_per_s']:.2f} scans/s; "
                  f"decode-alone {o['decode_alone_per_s']:.2f} scans/s; read inline {o['inline_per_s']:.2f} scans/s; "
+                 f"fusing {o['fusing_share']:.0%} of the overlapped run's wall time; "
                  f"maps {'bit-identical' if o['same_map'] else 'DIFFER'} with and without the reader thread")
     lines.append(f"  rolling store {ro['store_mib']:.1f} MiB ({ro['bricks']} bricks; {ro['evicted']} left the window, "
                  f"{ro['restored']} came back, {ro['restored_from_disk']} read from disk; finishing {ro['finish_s']:.2f} s)")

@@ -17,7 +17,10 @@ the reader and joins it, so no thread outlives the drive.
 import queue
 import threading
 
-DEFAULT_DEPTH = 2                  # frames read ahead: one being fused, one ready, one in decoding
+# Frames read ahead: one ready while the device fuses another (and a third being decoded). A scan
+# decodes several times faster than it fuses, so one is enough to keep the device busy; more
+# would only add to each frame's latency (from its reading to its fusion) and to memory.
+DEFAULT_DEPTH = 1
 
 
 class _Failed:
