@@ -284,8 +284,8 @@ def quality_figure(r):
             ("reference", "default model")) else f"{MODEL_NAMES.get(x.get('model'), '')}: {x['label']}"
         lines = textwrap.wrap(name, 46) or [""]
         rows += [f"{k:>2}  {lines[0]}"] + [f"    {line}" for line in lines[1:]]
-    # the run table above the legend (about 14 lines), at MIN_POINTS: 0.16 inch a line
-    fig = plt.figure(figsize=(15, max(8.5, 0.16 * (len(rows) + 16) + 1.5)))
+    # the run table above the legend (two columns, about 10 lines), at MIN_POINTS: 0.17 inch a line
+    fig = plt.figure(figsize=(15, max(8.5, 0.17 * (len(rows) + 12) / 0.82)))
     ref_v = r.get("reference_voxel_m")
     panels = (("auc_detectable", "pareto", "ROC-AUC, detectable vs free-visible (higher: better)"),
               ("ece_occupied", "pareto_ece", "ECE of the occupied calls (lower: better)"))
@@ -333,9 +333,12 @@ def quality_figure(r):
         labels.append("hollow: scored on its own voxel set")
     table = fig.add_axes([0.64, 0.09, 0.35, 0.82])
     table.axis("off")
-    table.text(0, 1, "run  setting changed from its model's reference\n" + "\n".join(rows), va="top",
-               family="monospace", fontsize=MIN_POINTS, transform=table.transAxes)
-    table.legend(handles, labels, loc="lower right", frameon=False, fontsize=MIN_POINTS)
+    text = table.text(0, 1, "run  setting changed from its model's reference\n" + "\n".join(rows), va="top",
+                      family="monospace", fontsize=MIN_POINTS, transform=table.transAxes)
+    # the legend right below the run table, wherever its lines end
+    below = table.transAxes.inverted().transform(text.get_window_extent(fig.canvas.get_renderer()))[0, 1]
+    table.legend(handles, labels, loc="upper left", bbox_to_anchor=(0.0, below - 0.01), frameon=False,
+                 fontsize=MIN_POINTS, ncol=2)
     return fig
 
 
