@@ -3,10 +3,10 @@
 A drive's host work (a PNG decoded, levels turned into power, per-azimuth poses) and the
 device's fusion of the frame before are independent, so a reader thread makes them overlap:
 ``prefetched(read, n)`` yields ``read(0)``, ``read(1)``, ... in order, with at most ``depth``
-of them read ahead and waiting (a bounded queue: memory stays ``depth`` frames, whatever the
-drive's length). PIL's decoding and numpy's conversions release the GIL, and so does waiting
-for the device, which is why a thread (not a process, whose frames would be pickled across)
-is enough.
+of them read ahead of the one in hand (memory stays ``depth`` frames, whatever the drive's
+length; a frame is read only once there is room for it, so it waits no longer than it must).
+PIL's decoding and numpy's conversions release the GIL, and so does waiting for the device,
+which is why a thread (not a process, whose frames would be pickled across) is enough.
 
 An exception in the reader (a corrupt scan's ``FrameFormatError``) is raised in the consumer
 at the frame it belongs to, the same exception with its own sentence, after every frame
@@ -17,9 +17,9 @@ the reader and joins it, so no thread outlives the drive.
 import queue
 import threading
 
-# Frames read ahead: one ready while the device fuses another (and a third being decoded). A scan
-# decodes several times faster than it fuses, so one is enough to keep the device busy; more
-# would only add to each frame's latency (from its reading to its fusion) and to memory.
+# Frames read ahead: the next one decoded while the device fuses this one. A scan decodes several
+# times faster than it fuses, so one is enough to keep the device busy; more would only add to
+# each frame's latency (from its reading to its fusion) and to memory.
 DEFAULT_DEPTH = 1
 
 
@@ -34,34 +34,30 @@ _DONE = object()
 
 
 def prefetched(read, n, depth=DEFAULT_DEPTH):
-    """Yield ``read(j)`` for j in 0 .. n-1, in order, read on a thread up to ``depth`` items
-    ahead (``depth`` 0: read inline, no thread). ``read``'s exception for item j is raised
-    here when item j is due."""
+    """Yield ``read(j)`` for j in 0 .. n-1, in order, read on a thread at most ``depth`` items
+    ahead of the one the consumer holds (``depth`` 0: read inline, no thread). ``read``'s
+    exception for item j is raised here when item j is due."""
     if depth <= 0:
         for j in range(n):
             yield read(j)
         return
-    items = queue.Queue(maxsize=depth)
+    items = queue.Queue()
+    ahead = threading.Semaphore(depth)         # taken before a read, given back when the consumer takes an item
     stop = threading.Event()
-
-    def put(item):
-        while not stop.is_set():                # a bounded wait, so a consumer that left is noticed
-            try:
-                items.put(item, timeout=0.1)
-                return True
-            except queue.Full:
-                continue
-        return False
 
     def reader():
         try:
             for j in range(n):
-                if stop.is_set() or not put(read(j)):
+                while not ahead.acquire(timeout=0.1):      # a bounded wait, so a consumer that left is noticed
+                    if stop.is_set():
+                        return
+                if stop.is_set():
                     return
+                items.put(read(j))
         except BaseException as exc:            # noqa: BLE001 - re-raised in the consumer
-            put(_Failed(exc))
+            items.put(_Failed(exc))
             return
-        put(_DONE)
+        items.put(_DONE)
 
     thread = threading.Thread(target=reader, name="radarcl-reader", daemon=True)
     thread.start()
@@ -72,6 +68,7 @@ def prefetched(read, n, depth=DEFAULT_DEPTH):
                 return
             if isinstance(item, _Failed):
                 raise item.exc
+            ahead.release()                      # the next read starts while the consumer works on this one
             yield item
     finally:
         stop.set()
