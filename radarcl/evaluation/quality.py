@@ -3,7 +3,9 @@
 One recording of the paper's 3,840 observations (``tuning.EVALUATION_SEED``) is mapped with the
 tuned configuration (``tuning.TUNED``) and with one setting changed at a time: zero padding
 (n_fft 256 = none, 512 = x2, 1024 = x4), the beam model (``geometry.BEAM_MODELS``), the voxel
-size (0.4, 0.2, 0.1 m) and the CFAR kind. Every run is scored on one fixed voxel set per voxel
+size (0.4, 0.2, 0.1 m) and the CFAR kind; beside them the default model (detection statistics,
+``sensor_model``) with its own knobs changed one at a time (``DEFAULT_MODEL_CHANGES``, the voxel,
+and its map read without the knowledge channel). Every run is scored on one fixed voxel set per voxel
 size: what the reference configuration's beams reach at that size (``evaluate.instrument``),
 with the visibility truth (``evaluation.visibility``) and ``metrics.radar_scores``; beside the
 three baselines of ``evaluation.baseline`` (prior_only, raw_intensity, octomap) on the same set.
@@ -11,9 +13,11 @@ For each run, measured in this process: ``ms_per_frame`` (the device pipeline, p
 included), the scores, and ``max_dev_nats``: the largest |kernel - float64 oracle| over the
 voxels that ``ORACLE_BEAMS`` of the middle frame reach, the oracle being ``radarcl.oracle`` end
 to end (range profile, CFAR, eq. 12, ``fusion_at_points``), voxels whose decisions lie within
-``FUSION_DECISION_MARGIN`` of a boundary left out. Runs on the Pareto front within their voxel
-size (no other run both faster and higher in ``auc_detectable``) are marked; ``report.quality``
-prints the table and draws that AUC against ms per frame, and a reliability diagram.
+``FUSION_DECISION_MARGIN`` of a boundary left out (the default model's through
+``interpret_detstats`` and its node tables). Runs on a Pareto front within their voxel size (no
+other run both faster and higher in ``auc_detectable``; or faster and lower in ``ece_occupied``,
+the calibration of the occupied calls) are marked; ``report.quality`` prints the table and draws
+both against ms per frame, and a reliability diagram.
 """
 
 import numpy as np
