@@ -19,6 +19,7 @@ from radarcl.errors import ConfigError, DeviceCapabilityError
 from radarcl.geometry import BeamLattice, BeamModel
 from radarcl.grid import EvidenceGrid
 from radarcl.models import BeamGeometry
+from radarcl.io import prefetch
 from radarcl.stages.cfar import Cfar, CfarResult
 from radarcl.stages.fusion import Fusion
 from radarcl.stages.interpret import Interpreter, InterpretResult
@@ -190,19 +191,25 @@ class Mapping:
         self.frames += 1
         return plan
 
-    def fuse_source(self, source, after_frame=None, before_frame=None):
+    def fuse_source(self, source, after_frame=None, before_frame=None, read_ahead=prefetch.DEFAULT_DEPTH):
         """Fuse every frame of ``source`` (an ``io.inputs.FrameSource``: frames, their poses and,
         for range profiles, their flags) in order; ``after_frame(j, trajectory)`` runs after
         frame j (progress, checkpoints), ``before_frame(j, position)`` before it, with the
-        sensor's position (3,) [m] (a rolling window's eviction). Returns (the sensor's trajectory
+        sensor's position (3,) [m] (a rolling window's eviction). The next ``read_ahead`` frames
+        are read (decoded, converted) on a reader thread while the device fuses (``io.prefetch``;
+        0: read inline); the map is the same either way. Returns (the sensor's trajectory
         (n, 4, 4): each frame's pose, or its middle beam's, the number of beams that reached no
         voxel of the grid)."""
+        raw = self.range_fft is not None
+
+        def read(j):
+            return source.frames[j], np.asarray(source.poses[j]), None if raw else source.flags[j]
+
         trajectory, outside = [], 0
-        for j in range(len(source)):
-            poses = np.asarray(source.poses[j])
+        for j, (frame, poses, flags) in enumerate(prefetch.prefetched(read, len(source), read_ahead)):
             if before_frame is not None:
                 before_frame(j, (poses if poses.ndim == 2 else poses[len(poses) // 2])[:3, 3])
-            plan = self.fuse(source.frames[j], poses, flags=None if self.range_fft is not None else source.flags[j])
+            plan = self.fuse(frame, poses, flags=flags)
             trajectory.append(poses if poses.ndim == 2 else poses[len(poses) // 2])
             outside += plan.beams_outside
             if after_frame is not None:

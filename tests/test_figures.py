@@ -40,9 +40,11 @@ def figures():
     poses[:, 0, 3] = [0, 2, 4]
     plane = GridSpec((-20.0, -20.0, -0.15), 0.5, (80, 80, 1))
     scores = dict(auc_detectable=0.6, iou_detectable=0.1, auc_obstacles=0.7, iou_obstacles=0.05, auc_weak=0.5,
-                  false_free=0.3, shadow_unknown=0.9, ece=0.4, brier=0.25, objects_found=9, objects_total=10,
+                  false_free=0.3, shadow_unknown=0.9, ece=0.4, brier=0.25, ece_occupied=0.3, objects_found=9,
+                  objects_total=10,
                   reliability=[(k / 10, (k + 1) / 10, 10 * k, k / 10 + 0.05, k / 12) for k in range(10)])
-    run = dict(scores, dimension="cfar", label="kind=ca", voxel_m=0.4, ms_per_frame=12.0, pareto=True)
+    run = dict(scores, dimension="cfar", label="kind=ca", voxel_m=0.4, ms_per_frame=12.0, pareto=True, pareto_ece=False,
+               model="paper")
     base = {"prior_only": dict(scores, auc_detectable=0.88, ms_per_frame=0.0),
             "raw_intensity": dict(scores, auc_detectable=0.67, ms_per_frame=9.0),
             "octomap": dict(scores, auc_detectable=0.48, ms_per_frame=45.0)}
@@ -50,7 +52,11 @@ def figures():
     quality = dict(device="Portable / pthread-cpu", observations=3840, seed=0, frames=15, reference_voxel_m=0.4,
                    voxel_set=voxel_set, runs=[
                        dict(run, dimension="reference", label="reference: kind=so, pfa=0.01, k_occ=0.25, e_high=-0.025"),
-                       run, dict(run, label="n_fft=256", dimension="zero padding", ms_per_frame=9.0, pareto=False)],
+                       run, dict(run, label="n_fft=256", dimension="zero padding", ms_per_frame=9.0, pareto=False),
+                       dict(run, label="default model: model=detstats", dimension="default model", model="detstats",
+                            ms_per_frame=40.0, auc_detectable=0.55, ece_occupied=0.1, pareto=False, pareto_ece=True),
+                       dict(run, label="look_limit=4", dimension="default model: look limit", model="detstats",
+                            ms_per_frame=41.0, auc_detectable=0.5, ece_occupied=None, pareto=False)],
                    baselines=base, by_voxel={"0.4": dict(voxel_set=voxel_set, baselines=base)})
     QUALITY.update(quality)
     return {  # built one at a time: a test draws only its own
@@ -77,11 +83,12 @@ def test_every_figure_follows_the_house_rules(name):
 
 def test_the_quality_chart_labels_coinciding_runs_once_and_lists_only_present_settings():
     fig = figures()["quality"]()
-    ax = fig.axes[0]
-    labels = [t.get_text() for t in ax.texts]
-    assert labels == ["1, 2", "3"]                     # runs 1 and 2 sit on the same point
-    legend = [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
-    assert "voxel" not in legend and "zero padding" in legend and "cfar" in legend
+    auc, ece, table = fig.axes
+    assert [t.get_text() for t in auc.texts] == ["1, 2", "3", "4", "5"]      # runs 1 and 2 sit on the same point
+    assert [t.get_text() for t in ece.texts] == ["1, 2", "3", "4"]           # run 5 has no occupied calls to score
+    legend = [t.get_text() for t in table.get_legend().get_texts()]
+    assert "voxel" not in legend and "zero padding" in legend and "cfar" in legend and "look limit" in legend
+    assert "eq. 12" in legend and "default model" in legend
     plots._pyplot().close(fig)
 
 

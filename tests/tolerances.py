@@ -38,3 +38,16 @@ FUSION_UNITS_PER_UPDATE = 1
 # Ambiguous voxels (see FUSION_DECISION_MARGIN) must stay below this fraction of the voxels
 # some beam reaches, or the comparison would prove little.
 FUSION_AMBIGUOUS_MAX = 0.02
+
+# The default model's series in float32 (kernels/interpret.cl): exp_nb's reduction r = x - n ln 2
+# carries ~ulp(n ln 2) / 2, its Taylor series < 6e-9, the product one more rounding: its note
+# bounds the whole range [-87, 88] by 4e-6 relative.
+EXP_NB_RTOL = 4e-6
+# log10_nb: the float32 rounding of exponent x log10(2) plus the mantissa's series, ~4e-6 decades
+# at 1e38 (its note), 1e-7 near 1.
+LOG10_NB_DECADES = 4e-6
+# L = t (1 - q) / (1 - q t), t = exp_nb(e): t's relative error grows by up to 1 / (1 - q t) in
+# the denominator; where q t <= 1 - 1e-3 that is <= 1e3 x EXP_NB_RTOL.
+LIKELIHOOD_RATIO_RTOL = 4e-3
+# The reading of exact integer sums in float64 (a division and an addition): a few ulps.
+READ_NATS_TOL = 1e-9

@@ -19,8 +19,10 @@ BENCHES = {
     "range-fft": (range_fft, "window + FFT + magnitude of a paper frame vs scipy.fft, same run"),
     "cfar": (cfar, "CFAR + eq. 12 of a paper frame vs vectorised numpy, same run"),
     "fusion": (fusion, "one paper frame into the 0.1 m grid vs the float64 oracle and the memory floor, same run"),
-    "quality": (quality, "map error against run time on the reference scene (zero padding, beam model, voxel, CFAR "
-                         "kind) on one fixed voxel set, with three baselines"),
+    "quality": (quality, "map error against run time on the reference scene: eq. 12's configurations (zero padding, "
+                         "beam model, voxel, CFAR kind) and the default model's (evidence, blocker gap, look limit, "
+                         "zero padding, voxel, knowledge channel) on the same fixed voxel sets, with three baselines "
+                         "and the Pareto fronts"),
     "heldout-scans": (heldout_scans, "real data without lidar: a map of the even Navtech scans predicts the CFAR "
                                      "detections of the odd ones, vs raw intensity"),
     "scenes": (scenes, "the maps of generated scenes (held-out or training split) scored on their visibility truth, "
@@ -33,7 +35,8 @@ BENCHES = {
                    "faults, vs waiting for whole frames"),
     "viewer": (viewer, "the paper's full grid rendered at 512 x 512 through EGL vs a plain ray march, same run"),
     "drive": (drive, "the 11 Oxford scans replayed cyclically along the 37-minute odometry into a rolling map: "
-                     "scans/s vs real time, memory high-water marks, latency, vs today's unbounded grid, same run"),
+                     "scans/s vs real time, memory high-water marks, latency, vs today's unbounded grid; decoding on "
+                     "a reader thread: end-to-end vs decode-alone and fuse-alone rates, same run"),
     "merge": (merge, "fuse-many's merge partitioned by brick key on 1, 2 and 3 Dask workers, many overlapping partial "
                      "maps, vs the one-process merge, same run"),
     "polar-read": (polar_read, "reading polar scans (RADIATE, Oxford) with their layout vs decoding the PNG with PIL "

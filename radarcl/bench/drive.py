@@ -12,11 +12,16 @@ Measured per run, each run in a process of its own (so one run's memory is not a
 scans per second against the radar's 4 Hz (the real-time factor), the device's high-water mark
 (the grid's pool chunks plus the pipeline's buffers; on a CPU device that memory is host memory
 too), the host's (the process's resident set, sampled every frame), the store's size, and the
-frame latency (from reading the PNG to the frame fused on the device) p50 and p99. The baseline,
+frame latency (from reading the PNG to the frame fused on the device, its wait for the device
+included) p50 and p99. The next
+scans are decoded on a reader thread while the device fuses (``io.prefetch``); the same drive
+read inline (decode, then fuse) times the two apart: decode-alone and fuse-alone rates beside
+the end-to-end one, and the two maps' digests (they must agree). The baseline,
 in the same run: today's unbounded grid on the same frames. Beside them: the memory of planar
 (8 x 8 x 1) and cubic (8^3) bricks for the same scans, and the same integers in both.
 """
 
+import hashlib
 import math
 import multiprocessing
 import os
@@ -28,6 +33,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from radarcl.io import polar_png, prefetch
 
 RADAR_HZ = 4.0                      # the CTS350-X turns at 4 Hz
 DEFAULT_VOXEL_M = 0.2
@@ -102,11 +109,37 @@ def _config(voxel_m, n_bins, range_m=None):
     return config
 
 
+def map_digest(keys, channels):
+    """SHA-256 of a map's bricks: ``keys`` (n, 3) and ``channels`` (name -> (n, ...) int32 in
+    the keys' order), taken in key order (the same map digests the same whatever its slots)."""
+    keys = np.asarray(keys, np.int32)
+    order = np.lexsort(keys.T[::-1])
+    h = hashlib.sha256(keys[order].tobytes())
+    for name in sorted(channels):
+        h.update(name.encode())
+        h.update(np.ascontiguousarray(np.asarray(channels[name], np.int32)[order]).tobytes())
+    return h.hexdigest()
+
+
+def _store_digest(store):
+    from radarcl.maps import disk
+
+    _, keys, data, _, channels = disk.read_map(store)
+    arrays = {"evidence": data}
+    if channels is not None:
+        arrays.update(knowledge=channels.knowledge, looks=channels.looks)
+    return map_digest(keys, arrays)
+
+
 def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None, brick_z=1, progress=True,
-              picture=None, first=0, range_m=None):
+              picture=None, first=0, range_m=None, read_ahead=prefetch.DEFAULT_DEPTH):
     """One drive of ``n_frames`` frames from frame ``first`` (in this process): rolling with
     ``window_m`` into the store ``store``, or unbounded (``window_m`` None); ``range_m``: map out
-    to this range (default: the sensor's). Returns its figures (a dict)."""
+    to this range (default: the sensor's); ``read_ahead``: frames decoded ahead on a reader
+    thread while the device fuses (0: decoded inline, one after the other). Returns its figures
+    (a dict): with the seconds spent reading frames (``read_s``: decoding, converting, posing)
+    and fusing them (``fuse_s``: from the frame in hand to its fusion finished on the device),
+    each summed over the frames, and the map's digest (``map_digest``)."""
     from radarcl.cl import Runtime
     from radarcl.io import polar_png
     from radarcl.jobs.fuse import drive_spec
@@ -137,46 +170,57 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
         backing = RollingStore(store, spec, config.sensor.toml(), config.as_dict(), overwrite=True,
                                reading=config.reading())
         rolling.backing = grid.backing = backing
-    latencies, device_max, host_max, trajectory, bricks_max = [], 0, _rss_bytes(), [], 0
-    stage = _stage_bytes(mapping)
-    start = time.perf_counter()
-    for j in range(n_frames):
+
+    def read(j):
+        """Frame j as the device takes it, with when its reading began and how long it took."""
         t0 = time.perf_counter()
         scan = polar_png.load_scan(scans[j % len(scans)], layout)              # decoding counts
-        period = int(stamps[j + 1] - stamps[j])
-        poses = frame_poses(track, int(stamps[j]), period, scan, n_az)
+        poses = frame_poses(track, int(stamps[j]), int(stamps[j + 1] - stamps[j]), scan, n_az)
+        flags = np.where(scan.valid, 0, FLAG_SILENT).astype(np.uint8)
+        return scan.power(), poses, flags, t0, time.perf_counter() - t0
+
+    latencies, device_max, host_max, trajectory, bricks_max = [], 0, _rss_bytes(), [], 0
+    read_s = fuse_s = 0.0
+    stage = _stage_bytes(mapping)
+    start = time.perf_counter()
+    for j, (power, poses, flags, t0, took) in enumerate(prefetch.prefetched(read, n_frames, read_ahead)):
+        t1 = time.perf_counter()
         if rolling is not None:
             rolling.update(poses[n_az // 2, :3, 3])
-        flags = np.where(scan.valid, 0, FLAG_SILENT).astype(np.uint8)
-        mapping.fuse(scan.power(), poses, flags=flags)
+        mapping.fuse(power, poses, flags=flags)
         runtime.queue.finish()
-        latencies.append(time.perf_counter() - t0)
+        t2 = time.perf_counter()
+        read_s, fuse_s = read_s + took, fuse_s + (t2 - t1)
+        latencies.append(t2 - t0)             # from reading the PNG, waiting in the queue included
         trajectory.append(poses[n_az // 2].copy())               # a copy: a view would keep the frame's poses
         device_max = max(device_max, grid.memory()["device_bytes"] + stage)
         bricks_max = max(bricks_max, grid.n_bricks)
         host_max = max(host_max, _rss_bytes())
         if progress and (j + 1) % 10 == 0:
-            print(f"  {'rolling' if rolling else 'unbounded'} ({brick_z}-deep bricks): {j + 1}/{n_frames} scans, "
-                  f"{(j + 1) / (time.perf_counter() - start):.2f} scans/s, device {device_max / 2**20:.0f} MiB, host "
-                  f"{host_max / 2**20:.0f} MiB", file=sys.stderr, flush=True)
-    fuse_s = time.perf_counter() - start
-    result = dict(frames=n_frames, drive_s=float(stamps[n_frames] - stamps[0]) / 1e9, wall_s=fuse_s,
-                  scans_per_s=n_frames / fuse_s, device_mib_max=device_max / 2**20, host_mib_max=host_max / 2**20,
+            print(f"  {'rolling' if rolling else 'unbounded'} ({brick_z}-deep bricks, read ahead {read_ahead}): "
+                  f"{j + 1}/{n_frames} scans, {(j + 1) / (time.perf_counter() - start):.2f} scans/s, device "
+                  f"{device_max / 2**20:.0f} MiB, host {host_max / 2**20:.0f} MiB", file=sys.stderr, flush=True)
+    wall_s = time.perf_counter() - start
+    result = dict(frames=n_frames, drive_s=float(stamps[n_frames] - stamps[0]) / 1e9, wall_s=wall_s,
+                  scans_per_s=n_frames / wall_s, read_s=read_s, fuse_s=fuse_s, read_ahead=read_ahead,
+                  device_mib_max=device_max / 2**20, host_mib_max=host_max / 2**20,
                   latency_p50_ms=float(np.percentile(latencies, 50)) * 1e3,
                   latency_p99_ms=float(np.percentile(latencies, 99)) * 1e3,
                   grid=f"{spec.shape[0]} x {spec.shape[1]} x {spec.shape[2]} at {spec.voxel_m:g} m",
                   device=runtime.name, brick_z=brick_z, device_bricks_max=bricks_max)
-    result["realtime_factor"] = result["drive_s"] / fuse_s
+    result["realtime_factor"] = result["drive_s"] / wall_s
     if rolling is not None:
         t0 = time.perf_counter()
         stored = rolling.finish(dict(poses=np.asarray(trajectory).reshape(-1, 16).tolist()))
         result.update(finish_s=time.perf_counter() - t0, bricks=stored, evicted=rolling.evicted,
                       restored=backing.stats["restored"], restored_from_disk=backing.stats["restored_from_disk"],
                       store_mib=sum(f.stat().st_size for f in Path(store).rglob("*") if f.is_file()) / 2**20,
-                      window_m=rolling.window_m)
+                      window_m=rolling.window_m, map_digest=_store_digest(store))
     else:
         mem = grid.memory()
-        result.update(bricks=mem["bricks"], map_mib=mem["bricks"] * spec.brick_bytes / 2**20)
+        keys, channels = grid.read_slots(grid.live_slots(), channels=grid.channels)
+        result.update(bricks=mem["bricks"], map_mib=mem["bricks"] * spec.brick_bytes / 2**20,
+                      map_digest=map_digest(keys, channels))
     if picture is not None and rolling is not None:
         drive_picture(store, np.asarray(trajectory), picture, n_frames)
     return result
@@ -279,6 +323,10 @@ def run(data, minutes=None, scans=None, voxel_m=DEFAULT_VOXEL_M, window_m=None, 
             f"voxels, window {window_m:g} m ...")
         rolling = in_process(data=data, n_frames=n, voxel_m=voxel_m, window_m=window_m, store=tmp / "drive.rcmap",
                              picture=picture)
+        say(f"the same drive read inline (decoding, then fusing, one frame after the other): decode-alone and "
+            f"fuse-alone rates ...")
+        inline = in_process(data=data, n_frames=n, voxel_m=voxel_m, window_m=window_m, store=tmp / "inline.rcmap",
+                            read_ahead=0)
         nb = n if baseline_scans is None else min(n, int(baseline_scans))
         say(f"baseline: today's unbounded grid on the first {nb} of those scans ...")
         baseline = in_process(data=data, n_frames=nb, voxel_m=voxel_m)
@@ -288,10 +336,26 @@ def run(data, minutes=None, scans=None, voxel_m=DEFAULT_VOXEL_M, window_m=None, 
         shutil.rmtree(tmp, ignore_errors=True)
     result = dict(benchmark="drive", scans_repeat=True, frames=n, whole_drive_frames=len(stamps) - 1,
                   voxel_m=voxel_m, window_m=window_m, load_before=list(load), load_after=list(os.getloadavg()),
-                  rolling=rolling, baseline=baseline, baseline_prefix=nb < n, memory=memory)
+                  rolling=rolling, inline=inline, baseline=baseline, baseline_prefix=nb < n, memory=memory,
+                  overlap=overlap_figures(rolling, inline))
     for k in ("realtime_factor", "device_mib_max", "host_mib_max", "latency_p50_ms", "latency_p99_ms"):
         result[k] = rolling[k]
     return result
+
+
+def overlap_figures(overlapped, inline):
+    """The reader thread's worth, from two runs of the same drive: end-to-end scans/s with the
+    reader thread, decode-alone and fuse-alone scans/s (the inline run's reading and fusing
+    timed apart), the end-to-end rate over the fuse-alone one, the share of the overlapped run's
+    wall time its device spent fusing (its own end-to-end over fuse-alone, from one process), and
+    whether the maps agree."""
+    n = inline["frames"]
+    fuse_alone = n / inline["fuse_s"]
+    return dict(end_to_end_per_s=overlapped["scans_per_s"], inline_per_s=inline["scans_per_s"],
+                decode_alone_per_s=n / inline["read_s"], fuse_alone_per_s=fuse_alone,
+                end_to_end_over_fuse_alone=overlapped["scans_per_s"] / fuse_alone,
+                fusing_share=overlapped["fuse_s"] / overlapped["wall_s"],
+                same_map=overlapped["map_digest"] == inline["map_digest"])
 
 
 def format_table(r):
@@ -305,6 +369,12 @@ def format_table(r):
         lines.append(f"  {name:32s} {x['scans_per_s']:6.2f} scans/s = {x['realtime_factor']:5.2f}x real time, device "
                      f"{x['device_mib_max']:7.1f} MiB, host {x['host_mib_max']:7.1f} MiB, frame latency p50 "
                      f"{x['latency_p50_ms']:6.0f} ms p99 {x['latency_p99_ms']:6.0f} ms, {x['bricks']} bricks")
+    o = r["overlap"]
+    lines.append(f"  reading ahead on a thread: end-to-end {o['end_to_end_per_s']:.2f} scans/s = "
+                 f"{o['end_to_end_over_fuse_alone']:.2f}x fuse-alone {o['fuse_alone_per_s']:.2f} scans/s; "
+                 f"decode-alone {o['decode_alone_per_s']:.2f} scans/s; read inline {o['inline_per_s']:.2f} scans/s; "
+                 f"fusing {o['fusing_share']:.0%} of the overlapped run's wall time; "
+                 f"maps {'bit-identical' if o['same_map'] else 'DIFFER'} with and without the reader thread")
     lines.append(f"  rolling store {ro['store_mib']:.1f} MiB ({ro['bricks']} bricks; {ro['evicted']} left the window, "
                  f"{ro['restored']} came back, {ro['restored_from_disk']} read from disk; finishing {ro['finish_s']:.2f} s)")
     lines.append(f"  planar vs cubic bricks, {m['frames']} scans unbounded: {m['planar_map_mib']:.1f} MiB vs "

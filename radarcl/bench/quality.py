@@ -1,5 +1,6 @@
-"""`radarcl bench quality`: map error against run time on the reference scene
-(``evaluation.quality`` measures, ``report.quality`` shows)."""
+"""`radarcl bench quality`: map error against run time on the reference scene, eq. 12's
+configurations and the default model's on the same fixed voxel sets (``evaluation.quality``
+measures, ``report.quality`` shows)."""
 
 from radarcl.commands.options import add_output, positive_float
 from radarcl.config.presets import EQ12, EVALUATION_SEED, paper_config
@@ -17,6 +18,8 @@ def add_arguments(parser):
     parser.add_argument("--voxels", type=positive_float, nargs="+", default=list(VOXELS),
                         help="voxel sizes swept [m] (default: 0.4 0.2 0.1)")
     parser.add_argument("--paper", action="store_true", help="sweep around the paper's constants, not the tuned")
+    parser.add_argument("--eq12-only", action="store_true",
+                        help="sweep eq. 12's configurations only, not the default model's beside them")
     parser.add_argument("--seed", type=int, default=None, help="simulation seed (default: the evaluation seed, 0)")
     parser.add_argument("--replay", default=None, help="a recording of the reference scene instead of simulating")
     add_output(parser, "--chart", "quality.png", "PNG chart to write (and its reliability diagram beside it, "
@@ -41,7 +44,9 @@ def command(args, runtime, say):
         say(f"simulating the reference scene, seed {seed} ...")
         obs = observe(scene, PAPER_TILTS_DEG, seed=seed)
     reference = paper_config(args.voxel, EQ12 if args.paper else TUNED)      # error against run time of eq. 12's choices
-    result = quality.run(runtime(), scene, obs, reference, voxels=tuple(args.voxels), report=say)
+    default = None if args.eq12_only else paper_config(args.voxel)            # the default model's, beside them
+    result = quality.run(runtime(), scene, obs, reference, voxels=tuple(args.voxels), report=say,
+                         default_config=default)
     reliability = files.check(chart_path.with_name(chart_path.stem + "_reliability.png"), args.force,
                               inputs=[args.replay], what="reliability chart")
     chart(result, chart_path, reliability)

@@ -148,9 +148,11 @@ def _drive(device, say, scans, memory_scans, data):
 
 
 def _drive_rows(r):
-    ro, b, m = r["rolling"], r["baseline"], r["memory"]
+    ro, b, m, o = r["rolling"], r["baseline"], r["memory"], r["overlap"]
     return [row("rolling map", ro["scans_per_s"], "scans/s", "unbounded grid", b["scans_per_s"],
                 _over(ro["scans_per_s"], b["scans_per_s"]), FIGURE_OF_BASELINE),
+            row("decoding on a reader thread, end to end", o["end_to_end_per_s"], "scans/s", "fusion alone",
+                o["fuse_alone_per_s"], o["end_to_end_over_fuse_alone"], FIGURE_OF_BASELINE),
             row("rolling map, real time", ro["realtime_factor"], "x real time"),
             row("bricks that left the rolling window", ro["evicted"], "bricks"),
             row("rolling map, device high-water", ro["device_mib_max"], "MiB", "unbounded grid",

@@ -131,7 +131,8 @@ def run(runtime, out_dir, seed=EVALUATION_SEED, voxel_m=DEFAULT_VOXEL_M, replay=
     _plot_profiles(obs, config, out / "fig10_scene.png", shown)
     _plot_topdown(res.log_odds, inst.truth.labels, res.spec, out / "topdown.png")
     report("error against run time at 0.4 m (bench quality) ...")
-    q = quality.run(runtime, scene, obs, paper_config(QUICK_VOXEL_M, TUNED), voxels=(QUICK_VOXEL_M,))
+    q = quality.run(runtime, scene, obs, paper_config(QUICK_VOXEL_M, TUNED), voxels=(QUICK_VOXEL_M,),
+                    default_config=paper_config(QUICK_VOXEL_M))
     chart(q, out / "quality.png", out / "reliability.png")
     for line in format_table(q):
         report(line)

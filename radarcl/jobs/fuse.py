@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from radarcl.config import mapconfig
-from radarcl.errors import ConfigError
+from radarcl.errors import ConfigError, FrameFormatError, ShapeError
 from radarcl.gridspec import GridSpec, lattice_box
 from radarcl.io.files import scratch
 from radarcl.maps.disk import MapSaver, output_format, reading_of
@@ -127,25 +127,38 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
     from radarcl.jobs.api import geo_anchor_of, write_trajectory
 
     anchor = geo_anchor_of(source)
-    kept = {} if anchor is None else dict(geo_anchor=anchor)      # where the map frame lies on the Earth
+    extra = {} if anchor is None else dict(geo_anchor=anchor)     # where the map frame lies on the Earth
 
     def save(poses):
         mapping.runtime.queue.finish()                  # the device's work counts as fusion, not saving
         with tally.saving():
-            saver(mapping.grid, poses, **kept)
+            saver(mapping.grid, poses, **extra)
 
     def before_frame(j, position):
         rolling.update(position)
         tally.device_memory()
 
+    fused = dict(trajectory=[])                  # the frames fused so far: a map kept when a frame fails
+
     def after_frame(j, trajectory):
+        fused["trajectory"] = trajectory
         if every and (j + 1) % every == 0 and j + 1 < n:
             save(np.array(trajectory))
         if progress is not None:
             progress(j + 1, n, "frames fused")
 
+    def say_kept():
+        """A frame that could not be read or fused: the map of the frames before it is kept."""
+        report(f"kept the map of the {len(fused['trajectory'])} frames fused before the error in {out}")
+
     if rolling is None:
-        trajectory, outside = mapping.fuse_source(source, after_frame)
+        try:
+            trajectory, outside = mapping.fuse_source(source, after_frame)
+        except (FrameFormatError, ShapeError) as exc:
+            done = fused["trajectory"]
+            save(np.array(done) if done else None)
+            say_kept()
+            raise
         save(trajectory if len(trajectory) else None)
         mem = mapping.grid.memory()
         bricks, mib = mem["bricks"], mem["sparse_bytes"] / 2 ** 20
@@ -156,9 +169,14 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
         except ConfigError as exc:               # the store failed mid-drive: it holds the map up to there
             backing.close()
             raise ConfigError(f"the drive stopped: {exc}") from None
+        except (FrameFormatError, ShapeError) as exc:
+            mapping.runtime.queue.finish()
+            rolling.finish(dict(poses=np.asarray(fused["trajectory"]).reshape(-1, 16).tolist(), **extra))
+            say_kept()
+            raise
         tally.device_memory()
         with tally.saving():
-            bricks = rolling.finish(dict(poses=np.asarray(trajectory).reshape(-1, 16).tolist(), **kept))
+            bricks = rolling.finish(dict(poses=np.asarray(trajectory).reshape(-1, 16).tolist(), **extra))
         mib = bricks * spec.brick_bytes / 2 ** 20
     with tally.saving():
         track = write_trajectory(source, np.asarray(trajectory), out)

@@ -287,73 +287,96 @@ def classes_figure(classes, spec, poses, title, pose_label="sensor path", what="
 
 
 # -- error against run time ------------------------------------------------------------------------------
-DIMENSION_MARKERS = {"reference": "*", "zero padding": "o", "beam model": "s", "voxel": "D", "cfar": "^"}
+DIMENSION_MARKERS = {"reference": "*", "zero padding": "o", "beam model": "s", "voxel": "D", "cfar": "^",
+                     "evidence": "v", "blocker gap": "<", "look limit": ">", "knowledge": "p"}
 
 
 BASELINE_MARKERS = {"prior_only": ("P", "tab:gray"), "raw_intensity": ("h", "tab:olive"), "octomap": ("X", "crimson")}
 
 
+MODEL_COLOURS = {"paper": "tab:blue", "detstats": "tab:orange"}       # eq. 12, the default model
+MODEL_NAMES = {"paper": "eq. 12", "detstats": "default model"}
+
+
 def quality_figure(r):
-    """``bench quality``'s result: AUC (detectable vs free-visible, on the reference voxel
-    size's fixed set) against ms per frame. Each run is a numbered marker whose shape says which
-    setting changed; the names are in the table beside it, the Pareto front is a line, the
-    baselines are large markers. Runs at other voxel sizes are scored on their own voxel sets,
-    so they are drawn hollow."""
+    """``bench quality``'s result, two panels against ms per frame: AUC (detectable vs
+    free-visible) and the ECE of the occupied calls, on the reference voxel size's fixed set.
+    Each run is a numbered marker, its colour the model (eq. 12, the default model), its shape
+    the setting changed; the names are in the table beside, each panel's Pareto front a dashed
+    line, the baselines large markers. Runs at other voxel sizes are scored on their own voxel
+    sets, so they are drawn hollow."""
     plt = _pyplot()
     runs = r["runs"]
     import textwrap
 
-    fig = plt.figure(figsize=(12.5, 6.2))
-    ax = fig.add_axes([0.07, 0.11, 0.56, 0.8])
-    colours = dict(zip(DIMENSION_MARKERS, plt.cm.tab10.colors))
-    ref_v = r.get("reference_voxel_m")
-    for k, x in enumerate(runs, 1):
-        same_set = ref_v is None or x["voxel_m"] == ref_v
-        ax.scatter(x["ms_per_frame"], x["auc_detectable"], marker=DIMENSION_MARKERS.get(x["dimension"], "o"),
-                   s=160 if x["dimension"] == "reference" else 70,
-                   color=colours.get(x["dimension"], "k") if same_set else "none",
-                   edgecolor=colours.get(x["dimension"], "k") if not same_set else "k",
-                   linewidth=1.4 if x["pareto"] else (1.0 if not same_set else 0.3), zorder=3)
-    front = sorted((x["ms_per_frame"], x["auc_detectable"]) for x in runs if x["pareto"] and x["voxel_m"] == ref_v)
-    if front:
-        ax.plot(*zip(*front), "k--", lw=1.2, label="Pareto front (thick edge)", zorder=2)
-    present = {x["dimension"] for x in runs}
-    for dim, marker in DIMENSION_MARKERS.items():
-        if dim in present:
-            ax.scatter([], [], marker=marker, color=colours[dim], edgecolor="k", s=60, label=dim)
-    if any(ref_v is not None and x["voxel_m"] != ref_v for x in runs):
-        ax.scatter([], [], marker="o", color="none", edgecolor="k", s=60, label="hollow: scored on its own voxel set")
-    for name, b in (r.get("baselines") or {}).items():
-        if "auc_detectable" in b and b["auc_detectable"] is not None:
-            marker, colour = BASELINE_MARKERS.get(name, ("X", "k"))
-            ax.scatter(max(b["ms_per_frame"], 0.1), b["auc_detectable"], marker=marker, color=colour, edgecolor="k",
-                       s=220, zorder=4, label=f"baseline: {name}")
-    ax.set_xscale("log")
-    ax.set_xlabel(f"ms per frame (whole pipeline, {r['device'].split('/')[-1].strip()[:28]}; prior_only at 0.1)")
-    ax.set_ylabel("ROC-AUC, detectable vs free-visible")
-    ax.set_title(f"Error against run time: reference scene, {r['observations']} observations, fixed voxel set at "
-                 f"{ref_v} m", fontsize=11)
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
-    ax.xaxis.set_major_locator(LogLocator(subs=(1, 2, 5)))              # 10, 20, 50, 100: no crowding
-    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-    ax.xaxis.set_minor_formatter(NullFormatter())
-    ax.grid(alpha=0.3, which="both")
-    _number_points(ax, [(x["ms_per_frame"], x["auc_detectable"]) for x in runs])
-    table = fig.add_axes([0.66, 0.11, 0.33, 0.8])
-    table.axis("off")
     rows = []
     for k, x in enumerate(runs, 1):
-        lines = textwrap.wrap(x["label"], 34) or [""]
+        name = x["label"] if x["dimension"] in ("reference", "default model") or x["label"].startswith(
+            ("reference", "default model")) else f"{MODEL_NAMES.get(x.get('model'), '')}: {x['label']}"
+        lines = textwrap.wrap(name, 46) or [""]
         rows += [f"{k:>2}  {lines[0]}"] + [f"    {line}" for line in lines[1:]]
-    table.text(0, 1, "run setting changed from the reference\n" + "\n".join(rows), va="top", family="monospace",
-               fontsize=10, transform=table.transAxes)
-    table.legend(*ax.get_legend_handles_labels(), loc="lower left", frameon=False)     # beside, not over, the points
+    # the run table above the legend (two columns, about 10 lines), at MIN_POINTS: 0.17 inch a line
+    fig = plt.figure(figsize=(15, max(8.5, 0.17 * (len(rows) + 12) / 0.82)))
+    ref_v = r.get("reference_voxel_m")
+    panels = (("auc_detectable", "pareto", "ROC-AUC, detectable vs free-visible (higher: better)"),
+              ("ece_occupied", "pareto_ece", "ECE of the occupied calls (lower: better)"))
+    for i, (key, front_key, ylabel) in enumerate(panels):
+        ax = fig.add_axes([0.05 + i * 0.3, 0.09, 0.25, 0.82])
+        shown = [(k, x) for k, x in enumerate(runs, 1) if x.get(key) is not None]
+        for k, x in shown:
+            dim = x["dimension"].removeprefix("default model: ").removeprefix("default model")
+            same_set = ref_v is None or x["voxel_m"] == ref_v
+            colour = MODEL_COLOURS.get(x.get("model"), "k")
+            ax.scatter(x["ms_per_frame"], x[key], marker=DIMENSION_MARKERS.get(dim or "reference", "o"),
+                       s=160 if dim in ("reference", "") else 60, color=colour if same_set else "none",
+                       edgecolor="k" if same_set else colour, linewidth=1.6 if x.get(front_key) else 0.4, zorder=3)
+        front = sorted((x["ms_per_frame"], x[key]) for _, x in shown if x.get(front_key) and x["voxel_m"] == ref_v)
+        if front:
+            ax.plot(*zip(*front), "k--", lw=1.2, label="Pareto front (thick edge)", zorder=2)
+        for name, b in (r.get("baselines") or {}).items():
+            if b.get(key) is not None:
+                marker, colour = BASELINE_MARKERS.get(name, ("X", "k"))
+                ax.scatter(max(b["ms_per_frame"], 0.1), b[key], marker=marker, color=colour, edgecolor="k",
+                           s=220, zorder=4, label=f"baseline: {name}")
+        ax.set_xscale("log")
+        ax.set_xlabel("ms per frame, whole pipeline (prior_only at 0.1)")
+        ax.set_ylabel(ylabel)
+        ax.xaxis.set_major_locator(LogLocator(subs=(1, 2, 5)))
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.grid(alpha=0.3, which="both")
+        _number_points(ax, [(x["ms_per_frame"], x[key]) for _, x in shown], [k for k, _ in shown])
+        if i == 0:
+            handles, labels = ax.get_legend_handles_labels()
+    fig.suptitle(f"Error against run time: reference scene, {r['observations']} observations, fixed voxel set at "
+                 f"{ref_v} m, on {r['device'].split('/')[-1].strip()[:40]}", fontsize=12)
+    for model, colour in MODEL_COLOURS.items():
+        if any(x.get("model") == model for x in runs):
+            handles.append(plt.Line2D([], [], marker="o", ls="", color=colour, markeredgecolor="k"))
+            labels.append(MODEL_NAMES[model])
+    for dim, marker in DIMENSION_MARKERS.items():
+        if any(x["dimension"].endswith(dim) or (dim == "reference" and x["dimension"] == "default model")
+               for x in runs):
+            handles.append(plt.Line2D([], [], marker=marker, ls="", color="w", markeredgecolor="k"))
+            labels.append(dim)
+    if any(ref_v is not None and x["voxel_m"] != ref_v for x in runs):
+        handles.append(plt.Line2D([], [], marker="o", ls="", color="w", markeredgecolor="tab:gray"))
+        labels.append("hollow: scored on its own voxel set")
+    table = fig.add_axes([0.64, 0.09, 0.35, 0.82])
+    table.axis("off")
+    text = table.text(0, 1, "run  setting changed from its model's reference\n" + "\n".join(rows), va="top",
+                      family="monospace", fontsize=MIN_POINTS, transform=table.transAxes)
+    # the legend right below the run table, wherever its lines end
+    below = table.transAxes.inverted().transform(text.get_window_extent(fig.canvas.get_renderer()))[0, 1]
+    table.legend(handles, labels, loc="upper left", bbox_to_anchor=(0.0, below - 0.01), frameon=False,
+                 fontsize=MIN_POINTS, ncol=2)
     return fig
 
 
-def _number_points(ax, points, near_px=12):
-    """Number the points 1..n beside their markers; points closer than ``near_px`` on screen
+def _number_points(ax, points, numbers=None, near_px=12):
+    """Number the points 1..n (or ``numbers``) beside their markers; points closer than ``near_px`` on screen
     share one label ("1, 5"), and each label takes the first of four places beside its marker
     that overlaps no other label or marker, so numbers never print over each other."""
     ax.autoscale_view()
@@ -369,7 +392,7 @@ def _number_points(ax, points, near_px=12):
     scale = ax.figure.dpi / 72.0                        # offsets are in points, the screen in pixels
     placed = [(p[0] - 7, p[1] - 7, p[0] + 7, p[1] + 7) for p in screen]          # the markers
     for g in groups:
-        text = ", ".join(str(k + 1) for k in g)
+        text = ", ".join(str(k + 1 if numbers is None else numbers[k]) for k in g)
         w, h = 7.0 * len(text) * scale, 11.0 * scale
         x, y = screen[g[0]]
         for dx, dy in ((6, 4), (6, -14), (-8 - 7 * len(text), 4), (-8 - 7 * len(text), -14)):

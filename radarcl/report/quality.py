@@ -5,7 +5,7 @@ from radarcl.evaluation.quality import BASELINES
 from radarcl.report import figures, html
 
 TABLE_KEYS = ("auc_detectable", "iou_detectable", "auc_obstacles", "auc_weak", "false_free", "shadow_unknown", "ece",
-              "brier")                  # the page's columns (iou_obstacles is in the JSON)
+              "brier", "ece_occupied")  # the page's columns (iou_obstacles and the rest are in the JSON)
 
 
 def _cells(x):
@@ -13,49 +13,63 @@ def _cells(x):
         v = x.get(k)
         return f"{v:{fmt}}" if isinstance(v, float) else f"{'-' if v is None else v!s:>6s}"
     return (f"{f('auc_detectable')} {f('iou_detectable')} {f('auc_obstacles')} {f('auc_weak')} {f('false_free')} "
-            f"{f('shadow_unknown')} {f('ece')} {f('brier')} {x.get('objects_found', '-')!s:>3s}/{x.get('objects_total', '-')!s:<3s}")
+            f"{f('shadow_unknown')} {f('ece')} {f('brier')} {f('ece_occupied')} "
+            f"{x.get('objects_found', '-')!s:>3s}/{x.get('objects_total', '-')!s:<3s}")
 
 
 def format_table(r):
     """Human-readable lines for a ``run`` result."""
     head = (f"{'AUCdet':>6s} {'IoUdet':>6s} {'AUCobs':>6s} {'AUCwk':>6s} {'f-free':>6s} {'shd-unk':>6s} {'ECE':>6s} "
-            f"{'Brier':>6s} {'objects':>7s}")
+            f"{'Brier':>6s} {'ECEocc':>6s} {'objects':>7s}")
     lines = [f"reference scene, {r['observations']} observations (seed {r['seed']}) on {r['device']}",
-             "* = Pareto front within a voxel size (no run both faster and higher in AUC detectable)"]
+             "* / + = on the Pareto front within a voxel size: no run both faster and higher in AUC detectable (*), "
+             "or lower in the occupied calls' ECE (+)"]
     for v, b in r["by_voxel"].items():
-        lines += [f"{b['voxel_set']}", f"  {'':13s} {'configuration':52s} {'ms/frame':>9s} {head} {'dev[nat]':>8s}"]
+        lines += [f"{b['voxel_set']}", f"   {'':22s} {'configuration':52s} {'ms/frame':>9s} {head} {'dev[nat]':>8s}"]
         for x in (x for x in r["runs"] if str(x["voxel_m"]) == v):
-            lines.append(f"{'*' if x['pareto'] else ' '} {x['dimension']:13s} {x['label'][:52]:52s} "
+            lines.append(f"{_marks(x)} {x['dimension'][:22]:22s} {x['label'][:52]:52s} "
                          f"{x['ms_per_frame']:9.1f} {_cells(x)} {x['max_dev_nats']:8.3f}")
         for name in BASELINES:
             x = b["baselines"][name]
             if "error" in x:
-                lines.append(f"  {'baseline':13s} {name:52s} {x['error']}")
+                lines.append(f"   {'baseline':22s} {name:52s} {x['error']}")
             else:
-                lines.append(f"  {'baseline':13s} {name:52s} {x['ms_per_frame']:9.1f} {_cells(x)}")
+                lines.append(f"   {'baseline':22s} {name:52s} {x['ms_per_frame']:9.1f} {_cells(x)}")
+    if "default_model_on_front" in r:
+        lines.append(f"the default model's configurations on a Pareto front: {r['default_model_on_front']}")
     return lines
+
+
+def _marks(x):
+    return ("*" if x["pareto"] else " ") + ("+" if x.get("pareto_ece") else " ")
 
 
 def sweep_table(r):
     """The sweep as a report table (``report.html``): one row per run and per baseline."""
     rows = []
     for k, x in enumerate(r["runs"], 1):
-        rows.append([k, x["voxel_m"], x["dimension"], x["label"], x["ms_per_frame"]] + [x[key] for key in TABLE_KEYS]
-                    + [f"{x['objects_found']}/{x['objects_total']}", "yes" if x["pareto"] else ""])
+        rows.append([k, x["voxel_m"], x["dimension"], x["label"], x["ms_per_frame"]] + [x.get(key) for key in TABLE_KEYS]
+                    + [f"{x['objects_found']}/{x['objects_total']}", _front_names(x)])
     for v, b in r["by_voxel"].items():
         for name in BASELINES:
             x = b["baselines"][name]
             if "error" not in x:
-                rows.append(["", float(v), "baseline", name, x["ms_per_frame"]] + [x[key] for key in TABLE_KEYS]
+                rows.append(["", float(v), "baseline", name, x["ms_per_frame"]] + [x.get(key) for key in TABLE_KEYS]
                             + [f"{x['objects_found']}/{x['objects_total']}", ""])
     return html.Table(["run", "voxel [m]", "changed", "configuration", "ms/frame", "AUC det", "IoU det", "AUC obst",
-                         "AUC weak", "false-free", "shadow unknown", "ECE", "Brier", "objects", "Pareto"], rows)
+                         "AUC weak", "false-free", "shadow unknown", "ECE", "Brier", "ECE occupied", "objects",
+                         "Pareto"], rows)
+
+
+def _front_names(x):
+    return ", ".join(name for name, on in (("AUC", x["pareto"]), ("ECE occupied", x.get("pareto_ece"))) if on)
 
 
 def write_report(r, chart_path, page, reliability_path=None):
     """``bench quality``'s page: the device, the voxel sets, the sweep table and the charts."""
-    figures = [html.Figure(chart_path, "AUC (detectable vs free-visible) against ms per frame; the Pareto front "
-                                         "dashed; the baselines as large markers")]
+    figures = [html.Figure(chart_path, "AUC (detectable vs free-visible) and the occupied calls' ECE against ms per "
+                                         "frame, eq. 12 and the default model; each Pareto front dashed; the "
+                                         "baselines as large markers")]
     if reliability_path:
         figures.append(html.Figure(reliability_path, "Reliability of the reference map and the baselines on the "
                                                        "visible voxels"))
@@ -65,14 +79,16 @@ def write_report(r, chart_path, page, reliability_path=None):
         ("Voxel sets", [html.Text(b["voxel_set"]) for b in r["by_voxel"].values()]),
         ("Runs", [sweep_table(r), html.Text(METRICS_TEXT)]),
         ("Charts", figures)],
-        "Each run changes one setting of the reference configuration; each is scored on the fixed voxel set of "
-        "its voxel size.")
+        "Each run changes one setting of its model's reference configuration (eq. 12's tuned one, or the default "
+        "model's); each is scored on the fixed voxel set of its voxel size, the same for both models.")
 
 
 METRICS_TEXT = ("AUC/IoU det: detectable surface voxels (noiseless echo >= 10 dB over the noise) vs free-visible air; "
                 "obst: the same for every solid but the ground; weak: surface voxels below that; false-free: occupied "
                 "voxels of any visibility with p < 0.35; shadow unknown: shadowed voxels within 0.2 nat of 0; ECE "
-                "(10 bins) and Brier on the visible voxels; objects: found within one voxel of their visible surface.")
+                "(10 bins) and Brier on the visible voxels; ECE occupied: the same over the visible voxels the map knows "
+                "and calls occupied (p >= 0.5); objects: found within one voxel of their visible surface. "
+                "Knowledge channel off: the default map read without its unknown class.")
 
 
 def chart(r, path, reliability_path=None):
