@@ -53,7 +53,7 @@ def probe(runtime, x, q):
     defines = dict(COMMON_DEFINES, N_BINS=64, MAX_PULSES=4, OCCLUSION=0, DETSTATS=1, GRADED=1, SNR_NU=SNR_U[2],
                    SNR_NV=SNR_V[2], SNR_U0=float(SNR_U[0]), SNR_V0=float(SNR_V[0]),
                    SNR_U_SCALE=(SNR_U[2] - 1) / (SNR_U[1] - SNR_U[0]), SNR_V_SCALE=(SNR_V[2] - 1) / (SNR_V[1] - SNR_V[0]),
-                   GAP_CAP=GAP_CAP)
+                   GAP_CAP=GAP_CAP, NODES=sm.NODES)
     program = cl.Program(runtime.context, PROBE).build(
         options=[f"-I{kernels_dir()}"] + [_define(k, v) for k, v in sorted(defines.items())])
     qu = runtime.queue
