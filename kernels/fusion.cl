@@ -42,7 +42,8 @@
  *     the still table give the same integers whatever the compiler contracts. The evidence goes
  *     to pool[], the opportunity to knowledge[] (the knowledge channel: "never observed" apart
  *     from "observed, undecided"), and looks[] counts the updates whose opportunity is not 0 (the
- *     reading counts correlated looks once: sensor_model.read_log_odds). The still table keeps
+ *     reading counts correlated looks once: sensor_model.read_log_odds), except where the evidence
+ *     sum sat at its limit before the frame and the frame does not pull it back (STUCK). The still table keeps
  *     q + 1 (never 0, whose bits mean "no beam") as an integer in place of the weight, and the
  *     class in bit 16. PACKED_LOOKS (DETSTATS, set by the host when a frame's knowledge of one voxel,
  *     n_beams x KNOWLEDGE_SCALE, stays below 2^PACKED_LOOKS and its looks below 2^(31 - PACKED_LOOKS)):
@@ -210,6 +211,9 @@ static inline int or_unit(int16 v)
 #define GATHER_NODES_V(pe, pk, p, at) CAT(G2_, VEC)(pe, pk, p, at)
 #define SEGMENTS 4                            /* node segments over rho2 in [0, 1] */
 #define CLASSES 2                             /* target classes: upright, terrain */
+/* lanes (-1) of a voxel whose evidence sum e0 sat at a limit before this frame and whose frame's
+ * sum a does not pull it back: its looks are not counted (sensor_model.read_log_odds) */
+#define STUCK(e0, a) ((((e0) >= GRID_LIMIT) & ((a) >= 0)) | (((e0) <= -GRID_LIMIT) & ((a) <= 0)))
 #define Q_ONE 16384.0f                        /* rho2 = 1 in quantisation steps (2^14; 2^12 per segment) */
 #define Q_MAX (Q_ONE - 1.0f)                  /* the last step: q stays in the last segment */
 /* the interpolated value between the signed 16-bit halves of x at the fraction f / 4096 */
@@ -471,15 +475,6 @@ __kernel void fusion(
         return;
     __global int *cells = pool + brick.w * BRICK_CELLS + (corner.z * 8 + corner.y) * 8 + corner.x;
     for (int u = 0; u < UNITS; ++u) {
-        if (or_unit(acc[u])) {
-            /* |acc| < n_beams x 2^14 <= 2^31 - 2^30 - 1 (Fusion refuses larger lattices) and |cell| <=
-             * GRID_LIMIT = 2^30: the sum cannot overflow int32, so no add_sat. A unit's rows are
-             * contiguous in the brick (ROWS 2 comes with VEC 8, the brick's edge). */
-            const int r0 = ROWS * u;
-            __global int *cell = cells + (ROW_DZ(r0) * 8 + ROW_DY(r0)) * 8;
-            const intL v = vloadL(0, cell) + acc[u];
-            vstoreL(v > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : (v < (intL)-GRID_LIMIT ? (intL)-GRID_LIMIT : v), 0, cell);
-        }
 #if defined(DETSTATS) && !RECORD
         if (or_unit(kacc[u])) {       /* non-negative, saturating at GRID_LIMIT: order does not matter */
             const int r0 = ROWS * u;
@@ -492,11 +487,24 @@ __kernel void fusion(
   #endif
             const intL v = vloadL(0, cell) + ksum;
             vstoreL(v > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : v, 0, cell);
+            /* before the evidence's store: a voxel whose sum saturated before this frame and is
+             * pushed no way back counts no more looks (STUCK), or its reading E / (n / look_limit)
+             * would fade as 1 / n */
+            const intL e0 = vloadL(0, cells + (ROW_DZ(r0) * 8 + ROW_DY(r0)) * 8);
             __global int *count = looks + (cell - knowledge);
-            const intL c = vloadL(0, count) + nsum;
+            const intL c = vloadL(0, count) + (nsum & ~STUCK(e0, acc[u]));
             vstoreL(c > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : c, 0, count);
         }
 #endif
+        if (or_unit(acc[u])) {
+            /* |acc| < n_beams x 2^14 <= 2^31 - 2^30 - 1 (Fusion refuses larger lattices) and |cell| <=
+             * GRID_LIMIT = 2^30: the sum cannot overflow int32, so no add_sat. A unit's rows are
+             * contiguous in the brick (ROWS 2 comes with VEC 8, the brick's edge). */
+            const int r0 = ROWS * u;
+            __global int *cell = cells + (ROW_DZ(r0) * 8 + ROW_DY(r0)) * 8;
+            const intL v = vloadL(0, cell) + acc[u];
+            vstoreL(v > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : (v < (intL)-GRID_LIMIT ? (intL)-GRID_LIMIT : v), 0, cell);
+        }
     }
 }
 
@@ -594,8 +602,9 @@ __kernel void fusion_cached(
             __global int *cell = kcells + (ROW_DZ(row) * 8 + ROW_DY(row)) * 8;
             const intV v = vloadV(0, cell) + ksum;
             vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : v, 0, cell);
+            const intV e0 = vloadV(0, cells + (ROW_DZ(row) * 8 + ROW_DY(row)) * 8);   /* before its store */
             __global int *count = looks + (cell - knowledge);
-            const intV c = vloadV(0, count) + nsum;
+            const intV c = vloadV(0, count) + (nsum & ~STUCK(e0, sum));
             vstoreV(c > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : c, 0, count);
         }
 #endif

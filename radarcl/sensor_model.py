@@ -462,7 +462,8 @@ def read_log_odds(evidence, knowledge, looks, reading):
     with E = ``evidence`` [logodds units], K = ``knowledge`` [KNOWLEDGE_SCALE units] in looks and
     n = ``looks`` the number of looks with an opportunity, ``reading`` a dict of ``READING``.
     Correlated looks (one viewpoint, one speckle, a partial blocker seen again) count at most
-    ``look_limit`` looks' worth of their mean evidence, however many scans.
+    ``look_limit`` looks' worth of their mean evidence, however many scans. Where E saturates
+    (``gridspec.GRID_LIMIT``) the fusion stops counting looks, so the mean does not fade.
 
     The prior is the log-odds of an occupied voxel before any look: the world's base rate. With
     ``prior_looks`` 0 (the default) it applies everywhere, so a voxel never observed reads the base
