@@ -5,10 +5,12 @@ from pathlib import Path
 
 from radarcl.commands.options import (
     add_config,
+    add_foxglove_options,
     add_output,
     add_progress,
     add_trajectory_options,
     positive_int,
+    foxglove_out,
     progress,
     resolve_config,
     runtime,
@@ -62,6 +64,7 @@ def add_arguments(parser):
                              "reading them back when the sensor returns; the grid spans the whole trajectory unless "
                              "[grid] origin_m and size_m are set. --window alone: "
                              f"{WINDOW_RANGE_FACTOR:g} x the sensor's mapped range (interpret.range_max_m)")
+    add_foxglove_options(parser)
     add_progress(parser)
 
 
@@ -117,6 +120,11 @@ def run(args):
         config = config.for_sensor(source.sensor)
         say_notes(config.notes, said)
     window, default = window_of(args, config)
-    fuse.run(runtime(), source, config, out, every=args.every, progress=progress(args), inputs=[args.input], page=page,
-             window_m=window, window_default=default, overwrite=args.force)
+    fox = foxglove_out(args)
+    try:
+        fuse.run(runtime(), source, config, out, every=args.every, progress=progress(args), inputs=[args.input],
+                 page=page, window_m=window, window_default=default, overwrite=args.force, foxglove=fox)
+    finally:
+        if fox is not None:
+            fox.close()
     return 0

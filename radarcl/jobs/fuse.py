@@ -24,6 +24,7 @@ from radarcl.errors import ConfigError
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GridSpec
 from radarcl.io.files import scratch
+from radarcl.live_foxglove import snapshot
 from radarcl.maps.disk import MapSaver, output_format, reading_of
 from radarcl.maps.map import Map
 from radarcl.maps.rolling import WINDOW_RANGE_FACTOR, RollingStore, RollingWindow
@@ -84,8 +85,14 @@ class Tally:
         self.device_bytes = max(self.device_bytes, self.grid.memory()["device_bytes"])
 
 
+def frame_time_ns(source, j):
+    """Frame j's time [UNIX ns] where the source knows it (polar scans: the first azimuth's), else None."""
+    scans = getattr(source.frames, "scans", None)
+    return scans[j].start_ns if scans is not None and scans[j].timed else None
+
+
 def run(runtime, source, config, out, every=None, progress=None, report=print, inputs=(), page=None, window_m=None,
-        window_default=False, overwrite=False):
+        window_default=False, overwrite=False, foxglove=None):
     """Fuse every frame of ``source`` (an ``io.inputs.FrameSource``) with ``config`` (a
     ``mapconfig.Resolved``) and write the map to ``out``: an ``.npz`` file, or a map store
     (``maps.store``, any other name: only changed bricks are written after the first save).
@@ -94,8 +101,12 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
     a store, replaced when ``overwrite``; ``window_default`` says the window was the default).
     Returns a dict with the frame count, milliseconds per frame of fusion (the device's work
     included) and seconds of saving, timed apart (and, rolling, the device's high-water mark
-    and the bricks that left and came back)."""
+    and the bricks that left and came back). ``foxglove``: a ``live_foxglove.FoxgloveOut`` offered
+    the map as it grows (at its rate) and once at the end, stamped with the frames' own times."""
     rolling = None
+    if window_m is not None and foxglove is not None:
+        raise ConfigError("--window and --foxglove/--mcap: a rolling map keeps only the window on the device; send "
+                          "the finished store to Foxglove with radarcl export, or leave out --window")
     if window_m is not None:
         if output_format(out) == "npz":
             raise ConfigError(f"--window writes the map into a map store as the sensor drives; {out} is an .npz "
@@ -134,9 +145,16 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
         rolling.update(position)
         tally.device_memory()
 
+    reading = reading_of(config) if mapping.grid.has_knowledge else None
+
+    def show(j, trajectory):
+        foxglove.offer(snapshot(mapping, trajectory, source.poses[j], frame_time_ns(source, j), reading))
+
     def after_frame(j, trajectory):
         if every and (j + 1) % every == 0 and j + 1 < n:
             save(np.array(trajectory))
+        if foxglove is not None and (foxglove.due() or j + 1 == n):
+            show(j, trajectory)
         if progress is not None:
             progress(j + 1, n, "frames fused")
 
@@ -170,7 +188,6 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
         report(f"rolling map: the device held at most {result['device_mib_max']:.0f} MiB; {rolling.evicted} bricks "
                f"left the window, {st['restored']} came back ({st['restored_from_disk']} read from the store)")
     if page is not None:
-        reading = reading_of(config) if mapping.grid.has_knowledge else None
         map_ = Map.of_grid(mapping.grid, reading) if rolling is None else Map.open(out)
         write_report(page, out, source, config, result, map_, trajectory)
         report(f"wrote {page}")
