@@ -1,5 +1,5 @@
-"""A Foxglove WebSocket protocol client for the tests, written from the protocol's spec (the
-foxglove/ws-protocol repository's docs/spec.md): it subscribes to every channel advertised and
+"""A Foxglove WebSocket protocol client for the tests, written from the protocol's specification (in
+the foxglove/ws-protocol repository): it subscribes to every channel advertised and
 decodes each message with the protobuf schema the server advertised (google.protobuf, not the
 SDK that encoded it), for a bounded time, stopping by itself."""
 

@@ -55,7 +55,7 @@ LAYERS = (
     ("jobs",),
     ("report",),
     ("evaluation",),
-    ("livemap", "live_foxglove", "self_test"),
+    ("livemap", "self_test"),
     ("pipeline",),
     ("stages", "scene", "viewer"),
     ("config", "maps"),

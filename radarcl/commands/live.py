@@ -138,7 +138,7 @@ def run(args):
             stop.clear()
             reader = PortReader(port, session.feed).start()
         if fox is not None and mapper.mapping is not None and mapper.trajectory:
-            from radarcl.live_foxglove import snapshot
+            from radarcl.maps.foxglove_out import snapshot
 
             fox.offer(snapshot(mapper.mapping, mapper.trajectory, mapper.trajectory[-1], reading=mapper.config))
     finally:
@@ -175,7 +175,7 @@ def _after_fuse(view, fox, mapper):
     (the map offered at the Foxglove rate, and always after the last pass, which saves)."""
     if fox is None:
         return view.publish if view else None
-    from radarcl.live_foxglove import snapshot
+    from radarcl.maps.foxglove_out import snapshot
 
     def after():
         if view:

@@ -185,7 +185,7 @@ def runtime():
 
 
 def add_foxglove_options(p):
-    """--foxglove [PORT], --mcap FILE, --foxglove-rate HZ: the map out to Foxglove (``live_foxglove``)."""
+    """--foxglove [PORT], --mcap FILE, --foxglove-rate HZ: the map out to Foxglove (``maps.foxglove_out``)."""
     p.add_argument("--foxglove", nargs="?", const=8765, default=None, type=bounded_int(0, 65535), metavar="PORT",
                    help="serve the growing map, the latest scan, the trajectory and TF to Foxglove (WebSocket on "
                         "127.0.0.1 only; PORT default 8765, 0 picks a free one)")
@@ -196,11 +196,11 @@ def add_foxglove_options(p):
 
 
 def foxglove_out(args):
-    """The ``live_foxglove.FoxgloveOut`` that --foxglove / --mcap ask for, or None."""
+    """The ``maps.foxglove_out.FoxgloveOut`` that --foxglove / --mcap ask for, or None."""
     if args.foxglove is None and args.mcap is None:
         return None
     from radarcl.io import files
-    from radarcl.live_foxglove import FoxgloveOut
+    from radarcl.maps.foxglove_out import FoxgloveOut
 
     mcap = files.check(args.mcap, args.force, what="MCAP file") if args.mcap else None
     return FoxgloveOut(args.foxglove, mcap, args.foxglove_rate, overwrite=args.force,

@@ -24,7 +24,7 @@ from radarcl.errors import ConfigError
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GridSpec
 from radarcl.io.files import scratch
-from radarcl.live_foxglove import snapshot
+from radarcl.maps.foxglove_out import snapshot
 from radarcl.maps.disk import MapSaver, output_format, reading_of
 from radarcl.maps.map import Map
 from radarcl.maps.rolling import WINDOW_RANGE_FACTOR, RollingStore, RollingWindow
@@ -101,7 +101,7 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
     a store, replaced when ``overwrite``; ``window_default`` says the window was the default).
     Returns a dict with the frame count, milliseconds per frame of fusion (the device's work
     included) and seconds of saving, timed apart (and, rolling, the device's high-water mark
-    and the bricks that left and came back). ``foxglove``: a ``live_foxglove.FoxgloveOut`` offered
+    and the bricks that left and came back). ``foxglove``: a ``maps.foxglove_out.FoxgloveOut`` offered
     the map as it grows (at its rate) and once at the end, stamped with the frames' own times."""
     rolling = None
     if window_m is not None and foxglove is not None:

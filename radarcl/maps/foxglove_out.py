@@ -32,6 +32,7 @@ from radarcl.maps.map import FREE_NATS, OCCUPIED_NATS, Map
 HOST = "127.0.0.1"               # loopback only: the map is never served to another address
 MAX_SCAN_POINTS = 200_000        # a frame's detections beyond this are left out of /scan
 FRAME, SENSOR_FRAME = "map", "radar"
+STOP_WAIT_S = 2.0                # how long closing waits for clients to take what is queued for them
 
 
 def scan_points(mapping, poses):
@@ -180,7 +181,13 @@ class FoxgloveOut:
         if self.writer is not None:
             self.writer.close()
         if self.server is not None:
-            self.server.stop()
+            # the SDK's stop waits for every client to take what is queued for it: a client that
+            # does not read would hold radarcl here for as long as it stalls, so it is given
+            # STOP_WAIT_S and then left to the process's end
+            done = threading.Thread(target=self.server.stop, name="radarcl-foxglove-stop", daemon=True)
+            done.start()
+            done.join(STOP_WAIT_S)
+            self.server = None
 
 
 def _cloud(fm, stamp, cloud):
