@@ -265,3 +265,50 @@ def test_a_bag_cut_before_its_first_whole_scan_is_refused(tmp_path, capsys):
     assert f"{bag} is damaged" in err and "the file ends inside a record (cut short)" in err
     assert "so no scan is fused" in err
     assert not (tmp_path / "m.npz").exists()
+
+
+def test_the_exported_bag_carries_tf_and_the_trajectory_stamped_with_the_recording_time(from_files, tmp_path):
+    """`radarcl export --to rosbag` of the Oxford map: /tf_static (map -> odom, latched), /tf
+    (odom -> radar per scan), /trajectory (nav_msgs/Path), each at its scan's time, the map at the
+    last scan's, none at the time the bag was written; fused back, its poses are the map's."""
+    from rosbags.interfaces import QosDurability
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    bag = tmp_path / "out"
+    assert main(["export", str(from_files), "--to", "rosbag", "--out", str(bag)]) == 0
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    starts = [t for t, _ in _pixels()]          # not the scans' first azimuths: those of the file's columns
+    poses = np.load(from_files)["poses"]
+    got = {}
+    with Reader(bag) as r:
+        for c, t, raw in r.messages():
+            got.setdefault(c.topic, []).append((t, ts.deserialize_cdr(raw, c.msgtype)))
+        qos = {c.topic: c.ext.offered_qos_profiles for c in r.connections}
+    assert set(got) == {"/map", "/map/points", "/tf", "/tf_static", "/trajectory"}
+    assert qos["/tf_static"][0].durability == QosDurability.TRANSIENT_LOCAL
+    assert qos["/map"][0].durability == QosDurability.TRANSIENT_LOCAL
+    (t_static, static), = got["/tf_static"]
+    tr = static.transforms[0]
+    assert (tr.header.frame_id, tr.child_frame_id) == ("map", "odom") and tr.transform.rotation.w == 1.0
+    times = [t for t, _ in got["/tf"]]
+    scan_times = np.array(times, np.int64)
+    assert len(times) == 11 and (np.diff(scan_times) > 0).all()
+    # each pose at its scan's first azimuth in acquisition order, within the scan's first ms of its file name
+    assert all(0 <= t - s < 10 ** 6 for t, s in zip(times, starts)), (times[:2], starts[:2])
+    (t_map, occupancy), = got["/map"]
+    assert t_map == times[-1] and occupancy.header.stamp.sec == times[-1] // 10 ** 9
+    assert occupancy.header.frame_id == "map"
+    path = got["/trajectory"][0][1]
+    assert [p.header.stamp.sec * 10 ** 9 + p.header.stamp.nanosec for p in path.poses] == times
+    from radarcl.io.trajectory import rotations
+
+    for p, (_, tf), expected in zip(path.poses, got["/tf"], poses):
+        q = p.pose.orientation
+        m = np.eye(4)
+        m[:3, :3] = rotations(np.array([[q.w, q.x, q.y, q.z]]))[0]
+        m[:3, 3] = p.pose.position.x, p.pose.position.y, p.pose.position.z
+        np.testing.assert_allclose(m, expected, rtol=0, atol=1e-9)   # float64 -> quaternion -> float64
+        t = tf.transforms[0]
+        assert (t.header.frame_id, t.child_frame_id) == ("odom", "radar")
+        assert t.transform.translation.x == p.pose.position.x

@@ -158,7 +158,8 @@ class Bag:
             head = f"{self.path}: {self.salvage.damage}; the messages before it:"
         lines = [head]
         for topic, msgtype, count in topics:
-            use = ("radar" if radar_kind(msgtype) else "poses" if msgtype in (ODOMETRY, TF) else
+            use = ("radar" if radar_kind(msgtype) else "poses" if msgtype == ODOMETRY or topic == "/tf" else
+                   "fixed frames" if topic == "/tf_static" else
                    "unknown type" if msgtype in self.unknown else "")
             lines.append(f"  {topic:<{width}}  {msgtype}  {count}{'  (' + use + ')' if use else ''}")
         return lines

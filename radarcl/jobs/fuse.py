@@ -138,8 +138,10 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
 
     def save(poses):
         mapping.runtime.queue.finish()                  # the device's work counts as fusion, not saving
+        times = [frame_time_ns(source, j) for j in range(0 if poses is None else len(poses))]
         with tally.saving():
-            saver(mapping.grid, poses)
+            # the frames' own times, where known: exports stamp with the recording's time
+            saver(mapping.grid, poses, **({"times_ns": times} if times and None not in times else {}))
 
     def before_frame(j, position):
         rolling.update(position)
