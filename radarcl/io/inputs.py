@@ -165,7 +165,12 @@ def _bag(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max_s
          poses_times=None, report=None, topic=None, pose_topic=None, msg_dir=None):
     """A ROS 2 bag (``io.rosbag``): its radar topic's scans, placed by the trajectory file given or
     the bag's own poses; a damaged bag gives the scans before the damage, named in the notes."""
-    read = rosbag.read_scans(path, PolarLayout.of(sensor), topic=topic, msg_dir=msg_dir, report=report)
+    try:
+        layout = PolarLayout.of(sensor)
+    except ConfigError:
+        raise ConfigError(f"{path} is a ROS 2 bag of polar radar scans; sensor {sensor.name} is no spinning radar "
+                          "read from polar scans: give --sensor (e.g. navtech-cts350x; radarcl sensors lists them)") from None
+    read = rosbag.read_scans(path, layout, topic=topic, msg_dir=msg_dir)
     track = None
     if poses:
         track = pose_files.read_trajectory(Path(poses), poses_format, clock_offset_s, poses_times, report)

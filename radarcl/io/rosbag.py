@@ -265,7 +265,7 @@ def choose_topic(bag, topic):
     raise ConfigError(f"{bag.path} has {len(radar)} radar topics ({', '.join(radar)}); choose one with --topic")
 
 
-def read_scans(path, layout, topic=None, msg_dir=None, report=None):
+def read_scans(path, layout, topic=None, msg_dir=None):
     """``BagScans`` of the radar topic (``topic``, or the bag's only one) read with ``layout``."""
     with Bag(path, msg_dir) as bag:
         topic, kind = choose_topic(bag, topic)
