@@ -312,3 +312,31 @@ def test_the_exported_bag_carries_tf_and_the_trajectory_stamped_with_the_recordi
         t = tf.transforms[0]
         assert (t.header.frame_id, t.child_frame_id) == ("odom", "radar")
         assert t.transform.translation.x == p.pose.position.x
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_a_type_the_bag_defines_is_decoded_from_its_own_definition(tmp_path, storage, capsys):
+    """A custom type radarcl has never seen, written with its definition in the bag (rosbag2
+    metadata version 8 in sqlite3, a schema in MCAP): listed as known, decoded field by field."""
+    from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    ts.register(get_types_from_msg("std_msgs/Header header\nfloat64 temperature_c\nstring mode\n",
+                                   "acme_msgs/msg/RadarStatus"))
+    msgs = [(10 ** 9 * k, ts.types["acme_msgs/msg/RadarStatus"](
+        header=ts.types["std_msgs/msg/Header"](stamp=ts.types["builtin_interfaces/msg/Time"](sec=k, nanosec=0),
+                                               frame_id="radar"), temperature_c=40.5 + k, mode="scan"))
+            for k in range(1, 4)]
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    bag = tmp_path / "bag"
+    with Writer(bag, version=8, storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3) as w:
+        c = w.add_connection("/radar/status", "acme_msgs/msg/RadarStatus", typestore=ts)
+        for t, m in msgs:
+            w.write(c, t, ts.serialize_cdr(m, "acme_msgs/msg/RadarStatus"))
+    assert main(["info", str(bag)]) == 0
+    out = capsys.readouterr().out
+    assert "/radar/status  acme_msgs/msg/RadarStatus  3" in out and "unknown" not in out
+    with rosbag.Bag(bag) as b:
+        got = [(t, m.temperature_c, m.mode) for _, _, t, m in b.messages({"/radar/status"})]
+    assert got == [(10 ** 9, 41.5, "scan"), (2 * 10 ** 9, 42.5, "scan"), (3 * 10 ** 9, 43.5, "scan")]
