@@ -72,7 +72,7 @@ def add_bag_options(parser):
     """--topic, --pose-topic, --msg-dir: what a ROS 2 bag's reader takes (``io.rosbag``)."""
     parser.add_argument("--topic", default=None, help="a ROS 2 bag: the radar topic to fuse (default: its only radar "
                                                       "topic; radarcl info BAG lists them)")
-    parser.add_argument("--pose-topic", default=None, help="a ROS 2 bag: the nav_msgs/Odometry or tf2_msgs/TFMessage "
+    parser.add_argument("--pose-topic", default=None, metavar="TOPIC", help="a ROS 2 bag: the nav_msgs/Odometry or tf2_msgs/TFMessage "
                                                            "topic of the radar's poses (default: its one odometry "
                                                            "topic, else /tf); --poses FILE overrides the bag's poses")
     parser.add_argument("--msg-dir", default=None, metavar="FOLDER",

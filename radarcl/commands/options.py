@@ -202,6 +202,7 @@ def foxglove_out(args):
     from radarcl.io import files
     from radarcl.maps.foxglove_out import FoxgloveOut
 
-    mcap = files.check(args.mcap, args.force, what="MCAP file") if args.mcap else None
+    read = [getattr(args, k, None) for k in ("input", "config", "poses", "odometry", "record")]
+    mcap = files.check(args.mcap, args.force, inputs=[r for r in read if r], what="MCAP file") if args.mcap else None
     return FoxgloveOut(args.foxglove, mcap, args.foxglove_rate, overwrite=args.force,
                        say=lambda line: print(f"radarcl: {line}", file=sys.stderr, flush=True))
