@@ -3,10 +3,8 @@ foxglove_client.py) subscribes while `radarcl fuse` and `radarcl live` run and d
 which must equal the map store's; the MCAP recording read back with the mcap library holds the
 same; a client that stalls or leaves holds nothing up; the server listens on 127.0.0.1 only."""
 
-import base64
 import os
 import socket
-import struct
 import sys
 import threading
 import time
@@ -16,6 +14,7 @@ import numpy as np
 import pytest
 
 import foxglove_client
+from radarcl.bench.foxglove import stalled_client
 from radarcl.cli import main
 from radarcl.io.trajectory import rotations
 from radarcl.maps.disk import read_poses
@@ -113,67 +112,13 @@ def test_a_client_decodes_the_fused_map_as_the_store_holds_it(tmp_path, plain):
     check_against_store(decoded, out)
 
 
-def _raw_stalled_client(port, subscribe=True):
-    """A client that completes the handshake, subscribes to every channel, then never reads
-    again (its receive buffer kept small, so the server's writes to it block at once)."""
-    import json
-
-    deadline = time.monotonic() + 60
-    while True:
-        try:
-            s = socket.create_connection(("127.0.0.1", port), timeout=30)
-            break
-        except ConnectionRefusedError:                 # the server is not up yet
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.05)
-    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    key = base64.b64encode(os.urandom(16)).decode()
-    s.sendall((f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-               f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
-               f"Sec-WebSocket-Protocol: {', '.join(foxglove_client.SUBPROTOCOLS)}\r\n\r\n").encode())
-    buf = b""
-    while b"\r\n\r\n" not in buf:
-        buf += s.recv(4096)
-    assert b" 101 " in buf.split(b"\r\n")[0], buf
-    buf = buf.split(b"\r\n\r\n", 1)[1]
-
-    def frame():
-        nonlocal buf
-        while True:
-            if len(buf) >= 2:
-                n, at = buf[1] & 0x7F, 2
-                if n == 126 and len(buf) >= 4:
-                    n, at = struct.unpack(">H", buf[2:4])[0], 4
-                elif n == 127 and len(buf) >= 10:
-                    n, at = struct.unpack(">Q", buf[2:10])[0], 10
-                if n < 126 or at > 2:
-                    if len(buf) >= at + n:
-                        op, body, buf = buf[0] & 0x0F, buf[at:at + n], buf[at + n:]
-                        return op, body
-            buf += s.recv(65536)
-
-    while True:
-        op, body = frame()
-        if op == 1 and json.loads(body).get("op") == "advertise":
-            channels = json.loads(body)["channels"]
-            break
-    if subscribe:
-        text = json.dumps({"op": "subscribe", "subscriptions": [{"id": i + 1, "channelId": c["id"]}
-                                                                for i, c in enumerate(channels)]}).encode()
-        mask = os.urandom(4)
-        header = bytes([0x81, 0x80 | 126]) + struct.pack(">H", len(text)) if len(text) >= 126 else bytes([0x81, 0x80 | len(text)])
-        s.sendall(header + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(text)))
-    return s
-
-
 def test_a_stalled_or_departing_client_holds_up_neither_the_map_nor_other_clients(tmp_path, plain):
     port = free_port()
     out = tmp_path / "m.npz"
     stalled, got, departed = [], {}, threading.Event()
 
     def stall():
-        stalled.append(_raw_stalled_client(port))
+        stalled.append(stalled_client(port)[0])
 
     def depart():
         # reads one message, then drops the connection mid-stream
