@@ -340,3 +340,21 @@ def test_a_type_the_bag_defines_is_decoded_from_its_own_definition(tmp_path, sto
     with rosbag.Bag(bag) as b:
         got = [(t, m.temperature_c, m.mode) for _, _, t, m in b.messages({"/radar/status"})]
     assert got == [(10 ** 9, 41.5, "scan"), (2 * 10 ** 9, 42.5, "scan"), (3 * 10 ** 9, 43.5, "scan")]
+
+
+def test_topic_chooses_among_radar_topics(from_files, tmp_path, capsys):
+    from rosbags.typesys import Stores, get_typestore
+
+    T = get_typestore(Stores.ROS2_HUMBLE).types
+    t, px = _pixels()[0]
+    other = T["sensor_msgs/msg/Image"](header=T["std_msgs/msg/Header"](stamp=_stamp(T, t), frame_id="radar2"),
+                                       height=px.shape[0], width=px.shape[1], encoding="mono8", is_bigendian=0,
+                                       step=px.shape[1], data=px.reshape(-1).copy())
+    bag = write_bag(tmp_path / "bag", "sqlite3", extra=[("/radar2/polar", "sensor_msgs/msg/Image", [(t, other)])])
+    assert main(["fuse", str(bag), "--sensor", "navtech-cts350x", "--poses", str(ODOMETRY),
+                 "--out", str(tmp_path / "m.npz")]) == 2
+    assert "has 2 radar topics (/radar/polar, /radar2/polar); choose one with --topic" in capsys.readouterr().err
+    same_map(fuse(bag, tmp_path / "m.npz", "--poses", ODOMETRY, "--topic", "/radar/polar"), from_files)
+    assert main(["fuse", str(bag), "--sensor", "navtech-cts350x", "--topic", "/radar3", "--poses", str(ODOMETRY),
+                 "--out", str(tmp_path / "n.npz")]) == 2
+    assert "has no topic /radar3; its topics: /radar/polar, /radar2/polar" in capsys.readouterr().err
