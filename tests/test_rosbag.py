@@ -23,12 +23,12 @@ MAP_ARRAYS = ("version", "origin_m", "voxel_m", "shape", "keys", "data", "poses"
 pytestmark = pytest.mark.skipif(not SCANS.is_dir(), reason="the shared Oxford scans are not beside the checkout")
 
 
-def typestore():
+def typestore(pkg="nav_messages"):
     from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
-    ts.register(get_types_from_msg(rosbag.NAVTECH_FFT, "nav_messages/msg/RadarFftDataMessage"))
-    ts.register(get_types_from_msg(rosbag.NAVTECH_CONFIG, "nav_messages/msg/RadarConfigurationMessage"))
+    ts.register(get_types_from_msg(rosbag.NAVTECH_FFT, f"{pkg}/msg/RadarFftDataMessage"))
+    ts.register(get_types_from_msg(rosbag.NAVTECH_CONFIG, f"{pkg}/msg/RadarConfigurationMessage"))
     return ts
 
 
@@ -42,14 +42,16 @@ def _pixels():
     return [(int(p.stem) * 1000, np.asarray(Image.open(p))) for p in sorted(SCANS.glob("*.png"))]
 
 
-def write_bag(path, storage="sqlite3", radar="image", poses=None, pose_topic="/odom", mount=None, extra=()):
+def write_bag(path, storage="sqlite3", radar="image", poses=None, pose_topic="/odom", mount=None, extra=(),
+              pkg="nav_messages"):
     """A rosbag2 of the Oxford scans: ``radar`` 'image' (sensor_msgs/Image of each PNG's
     pixels) or 'navtech' (Navtech driver messages, one per azimuth, as its publisher fills them),
     with ``poses`` (a Trajectory) as Odometry on ``pose_topic`` or as /tf of base_link with
-    /tf_static ``mount`` (T_base_radar); ``extra``: (topic, type, [(t, message)]) more."""
+    /tf_static ``mount`` (T_base_radar); ``extra``: (topic, type, [(t, message)]) more; ``pkg``: the
+    Navtech driver's message package (``messages`` in its older releases)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    ts = typestore()
+    ts = typestore(pkg)
     T = ts.types
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     with Writer(path, version=8, storage_plugin=plugin) as w:
@@ -67,7 +69,7 @@ def write_bag(path, storage="sqlite3", radar="image", poses=None, pose_topic="/o
                                                      encoding="mono8", is_bigendian=0, step=px.shape[1],
                                                      data=px.reshape(-1).copy()), "sensor_msgs/msg/Image")
         elif radar == "navtech":
-            fft, cfg = "nav_messages/msg/RadarFftDataMessage", "nav_messages/msg/RadarConfigurationMessage"
+            fft, cfg = f"{pkg}/msg/RadarFftDataMessage", f"{pkg}/msg/RadarConfigurationMessage"
             c = connection("/radar_data/fft_data", fft)
             cc = connection("/radar_data/configuration_data", cfg)
 
@@ -358,3 +360,8 @@ def test_topic_chooses_among_radar_topics(from_files, tmp_path, capsys):
     assert main(["fuse", str(bag), "--sensor", "navtech-cts350x", "--topic", "/radar3", "--poses", str(ODOMETRY),
                  "--out", str(tmp_path / "n.npz")]) == 2
     assert "has no topic /radar3; its topics: /radar/polar, /radar2/polar" in capsys.readouterr().err
+
+
+def test_the_older_navtech_package_name_reads_the_same(from_files, tmp_path):
+    bag = write_bag(tmp_path / "bag", "sqlite3", "navtech", pkg="messages")
+    same_map(fuse(bag, tmp_path / "bag.npz", "--poses", ODOMETRY), from_files)
