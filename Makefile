@@ -25,7 +25,7 @@ SYSTEM_PACKAGES_OCLGRIND := oclgrind
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,serial,viewer,export,fleet,docs]'
+	$(BIN)/python -m pip install --quiet -e '.[test,serial,viewer,export,fleet,docs,ros]'
 	touch $@
 
 system:

@@ -7,8 +7,8 @@ one JSON and one table; it exits 1 when one of them failed."""
 import json
 import sys
 
-from radarcl.bench import (cfar, drive, frames, fusion, heldout_scans, live, merge, polar_read, quality, range_fft,
-                           scenes, store, suite, viewer)
+from radarcl.bench import (cfar, drive, foxglove, frames, fuse_bag, fusion, heldout_scans, live, merge, polar_read,
+                           quality, range_fft, scenes, store, suite, viewer)
 from radarcl.commands.options import runtime
 
 SUMMARY = "benchmarks, each against a baseline measured in the same run"
@@ -41,6 +41,9 @@ BENCHES = {
                      "maps, vs the one-process merge, same run"),
     "polar-read": (polar_read, "reading polar scans (RADIATE, Oxford) with their layout vs decoding the PNG with PIL "
                                "alone, same run"),
+    "foxglove": (foxglove, "the Oxford scans fused without Foxglove, served, and served to a client that stalls, "
+                           "same run"),
+    "fuse-bag": (fuse_bag, "the Oxford scans fused from a ROS 2 bag (sqlite3, MCAP) vs from their PNG folder, same run"),
 }
 
 

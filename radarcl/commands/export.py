@@ -74,6 +74,8 @@ OPTIONS = {                      # exports.OPTIONS from the command line: the ex
     "colour": lambda args: args.colour,
     "frame_id": lambda args: args.frame_id,
     "stamp_ns": lambda args: disk.saved_ns(args.map),
+    "poses": lambda args: disk.read_poses(args.map),
+    "times_ns": lambda args: disk.read_meta(args.map, "times_ns"),
 }
 
 

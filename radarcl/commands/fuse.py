@@ -5,10 +5,12 @@ from pathlib import Path
 
 from radarcl.commands.options import (
     add_config,
+    add_foxglove_options,
     add_output,
     add_progress,
     add_trajectory_options,
     positive_int,
+    foxglove_out,
     progress,
     resolve_config,
     runtime,
@@ -48,6 +50,7 @@ def add_arguments(parser):
     parser.add_argument("--odometry", default=None, help="polar scans: an Oxford radar_odometry.csv (= --poses FILE "
                                                           "--poses-format oxford)")
     add_trajectory_options(parser)
+    add_bag_options(parser)
     parser.add_argument("--still", action="store_true",
                         help="fuse input that has no poses with every frame at the origin (a radar that does not move)")
     parser.add_argument("--every", type=positive_int, default=None, help="rewrite the map file every N frames")
@@ -61,7 +64,19 @@ def add_arguments(parser):
                              "reading them back when the sensor returns; the grid spans the whole trajectory unless "
                              "[grid] origin_m and size_m are set. --window alone: "
                              f"{WINDOW_RANGE_FACTOR:g} x the sensor's mapped range (interpret.range_max_m)")
+    add_foxglove_options(parser)
     add_progress(parser)
+
+
+def add_bag_options(parser):
+    """--topic, --pose-topic, --msg-dir: what a ROS 2 bag's reader takes (``io.rosbag``)."""
+    parser.add_argument("--topic", default=None, help="a ROS 2 bag: the radar topic to fuse (default: its only radar "
+                                                      "topic; radarcl info BAG lists them)")
+    parser.add_argument("--pose-topic", default=None, metavar="TOPIC", help="a ROS 2 bag: the nav_msgs/Odometry or tf2_msgs/TFMessage "
+                                                           "topic of the radar's poses (default: its one odometry "
+                                                           "topic, else /tf); --poses FILE overrides the bag's poses")
+    parser.add_argument("--msg-dir", default=None, metavar="FOLDER",
+                        help="a ROS 2 bag: message definitions it does not carry, as FOLDER/<package>/msg/<Name>.msg")
 
 
 def window_of(args, config):
@@ -93,7 +108,8 @@ def run(args):
     if args.odometry and args.poses:
         raise ConfigError("give --odometry or --poses, not both")
     source = open_input(config.sensor, args.input, args.odometry, args.poses, args.poses_format, args.clock_offset,
-                        args.max_speed, args.poses_times, report=lambda line: print(f"radarcl: {line}", file=sys.stderr))
+                        args.max_speed, args.poses_times, report=lambda line: print(f"radarcl: {line}", file=sys.stderr),
+                        topic=args.topic, pose_topic=args.pose_topic, msg_dir=args.msg_dir)
     if not source.posed and not args.still:
         raise ConfigError(f"{args.input}: no poses for these frames ({source.summary}); give --poses FILE "
                           "(--poses-format: oxford, tum, kitti, xyzrpy, radiate, boreas), put them beside the scans, "
@@ -104,6 +120,11 @@ def run(args):
         config = config.for_sensor(source.sensor)
         say_notes(config.notes, said)
     window, default = window_of(args, config)
-    fuse.run(runtime(), source, config, out, every=args.every, progress=progress(args), inputs=[args.input], page=page,
-             window_m=window, window_default=default, overwrite=args.force)
+    fox = foxglove_out(args)
+    try:
+        fuse.run(runtime(), source, config, out, every=args.every, progress=progress(args), inputs=[args.input],
+                 page=page, window_m=window, window_default=default, overwrite=args.force, foxglove=fox)
+    finally:
+        if fox is not None:
+            fox.close()
     return 0

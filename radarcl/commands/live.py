@@ -16,8 +16,10 @@ import numpy as np
 
 from radarcl.commands.options import (
     add_config,
+    add_foxglove_options,
     add_output,
     add_trajectory_options,
+    foxglove_out,
     positive_float,
     positive_int,
     read_trajectory,
@@ -54,6 +56,7 @@ def add_arguments(parser):
     p.add_argument("--serve", default=None, metavar="[HOST:]PORT",
                    help="send changed bricks to viewers (radarcl view --follow HOST:PORT); 0 picks a free port")
     p.add_argument("--view", action="store_true", help="open the viewer on the growing map (implies --serve 0)")
+    add_foxglove_options(p)
     p.add_argument("--retry", type=positive_float, default=None, metavar="S",
                    help="when the port goes away, try to reopen it every S seconds (default: save and stop)")
     p.add_argument("--duration", type=positive_float, default=None, help="stop after this many seconds")
@@ -102,6 +105,7 @@ def run(args):
     json_status = check_status_file(args.json_status, args.force) if args.json_status else None
     poses = pose_source(args)                        # every argument checked before a file is made
     view = _ViewServer(args) if (args.serve is not None or args.view) else None
+    fox = foxglove_out(args)
     port = open_port(args.port, args.baud)
     # the header keeps what made the map, so that a replay makes the same one without being told
     recorder = StreamRecorder(args.record, dict(protocol=config.sensor.protocol, sensor=config.sensor.name,
@@ -114,6 +118,7 @@ def run(args):
         mapper.prepare()                             # compile before the radar streams
         if view:
             view.start(mapper)
+        after_fuse = _after_fuse(view, fox, mapper)
         say = None if args.quiet else (lambda line: print("\r" + line, end="", file=sys.stderr, flush=True))
         started = time.monotonic()
         stop = threading.Event()
@@ -124,7 +129,7 @@ def run(args):
             watch = threading.Thread(target=_watch, args=(reader, stop, args.duration, started), daemon=True)
             watch.start()
             s = live.run(session, mapper, checkpoint_s=args.checkpoint, say=say, json_status=json_status, stop=stop,
-                         after_fuse=view.publish if view else None, stop_feeding=reader.stop)
+                         after_fuse=after_fuse, stop_feeding=reader.stop)
             if reader.lost is None or args.retry is None or s["interrupted"]:
                 break
             print(f"\nradarcl: the port {args.port} went away ({reader.lost}); the map is saved ({s['saved_beams']} "
@@ -132,6 +137,10 @@ def run(args):
             port = _reopen(args, stop)
             stop.clear()
             reader = PortReader(port, session.feed).start()
+        if fox is not None and mapper.mapping is not None and mapper.trajectory:
+            from radarcl.maps.foxglove_out import snapshot
+
+            fox.offer(snapshot(mapper.mapping, mapper.trajectory, mapper.trajectory[-1], reading=mapper.config))
     finally:
         if reader is not None:
             reader.stop()
@@ -144,6 +153,8 @@ def run(args):
                     os.unlink(args.record)
         if view:
             view.close()
+        if fox is not None:
+            fox.close()
     if say:
         print(file=sys.stderr)
     if reader.ended is not None and not s["interrupted"]:
@@ -157,6 +168,23 @@ def run(args):
         raise ConfigError(f"the radar's port {args.port} went away ({reader.lost}); the map is saved in {out} "
                           f"({s['saved_beams']} beams); --retry S waits for it to come back")
     return 0
+
+
+def _after_fuse(view, fox, mapper):
+    """What runs after each pass of the live loop: the view stream's publish and Foxglove's
+    (the map offered at the Foxglove rate, and always after the last pass, which saves)."""
+    if fox is None:
+        return view.publish if view else None
+    from radarcl.maps.foxglove_out import snapshot
+
+    def after():
+        if view:
+            view.publish()
+        beams = mapper.stats["beams"]
+        if mapper.mapping is not None and mapper.trajectory and beams != getattr(after, "shown", None) and fox.due():
+            fox.offer(snapshot(mapper.mapping, mapper.trajectory, mapper.trajectory[-1], reading=mapper.config))
+            after.shown = beams
+    return after
 
 
 def check_status_file(path, force):

@@ -204,3 +204,27 @@ def runtime():
     from radarcl.cl import Runtime  # pyopencl is loaded only by commands that run kernels
 
     return Runtime()
+
+
+def add_foxglove_options(p):
+    """--foxglove [PORT], --mcap FILE, --foxglove-rate HZ: the map out to Foxglove (``maps.foxglove_out``)."""
+    p.add_argument("--foxglove", nargs="?", const=8765, default=None, type=bounded_int(0, 65535), metavar="PORT",
+                   help="serve the growing map, the latest scan, the trajectory and TF to Foxglove (WebSocket on "
+                        "127.0.0.1 only; PORT default 8765, 0 picks a free one)")
+    p.add_argument("--mcap", default=None, metavar="FILE", help="record the same channels to an MCAP file Foxglove "
+                                                                "opens (--force replaces it)")
+    p.add_argument("--foxglove-rate", type=positive_float, default=2.0, metavar="HZ",
+                   help="at most this many map updates a second to Foxglove and the MCAP file (default: %(default)s)")
+
+
+def foxglove_out(args):
+    """The ``maps.foxglove_out.FoxgloveOut`` that --foxglove / --mcap ask for, or None."""
+    if args.foxglove is None and args.mcap is None:
+        return None
+    from radarcl.io import files
+    from radarcl.maps.foxglove_out import FoxgloveOut
+
+    read = [getattr(args, k, None) for k in ("input", "config", "poses", "odometry", "record")]
+    mcap = files.check(args.mcap, args.force, inputs=[r for r in read if r], what="MCAP file") if args.mcap else None
+    return FoxgloveOut(args.foxglove, mcap, args.foxglove_rate, overwrite=args.force,
+                       say=lambda line: print(f"radarcl: {line}", file=sys.stderr, flush=True))

@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from radarcl.errors import ConfigError, FrameFormatError
-from radarcl.io import polar_png, recording
+from radarcl.io import polar_png, recording, rosbag
 from radarcl.io import poses as pose_files
 from radarcl.io.polar_layout import PolarLayout
 from radarcl.io.ti_adc import load_capture
@@ -78,13 +78,14 @@ class _Head:
 
 
 def open_input(sensor, path, odometry=None, poses=None, poses_format=None, clock_offset_s=None,
-               max_speed_m_s=DEFAULT_MAX_SPEED_M_S, poses_times=None, report=None):
+               max_speed_m_s=DEFAULT_MAX_SPEED_M_S, poses_times=None, report=None, **options):
     """A ``FrameSource`` for ``path`` read as ``sensor``'s [reader] format says (a file whose
     extension a reader claims, a recording's ``.npz``, is read by that reader whatever the
     profile says). Polar scans: their poses from ``poses`` (a file in ``poses_format``, see
     ``io.poses``; ``odometry`` is the older name for an Oxford odometry file), else found beside
     them; ``clock_offset_s``: how far the pose file's clock runs ahead of the radar's; a
-    trajectory faster than ``max_speed_m_s`` is refused with the jump named."""
+    trajectory faster than ``max_speed_m_s`` is refused with the jump named. ``options``: a
+    reader's own (``Reader.options``; None values are left out), e.g. a bag's ``topic``."""
     if isinstance(sensor, (str, Path)):
         raise ConfigError(f"open_input takes a sensor profile, got the name {str(sensor)!r}: load it with "
                           "radarcl.config.sensors.load, or call radarcl.open_input, which takes names")
@@ -95,11 +96,17 @@ def open_input(sensor, path, odometry=None, poses=None, poses_format=None, clock
     if fmt not in READERS:
         raise ConfigError(f"sensor {sensor.name} is read as {fmt!r}, which no reader reads; readers: "
                           f"{', '.join(READERS)}")
-    reader = next((r for r in READERS.values() if path.is_file() and path.suffix in r.claims), READERS[fmt])
+    reader = next((r for r in READERS.values() if (path.is_file() and path.suffix in r.claims)
+                   or (r.recognises is not None and r.recognises(path))), READERS[fmt])
+    options = {k: v for k, v in options.items() if v is not None}
+    foreign = sorted(set(options) - set(reader.options))
+    if foreign:
+        raise ConfigError(f"{path} is read as {reader.what}, which takes no "
+                          f"{', '.join('--' + k.replace('_', '-') for k in foreign)}")
     return reader.open(sensor, path, poses=poses or odometry,
                        poses_format=poses_format or ("oxford" if odometry and not poses else None),
                        clock_offset_s=clock_offset_s, max_speed_m_s=max_speed_m_s, poses_times=poses_times,
-                       report=report)
+                       report=report, **options)
 
 
 def _check_frame(sensor, shape, dtype, what):
@@ -147,13 +154,6 @@ def _polar(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max
     or found beside them (see the module docstring)."""
     layout = polar_png.PolarLayout.of(sensor)
     sequence = polar_png.read_sequence(path, layout, odometry=False)
-    scans = sequence.scans
-    notes = ()
-    if sensor.n_bins() is None:
-        sensor = sensor.with_bins(scans[0].n_bins)
-        notes += sensor.notes
-    for s in scans:
-        _check_frame(sensor, s.levels.shape, np.float32, str(s.path))
     found = (Path(poses), poses_format) if poses else pose_files.find_beside(sequence.directory)
     track = None
     if found is not None:
@@ -162,6 +162,21 @@ def _polar(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max
                                    f"{layout.timestamps!r} gave none), so no trajectory can place them; set "
                                    "[reader] timestamps, or fuse them with --still")
         track = pose_files.read_trajectory(found[0], found[1], clock_offset_s, poses_times, report)
+    return place_scans(sensor, sequence.scans, track, f"polar scans of {sequence.directory}", max_speed_m_s)
+
+
+def place_scans(sensor, scans, track, what, max_speed_m_s=DEFAULT_MAX_SPEED_M_S, notes=()):
+    """A ``FrameSource`` of polar scans (``polar_png.PolarScan``, any reader's) placed by
+    ``track`` (a ``Trajectory`` in any frame, or None: a still radar at the origin): the sensor's
+    bin count from the scans where its profile leaves it out, every scan's size checked, the
+    trajectory checked for jumps and put in the first scan's frame, a pose per azimuth."""
+    notes = tuple(notes)
+    if sensor.n_bins() is None:
+        sensor = sensor.with_bins(scans[0].n_bins)
+        notes += sensor.notes
+    for s in scans:
+        _check_frame(sensor, s.levels.shape, np.float32, str(s.path))
+    if track is not None:
         track.check_motion(max_speed_m_s)
         notes += track.notes
         track = track.relative_to(scans[0].start_ns)
@@ -169,11 +184,31 @@ def _polar(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max
     else:
         how = "no poses: a still radar at the origin"
     per_beam = polar_png.beam_poses(scans, track, sensor.n_azimuth)
-    source = polar_source(sensor, scans, per_beam, f"{len(scans)} polar scans of {sequence.directory} ({how})")
+    source = polar_source(sensor, scans, per_beam, f"{len(scans)} {what} ({how})")
     source.posed, source.notes, source.trajectory = track is not None, notes, track
     if track is not None:
         source.times_ns = np.array([s.timestamps_ns[len(s.timestamps_ns) // 2] for s in scans], np.int64)
     return source
+
+
+def _bag(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max_speed_m_s=DEFAULT_MAX_SPEED_M_S,
+         poses_times=None, report=None, topic=None, pose_topic=None, msg_dir=None):
+    """A ROS 2 bag (``io.rosbag``): its radar topic's scans, placed by the trajectory file given or
+    the bag's own poses; a damaged bag gives the scans before the damage, named in the notes."""
+    try:
+        layout = PolarLayout.of(sensor)
+    except ConfigError:
+        raise ConfigError(f"{path} is a ROS 2 bag of polar radar scans; sensor {sensor.name} is no spinning radar "
+                          "read from polar scans: give --sensor (e.g. navtech-cts350x; radarcl sensors lists them)") from None
+    read = rosbag.read_scans(path, layout, topic=topic, msg_dir=msg_dir)
+    track = None
+    if poses:
+        track = pose_files.read_trajectory(Path(poses), poses_format, clock_offset_s, poses_times, report)
+    else:
+        track = rosbag.read_trajectory(path, read.frame_id, pose_topic, msg_dir=msg_dir)
+        if track is not None and clock_offset_s:
+            track = track.shifted(int(round(clock_offset_s * 1e9)))
+    return place_scans(sensor, read.scans, track, read.what, max_speed_m_s, read.notes)
 
 
 def polar_source(sensor, scans, per_beam, summary):
@@ -207,7 +242,8 @@ class Reader:
     the trajectory options it uses and ignores the others); claims: extensions of files it reads
     whatever the profile's format; check_profile(sensor): raises ``ConfigError`` where the
     profile's [reader] table does not describe files it can read (run when a profile is loaded),
-    or None."""
+    or None; recognises(path): True for inputs it reads whatever the profile's format (a bag's
+    folder), or None; options: the names of its own keyword arguments to ``open``."""
 
     name: str
     what: str
@@ -215,6 +251,8 @@ class Reader:
     open: Callable
     claims: tuple = ()
     check_profile: Callable = None
+    recognises: Callable = None
+    options: tuple = ()
 
 
 def register(reader):
@@ -232,3 +270,7 @@ register(Reader("polar-png", "a directory of polar scans",
                 "their poses from --poses or found beside them: Oxford's radar_odometry.csv, RADIATE's GPS/IMU, "
                 "Boreas' applanix poses", _polar, check_profile=PolarLayout.of))
 register(Reader("ti-openradar", "a TI capture", "a TI capture .npy/.txt", _ti_capture))
+register(Reader("rosbag", "a ROS 2 bag", "a ROS 2 bag (its folder, or one .db3 or .mcap file): radar topics of "
+                "Navtech's driver or polar sensor_msgs/Image scans in the sensor's layout, placed by --poses or the "
+                "bag's nav_msgs/Odometry or /tf", _bag, claims=(".db3", ".mcap"), recognises=rosbag.is_bag,
+                options=("topic", "pose_topic", "msg_dir")))

@@ -82,7 +82,7 @@ class PolarLayout:
     def of(cls, sensor):
         """The layout a sensor profile's [reader] table gives (defaults: Oxford)."""
         reader = dict(sensor.tables.get("reader", {}))
-        if reader.pop("format", "polar-png") != "polar-png":
+        if reader.pop("format", "polar-png") not in ("polar-png", "rosbag"):   # a bag of polar images too
             raise ConfigError(f"sensor {sensor.name} is not read as polar PNG scans")
         beams, rng = sensor.tables.get("beams", {}), sensor.tables.get("range", {})
         return cls(**reader, n_azimuth=beams.get("n_azimuth"), bin_spacing_m=rng.get("bin_spacing_m"))

@@ -165,6 +165,18 @@ def load_scan(path, layout=PolarLayout(), time_ns=None, period_ns=None):
     if raw.dtype != np.uint8 or raw.ndim != 2 or raw.shape != (height, width):
         raise FrameFormatError(f"{path}: expected an 8-bit greyscale image of {height} x {width}, got "
                                f"{raw.shape} {raw.dtype}")
+    if time_ns is None and layout.timestamp_column < 0:
+        time_ns = file_name_time_ns(path, layout.file_name_unit)
+        if time_ns is not None:
+            time_ns += int(round(layout.timestamp_offset_s * 1e9))
+    return decode_scan(raw, layout, path, time_ns, period_ns)
+
+
+def decode_scan(raw, layout, path, time_ns=None, period_ns=None):
+    """One scan from its 8-bit image ``raw`` (height, width) as ``layout`` says, named ``path``
+    (a file, or a bag's topic and message) in messages; without a timestamp column its azimuths
+    are timed from ``time_ns`` (None: untimed) over ``period_ns`` (``load_scan``)."""
+    layout.check_shape(path, *raw.shape)
     if layout.orientation == "range-rows":
         raw = raw.T                     # (azimuths, bins): a view; the row order below copies it
     n_az = raw.shape[0]
@@ -173,10 +185,6 @@ def load_scan(path, layout=PolarLayout(), time_ns=None, period_ns=None):
         c = layout.timestamp_column
         timestamps = np.ascontiguousarray(raw[:, c:c + 8]).view("<i8")[:, 0].astype(np.int64) * 1000
     else:
-        if time_ns is None:
-            time_ns = file_name_time_ns(path, layout.file_name_unit)
-            if time_ns is not None:
-                time_ns += int(round(layout.timestamp_offset_s * 1e9))
         if time_ns is None:
             time_ns, timed = 0, False
         period = int(period_ns if period_ns is not None else round(layout.scan_period_s * 1e9))
@@ -191,9 +199,17 @@ def load_scan(path, layout=PolarLayout(), time_ns=None, period_ns=None):
         angles = counts / layout.encoder_counts * 2 * np.pi
     else:
         angles = np.arange(n_az) * (2 * np.pi / n_az)
-    angles = angles + math.radians(layout.azimuth_start_deg)
     valid = raw[:, layout.valid_column] == 255 if layout.valid_column >= 0 else np.ones(n_az, bool)
-    levels = raw[:, layout.meta_columns:]
+    return assemble_scan(path, timestamps, angles, valid, raw[:, layout.meta_columns:], layout, timed)
+
+
+def assemble_scan(path, timestamps, angles, valid, levels, layout, timed=True):
+    """A ``PolarScan`` of one turn's rows in acquisition order: UNIX times [ns], the sensor's own
+    angles [rad] (before ``layout.azimuth_start_deg`` and its sense), valid flags and levels
+    (n_az, bins as recorded); the layout's bin shift and sense applied (the one place that
+    turns a sensor's rows into REP-103)."""
+    n_az = len(levels)
+    angles = angles + math.radians(layout.azimuth_start_deg)
     shift = layout.bin_shift()
     if shift > 0:
         levels = levels[:, shift:]

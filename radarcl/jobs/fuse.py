@@ -23,6 +23,7 @@ from radarcl.config import mapconfig
 from radarcl.errors import ConfigError, FrameFormatError, ShapeError
 from radarcl.gridspec import GridSpec, lattice_box
 from radarcl.io.files import scratch
+from radarcl.maps.foxglove_out import snapshot
 from radarcl.maps.disk import MapSaver, output_format, reading_of
 from radarcl.maps.map import Map
 from radarcl.maps.rolling import WINDOW_RANGE_FACTOR, RollingStore, RollingWindow
@@ -83,8 +84,14 @@ class Tally:
         self.device_bytes = max(self.device_bytes, self.grid.memory()["device_bytes"])
 
 
+def frame_time_ns(source, j):
+    """Frame j's time [UNIX ns] where the source knows it (polar scans: the first azimuth's), else None."""
+    scans = getattr(source.frames, "scans", None)
+    return scans[j].start_ns if scans is not None and scans[j].timed else None
+
+
 def run(runtime, source, config, out, every=None, progress=None, report=print, inputs=(), page=None, window_m=None,
-        window_default=False, overwrite=False):
+        window_default=False, overwrite=False, foxglove=None):
     """Fuse every frame of ``source`` (an ``io.inputs.FrameSource``) with ``config`` (a
     ``mapconfig.Resolved``, or a sensor's name for its defaults) and write the map to ``out``: an ``.npz`` file, or a map store
     (``maps.store``, any other name: only changed bricks are written after the first save).
@@ -93,9 +100,13 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
     a store, replaced when ``overwrite``; ``window_default`` says the window was the default).
     Returns a dict with the frame count, milliseconds per frame of fusion (the device's work
     included) and seconds of saving, timed apart (and, rolling, the device's high-water mark
-    and the bricks that left and came back)."""
+    and the bricks that left and came back). ``foxglove``: a ``maps.foxglove_out.FoxgloveOut`` offered
+    the map as it grows (at its rate) and once at the end, stamped with the frames' own times."""
     config = mapconfig.as_resolved(config)              # a sensor's name takes its defaults
     rolling = None
+    if window_m is not None and foxglove is not None:
+        raise ConfigError("--window and --foxglove/--mcap: a rolling map keeps only the window on the device; send "
+                          "the finished store to Foxglove with radarcl export, or leave out --window")
     if window_m is not None:
         if output_format(out) == "npz":
             raise ConfigError(f"--window writes the map into a map store as the sensor drives; {out} is an .npz "
@@ -131,8 +142,11 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
 
     def save(poses):
         mapping.runtime.queue.finish()                  # the device's work counts as fusion, not saving
+        times = [frame_time_ns(source, j) for j in range(0 if poses is None else len(poses))]
         with tally.saving():
-            saver(mapping.grid, poses, **extra)
+            # the frames' own times, where known: exports stamp with the recording's time
+            stamped = {"times_ns": times} if times and None not in times else {}
+            saver(mapping.grid, poses, **extra, **stamped)
 
     def before_frame(j, position):
         rolling.update(position)
@@ -140,10 +154,17 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
 
     fused = dict(trajectory=[])                  # the frames fused so far: a map kept when a frame fails
 
+    reading = reading_of(config) if mapping.grid.has_knowledge else None
+
+    def show(j, trajectory):
+        foxglove.offer(snapshot(mapping, trajectory, source.poses[j], frame_time_ns(source, j), reading))
+
     def after_frame(j, trajectory):
         fused["trajectory"] = trajectory
         if every and (j + 1) % every == 0 and j + 1 < n:
             save(np.array(trajectory))
+        if foxglove is not None and (foxglove.due() or j + 1 == n):
+            show(j, trajectory)
         if progress is not None:
             progress(j + 1, n, "frames fused")
 
@@ -200,7 +221,6 @@ def run(runtime, source, config, out, every=None, progress=None, report=print, i
         report(f"rolling map: the device held at most {result['device_mib_max']:.0f} MiB; {rolling.evicted} bricks "
                f"left the window, {st['restored']} came back ({st['restored_from_disk']} read from the store)")
     if page is not None:
-        reading = reading_of(config) if mapping.grid.has_knowledge else None
         map_ = Map.of_grid(mapping.grid, reading) if rolling is None else Map.open(out)
         write_report(page, out, source, config, result, map_, trajectory)
         report(f"wrote {page}")

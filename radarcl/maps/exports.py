@@ -300,10 +300,11 @@ def costmap(m, path, band=None, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS
     return out
 
 
-def rosbag(m, path, band=None, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS, frame_id="map", stamp_ns=None):
+def rosbag(m, path, band=None, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS, frame_id="map", stamp_ns=None,
+           poses=None, times_ns=None):
     """``maps.ros.rosbag`` (rosbags must be installed)."""
     _need("rosbags")
-    return ros.rosbag(m, path, band, occupied_nats, free_nats, frame_id, stamp_ns)
+    return ros.rosbag(m, path, band, occupied_nats, free_nats, frame_id, stamp_ns, poses, times_ns)
 
 
 # -- the formats ---------------------------------------------------------------------------------------
@@ -315,6 +316,8 @@ OPTIONS = {                       # what ``radarcl export`` hands an exporter th
     "colour": "--colour, one of COLOURS",
     "frame_id": "--frame-id",
     "stamp_ns": "when the map was saved [ns since the epoch]",
+    "poses": "the sensor poses the map keeps (n, 4, 4), or None",
+    "times_ns": "their frames' times [ns since the epoch] where the map keeps them, or None",
 }
 
 
@@ -375,5 +378,6 @@ register(Export("mesh", (".ply",), "the isosurface at the occupied threshold as 
 register(Export("vti", (".vti",), "the dense log-odds and an observed mask as VTK image data for ParaView", vti))
 register(Export("costmap", (".pgm",), "a ROS map_server PGM + YAML projected over --band (occupied, free, unknown)",
                 costmap, companions=((".yaml", "costmap YAML"),)))
-register(Export("rosbag", ("",), "a ROS 2 bag with the same grid on /map (latched) and the occupied voxels on "
-                                 "/map/points", rosbag, directory=("ROS 2 bag", only_a_bag)))
+register(Export("rosbag", ("",), "a ROS 2 bag with the same grid on /map (latched), the occupied voxels on "
+                                 "/map/points, the trajectory on /trajectory, /tf and /tf_static, stamped with the "
+                                 "recording's time", rosbag, directory=("ROS 2 bag", only_a_bag)))

@@ -5,11 +5,20 @@ The costmap is map_server's trinary image: 0 (black) occupied, 254 free, 205 unk
 from the top (the largest y), with a YAML beside it (``mode: trinary``; map_server reads p =
 (255 - pixel) / 255 against ``occupied_thresh`` 0.65 and ``free_thresh`` 0.196, which puts the
 three values in the three classes). The bag is written by rosbags (no ROS install) as
-``ros2 bag record`` would: its data file ``<bag>_0.db3`` named after the bag, the messages
-stamped with the map's own time (when it was saved), ``/map`` (OccupancyGrid) offered
-transient-local and reliable (the latched map that Nav2's and RViz's map subscribers ask
-for), ``/map/points`` (PointCloud2 of the occupied voxels: x, y, z [m], log_odds [nat],
-probability).
+``ros2 bag record`` would: its data file ``<bag>_0.db3`` named after the bag, with
+  /map           nav_msgs/OccupancyGrid in ``frame_id`` (default ``map``), offered transient-local
+                 and reliable (the latched map that Nav2's map_server serves and RViz's and
+                 Nav2's map subscribers ask for)
+  /map/points    sensor_msgs/PointCloud2 of the occupied voxels: x, y, z [m], log_odds [nat],
+                 probability
+  /trajectory    nav_msgs/Path: the sensor's pose of every frame, each stamped with its frame's time
+  /tf_static     ``frame_id`` -> ``odom``, the identity (latched as /tf_static is): radarcl's map is
+                 built in the frame of the first scan, which is where odometry starts (REP-105)
+  /tf            ``odom`` -> ``radar`` at every frame's time: the sensor on its way
+The map's messages are stamped with the recording's time (its last frame's, where the map
+keeps its frames' times), else with when the map was saved; never with when the bag is written.
+A ROS 2 user plays the bag and sees the map, the points, the path and the radar's frame in RViz
+with the fixed frame ``map``.
 """
 
 import contextlib
@@ -21,9 +30,11 @@ from pathlib import Path
 import numpy as np
 
 from radarcl.io.files import atomic, clean_stale
+from radarcl.io.trajectory import quaternions
 from radarcl.maps.map import FREE_NATS, OCCUPIED_NATS, UNKNOWN
 
 PGM_OCCUPIED, PGM_FREE, PGM_UNKNOWN = 0, 254, 205
+ODOM, SENSOR_FRAME = "odom", "radar"   # REP-105's odometry frame; the sensor's frame on /tf
 INFINITE = (2147483647, 4294967295)   # rosbag2's "default" (infinite) duration in QoS profiles
 
 
@@ -60,18 +71,37 @@ def _latched():
                QosLiveliness.AUTOMATIC, forever, False)
 
 
-def rosbag(m, path, band=None, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS, frame_id="map", stamp_ns=None):
-    """A ROS 2 bag (sqlite3) at the directory ``path``: ``/map`` (OccupancyGrid of the projection
-    over ``band``) and ``/map/points`` (the voxels above ``occupied_nats``), stamped ``stamp_ns``
-    (default: now) in ``frame_id``. Written beside ``path`` and renamed over it whole. Returns a
-    dict: the files written, the points and the cells by class."""
+def _static():
+    """The QoS /tf_static is offered with: reliable, transient local, the last message kept."""
+    return _latched()
+
+
+def rosbag(m, path, band=None, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS, frame_id="map", stamp_ns=None,
+           poses=None, times_ns=None):
+    """A ROS 2 bag (sqlite3) at the directory ``path`` (see the module docstring): ``/map``
+    (OccupancyGrid of the projection over ``band``), ``/map/points`` (the voxels above
+    ``occupied_nats``) in ``frame_id``, and with the sensor ``poses`` (n, 4, 4) ``/trajectory``,
+    ``/tf_static`` and ``/tf``, each pose at ``times_ns[i]`` (its frame's time; None: all at the
+    map's stamp). The map is stamped with the last of ``times_ns``, else ``stamp_ns`` (default:
+    now). Written beside ``path`` and renamed over it whole. Returns a dict: the files written,
+    the points, the cells by class and the poses."""
     from rosbags.rosbag2 import Writer
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types
+    poses = np.zeros((0, 4, 4)) if poses is None else np.asarray(poses, np.float64).reshape(-1, 4, 4)
+    if times_ns is not None and len(times_ns) != len(poses):
+        times_ns = None                 # times that do not match the poses place nothing
+    if times_ns is not None and len(times_ns):
+        stamp_ns = int(times_ns[-1])
     stamp_ns = int(stamp_ns) if stamp_ns is not None else time.time_ns()
-    stamp = T["builtin_interfaces/msg/Time"](sec=stamp_ns // 10 ** 9, nanosec=stamp_ns % 10 ** 9)
+    pose_ns = [stamp_ns] * len(poses) if times_ns is None else [int(t) for t in times_ns]
+
+    def time_msg(t):
+        return T["builtin_interfaces/msg/Time"](sec=t // 10 ** 9, nanosec=t % 10 ** 9)
+
+    stamp = time_msg(stamp_ns)
     header = T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id)
     centres, nats = m.occupied(occupied_nats)
     cloud = np.empty(len(centres), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("log_odds", "<f4"),
@@ -91,6 +121,21 @@ def rosbag(m, path, band=None, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS,
     info = T["nav_msgs/msg/MapMetaData"](map_load_time=stamp, resolution=float(m.spec.voxel_m),
                                          width=grid.shape[1], height=grid.shape[0], origin=pose)
     occupancy = T["nav_msgs/msg/OccupancyGrid"](header=header, info=info, data=grid.reshape(-1).astype(np.int8))
+    q = quaternions(poses[:, :3, :3]) if len(poses) else np.zeros((0, 4))
+
+    def transform(t, parent, child, p, r):
+        return T["geometry_msgs/msg/TransformStamped"](
+            header=T["std_msgs/msg/Header"](stamp=time_msg(t), frame_id=parent), child_frame_id=child,
+            transform=T["geometry_msgs/msg/Transform"](
+                translation=T["geometry_msgs/msg/Vector3"](x=float(p[0, 3]), y=float(p[1, 3]), z=float(p[2, 3])),
+                rotation=T["geometry_msgs/msg/Quaternion"](x=float(r[1]), y=float(r[2]), z=float(r[3]), w=float(r[0]))))
+
+    def pose_stamped(t, p, r):
+        return T["geometry_msgs/msg/PoseStamped"](
+            header=T["std_msgs/msg/Header"](stamp=time_msg(t), frame_id=frame_id),
+            pose=T["geometry_msgs/msg/Pose"](
+                position=T["geometry_msgs/msg/Point"](x=float(p[0, 3]), y=float(p[1, 3]), z=float(p[2, 3])),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=float(r[1]), y=float(r[2]), z=float(r[3]), w=float(r[0]))))
     path = Path(path)
     clean_stale(path)
     # the bag is written whole in a hidden folder beside, under its own name (rosbag2 names the
@@ -101,8 +146,24 @@ def rosbag(m, path, band=None, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS,
             c_map = writer.add_connection("/map", "nav_msgs/msg/OccupancyGrid", typestore=ts,
                                           offered_qos_profiles=[_latched()])
             c_points = writer.add_connection("/map/points", "sensor_msgs/msg/PointCloud2", typestore=ts)
+            tf_msg = "tf2_msgs/msg/TFMessage"
+            if len(poses):
+                c_static = writer.add_connection("/tf_static", tf_msg, typestore=ts, offered_qos_profiles=[_static()])
+                c_tf = writer.add_connection("/tf", tf_msg, typestore=ts)
+                c_path = writer.add_connection("/trajectory", "nav_msgs/msg/Path", typestore=ts)
+                first = min(pose_ns[0], stamp_ns)
+                if frame_id != ODOM:
+                    writer.write(c_static, first, ts.serialize_cdr(T[tf_msg](transforms=[
+                        transform(first, frame_id, ODOM, np.eye(4), (1.0, 0.0, 0.0, 0.0))]), tf_msg))
+                for t, p, r in zip(pose_ns, poses, q):
+                    writer.write(c_tf, t, ts.serialize_cdr(T[tf_msg](transforms=[
+                        transform(t, ODOM if frame_id != ODOM else frame_id, SENSOR_FRAME, p, r)]), tf_msg))
             writer.write(c_map, stamp_ns, ts.serialize_cdr(occupancy, "nav_msgs/msg/OccupancyGrid"))
             writer.write(c_points, stamp_ns, ts.serialize_cdr(points, "sensor_msgs/msg/PointCloud2"))
+            if len(poses):
+                path_msg = T["nav_msgs/msg/Path"](header=header, poses=[pose_stamped(t, p, r)
+                                                                       for t, p, r in zip(pose_ns, poses, q)])
+                writer.write(c_path, stamp_ns, ts.serialize_cdr(path_msg, "nav_msgs/msg/Path"))
         if path.is_dir():
             shutil.rmtree(path)
         elif path.exists():
@@ -112,4 +173,4 @@ def rosbag(m, path, band=None, occupied_nats=OCCUPIED_NATS, free_nats=FREE_NATS,
         with contextlib.suppress(OSError):
             shutil.rmtree(work)
     files = sorted(p for p in path.iterdir() if p.is_file())
-    return dict(files=files, points=len(cloud), **_cells(grid))
+    return dict(files=files, points=len(cloud), **_cells(grid), poses=len(poses))
