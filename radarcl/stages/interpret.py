@@ -20,6 +20,9 @@ from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_
 
 # Beams per work-group. One work-item walks one beam; any size is correct.
 DEFAULT_LOCAL_SIZE = 16
+# Work-items per work-group of interpret_nodes ("snr" evidence's nodes, eight bins a work-item):
+# any size is correct; within any device's work-group limit.
+NODES_LOCAL_SIZE = 64
 
 
 @dataclass(frozen=True)
@@ -77,10 +80,13 @@ class Interpreter(Stage):
         grid = dict(SNR_NU=SNR_U[2], SNR_NV=SNR_V[2], SNR_U0=float(SNR_U[0]), SNR_V0=float(SNR_V[0]),
                     SNR_U_SCALE=(SNR_U[2] - 1) / (SNR_U[1] - SNR_U[0]),
                     SNR_V_SCALE=(SNR_V[2] - 1) / (SNR_V[1] - SNR_V[0]), GAP_CAP=GAP_CAP) if graded else {}
-        self._kernel = build(runtime, "interpret", dict(N_BINS=self.n_bins, MAX_PULSES=self.config.max_pulses,
-                                                        OCCLUSION=int(self.config.model == "occlusion"),
-                                                        DETSTATS=int(self.detstats), GRADED=int(graded),
-                                                        **grid))["interpret"]
+        kernels = build(runtime, "interpret", dict(N_BINS=self.n_bins, MAX_PULSES=self.config.max_pulses,
+                                                   OCCLUSION=int(self.config.model == "occlusion"),
+                                                   DETSTATS=int(self.detstats), GRADED=int(graded), **grid))
+        self._kernel = kernels["interpret"]
+        # "snr" evidence: the beam's walk leaves each bin's blocking, a second kernel its nodes
+        self._nodes_kernel = kernels["interpret_nodes"] if graded else None
+        self._nodes_local_size = work_group_size(runtime, self._nodes_kernel, None, NODES_LOCAL_SIZE) if graded else 1
         self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
         f32, u8, i32 = np.dtype(np.float32), np.dtype(np.uint8), np.dtype(np.int32)
         shape = self.input_shape
@@ -103,7 +109,7 @@ class Interpreter(Stage):
         one = cla.zeros(q, (1,), np.float32)
         tables = dict(opportunity=one, miss=one, blocking=one, unblocked=cla.zeros(q, (1, 2), np.int32), c_det=1.0,
                       ln_snr=one, snr_table=one, snr_cap=one, noise_floor=1.0, blocker_gap=0.0,
-                      snr_q=1.0)
+                      snr_q=1.0, state=cla.zeros(q, (1, 2), np.float32), ln_floors=one)
         if not self.detstats:
             return tables
         m = self.bin_model
@@ -114,7 +120,9 @@ class Interpreter(Stage):
                           snr_table=cla.to_device(q, m.snr_table.values.astype(np.float32)),
                           snr_cap=cla.to_device(q, detection_cap(m.opportunity, m.snr_table.q, m.bounded).astype(np.float32)),
                           noise_floor=float(m.noise_floor), blocker_gap=float(m.blocker_gap),
-                          snr_q=float(m.snr_table.q))
+                          snr_q=float(m.snr_table.q),
+                          state=cla.zeros(q, (self.n_beams, self.n_bins, 2), np.float32),    # per bin: blocked, tau
+                          ln_floors=cla.zeros(q, (self.n_beams,), np.float32))
             return tables
         first, last = self.first_bin, self.last_bin
         unblocked = np.zeros((self.n_bins, N_CLASSES, NODES), np.int64), np.zeros((self.n_bins, N_CLASSES, NODES), np.int64)
@@ -143,8 +151,9 @@ class Interpreter(Stage):
         ls = self.local_size
         gsize = (-(-self.n_beams // ls) * ls,)
         a = self.arrays
-        return self._kernel(self.runtime.queue, gsize, (ls,), wait_for=wait_for,
-                            profiles=self.device("profiles", profiles), noise=self.device("noise", noise),
+        profiles = self.device("profiles", profiles)
+        done = self._kernel(self.runtime.queue, gsize, (ls,), wait_for=wait_for,
+                            profiles=profiles, noise=self.device("noise", noise),
                             mask=self.device("mask", mask),
                             flags_in=self._no_flags if flags is None else self.device("flags_in", flags),
                             k_occ=float(self.config.k_occ), e_high=self.e_high, e_low=self.e_low,
@@ -153,6 +162,16 @@ class Interpreter(Stage):
                             **self._tables,
                             n_beams=self.n_beams, evidence=a["evidence"], pulses=a["pulses"],
                             n_pulses=a["n_pulses"], flags_out=a["flags_out"])
+        if self._nodes_kernel is None:
+            return done
+        t = self._tables
+        n = self.n_beams * -(-self.n_bins // 8)            # a work-item per eight bins of a beam
+        ls = self._nodes_local_size
+        return self._nodes_kernel(self.runtime.queue, (-(-n // ls) * ls,), (ls,), wait_for=[done], profiles=profiles, flags_out=a["flags_out"],
+                                  state=t["state"], ln_floors=t["ln_floors"], opportunity=t["opportunity"],
+                                  ln_snr=t["ln_snr"], snr_cap=t["snr_cap"], snr_table=t["snr_table"],
+                                  first_bin=self.first_bin, last_bin=self.last_bin, blocker_gap=t["blocker_gap"],
+                                  snr_q=t["snr_q"], n_beams=self.n_beams, evidence=a["evidence"])
 
     def _result(self, evidence, pulses, n_pulses, flags_out):
         return InterpretResult(evidence, pulses, n_pulses, flags_out)
