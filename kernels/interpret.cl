@@ -222,13 +222,13 @@ static inline int8 fixed_nb8(float8 v, float scale)
     return as_int8(v * scale + 12582912.0f) - 0x4B400000;
 }
 
-/* the node pairs of bins j .. j + 7 (lanes; bin j + l's tables at jt.s<l> x 10) from the SNR
- * table: u = ln x, ln tau = -blocked; behind nearer echoes (blocked > 0) the mixture with a
- * gap of chance gap (q: the table's); every look within its known share of the node's cap,
- * either way. Lanes not in `write` store nothing. */
+/* the node pairs of bins j0 .. j0 + 7 (lanes; the tail's at bins jt, the per-node tables (2, 5,
+ * N_BINS)) from the SNR table: u = ln x, ln tau = -blocked; behind nearer echoes (blocked > 0)
+ * the mixture with a gap of chance gap (q: the table's); every look within its known share of
+ * the node's cap, either way. Lanes not in `write` store nothing. */
 static inline void write_graded8(__global int2 *out, int8 write, const __global float *ln_snr,
                                  const __global float *opportunity, const __global float *snr_cap,
-                                 const __global float *table, int8 jt, float8 u, float8 blocked, float8 tau,
+                                 const __global float *table, int j0, int8 jt, float8 u, float8 blocked, float8 tau,
                                  float gap, float q)
 {
     const float8 fu = grid_position8(u, SNR_U0, SNR_U_SCALE, SNR_NU);
@@ -240,8 +240,11 @@ static inline void write_graded8(__global int2 *out, int8 write, const __global 
     for (int c = 0; c < 2; ++c) {
         int8 e[5], d[5];
         for (int k = 0; k < 5; ++k) {
-            const int8 at = jt * 10 + (c * 5 + k);
-            const float8 opp = GATHER8(opportunity, at), ln_s = GATHER8(ln_snr, at);
+            const int node = (c * 5 + k) * N_BINS;
+            const int whole = j0 + 8 <= N_BINS;
+            const float8 opp = whole ? vload8(0, opportunity + node + j0) : GATHER8(opportunity, node + jt);
+            const float8 ln_s = whole ? vload8(0, ln_snr + node + j0) : GATHER8(ln_snr, node + jt);
+            const float8 cap = whole ? vload8(0, snr_cap + node + j0) : GATHER8(snr_cap, node + jt);
             float8 v = table_at8(table, i0, du, ln_s - blocked);
             float8 known = tau;
             /* only behind an echo, and only for a target there is (ln_s at the table's first
@@ -256,7 +259,7 @@ static inline void write_graded8(__global int2 *out, int8 write, const __global 
                 v = mix ? log10_nb8(lm / (1.0f - q + q * lm)) * LN10 : v;
                 known = mix & (w > 0.5f) ? (1.0f - w) * tau + w : tau;   /* see the oracle */
             }
-            const float8 most = known * GATHER8(snr_cap, at);    /* no more than a detection would say, either way */
+            const float8 most = known * cap;    /* no more than a detection would say, either way */
             v = v < most ? (v > -most ? v : -most) : most;
             /* knowledge is at most opp (tau, w <= 1): a node it rounds to 0 for is a look that is
              * not one, with no evidence */
@@ -264,12 +267,17 @@ static inline void write_graded8(__global int2 *out, int8 write, const __global 
             d[k] = none ? (int8)0 : as_int8(known * opp * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
             e[k] = d[k] != 0 ? fixed_nb8(v, LOGODDS_SCALE) : (int8)0;   /* no evidence from a look that is not one */
         }
+        int8 pe[4], pd[4];
         for (int k = 0; k < 4; ++k) {
-            const int8 pe = (e[k] & 0xFFFF) | (e[k + 1] << 16), pd = (d[k] & 0xFFFF) | (d[k + 1] << 16);
-            for (int l = 0; l < 8; ++l)
-                if (((const int *)&write)[l])
-                    out[l * NODE_WORDS + c * 4 + k] = (int2)(((const int *)&pe)[l], ((const int *)&pd)[l]);
+            pe[k] = (e[k] & 0xFFFF) | (e[k + 1] << 16);
+            pd[k] = (d[k] & 0xFFFF) | (d[k + 1] << 16);
         }
+        /* bin l's four pairs of this class are eight ints in a row: lane l of the eight vectors */
+#define PAIRS(l) (int8)(pe[0].s##l, pd[0].s##l, pe[1].s##l, pd[1].s##l, pe[2].s##l, pd[2].s##l, pe[3].s##l, pd[3].s##l)
+#define STORE(l) if (write.s##l) vstore8(PAIRS(l), 0, (__global int *)(out + l * NODE_WORDS + c * 4));
+        STORE(0) STORE(1) STORE(2) STORE(3) STORE(4) STORE(5) STORE(6) STORE(7)
+#undef STORE
+#undef PAIRS
     }
 }
 #endif
@@ -299,7 +307,7 @@ __kernel void interpret(
     const float noise_floor,            // GRADED: the least noise floor [power] (the CFAR's)
     const float blocker_gap,            // GRADED: the chance of a gap in nearer echoes (0: hard blocking)
     const float snr_q,                  // GRADED: the table's q (the evidence's bound is ln(1 / q))
-    __global float2 *state,             // GRADED: (n_beams, N_BINS) out, each bin's (blocked, tau) for interpret_nodes
+    __global float *state,              // GRADED: (n_beams, 2, N_BINS) out, each bin's blocked and tau for interpret_nodes
     __global float *ln_floors,          // GRADED: (n_beams,) out, ln of the beam's noise floor
     const int n_beams,
     __global int *evidence,           // (n_beams, N_BINS) out [logodds units]; DETSTATS: (n_beams, N_BINS, 8) int2
@@ -341,7 +349,7 @@ __kernel void interpret(
 #if DETSTATS
 #if GRADED
     /* the nodes are interpret_nodes' (below): here each bin's blocking and the beam's floor */
-    __global float2 *st = state + row;
+    __global float *st = state + 2 * row;                   /* this beam's blocked[], then its tau[] */
     if (flags & NO_EVIDENCE_FLAGS) {
         n_pulses[beam] = 0;
         return;
@@ -374,7 +382,8 @@ __kernel void interpret(
         while (j <= last_bin) {
             if (!m[j]) {
 #if GRADED
-                st[j] = (float2)(blocked, tau);
+                st[j] = blocked;
+                st[N_BINS + j] = tau;
 #else
                 if (blocked == 0.0f) {
                     for (int w = 0; w < NODE_WORDS; w++)
@@ -397,8 +406,10 @@ __kernel void interpret(
             }
             const int end = j - 1;
 #if GRADED
-            for (int i = start; i <= end; i++)
-                st[i] = (float2)(blocked, tau);              /* a pulse's bins: the tau in front of it */
+            for (int i = start; i <= end; i++) {            /* a pulse's bins: the tau in front of it */
+                st[i] = blocked;
+                st[N_BINS + i] = tau;
+            }
 #else
             const float scale = c_det / r[peak];
             for (int i = start; i <= end; i++)
@@ -511,9 +522,9 @@ __kernel void interpret(
 __kernel void interpret_nodes(
     const __global float *profiles,     // (n_beams, N_BINS) power r_i
     const __global uchar *flags_out,    // (n_beams,) interpret's flags
-    const __global float2 *state,       // (n_beams, N_BINS) interpret's (blocked, tau) per bin
+    const __global float *state,        // (n_beams, 2, N_BINS) interpret's blocked and tau per bin
     const __global float *ln_floors,    // (n_beams,) interpret's ln noise floor per beam
-    const __global float *opportunity,  // (N_BINS, 2, 5) as interpret's
+    const __global float *opportunity,  // (2, 5, N_BINS) interpret's tables, bins last (one vector load per node)
     const __global float *ln_snr,
     const __global float *snr_cap,
     const __global float *snr_table,
@@ -544,12 +555,19 @@ __kernel void interpret_nodes(
     if (!valid || !(in_range.s0 | in_range.s1 | in_range.s2 | in_range.s3 | in_range.s4 | in_range.s5 | in_range.s6
                     | in_range.s7))
         return;
-    const __global float *r = profiles + row;
-    const __global float2 *st = state + row;
-    const float8 blocked = GATHER8(((const __global float *)st), jt * 2);
-    const float8 tau = GATHER8(((const __global float *)st), jt * 2 + 1);
-    write_graded8(nd, in_range, ln_snr, opportunity, snr_cap, snr_table, jt,
-                  log10_nb8(GATHER8(r, jt)) * LN10 - ln_floors[beam], blocked, tau, blocker_gap, snr_q);
+    const __global float *r = profiles + row, *st = state + 2 * row;
+    float8 power, blocked, tau;
+    if (j0 + 8 <= N_BINS) {
+        power = vload8(0, r + j0);
+        blocked = vload8(0, st + j0);
+        tau = vload8(0, st + N_BINS + j0);
+    } else {                                                        /* the tail's lanes read the last bin */
+        power = GATHER8(r, jt);
+        blocked = GATHER8(st, jt);
+        tau = GATHER8((st + N_BINS), jt);
+    }
+    write_graded8(nd, in_range, ln_snr, opportunity, snr_cap, snr_table, j0, jt,
+                  log10_nb8(power) * LN10 - ln_floors[beam], blocked, tau, blocker_gap, snr_q);
 #undef CHUNKS
 #endif
 }

@@ -116,13 +116,18 @@ class Interpreter(Stage):
         tables.update(opportunity=cla.to_device(q, m.opportunity.astype(np.float32)),
                       blocking=cla.to_device(q, m.blocking.astype(np.float32)), c_det=(1.0 - m.pfa) / m.pfa)
         if m.graded:                     # the table replaces the misses and the exact unblocked nodes
+            snr_cap = detection_cap(m.opportunity, m.snr_table.q, m.bounded).astype(np.float32)
             tables.update(ln_snr=cla.to_device(q, m.ln_snr.astype(np.float32)),
                           snr_table=cla.to_device(q, m.snr_table.values.astype(np.float32)),
-                          snr_cap=cla.to_device(q, detection_cap(m.opportunity, m.snr_table.q, m.bounded).astype(np.float32)),
+                          snr_cap=cla.to_device(q, snr_cap),
                           noise_floor=float(m.noise_floor), blocker_gap=float(m.blocker_gap),
                           snr_q=float(m.snr_table.q),
-                          state=cla.zeros(q, (self.n_beams, self.n_bins, 2), np.float32),    # per bin: blocked, tau
+                          state=cla.zeros(q, (self.n_beams, 2, self.n_bins), np.float32),    # per bin: blocked, tau
                           ln_floors=cla.zeros(q, (self.n_beams,), np.float32))
+            # interpret_nodes reads eight bins of a node at once: its tables with the bins last
+            self._nodes_tables = {name: cla.to_device(q, np.ascontiguousarray(
+                np.asarray(table, np.float32).reshape(self.n_bins, N_CLASSES * NODES).T))
+                for name, table in (("opportunity", m.opportunity), ("ln_snr", m.ln_snr), ("snr_cap", snr_cap))}
             return tables
         first, last = self.first_bin, self.last_bin
         unblocked = np.zeros((self.n_bins, N_CLASSES, NODES), np.int64), np.zeros((self.n_bins, N_CLASSES, NODES), np.int64)
@@ -164,14 +169,13 @@ class Interpreter(Stage):
                             n_pulses=a["n_pulses"], flags_out=a["flags_out"])
         if self._nodes_kernel is None:
             return done
-        t = self._tables
+        t, ls = self._tables, self._nodes_local_size
         n = self.n_beams * -(-self.n_bins // 8)            # a work-item per eight bins of a beam
-        ls = self._nodes_local_size
-        return self._nodes_kernel(self.runtime.queue, (-(-n // ls) * ls,), (ls,), wait_for=[done], profiles=profiles, flags_out=a["flags_out"],
-                                  state=t["state"], ln_floors=t["ln_floors"], opportunity=t["opportunity"],
-                                  ln_snr=t["ln_snr"], snr_cap=t["snr_cap"], snr_table=t["snr_table"],
-                                  first_bin=self.first_bin, last_bin=self.last_bin, blocker_gap=t["blocker_gap"],
-                                  snr_q=t["snr_q"], n_beams=self.n_beams, evidence=a["evidence"])
+        return self._nodes_kernel(self.runtime.queue, (-(-n // ls) * ls,), (ls,), wait_for=[done], profiles=profiles,
+                                  flags_out=a["flags_out"], state=t["state"], ln_floors=t["ln_floors"],
+                                  snr_table=t["snr_table"], **self._nodes_tables, first_bin=self.first_bin,
+                                  last_bin=self.last_bin, blocker_gap=t["blocker_gap"], snr_q=t["snr_q"],
+                                  n_beams=self.n_beams, evidence=a["evidence"])
 
     def _result(self, evidence, pulses, n_pulses, flags_out):
         return InterpretResult(evidence, pulses, n_pulses, flags_out)
