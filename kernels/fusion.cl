@@ -207,7 +207,13 @@ static inline int or_unit(int16 v)
 #define GATHER_NODES(pe, pk, p, at) { const ulongL g_ = (ulongL)(CAT(GL_, LN)(((const __global ulong *)(p)), at)); \
     SPLIT_NODES(pe, pk, g_) }
 #endif
+#ifdef NO_INT64
 #define GATHER_NODES_V(pe, pk, p, at) CAT(G2_, VEC)(pe, pk, p, at)
+#else
+/* the still table's VEC lanes: one long vector, split as GATHER_NODES */
+#define GATHER_NODES_V(pe, pk, p, at) { const CAT(ulong, VEC) g_ = (CAT(ulong, VEC))(CAT(GL_, VEC)(((const __global ulong *)(p)), at)); \
+    const intV2 w_ = CAT(as_int, VEC2)(g_); pe = w_.even; pk = w_.odd; }
+#endif
 #define SEGMENTS 4                            /* node segments over rho2 in [0, 1] */
 #define CLASSES 2                             /* target classes: upright, terrain */
 #define Q_ONE 16384.0f                        /* rho2 = 1 in quantisation steps (2^14; 2^12 per segment) */

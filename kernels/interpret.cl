@@ -245,6 +245,14 @@ static inline void write_graded8(__global int2 *out, int8 write, const __global 
             const float8 opp = whole ? vload8(0, opportunity + node + j0) : GATHER8(opportunity, node + jt);
             const float8 ln_s = whole ? vload8(0, ln_snr + node + j0) : GATHER8(ln_snr, node + jt);
             const float8 cap = whole ? vload8(0, snr_cap + node + j0) : GATHER8(snr_cap, node + jt);
+            /* knowledge is at most opp (tau, w <= 1): a node it rounds to 0 for is a look that is
+             * not one, with no evidence (below); where it does in all eight bins (far bins of
+             * the terrain class), nothing to compute */
+            const int8 none = opp * (float)KNOWLEDGE_SCALE <= 0.5f;
+            if (none.s0 & none.s1 & none.s2 & none.s3 & none.s4 & none.s5 & none.s6 & none.s7) {
+                e[k] = d[k] = (int8)0;
+                continue;
+            }
             float8 v = table_at8(table, i0, du, ln_s - blocked);
             float8 known = tau;
             /* only behind an echo, and only for a target there is (ln_s at the table's first
@@ -261,9 +269,6 @@ static inline void write_graded8(__global int2 *out, int8 write, const __global 
             }
             const float8 most = known * cap;    /* no more than a detection would say, either way */
             v = v < most ? (v > -most ? v : -most) : most;
-            /* knowledge is at most opp (tau, w <= 1): a node it rounds to 0 for is a look that is
-             * not one, with no evidence */
-            const int8 none = opp * (float)KNOWLEDGE_SCALE <= 0.5f;
             d[k] = none ? (int8)0 : as_int8(known * opp * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
             e[k] = d[k] != 0 ? fixed_nb8(v, LOGODDS_SCALE) : (int8)0;   /* no evidence from a look that is not one */
         }
