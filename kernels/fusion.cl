@@ -625,17 +625,23 @@ __kernel void fusion_cached(
  * row's voxels lie bins apart (two or more on a fine grid of a long-range radar): in the planes
  * their pairs are 8 bytes per bin apart, as eq. 12's updates are 4, instead of a 64-byte bin
  * each, and a frame whose nodes pass the caches (a spinning radar's: 400 x 3768 bins x 64
- * bytes) is read from memory once instead of once per voxel. n_classes: the planes read (1
- * where no voxel takes the terrain class); the rest are not written. */
+ * bytes) is read from memory once instead of once per voxel. Only what the kernels read is
+ * copied: the bins first_bin .. first_bin + n_window - 1 that carry evidence (a voxel outside
+ * them reads some pair and masks it) and n_classes classes (1 where no voxel takes the terrain
+ * class). get_global_id(0) = beam * n_window + bin - first_bin. */
 __kernel void node_planes(
     const __global int2 *nodes,       // (n_beams, N_BINS, CLASSES, SEGMENTS) node pairs
+    const int first_bin,
+    const int n_window,
     const int n_classes,
     __global int2 *planes)            // out: (CLASSES, SEGMENTS, n_beams, N_BINS)
 {
 #ifdef DETSTATS
-    const int i = get_global_id(0);   /* beam * N_BINS + bin */
-    if (i >= PLANE)
+    const int k = get_global_id(0);
+    if (k >= N_AZ * N_EL * n_window)
         return;
+    const int beam = k / n_window;
+    const int i = beam * N_BINS + first_bin + (k - beam * n_window);     /* beam * N_BINS + bin */
     const __global int2 *from = nodes + (size_t)i * CLASSES * SEGMENTS;
     for (int p = 0; p < n_classes * SEGMENTS; ++p)
         planes[(size_t)p * PLANE + i] = from[p];

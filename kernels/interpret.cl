@@ -517,7 +517,8 @@ __kernel void interpret(
 
 
 /* "snr" evidence's nodes, one work-item per eight bins of a beam (get_global_id(0) = beam *
- * CHUNKS + chunk, bins chunk x 8 .. + 7): the bins of a beam depend on each other only through
+ * n_chunks + chunk, the chunks that meet the window [first_bin, last_bin]; the bins outside it
+ * hold 0 from the evidence array's allocation, and nothing writes them): the bins of a beam depend on each other only through
  * its blocking (blocked, tau), which interpret walks in order and leaves in state[]; the table
  * reads, the gap mixture and the caps are most of the model's work and independent per bin, so
  * they run here as vectors of eight bins (one work-item walking a beam's bins ran them one at a
@@ -537,15 +538,15 @@ __kernel void interpret_nodes(
     const int last_bin,
     const float blocker_gap,
     const float snr_q,
+    const int n_chunks,                 // chunks of eight bins from bin first_bin & ~7 that meet the window
     const int n_beams,
     __global int2 *evidence)            // (n_beams, N_BINS, 8) out: node pairs
 {
 #if DETSTATS && GRADED
-#define CHUNKS ((N_BINS + 7) / 8)
     const int id = get_global_id(0);
-    if (id >= n_beams * CHUNKS)
+    if (id >= n_beams * n_chunks)
         return;
-    const int beam = id / CHUNKS, j0 = (id - beam * CHUNKS) * 8;
+    const int beam = id / n_chunks, j0 = (first_bin & ~7) + (id - beam * n_chunks) * 8;
     const int8 j = j0 + (int8)(0, 1, 2, 3, 4, 5, 6, 7);
     const int8 jt = j < N_BINS ? j : (int8)(N_BINS - 1);           /* the tail's lanes read the last bin */
     const int8 in_range = (j >= first_bin) & (j <= last_bin) & (j < N_BINS);
@@ -573,6 +574,5 @@ __kernel void interpret_nodes(
     }
     write_graded8(nd, in_range, ln_snr, opportunity, snr_cap, snr_table, j0, jt,
                   log10_nb8(power) * LN10 - ln_floors[beam], blocked, tau, blocker_gap, snr_q);
-#undef CHUNKS
 #endif
 }

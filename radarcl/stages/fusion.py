@@ -395,10 +395,11 @@ class Fusion(Stage):
         if not len(plan.bricks):
             return None
         if self.detstats:
-            n = self.lattice.n_beams * self.n_bins
-            ls = min(self.local_size, 64)
+            window = self.last_bin - self.first_bin + 1
+            n, ls = self.lattice.n_beams * window, min(self.local_size, 64)
             wait_for = [self._node_planes(self.runtime.queue, (-(-n // ls) * ls,), (ls,), wait_for=wait_for,
-                                          nodes=evidence, n_classes=self._n_classes, planes=self._planes)]
+                                          nodes=evidence, first_bin=self.first_bin, n_window=window,
+                                          n_classes=self._n_classes, planes=self._planes)]
         if plan.table is not None and not gather:
             t = plan.table
             event = None

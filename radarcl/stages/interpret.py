@@ -98,6 +98,8 @@ class Interpreter(Stage):
                         Port("n_pulses", self.batch, i32, "pulse counts"),
                         Port("flags_out", self.batch, u8, "flags")])
         self._no_flags = self.arrays["flags_in"].copy()     # all zero: "no flags from upstream"
+        if graded:          # interpret_nodes writes the window's bins only: the others are 0 from here on
+            self.arrays["evidence"].fill(0)
         self._no_flags.fill(0)
         self._tables = self._model_tables()
 
@@ -170,12 +172,15 @@ class Interpreter(Stage):
         if self._nodes_kernel is None:
             return done
         t, ls = self._tables, self._nodes_local_size
-        n = self.n_beams * -(-self.n_bins // 8)            # a work-item per eight bins of a beam
+        chunks = max(0, (self.last_bin >> 3) - (self.first_bin >> 3) + 1)     # of eight bins meeting the window
+        n = self.n_beams * chunks
+        if not n:
+            return done
         return self._nodes_kernel(self.runtime.queue, (-(-n // ls) * ls,), (ls,), wait_for=[done], profiles=profiles,
                                   flags_out=a["flags_out"], state=t["state"], ln_floors=t["ln_floors"],
                                   snr_table=t["snr_table"], **self._nodes_tables, first_bin=self.first_bin,
                                   last_bin=self.last_bin, blocker_gap=t["blocker_gap"], snr_q=t["snr_q"],
-                                  n_beams=self.n_beams, evidence=a["evidence"])
+                                  n_chunks=chunks, n_beams=self.n_beams, evidence=a["evidence"])
 
     def _result(self, evidence, pulses, n_pulses, flags_out):
         return InterpretResult(evidence, pulses, n_pulses, flags_out)
