@@ -207,18 +207,9 @@ static inline int or_unit(int16 v)
 #define GATHER_NODES(pe, pk, p, at) { const ulongL g_ = (ulongL)(CAT(GL_, LN)(((const __global ulong *)(p)), at)); \
     SPLIT_NODES(pe, pk, g_) }
 #endif
-#ifdef NO_INT64
 #define GATHER_NODES_V(pe, pk, p, at) CAT(G2_, VEC)(pe, pk, p, at)
-#else
-/* the still table's VEC lanes: one long vector, split as GATHER_NODES */
-#define GATHER_NODES_V(pe, pk, p, at) { const CAT(ulong, VEC) g_ = (CAT(ulong, VEC))(CAT(GL_, VEC)(((const __global ulong *)(p)), at)); \
-    const intV2 w_ = CAT(as_int, VEC2)(g_); pe = w_.even; pk = w_.odd; }
-#endif
 #define SEGMENTS 4                            /* node segments over rho2 in [0, 1] */
 #define CLASSES 2                             /* target classes: upright, terrain */
-/* node pair (class, segment) of row `index` (beam * N_BINS + bin) in the planes node_planes writes */
-#define PLANE (N_AZ * N_EL * N_BINS)
-#define NODE_AT(index, cls, seg) (((cls) * SEGMENTS + (seg)) * PLANE + (index))
 #define Q_ONE 16384.0f                        /* rho2 = 1 in quantisation steps (2^14; 2^12 per segment) */
 #define Q_MAX (Q_ONE - 1.0f)                  /* the last step: q stays in the last segment */
 /* the interpolated value between the signed 16-bit halves of x at the fraction f / 4096 */
@@ -270,7 +261,7 @@ __kernel void fusion(
     __global int2 *first,             // RECORD 2: out, per voxel its first (beam * N_BINS + bin,
                                       //   as_int(weight)); (0, 0) where no beam reaches
     __global int2 *extras,            // RECORD 2: out, the voxels' further entries, row by row
-    const __global int2 *nodes,       // DETSTATS: (CLASSES, SEGMENTS, n_beams, N_BINS) node pairs (node_planes)
+    const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (header)
     const float terrain_dz,           // DETSTATS: voxels with z - beam origin z below this are terrain [m]
     __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity [KNOWLEDGE_SCALE units]
     __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity [count]
@@ -348,7 +339,7 @@ __kernel void fusion(
 #endif
             touched = 1;
 #ifdef DETSTATS
-            const __global int2 *row_nodes = nodes + (size_t)b * N_BINS;        /* in each plane */
+            const __global int2 *row_nodes = nodes + (size_t)b * N_BINS * CLASSES * SEGMENTS;
 #else
             const __global int *row_ev = evidence + b * N_BINS;
 #endif
@@ -447,7 +438,7 @@ __kernel void fusion(
                 const intL q = convert_intL(MINF(num / den * Q_ONE, Q_MAX));
                 const intL seg = q >> 12;
                 const intL f = q & 4095;
-                const intL at = NODE_AT(j, (qz < terrain_dz), seg);
+                const intL at = (j * CLASSES + (qz < terrain_dz)) * SEGMENTS + seg;
                 intL pe, pk;
                 GATHER_NODES(pe, pk, row_nodes, at);
                 acc[u] += NODE_LERP(pe, f) & inside;
@@ -518,8 +509,8 @@ __kernel void fusion_cached(
     const __global int2 *first,       // (n_items * BLOCK_ROWS * VEC,) each voxel's first entry (RECORD 2)
     const __global int2 *extras,      // the further entries (RECORD 2)
     const int n_items,                // the gather's work-items: listed bricks x SUBS
-    const __global int2 *nodes,       // DETSTATS: (CLASSES, SEGMENTS, n_beams, N_BINS) node pairs (node_planes; the
-                                      //   class of each entry is in its record)
+    const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (the class
+                                      //   of each entry is in its record)
     __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity
     __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity
     __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
@@ -548,7 +539,7 @@ __kernel void fusion_cached(
         const intV reached = bits != 0;
         const intV seg = (q >> 12) & (SEGMENTS - 1);            /* q = -1: segment 3, in bounds */
         const intV f = q & 4095;
-        const intV at = NODE_AT(index, (bits >> 16) & 1, seg);
+        const intV at = (index * CLASSES + ((bits >> 16) & 1)) * SEGMENTS + seg;
         intV pe, pk;
         GATHER_NODES_V(pe, pk, nodes, at);
         intV sum = NODE_LERP(pe, f) & reached;
@@ -576,7 +567,7 @@ __kernel void fusion_cached(
                     const int2 entry = extras[at];
 #ifdef DETSTATS
                     const int qe = (entry.y & 0xFFFF) - 1;
-                    const int2 node = nodes[NODE_AT(entry.x, (entry.y >> 16) & 1, qe >> 12)];
+                    const int2 node = nodes[(entry.x * CLASSES + ((entry.y >> 16) & 1)) * SEGMENTS + (qe >> 12)];
                     add += NODE_LERP(node.x, qe & 4095);
                     const int kn = NODE_LERP(node.y, qe & 4095);
                     kadd += kn;
@@ -616,34 +607,4 @@ __kernel void fusion_cached(
             vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : (v < (intV)-GRID_LIMIT ? (intV)-GRID_LIMIT : v), 0, cell);
         }
     }
-}
-
-
-/* DETSTATS: the frame's node pairs, (n_beams, N_BINS, CLASSES, SEGMENTS) as the interpreter
- * writes them, copied into one plane per (class, segment), (CLASSES, SEGMENTS, n_beams, N_BINS),
- * before the gather or the still table reads them. A voxel reads one pair of its bin, and a
- * row's voxels lie bins apart (two or more on a fine grid of a long-range radar): in the planes
- * their pairs are 8 bytes per bin apart, as eq. 12's updates are 4, instead of a 64-byte bin
- * each, and a frame whose nodes pass the caches (a spinning radar's: 400 x 3768 bins x 64
- * bytes) is read from memory once instead of once per voxel. Only what the kernels read is
- * copied: the bins first_bin .. first_bin + n_window - 1 that carry evidence (a voxel outside
- * them reads some pair and masks it) and n_classes classes (1 where no voxel takes the terrain
- * class). get_global_id(0) = beam * n_window + bin - first_bin. */
-__kernel void node_planes(
-    const __global int2 *nodes,       // (n_beams, N_BINS, CLASSES, SEGMENTS) node pairs
-    const int first_bin,
-    const int n_window,
-    const int n_classes,
-    __global int2 *planes)            // out: (CLASSES, SEGMENTS, n_beams, N_BINS)
-{
-#ifdef DETSTATS
-    const int k = get_global_id(0);
-    if (k >= N_AZ * N_EL * n_window)
-        return;
-    const int beam = k / n_window;
-    const int i = beam * N_BINS + first_bin + (k - beam * n_window);     /* beam * N_BINS + bin */
-    const __global int2 *from = nodes + (size_t)i * CLASSES * SEGMENTS;
-    for (int p = 0; p < n_classes * SEGMENTS; ++p)
-        planes[(size_t)p * PLANE + i] = from[p];
-#endif
 }

@@ -142,14 +142,6 @@ class Fusion(Stage):
 
         q = runtime.queue               # the RECORD buffers the plain gather ignores, and the other model's
         self._no_table = (cla.zeros(q, (1,), np.uint8), cla.zeros(q, (1,), np.int32), cla.zeros(q, (1, 2), np.int32))
-        # detstats: the kernels read a frame's node pairs from one plane per (class, segment), which
-        # node_planes fills before each fuse (kernels/fusion.cl says why); a voxel takes the
-        # terrain class's only where terrain_dz is above -inf
-        self._node_planes, self._planes = kernels["node_planes"], self._no_table[2]
-        self._n_classes = 1 if self.terrain_dz == -math.inf else NODE_SHAPE[0]
-        if self.detstats:
-            self._planes = cla.empty(q, (int(np.prod(NODE_SHAPE[:2])) * lattice.n_beams * self.n_bins, 2), np.int32)
-            runtime.hold(self._planes, self._planes.nbytes, "the frame's node planes")
 
     @property
     def evidence_shape(self):
@@ -394,12 +386,6 @@ class Fusion(Stage):
         evidence = self.device("evidence", evidence)
         if not len(plan.bricks):
             return None
-        if self.detstats:
-            window = self.last_bin - self.first_bin + 1
-            n, ls = self.lattice.n_beams * window, min(self.local_size, 64)
-            wait_for = [self._node_planes(self.runtime.queue, (-(-n // ls) * ls,), (ls,), wait_for=wait_for,
-                                          nodes=evidence, first_bin=self.first_bin, n_window=window,
-                                          n_classes=self._n_classes, planes=self._planes)]
         if plan.table is not None and not gather:
             t = plan.table
             event = None
@@ -416,11 +402,11 @@ class Fusion(Stage):
 
     def _inputs(self, evidence, c, cached=False):
         """The kernels' evidence arguments for pool chunk ``c``: eq. 12's updates, or the node
-        planes (``enqueue`` fills them from ``evidence``) and the chunk of the knowledge and looks
-        pools (the other model's get a placeholder); the still table keeps each entry's class."""
+        pairs and the chunk of the knowledge and looks pools (the other model's get a
+        placeholder); the still table keeps each entry's class."""
         none = self._no_table[1]
         if self.detstats:
-            out = dict(evidence=none, nodes=self._planes, knowledge=self.grid.chunk(c, "knowledge"),
+            out = dict(evidence=none, nodes=evidence, knowledge=self.grid.chunk(c, "knowledge"),
                        looks=self.grid.chunk(c, "looks"), terrain_dz=self.terrain_dz)
         else:
             out = dict(evidence=evidence, nodes=self._no_table[2], knowledge=none, looks=none, terrain_dz=-math.inf)
