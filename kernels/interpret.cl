@@ -171,6 +171,9 @@ static float kth_power(const __global float *r, int first, int last, int k)
  * lane computes the floats one bin's scalar code would (the same operations in the same order,
  * and so the same contractions); ternaries on vectors select per lane, without builtins. */
 #define GATHER8(p, i) ((float8)(p[(i).s0], p[(i).s1], p[(i).s2], p[(i).s3], p[(i).s4], p[(i).s5], p[(i).s6], p[(i).s7]))
+/* the floats at i and i + 1 of each lane, as (p[i.s0], p[i.s0 + 1], p[i.s1], ...): one two-float load a lane */
+#define PAIRS8(p, i) ((float16)(vload2(0, p + (i).s0), vload2(0, p + (i).s1), vload2(0, p + (i).s2), vload2(0, p + (i).s3), \
+                                vload2(0, p + (i).s4), vload2(0, p + (i).s5), vload2(0, p + (i).s6), vload2(0, p + (i).s7)))
 
 /* a grid position clamped to [0, n - 1] (-inf and NaN to 0) */
 static inline float8 grid_position8(float8 x, float x0, float scale, int n)
@@ -187,8 +190,9 @@ static inline float8 table_at8(const __global float *table, int8 i0, float8 du, 
     const int8 iv = t < SNR_NV - 2 ? t : (int8)(SNR_NV - 2);
     const float8 dv = fv - convert_float8(iv);
     const int8 a = i0 + iv, c = a + SNR_NV;
-    return (GATHER8(table, a) * (1.0f - dv) + GATHER8(table, a + 1) * dv) * (1.0f - du)
-         + (GATHER8(table, c) * (1.0f - dv) + GATHER8(table, c + 1) * dv) * du;
+    const float16 lo = PAIRS8(table, a), hi = PAIRS8(table, c);      /* columns iv, iv + 1 of rows iu, iu + 1 */
+    return (lo.even * (1.0f - dv) + lo.odd * dv) * (1.0f - du)
+         + (hi.even * (1.0f - dv) + hi.odd * dv) * du;
 }
 
 /* e^x for x in [-87, 88]: 2^n e^r, n = rint(x / ln 2), |r| <= ln 2 / 2, e^r by its Taylor
