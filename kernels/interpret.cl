@@ -47,10 +47,12 @@
  * above. Bins of a pulse take the tau in front of it, as without GRADED. Behind nearer echoes
  * (blocked > 0) with blocker_gap g > 0 (a partial blocker): L_b and L_0 from the table read at
  * ln tau + ln_snr and at ln_snr, e = ln(L / (1 - q + q L)) of L = (1 - g) L_b + g L_0, and d =
- * ((1 - w) tau + w) delta where the gap's posterior w = g L_0 / L is above 1/2 (exp_nb, log10_nb).
+ * ((1 - w) tau + w) delta where the gap's posterior w = g L_0 / L is above 1/2 (exp_nb8, log10_nb8).
  * Every look's e lies within +-known x snr_cap[bin, class, node] (tau, or the gap's, times what a
  * detection says at the node's opportunity: snr_evidence.bounded). A node whose d rounds to 0
- * gets e = 0, with either evidence (the reading counts only looks with knowledge).
+ * gets e = 0, with either evidence (the reading counts only looks with knowledge). Two launches:
+ * interpret walks each beam (flags, pulses, the floor and each bin's blocked and tau, into
+ * state[] and ln_floors[]), then interpret_nodes computes the nodes, eight bins a work-item.
  *
  * -D constants (set by radarcl/stages/interpret.py):
  *   N_BINS      bins per profile
