@@ -18,7 +18,8 @@ DESCRIPTION = ("Each benchmark prints its figures and their ratio to a baseline 
 BENCHES = {
     "range-fft": (range_fft, "window + FFT + magnitude of a paper frame vs scipy.fft, same run"),
     "cfar": (cfar, "CFAR + eq. 12 of a paper frame vs vectorised numpy, same run"),
-    "fusion": (fusion, "one paper frame into the 0.1 m grid vs the float64 oracle and the memory floor, same run"),
+    "fusion": (fusion, "one paper frame into the 0.1 m grid vs the float64 oracle and the memory floor, a spinning "
+                       "radar's scan, eq. 12 beside the default model, same run"),
     "quality": (quality, "map error against run time on the reference scene (zero padding, beam model, voxel, CFAR "
                          "kind) on one fixed voxel set, with three baselines"),
     "heldout-scans": (heldout_scans, "real data without lidar: a map of the even Navtech scans predicts the CFAR "
