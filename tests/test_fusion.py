@@ -382,6 +382,35 @@ def test_detstats_matches_its_oracle(runtime, model, widths, accumulators, monke
     assert np.array_equal(grid.knowledge_snapshot("looks"), 3 * counted)
 
 
+def test_detstats_without_terrain_reads_the_upright_nodes_only(runtime):
+    """terrain_dz = -inf (no ground plane: a spinning radar's one beam): every voxel takes the
+    upright class's nodes; the sums equal the oracle's as with both classes, though the terrain
+    class's nodes are not 0, from the gather and from the still table."""
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
+    e, d, packed = random_nodes(lattice, seed=4)
+    assert e[..., 1, :].any() and d[..., 1, :].any()
+    grid, fusion, _ = detstats_grid(runtime, SMALL, lattice, model, packed, POSE, -math.inf, still=True)
+    got, known, counted = grid.snapshot(), grid.knowledge_snapshot(), grid.knowledge_snapshot("looks")
+    nz, ny, nx = SMALL.array_shape
+    iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)
+    centres = SMALL.index_to_world(np.stack([ix, iy, iz], axis=1))
+    sums, updates, ambiguous, knowledge, looks = (a.reshape(nz, ny, nx) for a in oracle.fusion_at_points(
+        centres, None, lattice, model, POSE, SPACING, FIRST, LAST, FUSION_DECISION_MARGIN, nodes=(e, d),
+        terrain_dz=-math.inf))
+    reached, clear = updates > 0, ~ambiguous
+    assert reached.sum() > 1000
+    step = 1 + -(-max(np.abs(np.diff(e, axis=-1)).max(), np.abs(np.diff(d, axis=-1)).max()) // 4096)
+    assert (np.abs(got - sums)[clear] <= step * updates[clear]).all()
+    assert (np.abs(known - knowledge)[clear] <= step * updates[clear]).all()
+    assert (got == sums)[clear & reached].mean() > 0.95 and (known == knowledge)[clear & reached].mean() > 0.95
+    assert (np.abs(counted - looks)[clear] <= (np.abs(known - knowledge)[clear] > 0)).all() and counted.sum() > 1000
+    fusion(packed, POSE)                             # the pose comes back: the table is recorded
+    fusion(packed, POSE)                             # and streamed
+    assert fusion.plan(POSE).table is not None
+    assert np.array_equal(grid.snapshot(), 3 * got) and np.array_equal(grid.knowledge_snapshot(), 3 * known)
+    assert np.array_equal(grid.knowledge_snapshot("looks"), 3 * counted)
+
+
 def test_detstats_sums_do_not_depend_on_the_order_of_frames(runtime):
     lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
     poses = [POSE, pose_from_xyz_rpy(0.5, -0.3, 0.1, pitch=0.05, yaw=-0.08), pose_from_xyz_rpy(1.0, 0.4, 0.0, yaw=0.1)]

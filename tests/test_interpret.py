@@ -295,6 +295,36 @@ def test_detstats_matches_its_oracle(runtime, local_size, evidence):
         assert not ge[gd == 0].any() and not e[d == 0].any() and (gd == 0).any()
 
 
+@pytest.mark.parametrize("n_bins", [253, 264])
+def test_snr_nodes_of_any_bin_count_and_window(runtime, n_bins):
+    """"snr" evidence's nodes are computed eight bins at a time: a profile whose bins are not a
+    multiple of eight (the last chunk's lanes past the end), a window whose ends fall inside a
+    chunk, pulses and blocking across chunk edges, give the oracle's nodes within
+    EVIDENCE_UNITS_TOL, and 0 outside the window, on flagged beams and past the profile's end."""
+    from radarcl import sensor_model as sm
+
+    rng = np.random.default_rng(n_bins)
+    x = rng.exponential(size=(6, n_bins)).astype(np.float32)
+    x[0, 14:18] = 1e3                                # a pulse across the chunk edge at bin 16
+    x[1, n_bins - 12:n_bins - 9] = 40.0              # a weak pulse near the window's end
+    x[2, 30] = 1e30                                  # blocked behind it
+    x[3] = np.nan                                    # a bad beam: no evidence
+    cfg = InterpretConfig(range_min_m=1.1, range_max_m=(n_bins - 5) * SPACING, wide_pulse_m=2.0, max_pulses=4,
+                          model="detstats")
+    model = detstats_model(n_bins)
+    det = Detection(runtime, (6,), n_bins, SPACING, CfarConfig(guard=16, train=8), cfg, bin_model=model)
+    got = det(x)
+    e, d, pulses, n_pulses, flags = oracle.interpret_detstats(x, got.cfar.noise, got.cfar.mask, cfg, SPACING, model)
+    assert np.array_equal(got.interpret.pulses, pulses) and np.array_equal(got.interpret.flags, flags)
+    ge, gd = sm.unpack_nodes(got.interpret.evidence)
+    assert ge.shape == e.shape == (6, n_bins, 2, 5)
+    assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
+    first, last = cfg.bin_interval(SPACING, n_bins)
+    assert first % 8 and (last + 1) % 8 and last < n_bins - 1        # the window's ends inside chunks
+    assert not ge[:, :first].any() and not gd[:, last + 1:].any() and not ge[3].any() and not gd[3].any()
+    assert (gd[:, first] > 0).any() and (gd[:, last] > 0).any() and (ge[2, 30, 0] > 0).all()
+
+
 def test_a_gap_in_a_blocker_lets_the_echo_behind_it_count(runtime):
     """sensor_model.blocker_gap: behind a strong echo, a second echo is evidence of occupancy and
     knowledge with a gap (the mixture of the blocked and the unblocked target's likelihoods), and

@@ -30,7 +30,7 @@ class Constant(models.EvidenceModel):
     summary = "the same evidence on every bin (a test's toy)"
     per_bin = "constant"
 
-    def after_kernel(self, interpreter, event):
+    def after_kernel(self, interpreter, event, profiles):
         evidence = interpreter.arrays["evidence"]
         evidence.fill(np.int32(logodds.to_fixed(CONSTANT_NATS)), wait_for=[event])
         return evidence.events[-1]

@@ -18,7 +18,8 @@ DESCRIPTION = ("Each benchmark prints its figures and their ratio to a baseline 
 BENCHES = {
     "range-fft": (range_fft, "window + FFT + magnitude of a paper frame vs scipy.fft, same run"),
     "cfar": (cfar, "CFAR + eq. 12 of a paper frame vs vectorised numpy, same run"),
-    "fusion": (fusion, "one paper frame into the 0.1 m grid vs the float64 oracle and the memory floor, same run"),
+    "fusion": (fusion, "one paper frame into the 0.1 m grid vs the float64 oracle and the memory floor, a spinning "
+                       "radar's scan, eq. 12 beside the default model, same run"),
     "quality": (quality, "map error against run time on the reference scene: eq. 12's configurations (zero padding, "
                          "beam model, voxel, CFAR kind) and the default model's (evidence, blocker gap, look limit, "
                          "zero padding, voxel, knowledge channel) on the same fixed voxel sets, with three baselines "

@@ -90,9 +90,10 @@ class EvidenceModel:
         """The kernel's table arguments (placeholders where this model reads none)."""
         return placeholder_tables(queue)
 
-    def after_kernel(self, interpreter, event):
+    def after_kernel(self, interpreter, event, profiles):
         """Device work after kernels/interpret.cl (a model whose evidence the kernel does not make
-        writes it here into ``interpreter.arrays["evidence"]``); returns the last event."""
+        writes it here into ``interpreter.arrays["evidence"]``; ``profiles``: the frame on the
+        device, ``interpreter.kernels``: the program's kernels); returns the last event."""
         return event
 
     # -- the oracle ----------------------------------------------------------------------------------
@@ -136,4 +137,5 @@ def placeholder_tables(queue):
 
     one = cla.zeros(queue, (1,), np.float32)
     return dict(opportunity=one, miss=one, blocking=one, unblocked=cla.zeros(queue, (1, 2), np.int32), c_det=1.0,
-                ln_snr=one, snr_table=one, snr_cap=one, noise_floor=1.0, blocker_gap=0.0, snr_q=1.0)
+                ln_snr=one, snr_table=one, snr_cap=one, noise_floor=1.0, blocker_gap=0.0, snr_q=1.0,
+                state=cla.zeros(queue, (1, 2), np.float32), ln_floors=one)

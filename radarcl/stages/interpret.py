@@ -74,8 +74,10 @@ class Interpreter(Stage):
         if self.node_pairs and bin_model.graded and np.shape(bin_model.ln_snr) != bin_model.opportunity.shape:
             raise ConfigError(f"the bin model's ln_snr is {np.shape(bin_model.ln_snr)}, its opportunity "
                               f"{bin_model.opportunity.shape}: 'snr' evidence needs both per bin, class and node")
-        self._kernel = build(runtime, "interpret", dict(N_BINS=self.n_bins, MAX_PULSES=self.config.max_pulses,
-                                                        NODES=NODES, **self.model.defines(self.bin_model)))["interpret"]
+        self.kernels = build(runtime, "interpret", dict(N_BINS=self.n_bins, MAX_PULSES=self.config.max_pulses,
+                                                        NODES=NODES, **self.model.defines(self.bin_model)))
+        self._kernel = self.kernels["interpret"]
+        self.model_state = None                      # what the model keeps for its work after the kernel
         self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
         f32, u8, i32 = np.dtype(np.float32), np.dtype(np.uint8), np.dtype(np.int32)
         shape = self.input_shape
@@ -107,8 +109,9 @@ class Interpreter(Stage):
         ls = self.local_size
         gsize = (-(-self.n_beams // ls) * ls,)
         a = self.arrays
+        profiles = self.device("profiles", profiles)
         done = self._kernel(self.runtime.queue, gsize, (ls,), wait_for=wait_for,
-                            profiles=self.device("profiles", profiles), noise=self.device("noise", noise),
+                            profiles=profiles, noise=self.device("noise", noise),
                             mask=self.device("mask", mask),
                             flags_in=self._no_flags if flags is None else self.device("flags_in", flags),
                             k_occ=float(self.config.k_occ), e_high=self.e_high, e_low=self.e_low,
@@ -117,7 +120,7 @@ class Interpreter(Stage):
                             **self._tables,
                             n_beams=self.n_beams, evidence=a["evidence"], pulses=a["pulses"],
                             n_pulses=a["n_pulses"], flags_out=a["flags_out"])
-        return self.model.after_kernel(self, done)
+        return self.model.after_kernel(self, done, profiles)
 
     def _result(self, evidence, pulses, n_pulses, flags_out):
         return InterpretResult(evidence, pulses, n_pulses, flags_out)
