@@ -272,7 +272,7 @@ static inline void write_graded8(__global int2 *out, int8 write, const __global 
                 const float8 lm = (1.0f - gap) * lb + gap * l0;
                 const float8 w = gap * l0 / lm;       /* the gap's posterior chance */
                 v = mix ? log10_nb8(lm / (1.0f - q + q * lm)) * LN10 : v;
-                known = mix & (w > 0.5f) ? (1.0f - w) * tau + w : tau;   /* see the oracle */
+                known = (mix & (w > 0.5f)) ? (1.0f - w) * tau + w : tau;   /* see the oracle */
             }
             const float8 most = known * cap;    /* no more than a detection would say, either way */
             v = v < most ? (v > -most ? v : -most) : most;

@@ -30,20 +30,25 @@ CFAR = CfarConfig(guard=16, train=8)
 PROBE = """
 #include "interpret.cl"
 
-/* test only: the detection-statistics model's own series and likelihood ratio, as the kernel has them */
+/* test only: the detection-statistics model's own series and likelihood ratio, as the kernel has
+ * them: eight lanes a work-item, as interpret_nodes computes them (log10_nb also scalar) */
 __kernel void probe(const __global float *x, const float q, __global float *e, __global float *l,
-                    __global float *lr)
+                    __global float *lr, __global float *l1)
 {
     const int i = get_global_id(0);
-    e[i] = exp_nb(x[i]);
-    l[i] = log10_nb(x[i]);
-    lr[i] = likelihood_ratio(x[i], q);
+    const float8 v = vload8(i, x);
+    vstore8(exp_nb8(v), i, e);
+    vstore8(log10_nb8(v), i, l);
+    vstore8(likelihood_ratio8(v, q), i, lr);
+    for (int k = 0; k < 8; ++k)
+        l1[8 * i + k] = log10_nb(x[8 * i + k]);
 }
 """
 
 
 def probe(runtime, x, q):
-    """(exp_nb(x), log10_nb(x), likelihood_ratio(x, q)) computed on the device, float32."""
+    """(exp_nb8(x), log10_nb8(x), likelihood_ratio8(x, q)) computed on the device, float32, lane by
+    lane (log10_nb8 checked equal to the scalar log10_nb)."""
     import pyopencl as cl
     import pyopencl.array as cla
 
@@ -57,10 +62,14 @@ def probe(runtime, x, q):
     program = cl.Program(runtime.context, PROBE).build(
         options=[f"-I{kernels_dir()}"] + [_define(k, v) for k, v in sorted(defines.items())])
     qu = runtime.queue
-    xd = cla.to_device(qu, np.asarray(x, np.float32))
-    outs = [cla.empty(qu, xd.shape, np.float32) for _ in range(3)]
-    program.probe(qu, xd.shape, None, xd.data, np.float32(q), *(o.data for o in outs))
-    return tuple(o.get() for o in outs)
+    x = np.asarray(x, np.float32)
+    n = len(x)
+    xd = cla.to_device(qu, np.concatenate([x, np.ones(-n % 8, np.float32)]))     # whole lanes of eight
+    outs = [cla.empty(qu, xd.shape, np.float32) for _ in range(4)]
+    program.probe(qu, (xd.shape[0] // 8,), None, xd.data, np.float32(q), *(o.data for o in outs))
+    e, l, lr, l1 = (o.get()[:n] for o in outs)
+    assert np.array_equal(l, l1, equal_nan=True)               # the lanes compute what the scalar does
+    return e, l, lr
 
 
 def test_exp_nb_against_float64_over_its_range(runtime):
