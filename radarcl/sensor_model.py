@@ -167,6 +167,10 @@ EVIDENCE_BOUNDS = ("detection", "none")           # sensor_model.evidence_bound:
 GROUND_RANGE = (0.0, 1000.0, "m")                 # ground_below_m: the sensor's height above the ground plane (0: none)
 DEFAULT_SNR_DB = 50.0                             # the sensitivity assumed for a profile that gives none
 BLOCKER_GAP = 0.01                                # sensor_model.blocker_gap's default (ModelParams)
+# the least gap other than 0: below it the mixture's posterior rests on a likelihood ratio at its
+# cap, whose float32 rounding the device's nodes amplify by up to 1 / gap (a gap that small is no
+# gap a map could tell from none)
+BLOCKER_GAP_MIN = 1e-4
 READING = ("look_limit", "prior_nats", "prior_looks", "known_looks")   # what a map keeps to be read (``read_log_odds``)
 KNOWN_LOOKS = 0.5                 # a voxel whose knowledge reaches this many looks is observed; below, it reads the prior
 PRIOR_VOXEL_M = 0.2               # the voxel at which the default priors are the base rate (``prior_for_voxel``)
@@ -220,6 +224,10 @@ class ModelParams:
         for name, (lo, hi, unit, _) in RANGES.items():
             check_range(f"sensor_model.{name}", getattr(self, name), lo, hi, unit)
         check_range("sensor_model.ground_below_m", self.ground_below_m, *GROUND_RANGE)
+        if 0.0 < self.blocker_gap < BLOCKER_GAP_MIN:
+            raise ConfigError(f"sensor_model.blocker_gap = {self.blocker_gap:g}: expected 0 (no gap) or at least "
+                              f"{BLOCKER_GAP_MIN:g} (a smaller gap is below what the device's float32 mixture "
+                              "resolves, and no map could tell it from none)")
         if self.evidence not in EVIDENCE_KINDS:
             raise ConfigError(f"sensor_model.evidence = {self.evidence!r}: expected one of {', '.join(EVIDENCE_KINDS)}")
         if self.evidence_bound not in EVIDENCE_BOUNDS:

@@ -16,6 +16,7 @@ from tolerances import EVIDENCE_UNITS_TOL, EXP_NB_RTOL, LIKELIHOOD_RATIO_RTOL, L
 from radarcl import logodds, oracle
 from radarcl import sensor_model as sm
 from radarcl.config.stage_config import PAPER_RADAR, CfarConfig, InterpretConfig
+from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, BeamModel
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import GRID_LIMIT, GridSpec
@@ -144,14 +145,10 @@ def test_snr_from_minus_30_to_plus_150_db(runtime, evidence):
     assert not gd[-1, 110:].any() and not ge[-1, 110:].any()
 
 
-@pytest.mark.parametrize("gap", [pytest.param(1e-6, marks=pytest.mark.xfail(strict=True, reason=(
-    "at a gap of 1e-6 the mixture's posterior w = g L_0 / L is set by L_0 at its cap (1 - GAP_CAP) / q, where "
-    "L_0 = t (1 - q) / (1 - q t) amplifies float32's rounding of t by up to 1 / GAP_CAP: the kernel "
-    "is several units from float64; a cap float32 resolves changes the default maps, so it is the model owner's call"))),
-    1e-4, 0.01, 0.5])
+@pytest.mark.parametrize("gap", [sm.BLOCKER_GAP_MIN, 0.01, 0.5])
 def test_the_gap_mixture_at_extreme_snr(runtime, gap):
-    """Behind a blocker of 40 to 150 dB, an echo of -10 to 150 dB, with a gap of chance 1e-6 to
-    0.5: the nodes within EVIDENCE_UNITS_TOL of the float64 oracle (``snr_evidence.gap_mixture``
+    """Behind a blocker of 40 to 150 dB, an echo of -10 to 150 dB, with a gap of chance 1e-4 to
+    0.5 (a smaller one but 0 is refused: ``test_a_gap_float32_cannot_resolve_is_refused``): the nodes within EVIDENCE_UNITS_TOL of the float64 oracle (``snr_evidence.gap_mixture``
     in float64), finite, and an echo 60 dB or more behind a gap of 1 % or more counts as occupied."""
     blockers = np.array([1e4, 1e8, 1e12, 1e15])
     echoes = np.array([1e-1, 1e2, 1e6, 1e10, 1e15])
@@ -164,6 +161,15 @@ def test_the_gap_mixture_at_extreme_snr(runtime, gap):
     loud = np.tile(echoes >= 1e6, len(blockers))
     if gap >= 0.01:
         assert (ge[loud, 120, 0, 0] > 0).all() and (gd[loud, 120, 0, 0] > 0).all()
+
+
+def test_a_gap_float32_cannot_resolve_is_refused():
+    """At a gap of 1e-6 the mixture's posterior w = g L_0 / L rests on L_0 at its cap, whose float32
+    rounding the kernel's nodes amplify by up to 1 / GAP_CAP (several units from float64): such a
+    gap is refused with the least one allowed; 0 (no gap) stays allowed."""
+    with pytest.raises(ConfigError, match=r"blocker_gap = 1e-06: expected 0 \(no gap\) or at least 0.0001"):
+        sm.ModelParams(blocker_gap=1e-6)
+    assert sm.ModelParams(blocker_gap=0.0).blocker_gap == 0.0
 
 
 def looks_grid(runtime, e_units, frames, still="auto"):
