@@ -155,7 +155,8 @@ def test_bench_fusion_has_the_issue_keys():
                 "detstats_pipeline_ms_per_frame"):
         assert r[key] > 0, key
     assert set(r["load"]) == {"still", "gather", "moving", "planning", "planning_numpy", "spinning", "spinning_gather",
-                              "pipeline", "detstats_still", "detstats_gather", "detstats_moving", "detstats_pipeline"}
+                              "pipeline", "detstats_still", "detstats_gather", "detstats_moving", "detstats_pipeline",
+                              "spinning_pipeline", "detstats_spinning_pipeline"}
     assert r["detstats_gather_ms_per_frame"] > 0 and r["detstats_gather_ratio"] > 0
     assert any("detection statistics" in line for line in fusion.format_table(r))
     assert r["max_error_units"] <= 1 and r["oracle_voxels_compared"] > 10000

@@ -226,7 +226,7 @@ def test_an_input_format_added_to_the_table_alone_is_fused(runtime, tmp_path, ca
 
     profile = tmp_path / "toy.toml"
     profile.write_text(TOY_PROFILE)
-    with pytest.raises(ConfigError, match="must be one of 'recording', 'polar-png', 'ti-openradar', got 'toy-npy'"):
+    with pytest.raises(ConfigError, match="must be one of 'recording', 'polar-png', 'ti-openradar', 'rosbag', got 'toy-npy'"):
         mapconfig.resolve(str(profile))
     inputs.register(inputs.Reader("toy-npy", "a toy .npy", "a toy .npy of power profiles", open_npy))
     sensor = mapconfig.resolve(str(profile)).sensor
