@@ -212,7 +212,7 @@ def python_block(work):
     return done.stdout
 
 
-def oxford_bag(where):
+def drive_bag(where):
     """The shared Oxford scans and their odometry as an MCAP rosbag2 (polar sensor_msgs/Image and
     nav_msgs/Odometry), built with rosbags' writer as test_rosbag does."""
     from test_rosbag import ODOMETRY, write_bag
@@ -250,8 +250,8 @@ RUNS = {
     "radarcl live /dev/ttyUSB0 --sensor ti-xwr18xx-uart --mount 0,0,1.5,0,-10,0 --out ti-live.rcmap "
     "--record ti-live.rcs": ti_live,
     "radarcl replay ti-live.rcs --out ti-again.rcmap": verbatim,
-    "radarcl info oxford_bag": with_data(oxford_bag, "oxford_bag"),
-    "radarcl fuse oxford_bag --sensor navtech-cts350x --out bag.rcmap --mcap bag.mcap": verbatim,
+    "radarcl info drive_bag": with_data(drive_bag, "drive_bag"),
+    "radarcl fuse drive_bag --sensor navtech-cts350x --out bag.rcmap --mcap bag.mcap": verbatim,
     "radarcl export bag.rcmap --to rosbag --out bag_ros2": verbatim,
 }
 
