@@ -114,6 +114,10 @@ def test_bench_json_has_the_issue_keys(capsys):
     for key in ("ms_per_frame", "scipy_ms_per_frame", "ratio_vs_scipy", "max_rel_err", "runs"):
         assert key in result
     assert result["max_rel_err"] < 1e-6 and result["ratio_vs_scipy"] > 0
+    context = result["context"]                       # where and when: the measured-figures page says it
+    assert context["bench"] == "range-fft" and context["options"] == {"repeat": 10, "n_fft": [512]}
+    assert len(context["load_before"]) == len(context["load_after"]) == 3 and context["wall_s"] > 0
+    assert context["cpu"]["cores"] >= 1 and context["date"][:2] == "20"
 
 
 def test_bench_cfar_json_has_the_issue_keys(capsys):

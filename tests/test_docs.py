@@ -110,3 +110,58 @@ def test_a_new_page_joins_the_site_without_a_nav(copy):
     assert done.returncode == 0, done.stdout + done.stderr
     assert "A choice" in (copy / "site" / "design" / "a-choice" / "index.html").read_text()
     assert "design/a-choice/" in (copy / "site" / "index.html").read_text()      # in the navigation
+
+
+# The benches whose figures docs/measured-figures.md shows, each from its docs/figures/NAME.json
+FIGURES = ("drive", "fusion", "live", "range-fft", "cfar", "polar-read", "fuse-bag", "store")
+
+
+def figures(name):
+    """The JSON `radarcl bench NAME --json` wrote for the measured-figures page."""
+    import json
+
+    return json.loads((ROOT / "docs" / "figures" / f"{name}.json").read_text())
+
+
+def three(x):
+    """A figure as the page writes it: three significant digits, whole from 100 up."""
+    return f"{x:.0f}" if abs(x) >= 100 else f"{x:#.3g}"
+
+
+def test_the_measured_figures_are_the_benches_json(site):
+    """Every bench's table is built from its JSON: the page shows the ratios the JSON holds (to
+    three digits), each bench's command, and the load average it recorded."""
+    source = (ROOT / "docs" / "measured-figures.md").read_text()
+    text = " ".join(page_text(site, "measured-figures").split())
+    for name in FIGURES:
+        assert f"<!-- figures: {name} -->" in source, name
+        r = figures(name)
+        assert f"radarcl bench {name}" in text and f"load average {r['context']['load_before'][0]:.2f} before" in text
+        assert (site / "figures" / f"{name}.json").is_file()                            # linked under the table
+    fusion, drive, live = figures("fusion"), figures("drive"), figures("live")
+    pipeline = fusion["detstats_pipeline_ms_per_frame"] / fusion["pipeline_ms_per_frame"]
+    assert (f"detection statistics, whole pipeline {three(fusion['detstats_pipeline_ms_per_frame'])} ms/frame "
+            f"eq. 12's pipeline: {three(fusion['pipeline_ms_per_frame'])} ms/frame {three(pipeline)} "
+            "(measured / baseline)") in text
+    moving = fusion["moving_ms_per_frame"] / fusion["floor_ms_per_frame"]
+    assert (f"moving radar, planning included {three(fusion['moving_ms_per_frame'])} ms/frame memory floor: "
+            f"{three(fusion['floor_ms_per_frame'])} ms/frame {three(moving)} (measured / baseline)") in text
+    overlap = drive["overlap"]
+    assert (f"decoding on a reader thread, end to end {three(overlap['end_to_end_per_s'])} scans/s fusion alone: "
+            f"{three(overlap['fuse_alone_per_s'])} scans/s {three(overlap['end_to_end_over_fuse_alone'])}") in text
+    assert f"rolling map, real time {three(drive['rolling']['realtime_factor'])} x real time" in text
+    assert f"beam latency p99 at 921600 baud {three(live['latency_p99_ms'])} ms" in text
+    assert "radarcl bench drive --scans 100 --baseline-scans 100" in text
+
+
+@pytest.mark.parametrize("fault, says", [
+    (lambda folder: (folder / "store.json").unlink(), "docs/figures/store.json, which does not exist"),
+    (lambda folder: (folder / "cfar.json").write_text('{"ms_per_frame": '), "cfar.json is not readable JSON"),
+    (lambda folder: (folder / "live.json").write_text('{"latency_p50_ms": 1.0}'), "live.json lacks the figure"),
+])
+def test_a_figure_without_its_json_fails_the_build(copy, fault, says):
+    """A marker whose JSON is missing, broken or not the bench's stops the strict build, named."""
+    fault(copy / "docs" / "figures")
+    done = build(copy / "mkdocs.yml", copy / "site")
+    assert done.returncode != 0
+    assert says in done.stdout + done.stderr

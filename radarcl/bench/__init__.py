@@ -1,11 +1,15 @@
 """`radarcl bench NAME`: benchmarks, each printing its figures and their ratio to a baseline
 measured in the same run (interleaved, medians: ``timing``). Each benchmark module has
 ``add_arguments(parser)`` and ``command(args, runtime, say)`` -> (result dict, table lines).
+With --json the result carries a ``context``: the bench, its options, the date, the versions,
+the CPU, the load average before and after and the wall time.
 `radarcl bench all` (``suite``) runs those that tell a device apart, at sizes for a lent GPU, into
 one JSON and one table; it exits 1 when one of them failed."""
 
 import json
+import os
 import sys
+import time
 
 from radarcl.bench import (cfar, drive, foxglove, frames, fuse_bag, fusion, heldout_scans, live, merge, polar_read,
                            quality, range_fft, scenes, store, suite, viewer)
@@ -55,7 +59,7 @@ def add_arguments(parser):
         b = benches.add_parser(name, help=summary, description=summary[0].upper() + summary[1:] + ".")
         b.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
         module.add_arguments(b)
-        b.set_defaults(bench_module=module)
+        b.set_defaults(bench_module=module, bench_options=[a.dest for a in b._actions if a.dest not in ("help", "json")])
     b = benches.add_parser("all", help=suite.SUMMARY, description=suite.DESCRIPTION)
     suite.add_arguments(b)
     b.set_defaults(bench_module=suite)
@@ -66,6 +70,13 @@ def run(args):
         return suite.main(args, runtime)
     say = (lambda line: None) if args.json else (lambda line: print(line, file=sys.stderr))
     say(f"measuring {args.bench} ...")
+    context = dict(bench=args.bench, options={dest: getattr(args, dest) for dest in args.bench_options},
+                   **suite.context())
+    start = time.perf_counter()
     result, lines = args.bench_module.command(args, runtime, say)
-    print(json.dumps(result) if args.json else "\n".join(lines))
+    if args.json:                 # where and when it ran, for whoever reads the figures later
+        context.update(load_after=list(os.getloadavg()), wall_s=time.perf_counter() - start)
+        print(json.dumps({**result, "context": context}))
+    else:
+        print("\n".join(lines))
     return 0

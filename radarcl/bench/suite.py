@@ -179,6 +179,34 @@ def _viewer_rows(r):
     return rows
 
 
+# The benches outside the suite (they tell no device apart) have headline rows too, for the
+# measured-figures page of the documentation (``HEADLINES``).
+def _fuse_bag_rows(r):
+    return [row(f"fused from a ROS 2 bag ({k.removeprefix('bag_')})", r["seconds"][k], f"s per {r['scans']} scans",
+                "the PNG folder", r["seconds"]["files"], ratio, FIGURE_OF_BASELINE)
+            for k, ratio in r["bag_vs_files"].items()]
+
+
+def _store_rows(r):
+    return [row("map store, save", r["store_save_s"], "s", ".npz (savez_compressed)", r["npz_save_s"],
+                r["save_ratio"], BASELINE_OF_FIGURE),
+            row("map store, load", r["store_load_s"], "s", ".npz", r["npz_load_s"], r["load_ratio"], BASELINE_OF_FIGURE),
+            row(f"map store, saving {r['changed_bricks']} changed bricks", r["store_incremental_s"], "s",
+                ".npz (saves the whole map)", r["npz_save_s"], r["incremental_ratio"], BASELINE_OF_FIGURE),
+            row(f"map store, size ({r['bricks']} bricks at {r['voxel_m']:g} m)", r["store_mib"], "MiB", ".npz",
+                r["npz_mib"], _over(r["store_mib"], r["npz_mib"]), FIGURE_OF_BASELINE)]
+
+
+def _polar_read_rows(r):
+    rows = []
+    for x in r["runs"]:
+        rows += [row(f"{x['data']}: scan read", x["read_scans_per_s"], "scans/s", "PIL decoding the PNG alone",
+                     x["pil_scans_per_s"], x["read_vs_pil"], BASELINE_OF_FIGURE),
+                 row(f"{x['data']}: scan read, power computed", x["read_power_scans_per_s"], "scans/s",
+                     "PIL decoding the PNG alone", x["pil_scans_per_s"], x["read_power_vs_pil"], BASELINE_OF_FIGURE)]
+    return rows
+
+
 # Sizes: a full run stays within 5 minutes on a GPU, where what runs on the host (the numpy
 # baselines, PNG decoding, the pty's airtime, the first kernel builds) takes about as long as on a
 # CPU, so a CPU's run time bounds it (docs/guide/drives.md gives one). The drive's car stands still for its
@@ -199,6 +227,10 @@ SUITE = {
                     dict(repeat=2), _viewer_rows),
 }
 
+# Every bench's headline rows by name: the suite's, and those of the benches outside it.
+HEADLINES = {**{name: entry.rows for name, entry in SUITE.items()}, "fuse-bag": _fuse_bag_rows, "store": _store_rows,
+             "polar-read": _polar_read_rows}
+
 
 # -- the run --------------------------------------------------------------------------------------------
 def measure(names, device, quick=False, data=None, json_path=None, say=None):
@@ -207,9 +239,8 @@ def measure(names, device, quick=False, data=None, json_path=None, say=None):
     (each bench gets its own, as ``radarcl bench NAME`` does); ``data``: the Oxford set."""
     say = say or (lambda line: None)
     first = device()
-    report = dict(benchmark="all", complete=False, quick=quick, date=_now(), radarcl_version=_version(),
-                  versions=_versions(), device=first.name, limits=dataclasses.asdict(first.limits), cpu=_cpu(),
-                  load_before=list(os.getloadavg()), load_after=None, wall_s=None, failed=[], benches={})
+    report = dict(benchmark="all", complete=False, quick=quick, **context(), device=first.name,
+                  limits=dataclasses.asdict(first.limits), load_after=None, wall_s=None, failed=[], benches={})
     del first
     say(f"device {report['device']}; CPU {report['cpu']['model']} ({report['cpu']['cores']} cores); load average "
         f"{report['load_before'][0]:.2f}; {'--quick' if quick else 'full'} sizes")
@@ -324,6 +355,13 @@ def _plain(value):
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
+
+
+def context():
+    """Where and when a bench runs: the date, radarcl's and its libraries' versions, the CPU and
+    the load average (1, 5 and 15 minutes, as `uptime` prints it) before it starts."""
+    return dict(date=_now(), radarcl_version=_version(), versions=_versions(), cpu=_cpu(),
+                load_before=list(os.getloadavg()))
 
 
 def _now():
