@@ -244,7 +244,7 @@ def test_an_input_format_added_to_the_table_alone_is_fused(runtime, tmp_path, ca
     with pytest.raises(SystemExit):
         main(["fuse", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "a TI capture .npy/.txt; a toy .npy of power profiles)" in text and "a TI capture, or a toy .npy" in text
+    assert "; a toy .npy of power profiles)" in text and "a TI capture, a ROS 2 bag, or a toy .npy" in text
 
 def test_the_paper_profile_rebuilds_the_pre_profile_pipeline_bit_for_bit(runtime):
     """docs/guide/sensors.md: the paper's profile derives the paper's constants
