@@ -202,12 +202,13 @@ def test_a_million_looks_of_one_voxel_read_at_the_look_limit(runtime):
 
 
 @pytest.mark.parametrize("still", ["auto", False], ids=["still table", "gather"])
-def test_a_million_strong_looks_keep_their_mean_evidence(runtime, still):
-    """10^6 looks of +16 nat: the float64 reading is 2 looks' worth, 32 nat (the update limit
-    times look_limit). The stored sum saturates after 65,536 of them; the looks stop counting
-    there (the frame that saturates it counts whole), so the reading stays at its mean, within
-    one frame's share of the looks (10^4 of the 7 x 10^4 counted) rather than fading as 1 / n."""
-    evidence, knowledge, looks = looks_grid(runtime, logodds.EVIDENCE_LIMIT, 100, still)
+def test_strong_looks_past_saturation_keep_their_mean_evidence(runtime, still):
+    """2 x 10^5 looks of +16 nat (three times what saturates the sum): the float64 reading is 2
+    looks' worth, 32 nat (the update limit times look_limit). The stored sum saturates after
+    65,536 of them; the looks stop counting there (the frame that saturates it counts whole), so
+    the reading stays at its mean, within one frame's share of the looks (10^4 of the 7 x 10^4
+    counted), rather than fading as 1 / n (to 2.1 nat at 10^6 looks, as it did)."""
+    evidence, knowledge, looks = looks_grid(runtime, logodds.EVIDENCE_LIMIT, 20, still)      # 2 x 10^5 looks
     reading = dict(look_limit=2.0, prior_nats=0.0, prior_looks=0.0, known_looks=0.5)
     got = float(sm.read_log_odds(evidence, knowledge, looks, reading))
     assert evidence == GRID_LIMIT and looks == 10 ** 4 * math.ceil(GRID_LIMIT / (10 ** 4 * logodds.EVIDENCE_LIMIT))
