@@ -25,38 +25,6 @@ def test_info(capsys):
     assert "(* = chosen" in capsys.readouterr().out
 
 
-def test_demo_quick_runs_the_main_job_and_replays_its_recording(tmp_path, capsys):
-    """--quick: the whole main job at 0.4 m; then --replay of the recording it wrote gives the
-    same maps (the pipeline is deterministic)."""
-    assert main(["demo", "--quick", "--no-progress", "--out", str(tmp_path / "a")]) == 0
-    for name in ("fig9.png", "frame.png", "fig10_scene.png", "topdown.png", "quality.png", "reliability.png",
-                 "map.npz", "reference_scene.npz", "summary.json", "view.png", "report.html"):
-        assert (tmp_path / "a" / name).stat().st_size > 0
-    dom, console = open_in_browser(tmp_path / "a" / "report.html", tmp_path)
-    assert 'data-images="7/7"' in dom and 'data-errors="0"' in dom and console == [], (dom[-300:], console)
-    assert 'data-overflow="0"' in dom, dom[-300:]                      # every table fits a laptop's window
-    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
-    assert summary["view"]["mode"] == "iso" and "error" not in summary["view"]
-    assert summary["observations"] == 3840 and summary["voxel_m"] == 0.4
-    assert len(summary["fig9"]["pair_peaks_m"]["256"]) == 1 and len(summary["fig9"]["pair_peaks_m"]["1024"]) == 2
-    q = summary["quality"]
-    keys = {"auc_detectable", "auc_obstacles", "auc_weak", "false_free", "shadow_unknown", "ece", "brier",
-            "objects_found", "objects_total"}
-    assert set(q["baselines"]) == {"prior_only", "raw_intensity", "octomap"} and any(r["pareto"] for r in q["runs"])
-    for b in q["baselines"].values():
-        assert keys <= set(b) and b["auc_detectable"] is not None
-    for r in q["runs"]:
-        assert keys | {"config", "ms_per_frame", "max_dev_nats"} <= set(r)
-    assert "fixed voxel set" in q["voxel_set"] and summary["voxel_set"] == q["voxel_set"]
-    out = capsys.readouterr().out
-    assert "baseline: octomap" in out and "baseline: prior_only" in out and "§4.1 sweep" in out
-    assert main(["demo", "--quick", "--no-progress", "--out", str(tmp_path / "b"),
-                 "--replay", str(tmp_path / "a" / "reference_scene.npz")]) == 0
-    again = json.loads((tmp_path / "b" / "summary.json").read_text())
-    for name in ("paper constants", "tuned"):
-        assert again["maps"][name]["metrics"] == summary["maps"][name]["metrics"]
-
-
 def test_demo_sizes_are_one_choice(tmp_path, capsys):
     """The default demo runs at 0.2 m (a laptop's memory), --full at the paper's 0.1 m, --quick at
     0.4 m; asking for two sizes is a usage error before anything runs."""

@@ -60,7 +60,7 @@ def toy_format(monkeypatch):
 
 
 def test_a_toy_model_and_a_toy_format_through_the_registries_alone(runtime, toy_model, toy_format, tmp_path, capsys):
-    config = mapconfig.resolve("paper", program={"grid.voxel_m": 0.4, "interpret.model": "constant"})
+    config = mapconfig.resolve("paper", program={"grid.voxel_m": 0.8, "interpret.model": "constant"})
     assert config.evidence_model() is toy_model and config.reading() is None
     obs = observe(paper_scene(), (-9.2,), seed=1)
     mapping = Mapping.from_config(runtime, config=config)
