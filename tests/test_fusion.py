@@ -353,33 +353,14 @@ def test_detstats_matches_its_oracle(runtime, model, widths, accumulators, monke
     e, d, packed = random_nodes(lattice)
     grid, fusion, _ = detstats_grid(runtime, SMALL, lattice, model, packed, POSE, -0.8, still=True, **widths)
     assert ("PACKED_LOOKS" in fusion._defines) == (accumulators == "packed")
-    got, known = grid.snapshot(), grid.knowledge_snapshot()
+    reached, ambiguous, known = check_detstats_frame(grid, fusion, lattice, model, e, d, packed, -0.8)
+    clear = ~ambiguous
+    assert ambiguous.sum() <= FUSION_AMBIGUOUS_MAX * reached.sum()
     nz, ny, nx = SMALL.array_shape
     iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)
-    centres = SMALL.index_to_world(np.stack([ix, iy, iz], axis=1))
-    sums, updates, ambiguous, knowledge, looks = (a.reshape(nz, ny, nx) for a in oracle.fusion_at_points(
-        centres, None, lattice, model, POSE, SPACING, FIRST, LAST, FUSION_DECISION_MARGIN, nodes=(e, d), terrain_dz=-0.8))
-    counted = grid.knowledge_snapshot("looks")
-    reached = updates > 0
-    assert reached.sum() > 1000 and ambiguous.sum() <= FUSION_AMBIGUOUS_MAX * reached.sum()
     terrain = (SMALL.index_to_world(np.stack([ix, iy, iz], 1))[:, 2] - POSE[2, 3] < -0.8).reshape(nz, ny, nx)
     assert (reached & terrain).sum() > 100 and (reached & ~terrain).sum() > 100    # both classes are tested
-    step = 1 + -(-max(np.abs(np.diff(e, axis=-1)).max(), np.abs(np.diff(d, axis=-1)).max()) // 4096)
-    clear = ~ambiguous
-    assert (np.abs(got - sums)[clear] <= step * updates[clear]).all()
-    assert (np.abs(known - knowledge)[clear] <= step * updates[clear]).all()
-    # the step is the rare float32/float64 disagreement on rho2's quantisation, not a licence: the
-    # integer interpolation itself (its rounding included) is exact on most voxels (98 % here)
-    assert (got == sums)[clear & reached].mean() > 0.95 and (known == knowledge)[clear & reached].mean() > 0.95
     assert not known[~reached & clear].any()
-    # a look counts where its interpolated opportunity is above 0: the same as the oracle's except
-    # where one quantisation step of rho2 moves a node value across 0 (then by one)
-    assert (np.abs(counted - looks)[clear] <= (np.abs(known - knowledge)[clear] > 0)).all() and counted.sum() > 1000
-    fusion(packed, POSE)                             # the pose comes back: the table is recorded
-    fusion(packed, POSE)                             # and streamed
-    assert fusion.plan(POSE).table is not None
-    assert np.array_equal(grid.snapshot(), 3 * got) and np.array_equal(grid.knowledge_snapshot(), 3 * known)
-    assert np.array_equal(grid.knowledge_snapshot("looks"), 3 * counted)
 
 
 def test_detstats_without_terrain_reads_the_upright_nodes_only(runtime):
@@ -390,25 +371,38 @@ def test_detstats_without_terrain_reads_the_upright_nodes_only(runtime):
     e, d, packed = random_nodes(lattice, seed=4)
     assert e[..., 1, :].any() and d[..., 1, :].any()
     grid, fusion, _ = detstats_grid(runtime, SMALL, lattice, model, packed, POSE, -math.inf, still=True)
+    check_detstats_frame(grid, fusion, lattice, model, e, d, packed, -math.inf)
+
+
+def check_detstats_frame(grid, fusion, lattice, model, e, d, packed, terrain_dz):
+    """One frame of node pairs (e, d) fused into ``grid`` against the float64 oracle: evidence and
+    knowledge within one quantisation step of rho2 per update and exact on most voxels, the looks
+    counted as the oracle's; the pose fused twice more (recorded into the still table, then
+    streamed from it) gives three times each. Returns (reached, ambiguous, knowledge sums)."""
     got, known, counted = grid.snapshot(), grid.knowledge_snapshot(), grid.knowledge_snapshot("looks")
     nz, ny, nx = SMALL.array_shape
     iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)
     centres = SMALL.index_to_world(np.stack([ix, iy, iz], axis=1))
     sums, updates, ambiguous, knowledge, looks = (a.reshape(nz, ny, nx) for a in oracle.fusion_at_points(
         centres, None, lattice, model, POSE, SPACING, FIRST, LAST, FUSION_DECISION_MARGIN, nodes=(e, d),
-        terrain_dz=-math.inf))
+        terrain_dz=terrain_dz))
     reached, clear = updates > 0, ~ambiguous
     assert reached.sum() > 1000
     step = 1 + -(-max(np.abs(np.diff(e, axis=-1)).max(), np.abs(np.diff(d, axis=-1)).max()) // 4096)
     assert (np.abs(got - sums)[clear] <= step * updates[clear]).all()
     assert (np.abs(known - knowledge)[clear] <= step * updates[clear]).all()
+    # the step is the rare float32/float64 disagreement on rho2's quantisation, not a licence: the
+    # integer interpolation itself (its rounding included) is exact on most voxels (98 % here)
     assert (got == sums)[clear & reached].mean() > 0.95 and (known == knowledge)[clear & reached].mean() > 0.95
+    # a look counts where its interpolated opportunity is above 0: the same as the oracle's except
+    # where one quantisation step of rho2 moves a node value across 0 (then by one)
     assert (np.abs(counted - looks)[clear] <= (np.abs(known - knowledge)[clear] > 0)).all() and counted.sum() > 1000
     fusion(packed, POSE)                             # the pose comes back: the table is recorded
     fusion(packed, POSE)                             # and streamed
     assert fusion.plan(POSE).table is not None
     assert np.array_equal(grid.snapshot(), 3 * got) and np.array_equal(grid.knowledge_snapshot(), 3 * known)
     assert np.array_equal(grid.knowledge_snapshot("looks"), 3 * counted)
+    return reached, ambiguous, known
 
 
 def test_detstats_sums_do_not_depend_on_the_order_of_frames(runtime):
