@@ -95,7 +95,7 @@ def test_a_client_decodes_the_fused_map_as_the_store_holds_it(tmp_path, plain):
     # the map is the same with or without Foxglove, bit for bit
     a, b = np.load(out), np.load(plain)
     assert all(np.array_equal(a[k], b[k]) for k in ("keys", "data", "knowledge", "looks", "poses"))
-    # stamped with the recording's time: the last scan's first azimuth, not the time it ran
+    # stamped with the recording's time: the last scan's middle azimuth, not the time it ran
     first_scan_us = sorted(int(p.stem) for p in SCANS.glob("*.png"))[-1]
     assert abs(msgs[-1][1] - first_scan_us * 1000) < 10 ** 9 and msgs[-1][1] < 2 * 10 ** 18
     # the MCAP holds the same channels, read back with the mcap library and decoded from its schemas

@@ -296,8 +296,14 @@ def test_the_exported_bag_carries_tf_and_the_trajectory_stamped_with_the_recordi
     times = [t for t, _ in got["/tf"]]
     scan_times = np.array(times, np.int64)
     assert len(times) == 11 and (np.diff(scan_times) > 0).all()
-    # each pose at its scan's first azimuth in acquisition order, within the scan's first ms of its file name
-    assert all(0 <= t - s < 10 ** 6 for t, s in zip(times, starts)), (times[:2], starts[:2])
+    # each pose at the time it was the sensor's, its scan's middle azimuth: the trajectory file's times,
+    # half a turn (of 0.25 s) after the scan's start
+    from radarcl.jobs.api import trajectory_path
+
+    tum = [int(line.split()[0].replace(".", "")) for line in trajectory_path(from_files).read_text().splitlines()
+           if not line.startswith("#")]
+    assert times == tum, (times[:2], tum[:2])
+    assert all(0.1e9 < t - s < 0.15e9 for t, s in zip(times, starts)), (times[:2], starts[:2])
     (t_map, occupancy), = got["/map"]
     assert t_map == times[-1] and occupancy.header.stamp.sec == times[-1] // 10 ** 9
     assert occupancy.header.frame_id == "map"

@@ -85,9 +85,16 @@ class Tally:
 
 
 def frame_time_ns(source, j):
-    """Frame j's time [UNIX ns] where the source knows it (polar scans: the first azimuth's), else None."""
+    """Frame j's time [UNIX ns] where the source knows it, else None: its middle beam's, the time
+    of the pose the map keeps for it (``Mapping.fuse_source``'s trajectory, the TUM file's times),
+    so an export places each pose at the moment the sensor was there."""
+    if source.times_ns is not None:
+        return int(source.times_ns[j])
     scans = getattr(source.frames, "scans", None)
-    return scans[j].start_ns if scans is not None and scans[j].timed else None
+    if scans is None or not scans[j].timed:
+        return None
+    stamps = scans[j].timestamps_ns
+    return int(stamps[len(stamps) // 2])
 
 
 def run(runtime, source, config, out, every=None, progress=None, report=print, inputs=(), page=None, window_m=None,
