@@ -55,10 +55,15 @@
 #define convert_intV CAT(convert_int, LANES)
 #define convert_floatV CAT(convert_float, LANES)
 
+/* the floats at i and i + 1 of eight lanes, as (p[i.s0], p[i.s0 + 1], p[i.s1], ...): one two-float
+ * load a lane (TABLE_PAIRS: split into the lanes' p[i] and p[i + 1]) */
+#define PAIRS8(p, i) ((float16)(vload2(0, p + (i).s0), vload2(0, p + (i).s1), vload2(0, p + (i).s2), vload2(0, p + (i).s3), \
+                                vload2(0, p + (i).s4), vload2(0, p + (i).s5), vload2(0, p + (i).s6), vload2(0, p + (i).s7)))
 #if LANES == 8
 #define LANE_IDS (intV)(0, 1, 2, 3, 4, 5, 6, 7)
 #define GATHER(p, i) ((floatV)(p[(i).s0], p[(i).s1], p[(i).s2], p[(i).s3], p[(i).s4], p[(i).s5], p[(i).s6], p[(i).s7]))
 #define EACH_LANE(M) M(0) M(1) M(2) M(3) M(4) M(5) M(6) M(7)
+#define TABLE_PAIRS(p, i, at_i, at_next) { const float16 f = PAIRS8(p, i); at_i = f.even; at_next = f.odd; }
 /* log10_nb of each lane: the header's eight lanes at a time */
 #define LOG10_NB(x) log10_nb8(x)
 #elif LANES == 16
@@ -66,6 +71,8 @@
 #define GATHER(p, i) ((floatV)(p[(i).s0], p[(i).s1], p[(i).s2], p[(i).s3], p[(i).s4], p[(i).s5], p[(i).s6], p[(i).s7], \
                                p[(i).s8], p[(i).s9], p[(i).sa], p[(i).sb], p[(i).sc], p[(i).sd], p[(i).se], p[(i).sf]))
 #define EACH_LANE(M) M(0) M(1) M(2) M(3) M(4) M(5) M(6) M(7) M(8) M(9) M(a) M(b) M(c) M(d) M(e) M(f)
+#define TABLE_PAIRS(p, i, at_i, at_next) { const float16 f0 = PAIRS8(p, (i).lo), f1 = PAIRS8(p, (i).hi); \
+                                     at_i = (floatV)(f0.even, f1.even); at_next = (floatV)(f0.odd, f1.odd); }
 #define LOG10_NB(x) ((floatV)(log10_nb8((x).lo), log10_nb8((x).hi)))
 #else
 #error "LANES (8 or 16) comes from radarcl/stages/interpret_nodes.py"
@@ -91,8 +98,9 @@ static inline floatV table_at(const __global float *table, intV i0, floatV du, f
     const intV iv = t < SNR_NV - 2 ? t : (intV)(SNR_NV - 2);
     const floatV dv = fv - convert_floatV(iv);
     const intV a = i0 + iv, c = a + SNR_NV;            /* columns iv, iv + 1 of rows iu (a), iu + 1 (c) */
-    const floatV lo_even = GATHER(table, a), lo_odd = GATHER(table, a + 1);
-    const floatV hi_even = GATHER(table, c), hi_odd = GATHER(table, c + 1);
+    floatV lo_even, lo_odd, hi_even, hi_odd;
+    TABLE_PAIRS(table, a, lo_even, lo_odd);
+    TABLE_PAIRS(table, c, hi_even, hi_odd);
     return (lo_even * (1.0f - dv) + lo_odd * dv) * (1.0f - du)
          + (hi_even * (1.0f - dv) + hi_odd * dv) * du;
 }
