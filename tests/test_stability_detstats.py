@@ -57,7 +57,9 @@ def probe(runtime, x, q):
 
     from radarcl.cl.runtime import _define, kernels_dir
     from radarcl.stages import COMMON_DEFINES
-    from radarcl.stages.interpret_nodes import DEFAULT_LANES as LANES
+    from radarcl.stages.interpret_nodes import DEFAULT_LANES
+
+    LANES = DEFAULT_LANES["cpu" if runtime.is_cpu else "other"]
 
     defines = dict(COMMON_DEFINES, N_BINS=64, CLASSES=2, LANES=LANES, SNR_NU=SNR_U[2],
                    SNR_NV=SNR_V[2], SNR_U0=float(SNR_U[0]), SNR_V0=float(SNR_V[0]),

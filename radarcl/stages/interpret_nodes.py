@@ -23,10 +23,11 @@ from radarcl.stages import build, work_group_size
 
 # Work-items per work-group: any size is correct; within any device's work-group limit.
 DEFAULT_LOCAL_SIZE = 64
-# Bins per work-item, each a vector lane: 16 fills a 512-bit register (PoCL's CPU devices), 8
-# half of one; either computes the same floats lane for lane.
+# Bins per work-item, each a vector lane; any choice computes the same floats lane for lane. On a
+# CPU 16 (two 256-bit registers' worth of independent work a work-item, or one 512-bit); elsewhere
+# 8, as a GPU's work-item holds its vectors in registers the other work-items share.
 LANE_CHOICES = (8, 16)
-DEFAULT_LANES = 16
+DEFAULT_LANES = {"cpu": 16, "other": 8}
 
 
 def classes_needed(opportunity):
@@ -39,8 +40,8 @@ def classes_needed(opportunity):
 class InterpretNodes:
     """The node kernel for frames of ``n_beams`` beams of ``n_bins`` bins, window [first_bin,
     last_bin] (the interpreter's), from ``bin_model`` (a ``sensor_model.BinModel`` with "snr"
-    evidence; its tables go to the device once). ``lanes``: bins per work-item (8 or 16);
-    ``local_size``: work-items per work-group."""
+    evidence; its tables go to the device once). ``lanes``: bins per work-item (8 or 16; None:
+    ``DEFAULT_LANES`` for the device); ``local_size``: work-items per work-group."""
 
     def __init__(self, runtime, n_beams, n_bins, first_bin, last_bin, bin_model, *, lanes=None, local_size=None):
         if not isinstance(bin_model, BinModel) or not bin_model.graded:
@@ -50,7 +51,7 @@ class InterpretNodes:
         if bin_model.opportunity.shape != shape or np.shape(bin_model.ln_snr) != shape:
             raise ConfigError(f"the bin model's opportunity {bin_model.opportunity.shape} and ln_snr "
                               f"{np.shape(bin_model.ln_snr)} must both be {shape} (bins, classes, nodes)")
-        lanes = DEFAULT_LANES if lanes is None else lanes
+        lanes = DEFAULT_LANES["cpu" if runtime.is_cpu else "other"] if lanes is None else lanes
         if lanes not in LANE_CHOICES:
             raise ConfigError(f"lanes must be one of {LANE_CHOICES}, got {lanes!r}")
         self.runtime = runtime
