@@ -109,6 +109,9 @@ def test_refuses_bad_input(runtime):
         InterpretNodes(runtime, 4, 128, 8, 60, model)
     with pytest.raises(ConfigError, match=r"local_size must be an integer in \[1, "):
         InterpretNodes(runtime, 4, 64, 8, 60, model, local_size=0)
+    with pytest.raises(ConfigError, match="the detection statistics interpreter with detection evidence has no node"):
+        Interpreter(runtime, (4,), 64, SPACING, CONFIG, bin_model=detstats_model(n_bins=64, evidence="detection"),
+                    nodes_options=dict(lanes=8))
 
 
 @pytest.mark.parametrize("n_bins", [253, 264])

@@ -86,6 +86,10 @@ class Interpreter(Stage):
         if self.node_pairs and bin_model.graded:    # "snr" evidence: the nodes are a second launch's
             self.nodes = InterpretNodes(runtime, self.n_beams, self.n_bins, self.first_bin, self.last_bin, bin_model,
                                         **(nodes_options or {}))
+        elif nodes_options:
+            raise ConfigError(f"nodes_options are for the detection-statistics model with 'snr' evidence; the "
+                              f"{self.model.summary} interpreter{' with detection evidence' if self.node_pairs else ''} "
+                              "has no node kernel")
         self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
         f32, u8, i32 = np.dtype(np.float32), np.dtype(np.uint8), np.dtype(np.int32)
         shape = self.input_shape
