@@ -1,7 +1,7 @@
 """The "snr" evidence of the detection-statistics model (``radarcl.sensor_model``): the
 log-likelihood ratio of a bin's measured power for a voxel holding a typical target against the
-voxel free, tabulated once and read bilinearly (here in float64, in ``kernels/interpret.cl``,
--D GRADED, from the same float32 table).
+voxel free, tabulated once and read bilinearly (here in float64, in ``kernels/interpret_nodes.cl``
+from the same float32 table).
 
 A bin's power over the beam's noise floor, x = r / N (``noise_floor``: the median power of the
 range window / ln 2, the mean of exponential noise were the window noise alone; the noise's mean

@@ -124,11 +124,14 @@ def test_bench_fusion_has_the_issue_keys():
                 "planning_ms_numpy", "pipeline_ms_per_frame", "voxels_per_frame", "floor_ms_per_frame",
                 "spinning_voxels_per_frame", "ratio_vs_floor", "ratio_vs_numpy", "detstats_gather_ms_per_frame",
                 "detstats_still_ms_per_frame", "detstats_moving_ms_per_frame", "detstats_gather_ratio",
-                "detstats_pipeline_ms_per_frame"):
+                "detstats_pipeline_ms_per_frame", "interpret_ms_per_frame", "detstats_interpret_ms_per_frame",
+                "spinning_interpret_ms_per_frame", "detstats_spinning_interpret_ms_per_frame"):
         assert r[key] > 0, key
     assert set(r["load"]) == {"still", "gather", "moving", "planning", "planning_numpy", "spinning", "spinning_gather",
                               "pipeline", "detstats_still", "detstats_gather", "detstats_moving", "detstats_pipeline",
-                              "spinning_pipeline", "detstats_spinning_pipeline"}
+                              "spinning_pipeline", "detstats_spinning_pipeline", "interpret", "detstats_interpret",
+                              "spinning_interpret", "detstats_spinning_interpret"}
+    assert r["detstats_interpret_ms_per_frame"] < r["detstats_pipeline_ms_per_frame"]
     assert r["detstats_gather_ms_per_frame"] > 0 and r["detstats_gather_ratio"] > 0
     assert any("detection statistics" in line for line in fusion.format_table(r))
     assert r["max_error_units"] <= 1 and r["oracle_voxels_compared"] > 10000

@@ -29,34 +29,39 @@ CONFIG = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, ma
 CFAR = CfarConfig(guard=16, train=8)
 
 PROBE = """
-#include "interpret.cl"
+#include "interpret_nodes.cl"
+#define vstoreV CAT(vstore, LANES)
 
 /* test only: the detection-statistics model's own series and likelihood ratio, as the kernel has
- * them: eight lanes a work-item, as interpret_nodes computes them (log10_nb also scalar) */
+ * them: LANES lanes a work-item, as interpret_nodes computes them (log10_nb also scalar) */
 __kernel void probe(const __global float *x, const float q, __global float *e, __global float *l,
                     __global float *lr, __global float *l1)
 {
     const int i = get_global_id(0);
-    const float8 v = vload8(i, x);
-    vstore8(exp_nb8(v), i, e);
-    vstore8(log10_nb8(v), i, l);
-    vstore8(likelihood_ratio8(v, q), i, lr);
-    for (int k = 0; k < 8; ++k)
-        l1[8 * i + k] = log10_nb(x[8 * i + k]);
+    const floatV v = vloadV(i, x);
+    vstoreV(exp_nb(v), i, e);
+    vstoreV(LOG10_NB(v), i, l);
+    vstoreV(likelihood_ratio(v, q), i, lr);
+    for (int k = 0; k < LANES; ++k)
+        l1[LANES * i + k] = log10_nb(x[LANES * i + k]);
 }
 """
 
 
 def probe(runtime, x, q):
-    """(exp_nb8(x), log10_nb8(x), likelihood_ratio8(x, q)) computed on the device, float32, lane by
-    lane (log10_nb8 checked equal to the scalar log10_nb)."""
+    """(exp_nb(x), log10_nb(x), likelihood_ratio(x, q)) computed on the device, float32, lane by
+    lane as kernels/interpret_nodes.cl computes them (its default lanes; log10_nb's lanes checked
+    equal to the scalar log10_nb)."""
     import pyopencl as cl
     import pyopencl.array as cla
 
     from radarcl.cl.runtime import _define, kernels_dir
     from radarcl.stages import COMMON_DEFINES
+    from radarcl.stages.interpret_nodes import DEFAULT_LANES
 
-    defines = dict(COMMON_DEFINES, N_BINS=64, MAX_PULSES=4, OCCLUSION=0, DETSTATS=1, GRADED=1, SNR_NU=SNR_U[2],
+    LANES = DEFAULT_LANES["cpu" if runtime.is_cpu else "other"]
+
+    defines = dict(COMMON_DEFINES, N_BINS=64, CLASSES=2, LANES=LANES, SNR_NU=SNR_U[2],
                    SNR_NV=SNR_V[2], SNR_U0=float(SNR_U[0]), SNR_V0=float(SNR_V[0]),
                    SNR_U_SCALE=(SNR_U[2] - 1) / (SNR_U[1] - SNR_U[0]), SNR_V_SCALE=(SNR_V[2] - 1) / (SNR_V[1] - SNR_V[0]),
                    GAP_CAP=GAP_CAP, NODES=sm.NODES)
@@ -65,55 +70,12 @@ def probe(runtime, x, q):
     qu = runtime.queue
     x = np.asarray(x, np.float32)
     n = len(x)
-    xd = cla.to_device(qu, np.concatenate([x, np.ones(-n % 8, np.float32)]))     # whole lanes of eight
+    xd = cla.to_device(qu, np.concatenate([x, np.ones(-n % LANES, np.float32)]))     # whole work-items
     outs = [cla.empty(qu, xd.shape, np.float32) for _ in range(4)]
-    program.probe(qu, (xd.shape[0] // 8,), None, xd.data, np.float32(q), *(o.data for o in outs))
+    program.probe(qu, (xd.shape[0] // LANES,), None, xd.data, np.float32(q), *(o.data for o in outs))
     e, l, lr, l1 = (o.get()[:n] for o in outs)
     assert np.array_equal(l, l1, equal_nan=True)               # the lanes compute what the scalar does
     return e, l, lr
-
-
-def test_exp_nb_against_float64_over_its_range(runtime):
-    """exp_nb on [-87, 88] (every float32 input it takes unclamped, sampled densely, the points
-    where its reduction n = rint(x / ln 2) steps) within EXP_NB_RTOL of float64's exp of the same
-    float; outside, clamped to its ends (finite, never 0 or inf)."""
-    rng = np.random.default_rng(1)
-    steps = (np.arange(-125, 127) + 0.5) * math.log(2.0)
-    x = np.concatenate([np.linspace(-87.0, 88.0, 200001), rng.uniform(-87, 88, 100000), steps, np.nextafter(steps, 0),
-                        [0.0, -0.0, 1e-30, -1e-30]]).astype(np.float32)
-    got = probe(runtime, x, 0.1)[0].astype(np.float64)
-    exact = np.exp(x.astype(np.float64))
-    assert np.abs(got / exact - 1).max() <= EXP_NB_RTOL
-    ends = probe(runtime, np.array([88.0, 89.0, 1e30, np.inf, -87.0, -88.0, -1e30, -np.inf], np.float32), 0.1)[0]
-    assert np.isfinite(ends).all() and (ends > 0).all()
-    assert ends[:4].tolist() == [ends[0]] * 4 and ends[4:].tolist() == [ends[4]] * 4
-
-
-def test_log10_nb_against_float64_over_its_range(runtime):
-    """log10_nb over every float32 exponent, subnormals included, and the arguments the model gives
-    it (1 + delta c_det up to 1e6, the mixture's L / (1 - q + q L) in (0, 1 / q)) within
-    LOG10_NB_DECADES of float64's log10; log10(0) = -inf."""
-    rng = np.random.default_rng(2)
-    x = np.concatenate([np.ldexp(1.0, np.arange(-149, 128)), rng.uniform(0.5, 2.0, 50000),
-                        10.0 ** rng.uniform(-45, 38, 50000), 1 + 10.0 ** rng.uniform(-7, 6, 50000)]).astype(np.float32)
-    x = x[(x > 0) & np.isfinite(x)]
-    got = probe(runtime, x, 0.1)[1].astype(np.float64)
-    assert np.abs(got - np.log10(x.astype(np.float64))).max() <= LOG10_NB_DECADES
-    assert probe(runtime, np.zeros(1, np.float32), 0.1)[1].tolist() == [-np.inf]
-
-
-@pytest.mark.parametrize("q", [1e-6, 1e-3, 0.1, 0.5])
-def test_the_likelihood_ratio_against_float64_at_extreme_evidence(runtime, q):
-    """L of e = ln(L / (1 - q + q L)) (the gap mixture's first step) for e from -80 nat to
-    ln(1 / q) and past it: finite and positive everywhere (capped below 1 / q by GAP_CAP), within
-    LIKELIHOOD_RATIO_RTOL of float64 where e^e is at least a part in 10^3 below its cap (at the cap
-    L's denominator 1 - q e^e cancels, but the mixture's evidence there is ln(1 / q) whatever L)."""
-    e = np.concatenate([np.linspace(-80.0, -math.log(q) + 5.0, 20001), [-math.log(q), 88.0, 200.0]]).astype(np.float32)
-    got = probe(runtime, e, q)[2].astype(np.float64)
-    exact = likelihood_ratio(e.astype(np.float64), q)
-    assert np.isfinite(got).all() and (got > 0).all() and np.isfinite(exact).all()
-    away = np.exp(e.astype(np.float64)) * q < 1 - 1e-3
-    assert away.sum() > 10000 and np.abs(got[away] / exact[away] - 1).max() <= LIKELIHOOD_RATIO_RTOL
 
 
 def detect(runtime, x, model, flags=None):

@@ -39,7 +39,7 @@ FUSION_UNITS_PER_UPDATE = 1
 # some beam reaches, or the comparison would prove little.
 FUSION_AMBIGUOUS_MAX = 0.02
 
-# The default model's series in float32 (kernels/interpret.cl): exp_nb's reduction r = x - n ln 2
+# The default model's series in float32 (kernels/interpret_nodes.cl): exp_nb's reduction r = x - n ln 2
 # carries ~ulp(n ln 2) / 2, its Taylor series < 6e-9, the product one more rounding: its note
 # bounds the whole range [-87, 88] by 4e-6 relative.
 EXP_NB_RTOL = 4e-6

@@ -137,5 +137,4 @@ def placeholder_tables(queue):
 
     one = cla.zeros(queue, (1,), np.float32)
     return dict(opportunity=one, miss=one, blocking=one, unblocked=cla.zeros(queue, (1, 2), np.int32), c_det=1.0,
-                ln_snr=one, snr_table=one, snr_cap=one, noise_floor=1.0, blocker_gap=0.0, snr_q=1.0,
-                state=cla.zeros(queue, (1, 2), np.float32), ln_floors=one)
+                noise_floor=1.0, state=cla.zeros(queue, (1, 2), np.float32), ln_floors=one)

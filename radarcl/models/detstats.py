@@ -1,7 +1,8 @@
 """The detection-statistics model ("detstats", radarcl's default): evidence from the CFAR's own
 detection statistics per target class and rho2 node, a knowledge channel, correlated looks
 counted once (``radarcl.sensor_model`` says the physics; ``radarcl.snr_evidence`` the "snr"
-evidence's table). On the device: kernels/interpret.cl with DETSTATS (and GRADED for "snr").
+evidence's table). On the device: kernels/interpret.cl with DETSTATS (and GRADED for "snr", whose
+nodes kernels/interpret_nodes.cl computes after the walk: the interpreter's ``nodes``).
 """
 
 import numpy as np
@@ -9,11 +10,6 @@ import numpy as np
 from radarcl import logodds, sensor_model
 from radarcl.models.base import Choice, EvidenceModel, Number, placeholder_tables
 from radarcl.sensor_model import N_CLASSES, NODES, pack_nodes
-from radarcl.snr_evidence import GAP_CAP, SNR_U, SNR_V, detection_cap
-
-# Work-items per work-group of interpret_nodes ("snr" evidence's nodes, eight bins a work-item):
-# any size is correct; within any device's work-group limit.
-NODES_LOCAL_SIZE = 64
 
 
 class DetStats(EvidenceModel):
@@ -54,11 +50,7 @@ class DetStats(EvidenceModel):
         return sensor_model.terrain_dz(params)
 
     def defines(self, bin_model):
-        graded = bin_model.graded
-        grid = dict(SNR_NU=SNR_U[2], SNR_NV=SNR_V[2], SNR_U0=float(SNR_U[0]), SNR_V0=float(SNR_V[0]),
-                    SNR_U_SCALE=(SNR_U[2] - 1) / (SNR_U[1] - SNR_U[0]),
-                    SNR_V_SCALE=(SNR_V[2] - 1) / (SNR_V[1] - SNR_V[0]), GAP_CAP=GAP_CAP) if graded else {}
-        return dict(OCCLUSION=0, DETSTATS=1, GRADED=int(graded), **grid)
+        return dict(OCCLUSION=0, DETSTATS=1, GRADED=int(bin_model.graded))
 
     def device_tables(self, queue, interpreter):
         import pyopencl.array as cla
@@ -69,24 +61,12 @@ class DetStats(EvidenceModel):
                       blocking=cla.to_device(queue, m.blocking.astype(np.float32)), c_det=(1.0 - m.pfa) / m.pfa)
         if m.graded:                     # the table replaces the misses and the exact unblocked nodes
             n_beams, n_bins = interpreter.n_beams, interpreter.n_bins
-            snr_cap = detection_cap(m.opportunity, m.snr_table.q, m.bounded).astype(np.float32)
-            tables.update(ln_snr=cla.to_device(queue, m.ln_snr.astype(np.float32)),
-                          snr_table=cla.to_device(queue, m.snr_table.values.astype(np.float32)),
-                          snr_cap=cla.to_device(queue, snr_cap),
-                          noise_floor=float(m.noise_floor), blocker_gap=float(m.blocker_gap),
-                          snr_q=float(m.snr_table.q),
+            tables.update(noise_floor=float(m.noise_floor),
                           state=cla.zeros(queue, (n_beams, 2, n_bins), np.float32),    # per bin: blocked, tau
                           ln_floors=cla.zeros(queue, (n_beams,), np.float32))
-            # the beam's walk leaves each bin's blocking; interpret_nodes makes the nodes, eight bins a
-            # work-item, reading its tables with the bins last (one vector load a node) and writing
-            # the window's bins only: the others are 0 from here on
+            # the beam's walk leaves each bin's blocking; the interpreter's nodes kernel makes the
+            # nodes of the window's bins only: the others are 0 from here on
             interpreter.arrays["evidence"].fill(0)
-            kernel = interpreter.kernels["interpret_nodes"]
-            interpreter.model_state = dict(
-                kernel=kernel, local_size=min(NODES_LOCAL_SIZE, interpreter.runtime.max_local_size(kernel)),
-                tables={name: cla.to_device(queue, np.ascontiguousarray(
-                    np.asarray(table, np.float32).reshape(n_bins, N_CLASSES * NODES).T))
-                    for name, table in (("opportunity", m.opportunity), ("ln_snr", m.ln_snr), ("snr_cap", snr_cap))})
             return tables
         first, last, n_bins = interpreter.first_bin, interpreter.last_bin, interpreter.n_bins
         unblocked = np.zeros((n_bins, N_CLASSES, NODES), np.int64), np.zeros((n_bins, N_CLASSES, NODES), np.int64)
@@ -100,19 +80,11 @@ class DetStats(EvidenceModel):
         return tables
 
     def after_kernel(self, interpreter, event, profiles):
-        state = interpreter.model_state
-        if state is None:                 # "detection" evidence: the beam's walk made the nodes
+        if interpreter.nodes is None:     # "detection" evidence: the beam's walk made the nodes
             return event
-        chunks = max(0, (interpreter.last_bin >> 3) - (interpreter.first_bin >> 3) + 1)   # eight bins meeting the window
-        n, ls, t = interpreter.n_beams * chunks, state["local_size"], interpreter._tables
-        if not n:
-            return event
-        return state["kernel"](interpreter.runtime.queue, (-(-n // ls) * ls,), (ls,), wait_for=[event],
-                               profiles=profiles, flags_out=interpreter.arrays["flags_out"], state=t["state"],
-                               ln_floors=t["ln_floors"], snr_table=t["snr_table"], **state["tables"],
-                               first_bin=interpreter.first_bin, last_bin=interpreter.last_bin,
-                               blocker_gap=t["blocker_gap"], snr_q=t["snr_q"], n_chunks=chunks,
-                               n_beams=interpreter.n_beams, evidence=interpreter.arrays["evidence"])
+        t = interpreter._tables
+        return interpreter.nodes.enqueue(profiles, interpreter.arrays["flags_out"], t["state"], t["ln_floors"],
+                                         interpreter.arrays["evidence"], wait_for=[event])
 
     def oracle(self, profiles, noise, mask, config, bin_spacing_m, bin_model=None, flags=None):
         from radarcl import oracle

@@ -16,6 +16,7 @@ from radarcl.config.stage_config import InterpretConfig
 from radarcl.errors import ConfigError
 from radarcl.sensor_model import N_CLASSES, NODE_SHAPE, NODES, BinModel
 from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_group_size
+from radarcl.stages.interpret_nodes import InterpretNodes
 
 # Beams per work-group. One work-item walks one beam; any size is correct.
 DEFAULT_LOCAL_SIZE = 16
@@ -50,9 +51,13 @@ class Interpreter(Stage):
     until a beam's first pulse and within ``EVIDENCE_UNITS_TOL`` after it (except, with "snr"
     evidence, a node whose float32 and float64 opportunity round to 0 on different sides of 1/2,
     where one has the evidence and the other 0; the seeded tests keep far from it).
+    With "snr" evidence the walk leaves the nodes to ``nodes``, an ``InterpretNodes``
+    (kernels/interpret_nodes.cl; ``nodes_options``: its keyword options, e.g. ``lanes``), which the
+    model launches after it; otherwise ``nodes`` is None.
     """
 
-    def __init__(self, runtime, batch, n_bins, bin_spacing_m, config=None, *, local_size=None, bin_model=None):
+    def __init__(self, runtime, batch, n_bins, bin_spacing_m, config=None, *, local_size=None, bin_model=None,
+                 nodes_options=None):
         self.runtime = runtime
         self.config = config if config is not None else InterpretConfig()
         if not isinstance(self.config, InterpretConfig):
@@ -77,7 +82,14 @@ class Interpreter(Stage):
         self.kernels = build(runtime, "interpret", dict(N_BINS=self.n_bins, MAX_PULSES=self.config.max_pulses,
                                                         NODES=NODES, **self.model.defines(self.bin_model)))
         self._kernel = self.kernels["interpret"]
-        self.model_state = None                      # what the model keeps for its work after the kernel
+        self.nodes = None
+        if self.node_pairs and bin_model.graded:    # "snr" evidence: the nodes are a second launch's
+            self.nodes = InterpretNodes(runtime, self.n_beams, self.n_bins, self.first_bin, self.last_bin, bin_model,
+                                        **(nodes_options or {}))
+        elif nodes_options:
+            raise ConfigError(f"nodes_options are for the detection-statistics model with 'snr' evidence; the "
+                              f"{self.model.summary} interpreter{' with detection evidence' if self.node_pairs else ''} "
+                              "has no node kernel")
         self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
         f32, u8, i32 = np.dtype(np.float32), np.dtype(np.uint8), np.dtype(np.int32)
         shape = self.input_shape

@@ -1,0 +1,55 @@
+/* What the beam walk (interpret.cl) and the "snr" evidence's nodes (interpret_nodes.cl) share:
+ * the node pairs' layout and the logs without builtins (PoCL may call its builtins out of line,
+ * each call spilling the vector registers; ARCHITECTURE.md). Included with -I <kernels dir>. */
+#ifndef INTERPRET_COMMON_H
+#define INTERPRET_COMMON_H
+
+#include "radarcl_common.h"
+
+#define NODE_WORDS 8                  /* int2 per bin: 2 classes x 4 segments (sensor_model.pack_nodes) */
+#define LN10 2.302585093f
+
+/* log10 of x >= 0 without a builtin call: the exponent, and ln of the mantissa in
+ * [sqrt(1/2), sqrt(2)) by the atanh series to t^9 (error < 1e-9); float32 rounding of the sum
+ * dominates, ~4e-6 decades at 1e38, 1e-7 near 1. Subnormals are scaled by 2^64 first;
+ * log10(0) = -inf as log10's. */
+static inline float log10_nb(float x)
+{
+    int bias = 0;
+    if (x < 1.17549435e-38f) {                  /* FLT_MIN */
+        if (x <= 0.0f)
+            return x == 0.0f ? -INFINITY : NAN;
+        x *= 18446744073709551616.0f;          /* 2^64 */
+        bias = -64;
+    }
+    const int i = as_int(x);
+    int e = ((i >> 23) & 255) - 127 + bias;
+    float m = as_float((i & 0x7FFFFF) | 0x3F800000);
+    if (m > 1.41421356f) {
+        m *= 0.5f;
+        e += 1;
+    }
+    const float t = (m - 1.0f) / (m + 1.0f), t2 = t * t;
+    const float ln_m = 2.0f * t * (1.0f + t2 * (1.0f / 3.0f + t2 * (0.2f + t2 * (1.0f / 7.0f + t2 * (1.0f / 9.0f)))));
+    return (float)e * 0.30102999566f + ln_m * 0.43429448190f;
+}
+
+/* log10_nb on eight values at once, lane for lane the same floats (the same operations, the
+ * branches as selects) */
+static inline float8 log10_nb8(float8 x)
+{
+    const int8 sub = x < 1.17549435e-38f;                       /* FLT_MIN; also 0 and below */
+    const float8 xs = sub ? x * 18446744073709551616.0f : x;     /* 2^64 */
+    const int8 i = as_int8(xs);
+    int8 e = ((i >> 23) & 255) - 127 + (sub & -64);
+    float8 m = as_float8((i & 0x7FFFFF) | 0x3F800000);
+    const int8 big = m > 1.41421356f;
+    m = big ? m * 0.5f : m;
+    e -= big;                                                    /* big is -1 */
+    const float8 t = (m - 1.0f) / (m + 1.0f), t2 = t * t;
+    const float8 ln_m = 2.0f * t * (1.0f + t2 * (1.0f / 3.0f + t2 * (0.2f + t2 * (1.0f / 7.0f + t2 * (1.0f / 9.0f)))));
+    const float8 y = convert_float8(e) * 0.30102999566f + ln_m * 0.43429448190f;
+    return x == 0.0f ? (float8)(-INFINITY) : (x < 0.0f ? (float8)(NAN) : y);
+}
+
+#endif

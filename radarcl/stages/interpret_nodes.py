@@ -1,0 +1,99 @@
+"""The "snr" evidence's node pairs, after the interpreter's beam walk (the detection-statistics model).
+
+``InterpretNodes`` wraps ``kernels/interpret_nodes.cl``. ``radarcl.stages.interpret.Interpreter``
+makes one for a bin model with "snr" evidence and ``radarcl.models.detstats`` launches it after
+the walk (``kernels/interpret.cl`` with GRADED), which leaves each bin's blocking and each beam's
+noise floor; the two launches together are equivalent to ``radarcl.oracle.interpret_detstats``:
+node values within ``EVIDENCE_UNITS_TOL`` of it (float32 logs, blocking and the table's bilinear
+read; tests/test_interpret_nodes.py).
+
+Only the classes of target the scene has are computed: a bin model whose terrain class has no
+opportunity at any bin (no ground plane: ``sensor_model.terrain_dz`` is -inf, and the fusion never
+reads that class) gets ``classes == 1``, and the terrain class's pairs stay the 0 they would be
+(a node without knowledge carries no evidence).
+"""
+
+import numpy as np
+
+from radarcl import logodds
+from radarcl.errors import ConfigError
+from radarcl.sensor_model import N_CLASSES, NODES, BinModel
+from radarcl.snr_evidence import GAP_CAP, SNR_U, SNR_V, detection_cap
+from radarcl.stages import build, work_group_size
+
+# Work-items per work-group: any size is correct; within any device's work-group limit.
+DEFAULT_LOCAL_SIZE = 64
+# Bins per work-item, each a vector lane; any choice computes the same floats lane for lane. On a
+# CPU 16 (two 256-bit registers' worth of independent work a work-item, or one 512-bit); elsewhere
+# 8, as a GPU's work-item holds its vectors in registers the other work-items share.
+LANE_CHOICES = (8, 16)
+DEFAULT_LANES = {"cpu": 16, "other": 8}
+
+
+def classes_needed(opportunity):
+    """1 where the terrain class has no node the kernel would compute (its float32 opportunity
+    rounds to 0 knowledge units at every bin and node: the kernel's own test), else 2."""
+    terrain = np.asarray(opportunity, np.float32)[:, 1]
+    return 2 if (terrain * np.float32(logodds.KNOWLEDGE_SCALE) > np.float32(0.5)).any() else 1
+
+
+class InterpretNodes:
+    """The node kernel for frames of ``n_beams`` beams of ``n_bins`` bins, window [first_bin,
+    last_bin] (the interpreter's), from ``bin_model`` (a ``sensor_model.BinModel`` with "snr"
+    evidence; its tables go to the device once). ``lanes``: bins per work-item (8 or 16; None:
+    ``DEFAULT_LANES`` for the device); ``local_size``: work-items per work-group."""
+
+    def __init__(self, runtime, n_beams, n_bins, first_bin, last_bin, bin_model, *, lanes=None, local_size=None):
+        if not isinstance(bin_model, BinModel) or not bin_model.graded:
+            got = "one with 'detection' evidence" if isinstance(bin_model, BinModel) else type(bin_model).__name__
+            raise ConfigError(f"the node kernel needs a sensor_model.BinModel with 'snr' evidence, got {got}")
+        shape = (n_bins, N_CLASSES, NODES)
+        if bin_model.opportunity.shape != shape or np.shape(bin_model.ln_snr) != shape:
+            raise ConfigError(f"the bin model's opportunity {bin_model.opportunity.shape} and ln_snr "
+                              f"{np.shape(bin_model.ln_snr)} must both be {shape} (bins, classes, nodes)")
+        lanes = DEFAULT_LANES["cpu" if runtime.is_cpu else "other"] if lanes is None else lanes
+        if lanes not in LANE_CHOICES:
+            raise ConfigError(f"lanes must be one of {LANE_CHOICES}, got {lanes!r}")
+        self.runtime = runtime
+        self.n_beams, self.n_bins, self.first_bin, self.last_bin = n_beams, n_bins, first_bin, last_bin
+        self.lanes = lanes
+        self.classes = classes_needed(bin_model.opportunity)
+        q = bin_model.snr_table.q
+        self.kernels = build(runtime, "interpret_nodes", dict(
+            N_BINS=n_bins, NODES=NODES, CLASSES=self.classes, LANES=lanes,
+            SNR_NU=SNR_U[2], SNR_NV=SNR_V[2], SNR_U0=float(SNR_U[0]), SNR_V0=float(SNR_V[0]),
+            SNR_U_SCALE=(SNR_U[2] - 1) / (SNR_U[1] - SNR_U[0]), SNR_V_SCALE=(SNR_V[2] - 1) / (SNR_V[1] - SNR_V[0]),
+            GAP_CAP=GAP_CAP))
+        self._kernel = self.kernels["interpret_nodes"]
+        self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
+        import pyopencl.array as cla
+
+        queue = runtime.queue
+        cap = detection_cap(bin_model.opportunity, q, bin_model.bounded)
+
+        def bins_last(table):
+            """(n_bins, classes, nodes) -> (classes, nodes, n_bins) float32: one vector load a node"""
+            return cla.to_device(queue, np.ascontiguousarray(np.asarray(table, np.float32).reshape(n_bins, -1).T))
+
+        self.tables = dict(opportunity=bins_last(bin_model.opportunity), ln_snr=bins_last(bin_model.ln_snr),
+                           snr_cap=bins_last(cap),
+                           snr_table=cla.to_device(queue, bin_model.snr_table.values.astype(np.float32)))
+        self.blocker_gap, self.snr_q = float(bin_model.blocker_gap), float(q)
+        # chunks of LANES bins that meet the window
+        self.n_chunks = max(0, last_bin // lanes - first_bin // lanes + 1) if first_bin <= last_bin else 0
+
+    def enqueue(self, profiles, flags, state, ln_floors, evidence, wait_for=None):
+        """Launch on the walk's device arrays: ``profiles`` (n_beams, n_bins) float32, its
+        ``flags`` (n_beams,) uint8, ``state`` (n_beams, 2, n_bins) float32 (each bin's blocking
+        and tau), ``ln_floors`` (n_beams,) float32; writes the node pairs of the window's bins
+        into ``evidence`` (n_beams, n_bins, 8) int2, whose other bins must hold 0. Returns the
+        kernel's event (a marker after ``wait_for`` where the window is empty)."""
+        n, ls = self.n_beams * self.n_chunks, self.local_size
+        if not n:
+            import pyopencl as cl
+
+            return cl.enqueue_marker(self.runtime.queue, wait_for=wait_for)
+        return self._kernel(self.runtime.queue, (-(-n // ls) * ls,), (ls,), wait_for=wait_for,
+                            profiles=profiles, flags_out=flags, state=state, ln_floors=ln_floors, **self.tables,
+                            first_bin=self.first_bin, last_bin=self.last_bin, blocker_gap=self.blocker_gap,
+                            snr_q=self.snr_q, n_chunks=self.n_chunks, n_beams=self.n_beams, evidence=evidence)

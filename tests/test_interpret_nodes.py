@@ -1,0 +1,213 @@
+"""kernels/interpret_nodes.cl <-> radarcl/stages/interpret_nodes.py: "snr" evidence's node pairs
+after the beam walk, against radarcl.oracle.interpret_detstats (the walk's own checks, the
+"detection" evidence and the noise floor are tests/test_interpret.py's)."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from test_interpret import SPACING, detstats_model
+from tolerances import EVIDENCE_UNITS_TOL
+
+from radarcl import logodds, oracle
+from radarcl import sensor_model as sm
+from radarcl.config.stage_config import CfarConfig, InterpretConfig
+from radarcl.errors import ConfigError
+from radarcl.pipeline import Detection
+from radarcl.stages.interpret import Interpreter
+from radarcl.stages.interpret_nodes import LANE_CHOICES, InterpretNodes, classes_needed
+
+CONFIG = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4, model="detstats")
+CFAR = CfarConfig(guard=16, train=8)
+
+
+def scene(seed=0, n_beams=12, n_bins=256):
+    """Exponential noise with pulses of every kind the nodes meet: a strong blocker with an echo
+    behind it, a weak partial blocker, a huge echo, a silent and a NaN beam."""
+    x = np.random.default_rng(seed).exponential(size=(n_beams, n_bins)).astype(np.float32)
+    x[0, 40:42] = 1e7
+    x[0, 120:122] = 1e4
+    x[1, 50:53] = 30.0
+    x[2, 60:63] = 1e30
+    x[3] = 0.0
+    x[4, 7] = np.nan
+    x[5, 100:116] = 1e3
+    return x
+
+
+def run(runtime, x, model, config=CONFIG, **nodes_options):
+    """(the interpreter's node values (e, d), the oracle's (e, d), the interpreter's nodes plan)"""
+    det = Detection(runtime, x.shape[:-1], x.shape[-1], SPACING, CFAR, config, bin_model=model)
+    if nodes_options:
+        det.interpreter = Interpreter(runtime, x.shape[:-1], x.shape[-1], SPACING, config, bin_model=model,
+                                      nodes_options=nodes_options)
+    got = det(x)
+    e, d = oracle.interpret_detstats(x, got.cfar.noise, got.cfar.mask, config, SPACING, model)[:2]
+    return sm.unpack_nodes(got.interpret.evidence), (e, d), det.interpreter.nodes
+
+
+@pytest.mark.parametrize("lanes", LANE_CHOICES)
+@pytest.mark.parametrize("local_size", [1, 7, 64])
+def test_lanes_and_local_sizes_give_the_same_nodes(runtime, lanes, local_size):
+    """Every bins-per-work-item choice and work-group size gives the same node pairs, bit for bit
+    (each lane computes one bin's scalar floats), within EVIDENCE_UNITS_TOL of the float64
+    oracle, with both classes computed where the scene has terrain."""
+    x = scene(seed=lanes + local_size)
+    model = detstats_model()
+    (ge, gd), (e, d), nodes = run(runtime, x, model, lanes=lanes, local_size=local_size)
+    assert (nodes.lanes, nodes.local_size, nodes.classes) == (lanes, local_size, 2)
+    assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
+    assert (gd[..., 1, :] > 0).any() and (gd[..., 0, :] > 0).any()
+    (ref_e, ref_d), _, _ = run(runtime, x, model, lanes=8, local_size=64)
+    assert np.array_equal(ge, ref_e) and np.array_equal(gd, ref_d)
+
+
+def test_a_scene_without_terrain_computes_the_upright_class_only(runtime):
+    """No ground plane (ground_below_m = 0, sensor_model.terrain_dz = -inf): the terrain class has
+    no opportunity at any bin, so the kernel computes one class, and the terrain class's nodes are
+    0 in the kernel and in the oracle alike (a node without knowledge carries no evidence); the
+    upright class's nodes are the oracle's within EVIDENCE_UNITS_TOL, and bit for bit those of a
+    model with terrain wherever the upright tables agree."""
+    flat = detstats_model(ground_below_m=0.0)
+    assert not flat.opportunity[:, 1].any() and classes_needed(flat.opportunity) == 1
+    x = scene(seed=3)
+    (ge, gd), (e, d), nodes = run(runtime, x, flat)
+    assert nodes.classes == 1
+    assert not ge[..., 1, :].any() and not gd[..., 1, :].any() and not e[..., 1, :].any() and not d[..., 1, :].any()
+    assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
+    assert (gd[..., 0, :] > 0).any() and (ge[..., 0, :] != 0).any()
+    # the same upright tables with a terrain class beside them: two classes, the same upright nodes
+    terrain = np.array(flat.opportunity)
+    terrain[:, 1] = 0.5
+    both = dataclasses.replace(flat, opportunity=terrain, miss=1.0 - terrain)
+    assert classes_needed(both.opportunity) == 2
+    (be, bd), _, plan = run(runtime, x, both)
+    assert plan.classes == 2 and (bd[..., 1, :] > 0).any()
+    assert np.array_equal(be[..., 0, :], ge[..., 0, :]) and np.array_equal(bd[..., 0, :], gd[..., 0, :])
+
+
+def test_a_terrain_class_below_half_a_knowledge_unit_is_not_computed():
+    """The class test is the kernel's own, in float32: an opportunity whose knowledge rounds to 0
+    (at most half a unit) everywhere is no class to compute; one bin above it is."""
+    half = np.float32(0.5) / np.float32(logodds.KNOWLEDGE_SCALE)
+    opportunity = np.zeros((64, sm.N_CLASSES, sm.NODES), np.float32)
+    opportunity[:, 0] = 1.0
+    opportunity[10:, 1] = half
+    assert classes_needed(opportunity) == 1
+    opportunity[40, 1, 3] = np.nextafter(half, np.float32(1.0))
+    assert classes_needed(opportunity) == 2
+
+
+def test_refuses_bad_input(runtime):
+    model = detstats_model(n_bins=64)
+    with pytest.raises(ConfigError, match=r"lanes must be one of \(8, 16\), got 12"):
+        InterpretNodes(runtime, 4, 64, 8, 60, model, lanes=12)
+    with pytest.raises(ConfigError, match="needs a sensor_model.BinModel with 'snr' evidence"):
+        InterpretNodes(runtime, 4, 64, 8, 60, detstats_model(n_bins=64, evidence="detection"))
+    with pytest.raises(ConfigError, match=r"must both be \(128, 2, 5\)"):
+        InterpretNodes(runtime, 4, 128, 8, 60, model)
+    with pytest.raises(ConfigError, match=r"local_size must be an integer in \[1, "):
+        InterpretNodes(runtime, 4, 64, 8, 60, model, local_size=0)
+    with pytest.raises(ConfigError, match="the detection statistics interpreter with detection evidence has no node"):
+        Interpreter(runtime, (4,), 64, SPACING, CONFIG, bin_model=detstats_model(n_bins=64, evidence="detection"),
+                    nodes_options=dict(lanes=8))
+
+
+@pytest.mark.parametrize("n_bins", [253, 264])
+def test_snr_nodes_of_any_bin_count_and_window(runtime, n_bins):
+    """"snr" evidence's nodes are computed eight bins at a time: a profile whose bins are not a
+    multiple of eight (the last chunk's lanes past the end), a window whose ends fall inside a
+    chunk, pulses and blocking across chunk edges, give the oracle's nodes within
+    EVIDENCE_UNITS_TOL, and 0 outside the window, on flagged beams and past the profile's end."""
+    from radarcl import sensor_model as sm
+
+    rng = np.random.default_rng(n_bins)
+    x = rng.exponential(size=(6, n_bins)).astype(np.float32)
+    x[0, 14:18] = 1e3                                # a pulse across the chunk edge at bin 16
+    x[1, n_bins - 12:n_bins - 9] = 40.0              # a weak pulse near the window's end
+    x[2, 30] = 1e30                                  # blocked behind it
+    x[3] = np.nan                                    # a bad beam: no evidence
+    cfg = InterpretConfig(range_min_m=1.1, range_max_m=(n_bins - 5) * SPACING, wide_pulse_m=2.0, max_pulses=4,
+                          model="detstats")
+    model = detstats_model(n_bins)
+    det = Detection(runtime, (6,), n_bins, SPACING, CfarConfig(guard=16, train=8), cfg, bin_model=model)
+    got = det(x)
+    e, d, pulses, n_pulses, flags = oracle.interpret_detstats(x, got.cfar.noise, got.cfar.mask, cfg, SPACING, model)
+    assert np.array_equal(got.interpret.pulses, pulses) and np.array_equal(got.interpret.flags, flags)
+    ge, gd = sm.unpack_nodes(got.interpret.evidence)
+    assert ge.shape == e.shape == (6, n_bins, 2, 5)
+    assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
+    first, last = cfg.bin_interval(SPACING, n_bins)
+    assert first % 8 and (last + 1) % 8 and last < n_bins - 1        # the window's ends inside chunks
+    assert not ge[:, :first].any() and not gd[:, last + 1:].any() and not ge[3].any() and not gd[3].any()
+    assert (gd[:, first] > 0).any() and (gd[:, last] > 0).any() and (ge[2, 30, 0] > 0).all()
+
+
+def test_a_gap_in_a_blocker_lets_the_echo_behind_it_count(runtime):
+    """sensor_model.blocker_gap: behind a strong echo, a second echo is evidence of occupancy and
+    knowledge with a gap (the mixture of the blocked and the unblocked target's likelihoods), and
+    none with hard blocking; the noise behind the blocker gives no knowledge either way. The
+    kernel matches its oracle in both."""
+    from radarcl import sensor_model as sm
+
+    x = np.random.default_rng(5).exponential(size=(2, 256)).astype(np.float32)
+    x[:, 40:42] = 1e7                             # the blocker: x ~ 1e7, far beyond the blocking unit
+    x[:, 120:122] = 1e4                           # an echo behind it
+    cfg = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4, model="detstats")
+    got = {}
+    for gap in (0.0, 0.01):
+        model = detstats_model(blocker_gap=gap)
+        det = Detection(runtime, (2,), 256, SPACING, CfarConfig(guard=16, train=8), cfg, bin_model=model)
+        out = det(x)
+        e, d = oracle.interpret_detstats(x, out.cfar.noise, out.cfar.mask, cfg, SPACING, model)[:2]
+        ge, gd = sm.unpack_nodes(out.interpret.evidence)
+        assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
+        assert out.interpret.n_pulses.tolist() == [2, 2]
+        got[gap] = ge[:, 120:122, 0], gd[:, 120:122, 0], gd[:, 60:110]
+    (e0, d0, n0), (e1, d1, n1) = got[0.0], got[0.01]
+    assert np.abs(e0).max() <= 1 and not d0.any()                  # hard blocking: nothing behind the blocker
+    assert (e1 > 2 * logodds.SCALE).all() and (d1 > 0).all()        # a gap: the echo counts, and is known
+    assert not n0.any() and not n1.any()                             # noise behind the blocker: still unknown
+
+
+def test_a_look_that_could_hardly_see_says_at_most_what_a_detection_would_either_way(runtime):
+    """A look says of an occupied voxel no more than a CFAR detection would at its opportunity
+    delta, ln(1 + delta (1 - q) / q) (snr_evidence.bounded): a 40 dB echo where the typical
+    target's opportunity is 0.02 gives that (about 0.89 nat), not the ln(1 / q) of the table it
+    gives where the look sees the voxel; a bin far under the noise no more either way (and where the
+    look sees, no more than -ln(1 / q) though the table says more). Kernel and oracle alike."""
+    from radarcl import sensor_model as sm
+    from radarcl.snr_evidence import detection_cap
+
+    base = detstats_model(ground_below_m=0.0)
+    at = 100
+    opportunity = np.array(base.opportunity)
+    ln_snr = np.array(base.ln_snr)
+    opportunity[at, 0] = [1.0, 0.02, 0.02, 0.02, 0.02]            # node 0: a look that sees; 1-4: hardly
+    ln_snr[at, 0] = math.log(1e4)                                   # a 40 dB target: the table says all it can
+    model = sm.BinModel(opportunity, 1.0 - opportunity, base.blocking, base.pfa, ln_snr, base.snr_table)
+    x = np.full((2, 256), math.log(2.0), np.float32)                # the floor: median / ln 2 = 1
+    x[0, at] = 1e4                                                  # 40 dB over the floor
+    x[1, at] = 1e-3                                                 # far under it
+    mask = np.zeros(x.shape, np.uint8)
+    cfg = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4, model="detstats")
+    out = Interpreter(runtime, (2,), 256, SPACING, cfg, bin_model=model)(x, np.ones_like(x), mask)
+    ge, gd = sm.unpack_nodes(out.evidence)
+    e, d = oracle.interpret_detstats(x, np.ones_like(x), mask, cfg, SPACING, model)[:2]
+    assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.array_equal(gd, d)
+    q = model.snr_table.q
+    most = detection_cap(0.02, q) * logodds.SCALE
+    assert 0.8 * logodds.SCALE < most < 0.9 * logodds.SCALE
+    assert abs(e[0, at, 0, 0] + math.log(q) * logodds.SCALE) <= EVIDENCE_UNITS_TOL     # sees: the table's ln(1 / q)
+    assert np.all(np.abs(e[0, at, 0, 1:] - most) <= EVIDENCE_UNITS_TOL)
+    assert model.snr_table(math.log(1e-3), math.log(1e4)) < -5.0                        # the table's free evidence
+    assert abs(e[1, at, 0, 0] - math.log(q) * logodds.SCALE) <= EVIDENCE_UNITS_TOL
+    assert np.all(np.abs(e[1, at, 0, 1:] + most) <= EVIDENCE_UNITS_TOL)
+    # sensor_model.evidence_bound = "none": the table's evidence as it is, in the kernel as in the oracle
+    free = dataclasses.replace(model, bounded=False)
+    ge = sm.unpack_nodes(Interpreter(runtime, (2,), 256, SPACING, cfg, bin_model=free)(x, np.ones_like(x), mask).evidence)[0]
+    e = oracle.interpret_detstats(x, np.ones_like(x), mask, cfg, SPACING, free)[0]
+    assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL
+    table = model.snr_table(np.log(x[:, at])[:, None], np.full((2, 5), math.log(1e4))) * logodds.SCALE
+    assert np.all(np.abs(e[:, at, 0] - np.rint(table)) <= EVIDENCE_UNITS_TOL)
