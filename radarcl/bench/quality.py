@@ -17,7 +17,7 @@ def add_arguments(parser):
                         help="voxel of the reference run [m] (default: %(default)s)")
     parser.add_argument("--voxels", type=positive_float, nargs="+", default=list(VOXELS),
                         help="voxel sizes swept [m], each scored on the reference voxel's set: as large or larger, "
-                             "or a finer one that divides it (default: 0.4 0.2 0.1)")
+                             "or a finer one that divides it (default: 0.8 0.4 0.2 0.1)")
     parser.add_argument("--paper", action="store_true", help="sweep around the paper's constants, not the tuned")
     parser.add_argument("--eq12-only", action="store_true",
                         help="sweep eq. 12's configurations only, not the default model's beside them")

@@ -3,7 +3,7 @@
 One recording of the paper's 3,840 observations (``config.presets.EVALUATION_SEED``) is mapped with the
 tuned configuration (``tuning.TUNED``) and with one setting changed at a time: zero padding
 (n_fft 256 = none, 512 = x2, 1024 = x4), the beam model (``geometry.BEAM_MODELS``), the voxel
-size (0.4, 0.2, 0.1 m) and the CFAR kind; beside them the default model (detection statistics,
+size (0.8, 0.4, 0.2, 0.1 m) and the CFAR kind; beside them the default model (detection statistics,
 ``sensor_model``) with its pipeline's knobs changed (``DEFAULT_MODEL_CHANGES``, the voxel, and the
 cheaper "detection" evidence stacked on each cheaper grid: ``budget_variants``), and its map read
 in other ways (``READINGS``: the look limit, and without the knowledge channel), which cost no run
@@ -13,10 +13,10 @@ beams reach at its voxel size (``evaluate.instrument``), with the visibility tru
 that set's voxels (``on_voxel_set``), so that the voxel trades against the rest on one front. Beside
 them, the three baselines of ``evaluation.baseline`` (prior_only, raw_intensity, octomap) on the same set.
 For each run, measured in this process: ``ms_per_frame`` (the device pipeline, planning
-included), the scores, and ``max_dev_nats``: the largest |kernel - float64 oracle| over the
-voxels that ``ORACLE_BEAMS`` of the middle frame reach, the oracle being ``radarcl.oracle`` end
-to end (range profile, CFAR, eq. 12, ``fusion_at_points``), voxels whose decisions lie within
-``FUSION_DECISION_MARGIN`` of a boundary left out (the default model's through
+included; the median of ``TIMING_PASSES``), the scores, and ``max_dev_nats``: the largest
+|kernel - float64 oracle| over the voxels that ``ORACLE_BEAMS`` of the middle frame reach, the
+oracle being ``radarcl.oracle`` end to end (range profile, CFAR, eq. 12, ``fusion_at_points``),
+voxels whose decisions lie within ``FUSION_DECISION_MARGIN`` of a boundary left out (the default model's through
 ``interpret_detstats`` and its node tables). Runs on a Pareto front (no other run both faster and
 higher in ``auc_detectable``; or faster and lower in ``ece_occupied``, the calibration of the
 occupied calls) are marked; ``report.quality`` prints the table and draws both against ms per
@@ -29,15 +29,18 @@ from radarcl import logodds, oracle
 from radarcl.cfar_theory import CFAR_KINDS
 from radarcl.config.keys import BUILTIN
 from radarcl.errors import ConfigError
-from radarcl.evaluation.evaluate import baselines, instrument, map_observations, radar_score, read_map
+from radarcl.evaluation.evaluate import baselines, fuse_timed, instrument, map_observations, radar_score, read_map
 from radarcl.geometry import BEAM_MODELS
 from radarcl.grid import EvidenceGrid
 from radarcl.pipeline import Mapping
 from radarcl.stages.fusion import Fusion
 
 ORACLE_BEAMS = (0, 85, 170, 255)
+# Each pipeline's run time is the median of this many passes, the later ones interleaved over every
+# run after all are scored: a front drawn from one timing each follows the load of a shared machine.
+TIMING_PASSES = 5
 DECISION_MARGIN = 1e-3           # as tests/tolerances.FUSION_DECISION_MARGIN
-VOXELS = (0.4, 0.2, 0.1)
+VOXELS = (0.8, 0.4, 0.2, 0.1)
 N_FFTS = (256, 512, 1024)
 
 
@@ -228,11 +231,12 @@ def pareto(runs, key="auc_detectable", higher=True):
     return flags
 
 
-def run(runtime, scene, obs, reference_config, voxels=VOXELS, report=None, default_config=None):
+def run(runtime, scene, obs, reference_config, voxels=VOXELS, report=None, default_config=None, passes=TIMING_PASSES):
     """Measure every variant of ``reference_config`` (and, given ``default_config``, of the
     default model's, with its ``readings``) on ``obs`` (simulated from ``scene``), each scored on
     the fixed voxel set of ``reference_config``'s voxel size (``evaluate.instrument``; other voxel
-    sizes read on it by ``on_voxel_set``), beside the three baselines. Returns the --json dict;
+    sizes read on it by ``on_voxel_set``), beside the three baselines; each pipeline's run time
+    the median of ``passes`` timings. Returns the --json dict;
     each run carries ``pareto`` (the front of AUC detectable against ms per frame) and
     ``pareto_ece`` (the front of the occupied calls' ECE, lower better)."""
     say = report or (lambda _: None)
@@ -240,7 +244,9 @@ def run(runtime, scene, obs, reference_config, voxels=VOXELS, report=None, defau
     say(f"truth and baselines at {reference_config['grid.voxel_m']} m ...")
     inst = instrument(runtime, scene, obs, reference_config)
     base, runs = baselines(runtime, inst, obs), []
-    for dim, config in variants(reference_config, voxels, default_config):
+    pipelines = variants(reference_config, voxels, default_config)
+    times = {id(c): [] for _, c in pipelines}
+    for dim, config in pipelines:
         model_base = default_config if dim.startswith("default model") else reference_config
         say(f"{dim}: {config.label(model_base)} ...")
         res = inst.reference_map if config is reference_config else map_observations(runtime, obs, config)
@@ -251,7 +257,8 @@ def run(runtime, scene, obs, reference_config, voxels=VOXELS, report=None, defau
             label = "default model: " + config.label()
         else:
             label = config.label(model_base)
-        common = dict(voxel_m=config["grid.voxel_m"], ms_per_frame=res.ms_per_frame, max_dev_nats=dev,
+        times[id(config)].append(res.ms_per_frame)
+        common = dict(voxel_m=config["grid.voxel_m"], pipeline=id(config), max_dev_nats=dev,
                       exact_fraction=exact, oracle_voxels=compared, memory_mib=res.memory["sparse_bytes"] / 2 ** 20,
                       model=config["interpret.model"])
         read = [(dim, label, config, True)]
@@ -265,9 +272,16 @@ def run(runtime, scene, obs, reference_config, voxels=VOXELS, report=None, defau
                              **common, **{k: m.get(k) for k in SCORE_KEYS}, objects=m["objects"],
                              reliability=m["reliability"]))
         del res
+    for k in range(1, passes):
+        say(f"timing pass {k + 1} of {passes} over the {len(pipelines)} pipelines ...")
+        for _, config in pipelines:
+            times[id(config)].append(fuse_timed(runtime, Mapping.from_config(runtime, config=config), obs))
+    for r in runs:
+        took = times[r.pop("pipeline")]
+        r.update(ms_per_frame=float(np.median(took)), ms_per_frame_passes=took)
     for r, front, calibrated in zip(runs, pareto(runs), pareto(runs, "ece_occupied", higher=False)):
         r["pareto"], r["pareto_ece"] = front, calibrated
-    return dict(benchmark="quality", device=runtime.name, frames=len(obs.samples),
+    return dict(benchmark="quality", device=runtime.name, frames=len(obs.samples), timing_passes=passes,
                 observations=int(np.prod(obs.samples.shape[:3])), seed=obs.seed,
                 reference_voxel_m=float(reference_config["grid.voxel_m"]), voxel_set=inst.describe(),
                 classes=inst.truth.counts(), hidden_objects=inst.hidden, runs=runs, baselines=base,

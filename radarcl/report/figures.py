@@ -288,7 +288,7 @@ def classes_figure(classes, spec, poses, title, pose_label="sensor path", what="
 
 # -- error against run time ------------------------------------------------------------------------------
 DIMENSION_MARKERS = {"reference": "*", "zero padding": "o", "beam model": "s", "voxel": "D", "cfar": "^",
-                     "evidence": "v", "blocker gap": "<", "look limit": ">", "knowledge": "p", "budget": "d"}
+                     "evidence": "v", "blocker gap": "<", "look limit": ">", "knowledge": "p", "budget": "8"}
 
 
 BASELINE_MARKERS = {"prior_only": ("P", "tab:gray"), "raw_intensity": ("h", "tab:olive"), "octomap": ("X", "crimson")}
@@ -388,7 +388,7 @@ def _number_points(ax, points, numbers=None, near_px=12):
     scale = ax.figure.dpi / 72.0                        # offsets are in points, the screen in pixels
     placed = [(p[0] - 7, p[1] - 7, p[0] + 7, p[1] + 7) for p in screen]          # the markers
     for g in groups:
-        text = ", ".join(str(k + 1 if numbers is None else numbers[k]) for k in g)
+        text = _runs_text([k + 1 if numbers is None else numbers[k] for k in g])
         w, h = 7.0 * len(text) * scale, 11.0 * scale
         x, y = screen[g[0]]
         for dx, dy in ((6, 4), (6, -14), (-8 - 7 * len(text), 4), (-8 - 7 * len(text), -14)):
@@ -399,6 +399,17 @@ def _number_points(ax, points, numbers=None, near_px=12):
             dx, dy = 6, 4
         placed.append(box)
         ax.annotate(text, points[g[0]], xytext=(dx, dy), textcoords="offset points", fontsize=10)
+
+
+def _runs_text(numbers):
+    """"1, 5" or, for three or more in a row, "12-16": a group's label kept short."""
+    spans = []
+    for n in numbers:
+        if spans and n == spans[-1][1] + 1:
+            spans[-1][1] = n
+        else:
+            spans.append([n, n])
+    return ", ".join(f"{a}-{b}" if b - a >= 2 else ", ".join(map(str, range(a, b + 1))) for a, b in spans)
 
 
 def reliability_figure(curves, subtitle="", what="visible voxels", outcome="occupied"):

@@ -24,6 +24,8 @@ def format_table(r):
             f"{'Brier':>6s} {'ECEocc':>6s} {'objects':>7s}")
     lines = [f"reference scene, {r['observations']} observations (seed {r['seed']}) on {r['device']}",
              r["voxel_set"], "every run is scored on it; a run at another voxel size is read on its voxels",
+             f"ms/frame: the median of {r.get('timing_passes', 1)} timings of each pipeline, the later ones "
+             "interleaved over all; a reading of the default map shares its run time",
              "* / + = on the Pareto front: no run both faster and higher in AUC detectable (*), "
              "or lower in the occupied calls' ECE (+)",
              f"   {'':22s} {'configuration':52s} {'voxel':>5s} {'ms/frame':>9s} {head} {'dev[nat]':>8s}"]
