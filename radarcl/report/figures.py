@@ -288,7 +288,7 @@ def classes_figure(classes, spec, poses, title, pose_label="sensor path", what="
 
 # -- error against run time ------------------------------------------------------------------------------
 DIMENSION_MARKERS = {"reference": "*", "zero padding": "o", "beam model": "s", "voxel": "D", "cfar": "^",
-                     "evidence": "v", "blocker gap": "<", "look limit": ">", "knowledge": "p", "budget": "8"}
+                     "evidence": "v", "blocker gap": "<", "look limit": ">", "knowledge": "p", "budget": "H"}
 
 
 BASELINE_MARKERS = {"prior_only": ("P", "tab:gray"), "raw_intensity": ("h", "tab:olive"), "octomap": ("X", "crimson")}
