@@ -398,7 +398,7 @@ def _number_points(ax, points, numbers=None, near_px=12):
         else:
             dx, dy = 6, 4
         placed.append(box)
-        ax.annotate(text, points[g[0]], xytext=(dx, dy), textcoords="offset points", fontsize=10)
+        ax.annotate(text, points[g[0]], xytext=(dx, dy), textcoords="offset points", fontsize=10, zorder=5)
 
 
 def _runs_text(numbers):
