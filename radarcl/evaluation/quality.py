@@ -236,9 +236,9 @@ def run(runtime, scene, obs, reference_config, voxels=VOXELS, report=None, defau
     default model's, with its ``readings``) on ``obs`` (simulated from ``scene``), each scored on
     the fixed voxel set of ``reference_config``'s voxel size (``evaluate.instrument``; other voxel
     sizes read on it by ``on_voxel_set``), beside the three baselines; each pipeline's run time
-    the median of ``passes`` timings. Returns the --json dict;
-    each run carries ``pareto`` (the front of AUC detectable against ms per frame) and
-    ``pareto_ece`` (the front of the occupied calls' ECE, lower better)."""
+    the median of ``passes`` timings. Returns the --json dict; each run carries ``pareto`` (the
+    front of AUC detectable against ms per frame) and ``pareto_ece`` (the front of the occupied
+    calls' ECE, lower better)."""
     say = report or (lambda _: None)
     check_voxels(reference_config["grid.voxel_m"], voxels)
     say(f"truth and baselines at {reference_config['grid.voxel_m']} m ...")
