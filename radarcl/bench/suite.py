@@ -211,9 +211,13 @@ def _quality_rows(r):
     """The runs on a Pareto front, each beside eq. 12's tuned reference of the same run."""
     ref = r["runs"][0]
     names = {"paper": "eq. 12", "detstats": "default model"}
+
+    def held(x, key):                   # of the timing passes alone, how many put it on this front
+        return f" in {x[key]} of {r['timing_passes']} passes" if key in x and r.get("timing_passes") else ""
     rows = []
     for x in r["runs"]:
-        fronts = [name for name, on in (("AUC", x["pareto"]), ("ECE occupied", x["pareto_ece"])) if on]
+        fronts = [f"{name}{held(x, k)}" for name, k, on in (("AUC", "pareto_passes", x["pareto"]),
+                                                            ("ECE occupied", "pareto_ece_passes", x["pareto_ece"])) if on]
         if fronts:
             label = x["label"] if x["label"].startswith(("reference", "default model")) else (
                 f"{names.get(x['model'], x['model'])}: {x['label']}")

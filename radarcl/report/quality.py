@@ -28,10 +28,11 @@ def format_table(r):
              "interleaved over all; a reading of the default map shares its run time",
              "* / + = on the Pareto front: no run both faster and higher in AUC detectable (*), "
              "or lower in the occupied calls' ECE (+)",
-             f"   {'':22s} {'configuration':52s} {'voxel':>5s} {'ms/frame':>9s} {head} {'dev[nat]':>8s}"]
+             "passes: of the timing passes alone, how many put the run on each front it is on",
+             f"   {'':22s} {'configuration':52s} {'voxel':>5s} {'ms/frame':>9s} {head} {'dev[nat]':>8s} passes"]
     for x in r["runs"]:
         lines.append(f"{_marks(x)} {x['dimension'][:22]:22s} {x['label'][:52]:52s} {x['voxel_m']:5.2f} "
-                     f"{x['ms_per_frame']:9.1f} {_cells(x)} {x['max_dev_nats']:8.3f}")
+                     f"{x['ms_per_frame']:9.1f} {_cells(x)} {x['max_dev_nats']:8.3f} {_held(x, r.get('timing_passes'))}")
     for name in BASELINES:
         x = r["baselines"][name]
         if "error" in x:
@@ -41,6 +42,9 @@ def format_table(r):
                          f"{_cells(x)}")
     if "default_model_on_front" in r:
         lines.append(f"the default model's configurations on a Pareto front: {r['default_model_on_front']}")
+    if "default_model_on_front_by_pass" in r:
+        lines.append("the same from each timing pass alone: "
+                     + ", ".join(str(n) for n in r["default_model_on_front_by_pass"]))
     return lines
 
 
@@ -48,12 +52,20 @@ def _marks(x):
     return ("*" if x["pareto"] else " ") + ("+" if x.get("pareto_ece") else " ")
 
 
+def _held(x, passes):
+    """"5/5, 3/5": of the timing passes alone, how many put the run on each front it is on (AUC, ECE)."""
+    if not passes or "pareto_passes" not in x:
+        return ""
+    return ", ".join(f"{x[k]}/{passes}" for k, on in (("pareto_passes", x["pareto"]),
+                                                     ("pareto_ece_passes", x["pareto_ece"])) if on)
+
+
 def sweep_table(r):
     """The sweep as a report table (``report.html``): one row per run and per baseline."""
     rows = []
     for k, x in enumerate(r["runs"], 1):
         rows.append([k, x["voxel_m"], x["label"], x["ms_per_frame"]] + [x.get(key) for key in TABLE_KEYS]
-                    + [f"{x['objects_found']}/{x['objects_total']}", _front_names(x)])
+                    + [f"{x['objects_found']}/{x['objects_total']}", _front_names(x, r.get("timing_passes"))])
     for name in BASELINES:
         x = r["baselines"][name]
         if "error" not in x:
@@ -64,8 +76,10 @@ def sweep_table(r):
                        "ECE occ.", "objects", "Pareto"], rows)
 
 
-def _front_names(x):
-    return ", ".join(name for name, on in (("AUC", x["pareto"]), ("ECE occ.", x.get("pareto_ece"))) if on)
+def _front_names(x, passes=None):
+    names = ", ".join(name for name, on in (("AUC", x["pareto"]), ("ECE occ.", x.get("pareto_ece"))) if on)
+    held = _held(x, passes)
+    return f"{names} ({held} passes)" if held else names
 
 
 def write_report(r, chart_path, page, reliability_path=None):
