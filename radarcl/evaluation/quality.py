@@ -5,7 +5,7 @@ tuned configuration (``tuning.TUNED``) and with one setting changed at a time: z
 (n_fft 256 = none, 512 = x2, 1024 = x4), the beam model (``geometry.BEAM_MODELS``), the voxel
 size (0.8, 0.4, 0.2, 0.1 m) and the CFAR kind; beside them the default model (detection statistics,
 ``sensor_model``) with its pipeline's knobs changed (``DEFAULT_MODEL_CHANGES``, the voxel, and the
-cheaper "detection" evidence stacked on each cheaper grid: ``budget_variants``), and its map read
+binary "detection" evidence stacked on each cheaper grid: ``budget_variants``), and its map read
 in other ways (``READINGS``: the look limit, and without the knowledge channel), which cost no run
 time of their own. Every run is scored on one fixed voxel set: what the reference configuration's
 beams reach at its voxel size (``evaluate.instrument``), with the visibility truth
@@ -75,7 +75,8 @@ def variants(reference_config, voxels=VOXELS, default_config=None):
 DEFAULT_MODEL_CHANGES = (("evidence", "sensor_model__evidence", ("snr", "detection")),
                          ("blocker gap", "sensor_model__blocker_gap", (0.0, 0.1)),
                          ("zero padding", "range_fft__n_fft", N_FFTS))
-# What a user on a budget stacks: the cheaper evidence with each cheaper grid of bins or voxels.
+# What a user on a budget stacks: the binary evidence (no likelihood of the measured power to
+# compute) with each cheaper grid of bins or voxels.
 BUDGET_EVIDENCE = "detection"
 # How the default model's map is read (``sensor_model.read_log_odds``): changed on the same map, so
 # at the same run time; and the map without its knowledge channel (``KNOWLEDGE_OFF``).
