@@ -154,6 +154,19 @@ def test_the_measured_figures_are_the_benches_json(site):
     assert "radarcl bench drive --scans 100 --baseline-scans 100" in text
 
 
+def test_the_configuration_page_s_front_is_the_quality_bench_s_json(site):
+    """docs/choosing-a-configuration.md shows `radarcl bench quality`'s front from its JSON: the
+    command, the load it recorded, each run on a front with its run time, and the count."""
+    source = (ROOT / "docs" / "choosing-a-configuration.md").read_text()
+    assert "<!-- figures: quality -->" in source
+    r = figures("quality")
+    text = " ".join(page_text(site, "choosing-a-configuration").split())
+    assert "radarcl bench quality" in text and f"load average {r['context']['load_before'][0]:.2f} before" in text
+    front = [x for x in r["runs"] if x["pareto"] or x["pareto_ece"]]
+    assert front and all(f"{x['label']} ({x['voxel_m']:g} m; front:" in text for x in front)
+    assert f"the default model's configurations on a Pareto front: {r['default_model_on_front']}" in text
+
+
 @pytest.mark.parametrize("fault, says", [
     (lambda folder: (folder / "store.json").unlink(), "docs/figures/store.json, which does not exist"),
     (lambda folder: (folder / "cfar.json").write_text('{"ms_per_frame": '), "cfar.json is not readable JSON"),

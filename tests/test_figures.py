@@ -57,7 +57,7 @@ def figures():
                             ms_per_frame=40.0, auc_detectable=0.55, ece_occupied=0.1, pareto=False, pareto_ece=True),
                        dict(run, label="look_limit=4", dimension="default model: look limit", model="detstats",
                             ms_per_frame=41.0, auc_detectable=0.5, ece_occupied=None, pareto=False)],
-                   baselines=base, by_voxel={"0.4": dict(voxel_set=voxel_set, baselines=base)})
+                   baselines=base)
     QUALITY.update(quality)
     return {  # built one at a time: a test draws only its own
         "fig9": lambda: plots.fig9_figure([r, r], [np.abs(np.sin(r)), np.abs(np.cos(r))], (7.2, 8.2), ["a", "b"]),

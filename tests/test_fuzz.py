@@ -373,6 +373,7 @@ def test_the_cli_answers_hostile_arguments_with_a_sentence(tmp_path, capsys):
         ["config", "save"], ["sensors", str(notes)], ["tune", "--replay", str(junk)],
         ["demo", "--replay", str(zero), "--out", str(tmp_path / "d")],
         ["bench", "quality", "--replay", str(junk), "--chart", str(tmp_path / "q.png")],
+        ["bench", "quality", "--voxels", "0.15", "--chart", str(tmp_path / "q.png")],
         ["bench", "fusion", "--repeat", "0"], ["bench", "range-fft", "--n-fft", "100"],
     ]
     for argv in argvs:

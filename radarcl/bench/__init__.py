@@ -25,9 +25,9 @@ BENCHES = {
     "fusion": (fusion, "one paper frame into the 0.1 m grid vs the float64 oracle and the memory floor, a spinning "
                        "radar's scan, eq. 12 beside the default model, same run"),
     "quality": (quality, "map error against run time on the reference scene: eq. 12's configurations (zero padding, "
-                         "beam model, voxel, CFAR kind) and the default model's (evidence, blocker gap, look limit, "
-                         "zero padding, voxel, knowledge channel) on the same fixed voxel sets, with three baselines "
-                         "and the Pareto fronts"),
+                         "beam model, voxel, CFAR kind) and the default model's (evidence, blocker gap, zero padding, "
+                         "voxel, the detection evidence stacked on each, look limit, knowledge channel) on one fixed "
+                         "voxel set, with three baselines and the Pareto fronts"),
     "heldout-scans": (heldout_scans, "real data without lidar: a map of the even Navtech scans predicts the CFAR "
                                      "detections of the odd ones, vs raw intensity"),
     "scenes": (scenes, "the maps of generated scenes (held-out or training split) scored on their visibility truth, "

@@ -54,17 +54,8 @@ def map_observations(runtime, obs, config, progress=None):
     computed afterwards."""
     mapping = Mapping.from_config(runtime, config=config)
     grid, spec, lattice, model = mapping.grid, mapping.grid.spec, mapping.fusion.lattice, mapping.fusion.model
-    n_frames, per_frame = len(obs.samples), lattice.n_beams
-    mapping.fuse(obs.samples[0], obs.poses[0])         # warm-up: kernel builds, first allocations
-    runtime.queue.finish()
-    grid.clear()
-    start = time.perf_counter()
-    for j in range(n_frames):
-        mapping.fuse(obs.samples[j], obs.poses[j])
-        if progress is not None:
-            progress((j + 1) * per_frame, n_frames * per_frame)
-    runtime.queue.finish()
-    ms_per_frame = (time.perf_counter() - start) * 1e3 / n_frames
+    n_frames = len(obs.samples)
+    ms_per_frame = fuse_timed(runtime, mapping, obs, progress)
 
     count = EvidenceGrid(runtime, spec)
     fusion = mapping.fusion
@@ -80,6 +71,22 @@ def map_observations(runtime, obs, config, progress=None):
     log_odds, knowledge = read_map(grid, config)
     return MapResult(config, spec, log_odds, count.snapshot() > 0, ms_per_frame, detections, grid.memory(), grid,
                      knowledge)
+
+
+def fuse_timed(runtime, mapping, obs, progress=None):
+    """Fuse every frame of ``obs`` into ``mapping``'s grid, cleared after a warm-up frame (kernel
+    builds, first allocations); returns the pipeline's ms per frame, until the device is idle."""
+    n_frames, per_frame = len(obs.samples), mapping.fusion.lattice.n_beams
+    mapping.fuse(obs.samples[0], obs.poses[0])
+    runtime.queue.finish()
+    mapping.grid.clear()
+    start = time.perf_counter()
+    for j in range(n_frames):
+        mapping.fuse(obs.samples[j], obs.poses[j])
+        if progress is not None:
+            progress((j + 1) * per_frame, n_frames * per_frame)
+    runtime.queue.finish()
+    return (time.perf_counter() - start) * 1e3 / n_frames
 
 
 def read_map(grid, config):

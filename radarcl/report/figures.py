@@ -288,7 +288,7 @@ def classes_figure(classes, spec, poses, title, pose_label="sensor path", what="
 
 # -- error against run time ------------------------------------------------------------------------------
 DIMENSION_MARKERS = {"reference": "*", "zero padding": "o", "beam model": "s", "voxel": "D", "cfar": "^",
-                     "evidence": "v", "blocker gap": "<", "look limit": ">", "knowledge": "p"}
+                     "evidence": "v", "blocker gap": "<", "look limit": ">", "knowledge": "p", "budget": "H"}
 
 
 BASELINE_MARKERS = {"prior_only": ("P", "tab:gray"), "raw_intensity": ("h", "tab:olive"), "octomap": ("X", "crimson")}
@@ -303,8 +303,8 @@ def quality_figure(r):
     free-visible) and the ECE of the occupied calls, on the reference voxel size's fixed set.
     Each run is a numbered marker, its colour the model (eq. 12, the default model), its shape
     the setting changed; the names are in the table beside, each panel's Pareto front a dashed
-    line, the baselines large markers. Runs at other voxel sizes are scored on their own voxel
-    sets, so they are drawn hollow."""
+    line, the baselines large markers. Every run is scored on the same fixed voxel set (a run at
+    another voxel size read on its voxels)."""
     plt = _pyplot()
     runs = r["runs"]
     import textwrap
@@ -327,12 +327,11 @@ def quality_figure(r):
         shown = [(k, x) for k, x in enumerate(runs, 1) if x.get(key) is not None]
         for k, x in shown:
             dim = x["dimension"].removeprefix("default model: ").removeprefix("default model")
-            same_set = ref_v is None or x["voxel_m"] == ref_v
             colour = MODEL_COLOURS.get(x.get("model"), "k")
             ax.scatter(x["ms_per_frame"], x[key], marker=DIMENSION_MARKERS.get(dim or "reference", "o"),
-                       s=160 if dim in ("reference", "") else 60, color=colour if same_set else "none",
-                       edgecolor="k" if same_set else colour, linewidth=1.6 if x.get(front_key) else 0.4, zorder=3)
-        front = sorted((x["ms_per_frame"], x[key]) for _, x in shown if x.get(front_key) and x["voxel_m"] == ref_v)
+                       s=160 if dim in ("reference", "") else 60, color=colour, edgecolor="k",
+                       linewidth=1.6 if x.get(front_key) else 0.4, zorder=3)
+        front = sorted((x["ms_per_frame"], x[key]) for _, x in shown if x.get(front_key))
         if front:
             ax.plot(*zip(*front), "k--", lw=1.2, label="Pareto front (thick edge)", zorder=2)
         for name, b in (r.get("baselines") or {}).items():
@@ -361,9 +360,6 @@ def quality_figure(r):
                for x in runs):
             handles.append(plt.Line2D([], [], marker=marker, ls="", color="w", markeredgecolor="k"))
             labels.append(dim)
-    if any(ref_v is not None and x["voxel_m"] != ref_v for x in runs):
-        handles.append(plt.Line2D([], [], marker="o", ls="", color="w", markeredgecolor="tab:gray"))
-        labels.append("hollow: scored on its own voxel set")
     table = fig.add_axes([0.64, 0.09, 0.35, 0.82])
     table.axis("off")
     text = table.text(0, 1, "run  setting changed from its model's reference\n" + "\n".join(rows), va="top",
@@ -392,7 +388,7 @@ def _number_points(ax, points, numbers=None, near_px=12):
     scale = ax.figure.dpi / 72.0                        # offsets are in points, the screen in pixels
     placed = [(p[0] - 7, p[1] - 7, p[0] + 7, p[1] + 7) for p in screen]          # the markers
     for g in groups:
-        text = ", ".join(str(k + 1 if numbers is None else numbers[k]) for k in g)
+        text = _runs_text([k + 1 if numbers is None else numbers[k] for k in g])
         w, h = 7.0 * len(text) * scale, 11.0 * scale
         x, y = screen[g[0]]
         for dx, dy in ((6, 4), (6, -14), (-8 - 7 * len(text), 4), (-8 - 7 * len(text), -14)):
@@ -402,7 +398,18 @@ def _number_points(ax, points, numbers=None, near_px=12):
         else:
             dx, dy = 6, 4
         placed.append(box)
-        ax.annotate(text, points[g[0]], xytext=(dx, dy), textcoords="offset points", fontsize=10)
+        ax.annotate(text, points[g[0]], xytext=(dx, dy), textcoords="offset points", fontsize=10, zorder=5)
+
+
+def _runs_text(numbers):
+    """"1, 5" or, for three or more in a row, "12-16": a group's label kept short."""
+    spans = []
+    for n in numbers:
+        if spans and n == spans[-1][1] + 1:
+            spans[-1][1] = n
+        else:
+            spans.append([n, n])
+    return ", ".join(f"{a}-{b}" if b - a >= 2 else ", ".join(map(str, range(a, b + 1))) for a, b in spans)
 
 
 def reliability_figure(curves, subtitle="", what="visible voxels", outcome="occupied"):

@@ -23,21 +23,28 @@ def format_table(r):
     head = (f"{'AUCdet':>6s} {'IoUdet':>6s} {'AUCobs':>6s} {'AUCwk':>6s} {'f-free':>6s} {'shd-unk':>6s} {'ECE':>6s} "
             f"{'Brier':>6s} {'ECEocc':>6s} {'objects':>7s}")
     lines = [f"reference scene, {r['observations']} observations (seed {r['seed']}) on {r['device']}",
-             "* / + = on the Pareto front within a voxel size: no run both faster and higher in AUC detectable (*), "
-             "or lower in the occupied calls' ECE (+)"]
-    for v, b in r["by_voxel"].items():
-        lines += [f"{b['voxel_set']}", f"   {'':22s} {'configuration':52s} {'ms/frame':>9s} {head} {'dev[nat]':>8s}"]
-        for x in (x for x in r["runs"] if str(x["voxel_m"]) == v):
-            lines.append(f"{_marks(x)} {x['dimension'][:22]:22s} {x['label'][:52]:52s} "
-                         f"{x['ms_per_frame']:9.1f} {_cells(x)} {x['max_dev_nats']:8.3f}")
-        for name in BASELINES:
-            x = b["baselines"][name]
-            if "error" in x:
-                lines.append(f"   {'baseline':22s} {name:52s} {x['error']}")
-            else:
-                lines.append(f"   {'baseline':22s} {name:52s} {x['ms_per_frame']:9.1f} {_cells(x)}")
+             r["voxel_set"], "every run is scored on it; a run at another voxel size is read on its voxels",
+             f"ms/frame: the median of {r.get('timing_passes', 1)} timings of each pipeline, the later ones "
+             "interleaved over all; a reading of the default map shares its run time",
+             "* / + = on the Pareto front: no run both faster and higher in AUC detectable (*), "
+             "or lower in the occupied calls' ECE (+)",
+             "passes: of the timing passes alone, how many put the run on each front it is on",
+             f"   {'':22s} {'configuration':52s} {'voxel':>5s} {'ms/frame':>9s} {head} {'dev[nat]':>8s} passes"]
+    for x in r["runs"]:
+        lines.append(f"{_marks(x)} {x['dimension'][:22]:22s} {x['label'][:52]:52s} {x['voxel_m']:5.2f} "
+                     f"{x['ms_per_frame']:9.1f} {_cells(x)} {x['max_dev_nats']:8.3f} {_held(x, r.get('timing_passes'))}")
+    for name in BASELINES:
+        x = r["baselines"][name]
+        if "error" in x:
+            lines.append(f"   {'baseline':22s} {name:52s} {x['error']}")
+        else:
+            lines.append(f"   {'baseline':22s} {name:52s} {r['reference_voxel_m']:5.2f} {x['ms_per_frame']:9.1f} "
+                         f"{_cells(x)}")
     if "default_model_on_front" in r:
         lines.append(f"the default model's configurations on a Pareto front: {r['default_model_on_front']}")
+    if "default_model_on_front_by_pass" in r:
+        lines.append("the same from each timing pass alone: "
+                     + ", ".join(str(n) for n in r["default_model_on_front_by_pass"]))
     return lines
 
 
@@ -45,25 +52,34 @@ def _marks(x):
     return ("*" if x["pareto"] else " ") + ("+" if x.get("pareto_ece") else " ")
 
 
+def _held(x, passes):
+    """"5/5, 3/5": of the timing passes alone, how many put the run on each front it is on (AUC, ECE)."""
+    if not passes or "pareto_passes" not in x:
+        return ""
+    return ", ".join(f"{x[k]}/{passes}" for k, on in (("pareto_passes", x["pareto"]),
+                                                     ("pareto_ece_passes", x["pareto_ece"])) if on)
+
+
 def sweep_table(r):
     """The sweep as a report table (``report.html``): one row per run and per baseline."""
     rows = []
     for k, x in enumerate(r["runs"], 1):
         rows.append([k, x["voxel_m"], x["label"], x["ms_per_frame"]] + [x.get(key) for key in TABLE_KEYS]
-                    + [f"{x['objects_found']}/{x['objects_total']}", _front_names(x)])
-    for v, b in r["by_voxel"].items():
-        for name in BASELINES:
-            x = b["baselines"][name]
-            if "error" not in x:
-                rows.append(["", float(v), f"baseline: {name}", x["ms_per_frame"]] + [x.get(key) for key in TABLE_KEYS]
-                            + [f"{x['objects_found']}/{x['objects_total']}", ""])
+                    + [f"{x['objects_found']}/{x['objects_total']}", _front_names(x, r.get("timing_passes"))])
+    for name in BASELINES:
+        x = r["baselines"][name]
+        if "error" not in x:
+            rows.append(["", r["reference_voxel_m"], f"baseline: {name}", x["ms_per_frame"]]
+                        + [x.get(key) for key in TABLE_KEYS] + [f"{x['objects_found']}/{x['objects_total']}", ""])
     return html.Table(["run", "voxel [m]", "configuration (what differs from its model's reference)", "ms/frame",
                        "AUC det", "AUC obst", "AUC weak", "false-free", "shadow unknown", "ECE", "Brier",
                        "ECE occ.", "objects", "Pareto"], rows)
 
 
-def _front_names(x):
-    return ", ".join(name for name, on in (("AUC", x["pareto"]), ("ECE occ.", x.get("pareto_ece"))) if on)
+def _front_names(x, passes=None):
+    names = ", ".join(name for name, on in (("AUC", x["pareto"]), ("ECE occ.", x.get("pareto_ece"))) if on)
+    held = _held(x, passes)
+    return f"{names} ({held} passes)" if held else names
 
 
 def write_report(r, chart_path, page, reliability_path=None):
@@ -77,11 +93,12 @@ def write_report(r, chart_path, page, reliability_path=None):
     html.write(page, "radarcl bench quality: error against run time", [
         ("Run", [html.Pairs({"device": r["device"], "observations": r["observations"], "seed": r["seed"],
                                "frames": r["frames"]})]),
-        ("Voxel sets", [html.Text(b["voxel_set"]) for b in r["by_voxel"].values()]),
+        ("Voxel set", [html.Text(r["voxel_set"])]),
         ("Runs", [sweep_table(r), html.Text(METRICS_TEXT)]),
         ("Charts", figures)],
-        "Each run changes one setting of its model's reference configuration (eq. 12's tuned one, or the default "
-        "model's); each is scored on the fixed voxel set of its voxel size, the same for both models.")
+        "Each run changes a setting of its model's reference configuration (eq. 12's tuned one, or the default "
+        "model's); all are scored on one fixed voxel set, the same for both models (a map of another voxel size "
+        "read on its voxels).")
 
 
 METRICS_TEXT = ("AUC/IoU det: detectable surface voxels (noiseless echo >= 10 dB over the noise) vs free-visible air; "
@@ -89,7 +106,9 @@ METRICS_TEXT = ("AUC/IoU det: detectable surface voxels (noiseless echo >= 10 dB
                 "voxels of any visibility with p < 0.35; shadow unknown: shadowed voxels within 0.2 nat of 0; ECE "
                 "(10 bins) and Brier on the visible voxels; ECE occupied: the same over the visible voxels the map knows "
                 "and calls occupied (p >= 0.5); objects: found within one voxel of their visible surface. "
-                "Knowledge channel off: the default map read without its unknown class.")
+                "Knowledge channel off: the default map read without its unknown class; a look limit: the default "
+                "map read with it (both at the default's run time). A coarser map is read at each voxel's centre, a "
+                "finer one by its most occupied voxel inside.")
 
 
 def chart(r, path, reliability_path=None):
