@@ -95,10 +95,12 @@ def test_scans_decoded_by_hand_are_pil_s_pixels(scans, tmp_path):
 
     stream = zlib.compress(b"".join(bytes([1]) + r.tobytes() for r in pixels))
     short = zlib.compress(b"".join(bytes([1]) + r.tobytes() for r in pixels[:5]))
+    peeked = zlib.compress(b"".join(bytes([1]) + r.tobytes() for r in pixels[:navtech.PEEK_ROWS]))
     long_ = zlib.compress(b"".join(bytes([1]) + r.tobytes() for r in np.vstack([pixels, pixels])))
     for damaged, said in ((stream[:-30], r"stop after 17\d\d bytes, before their stream's end; expected the 1806 "),
                           (stream[:-4], "stop after 1806 bytes, before their stream's end"),
                           (short, r"inflate to 1505 bytes, expected the 1806 bytes of 6 x 300 pixels\)$"),
+                          (peeked, f"inflate to {navtech.PEEK_ROWS * 301} bytes, expected the 1806"),
                           (long_, "inflate to more than the 1806 bytes"), (b"\x00" * 40, "do not inflate")):
         with pytest.raises(FrameFormatError, match=said):
             navtech.greyscale_pixels("x.png", _png(pixels, [1] * 6, damaged), 300, 6)

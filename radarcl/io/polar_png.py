@@ -39,6 +39,7 @@ from radarcl.io.polar_layout import PolarLayout, file_name_time_ns, scan_times_n
 from radarcl.io.trajectory import Trajectory
 
 MAX_PIXELS = 64 * 2 ** 20          # a scan larger than this is refused before decoding
+PEEK_ROWS = 4                      # rows inflated to see a PNG's filters before the rest (greyscale_pixels)
 
 
 @dataclass(frozen=True)
@@ -159,7 +160,12 @@ def greyscale_pixels(path, raw, width, height):
     expected = height * (width + 1)                     # a filter byte before each row
     inflate = isal_zlib.decompressobj()
     try:
-        out = inflate.decompress(b"".join(parts), expected + 1)     # bounded: a deflate bomb stops here
+        # the first rows first: a PNG whose writer chose other filters goes to PIL uninflated
+        out = inflate.decompress(b"".join(parts), min(PEEK_ROWS * (width + 1), expected))
+        if not set(out[::width + 1]) <= {0, 1}:
+            return None
+        if len(out) == min(PEEK_ROWS * (width + 1), expected):        # bounded: a deflate bomb stops here
+            out += inflate.decompress(inflate.unconsumed_tail, expected + 1 - len(out))
     except isal_zlib.error as exc:
         raise FrameFormatError(f"{path}: not a readable PNG (its image data do not inflate: {exc})") from exc
     size = f"the {expected} bytes of {height} x {width} pixels"
