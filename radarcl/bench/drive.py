@@ -141,7 +141,7 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
     to this range (default: the sensor's); ``read_ahead``: frames decoded ahead on a reader
     thread while the device fuses (0: decoded inline, one after the other); ``alternate``: blocks
     of this many frames read ahead and read inline in turn (``io.prefetch``'s ``overlap``), which
-    times the overlap and its parts under the same load (``alternating``). Returns its figures
+    times the overlap and its parts under the same load (``overlap_figures``). Returns its figures
     (a dict): with the seconds spent reading frames (``read_s``: decoding, converting, posing)
     and fusing them (``fuse_s``: from the frame in hand to its fusion finished on the device),
     each summed over the frames, and the map's digest (``map_digest``)."""
@@ -187,7 +187,7 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
     latencies, device_max, host_max, trajectory, bricks_max = [], 0, _rss_bytes(), [], 0
     read_s = fuse_s = 0.0
     overlap = None if alternate is None else (lambda j: (j // alternate) % 2 == 0)
-    times = dict(overlapped=[], read=[], fused=[])          # per frame, for ``alternating``
+    times = dict(overlapped=[], read=[], fused=[])          # per frame, for ``overlap_figures``
     stage = _stage_bytes(mapping)
     start = t2 = time.perf_counter()
     for j, (power, poses, flags, t0, took) in enumerate(prefetch.prefetched(read, n_frames, read_ahead, overlap)):

@@ -37,9 +37,9 @@ def prefetched(read, n, depth=DEFAULT_DEPTH, overlap=None):
     """Yield ``read(j)`` for j in 0 .. n-1, in order, read on a thread at most ``depth`` items
     ahead of the one the consumer holds (``depth`` 0: read inline, no thread). ``read``'s
     exception for item j is raised here when item j is due. ``overlap(j)`` False holds item j's
-    reading back until the consumer is done with the items before it (is back for the next one),
-    as if it were read inline: a bench times reading and consuming apart that way, in the same
-    run as the overlap."""
+    reading back until the consumer is back from item j - ``depth`` (with ``depth`` 1: done with
+    the item before it), as if it were read inline: a bench times reading and consuming apart
+    that way, in the same run as the overlap."""
     if depth <= 0:
         for j in range(n):
             yield read(j)
