@@ -49,6 +49,11 @@ def test_a_drive_reading_ahead_makes_the_inline_drive_s_map_bit_for_bit(shared_d
     inline = drive.run_drive(**common, window_m=WINDOW, store=tmp_path / "i.rcmap", read_ahead=0)
     assert ahead["bricks"] > 0 and ahead["map_digest"] == inline["map_digest"]
     assert drive.run_drive(**common, read_ahead=3)["map_digest"] == drive.run_drive(**common, read_ahead=0)["map_digest"]
-    figures = drive.overlap_figures(ahead, inline)
-    assert figures["same_map"] and figures["decode_alone_per_s"] > 0 and figures["fuse_alone_per_s"] > 0
     assert inline["read_s"] + inline["fuse_s"] <= inline["wall_s"]
+    timing = drive.run_drive(**common, window_m=WINDOW, store=tmp_path / "t.rcmap", alternate=3)
+    # frames 0-2 and 6-7 read ahead, 3-5 inline: 1 and 6 timed end to end (read beside the fuse before
+    # them, fused beside the next read; 0 and 7 have no neighbour), 3-5 read alone, 2-4 fused alone
+    assert (timing["overlapped_frames"], timing["read_frames"], timing["fused_frames"]) == (2, 3, 3)
+    figures = drive.overlap_figures(timing, ahead)
+    assert figures["same_map"] and figures["decode_alone_per_s"] > 0 and figures["fuse_alone_per_s"] > 0
+    assert figures["end_to_end_over_fuse_alone"] == timing["fused_median_s"] / timing["overlapped_median_s"]

@@ -44,6 +44,68 @@ def test_levels_are_decibels_of_integer_amplitudes(scans):
     assert navtech.levels_to_power(np.array([0, 10, 255]))[1] == np.float32(10.0)
 
 
+def _png(pixels, filters, compressed=None):
+    """A greyscale 8-bit PNG of ``pixels`` (h, w) uint8 with each row's filter byte taken from
+    ``filters`` (0 None, 1 Sub, 2 Up: the rows are filtered to match), its image data
+    ``compressed`` when given (a damaged stream), with valid chunk CRCs."""
+    import struct
+    import zlib
+
+    h, w = pixels.shape
+    rows = []
+    for i, f in enumerate(filters):
+        row = pixels[i].astype(np.int16)
+        before = {0: 0, 1: np.concatenate([[0], row[:-1]]), 2: pixels[i - 1].astype(np.int16) if i else 0}[f]
+        rows.append(bytes([f]) + ((row - before) % 256).astype(np.uint8).tobytes())
+    data = zlib.compress(b"".join(rows)) if compressed is None else compressed
+
+    def chunk(kind, body):
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    return (navtech.PNG_SIGNATURE + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
+            + chunk(b"IDAT", data[: len(data) // 2]) + chunk(b"IDAT", data[len(data) // 2:]) + chunk(b"IEND", b""))
+
+
+def test_scans_decoded_by_hand_are_pil_s_pixels(scans, tmp_path):
+    """The reader's own inflate and unfiltering (rows all "Sub", as Navtech writes them, or all
+    "None") gives PIL's pixels exactly; other filters are left to PIL, and a stream that inflates
+    short, long or not at all is refused with a sentence."""
+    import io
+
+    from PIL import Image
+
+    for path in scans:
+        raw = path.read_bytes()
+        w, h = navtech.verify_png(path, raw)
+        pixels = navtech.greyscale_pixels(path, raw, w, h)
+        assert pixels is not None and np.array_equal(pixels, np.asarray(Image.open(io.BytesIO(raw))))
+    rng = np.random.default_rng(5)
+    pixels = rng.integers(0, 256, (6, 300), dtype=np.uint8)
+    for filters, by_hand in (([1] * 6, True), ([0] * 6, True), ([1, 2, 1, 2, 1, 2], False), ([0, 1] * 3, False)):
+        raw = _png(pixels, filters)
+        got = navtech.greyscale_pixels("x.png", raw, 300, 6)
+        assert (got is not None) == by_hand and np.array_equal(np.asarray(Image.open(io.BytesIO(raw))), pixels)
+        if by_hand:
+            assert np.array_equal(got, pixels)
+        (tmp_path / "s.png").write_bytes(raw)
+        layout = navtech.PolarLayout(meta_columns=0, timestamp_column=-1, encoder_column=-1, valid_column=-1)
+        scan = navtech.load_scan(tmp_path / "s.png", layout)
+        assert np.array_equal(scan.levels, pixels[scan.acquired])
+    import zlib
+
+    stream = zlib.compress(b"".join(bytes([1]) + r.tobytes() for r in pixels))
+    short = zlib.compress(b"".join(bytes([1]) + r.tobytes() for r in pixels[:5]))
+    peeked = zlib.compress(b"".join(bytes([1]) + r.tobytes() for r in pixels[:navtech.PEEK_ROWS]))
+    long_ = zlib.compress(b"".join(bytes([1]) + r.tobytes() for r in np.vstack([pixels, pixels])))
+    for damaged, said in ((stream[:-30], r"stop after 17\d\d bytes, before their stream's end; expected the 1806 "),
+                          (stream[:-4], "stop after 1806 bytes, before their stream's end"),
+                          (short, r"inflate to 1505 bytes, expected the 1806 bytes of 6 x 300 pixels\)$"),
+                          (peeked, f"inflate to {navtech.PEEK_ROWS * 301} bytes, expected the 1806"),
+                          (long_, "inflate to more than the 1806 bytes"), (b"\x00" * 40, "do not inflate")):
+        with pytest.raises(FrameFormatError, match=said):
+            navtech.greyscale_pixels("x.png", _png(pixels, [1] * 6, damaged), 300, 6)
+
+
 def test_bad_files_are_refused(tmp_path):
     bad = tmp_path / "1.png"
     bad.write_bytes(b"not a png")

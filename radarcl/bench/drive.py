@@ -14,9 +14,11 @@ scans per second against the radar's 4 Hz (the real-time factor), the device's h
 too), the host's (the process's resident set, sampled every frame), the store's size, and the
 frame latency (from reading the PNG to the frame fused on the device, its wait for the device
 included) p50 and p99. The next
-scans are decoded on a reader thread while the device fuses (``io.prefetch``); the same drive
-read inline (decode, then fuse) times the two apart: decode-alone and fuse-alone rates beside
-the end-to-end one, and the two maps' digests (they must agree). The baseline,
+scans are decoded on a reader thread while the device fuses (``io.prefetch``). The same drive
+again, in blocks of frames read ahead and read inline (decode, then fuse) in turn, times the
+overlap and its two parts under the same load (the machine's other work comes and goes; two runs
+one after the other would compare two loads): end-to-end, decode-alone and fuse-alone rates
+(medians over frames), and its map's digest against the first run's (they must agree). The baseline,
 in the same run: today's unbounded grid on the same frames. Beside them: the memory of planar
 (8 x 8 x 1) and cubic (8^3) bricks for the same scans, and the same integers in both.
 """
@@ -39,6 +41,7 @@ from radarcl.io import polar_png, prefetch
 RADAR_HZ = 4.0                      # the CTS350-X turns at 4 Hz
 DEFAULT_VOXEL_M = 0.2
 MEMORY_SCANS = 22                   # scans of the planar / cubic memory comparison (twice the 11)
+ALTERNATE = 10                      # scans a block when reading ahead and reading inline take turns
 
 
 def _paths(data):
@@ -132,11 +135,13 @@ def _store_digest(store):
 
 
 def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None, brick_z=1, progress=True,
-              picture=None, first=0, range_m=None, read_ahead=prefetch.DEFAULT_DEPTH):
+              picture=None, first=0, range_m=None, read_ahead=prefetch.DEFAULT_DEPTH, alternate=None):
     """One drive of ``n_frames`` frames from frame ``first`` (in this process): rolling with
     ``window_m`` into the store ``store``, or unbounded (``window_m`` None); ``range_m``: map out
     to this range (default: the sensor's); ``read_ahead``: frames decoded ahead on a reader
-    thread while the device fuses (0: decoded inline, one after the other). Returns its figures
+    thread while the device fuses (0: decoded inline, one after the other); ``alternate``: blocks
+    of this many frames read ahead and read inline in turn (``io.prefetch``'s ``overlap``), which
+    times the overlap and its parts under the same load (``overlap_figures``). Returns its figures
     (a dict): with the seconds spent reading frames (``read_s``: decoding, converting, posing)
     and fusing them (``fuse_s``: from the frame in hand to its fusion finished on the device),
     each summed over the frames, and the map's digest (``map_digest``)."""
@@ -181,16 +186,25 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
 
     latencies, device_max, host_max, trajectory, bricks_max = [], 0, _rss_bytes(), [], 0
     read_s = fuse_s = 0.0
+    overlap = None if alternate is None else (lambda j: (j // alternate) % 2 == 0)
+    times = dict(overlapped=[], read=[], fused=[])          # per frame, for ``overlap_figures``
     stage = _stage_bytes(mapping)
-    start = time.perf_counter()
-    for j, (power, poses, flags, t0, took) in enumerate(prefetch.prefetched(read, n_frames, read_ahead)):
-        t1 = time.perf_counter()
+    start = t2 = time.perf_counter()
+    for j, (power, poses, flags, t0, took) in enumerate(prefetch.prefetched(read, n_frames, read_ahead, overlap)):
+        t1, before = time.perf_counter(), t2
         if rolling is not None:
             rolling.update(poses[n_az // 2, :3, 3])
         mapping.fuse(power, poses, flags=flags)
         runtime.queue.finish()
         t2 = time.perf_counter()
         read_s, fuse_s = read_s + took, fuse_s + (t2 - t1)
+        if overlap is not None:
+            if 0 < j < n_frames - 1 and overlap(j) and overlap(j + 1):   # read beside the last fuse, fused beside the next read
+                times["overlapped"].append(t2 - before)
+            if not overlap(j):
+                times["read"].append(took)                  # read with nothing beside it
+            if not overlap(j + 1):
+                times["fused"].append(t2 - t1)              # fused with nothing read beside it
         latencies.append(t2 - t0)             # from reading the PNG, waiting in the queue included
         trajectory.append(poses[n_az // 2].copy())               # a copy: a view would keep the frame's poses
         device_max = max(device_max, grid.memory()["device_bytes"] + stage)
@@ -209,6 +223,9 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
                   grid=f"{spec.shape[0]} x {spec.shape[1]} x {spec.shape[2]} at {spec.voxel_m:g} m",
                   device=runtime.name, brick_z=brick_z, device_bricks_max=bricks_max)
     result["realtime_factor"] = result["drive_s"] / wall_s
+    if overlap is not None:
+        result.update(alternate=alternate, **{f"{k}_frames": len(v) for k, v in times.items()},
+                      **{f"{k}_median_s": float(np.median(v)) if v else math.nan for k, v in times.items()})
     if rolling is not None:
         t0 = time.perf_counter()
         stored = rolling.finish(dict(poses=np.asarray(trajectory).reshape(-1, 16).tolist()))
@@ -323,10 +340,11 @@ def run(data, minutes=None, scans=None, voxel_m=DEFAULT_VOXEL_M, window_m=None, 
             f"voxels, window {window_m:g} m ...")
         rolling = in_process(data=data, n_frames=n, voxel_m=voxel_m, window_m=window_m, store=tmp / "drive.rcmap",
                              picture=picture)
-        say(f"the same drive read inline (decoding, then fusing, one frame after the other): decode-alone and "
-            f"fuse-alone rates ...")
-        inline = in_process(data=data, n_frames=n, voxel_m=voxel_m, window_m=window_m, store=tmp / "inline.rcmap",
-                            read_ahead=0)
+        block = max(1, min(ALTERNATE, n // 4))              # a short drive still has frames of each kind
+        say(f"the same drive, blocks of {block} scans read ahead and read inline (decoding, then fusing) in "
+            f"turn: end-to-end, decode-alone and fuse-alone times under the same load ...")
+        timing = in_process(data=data, n_frames=n, voxel_m=voxel_m, window_m=window_m, store=tmp / "timing.rcmap",
+                            alternate=block)
         nb = n if baseline_scans is None else min(n, int(baseline_scans))
         say(f"baseline: today's unbounded grid on the first {nb} of those scans ...")
         baseline = in_process(data=data, n_frames=nb, voxel_m=voxel_m)
@@ -336,26 +354,24 @@ def run(data, minutes=None, scans=None, voxel_m=DEFAULT_VOXEL_M, window_m=None, 
         shutil.rmtree(tmp, ignore_errors=True)
     result = dict(benchmark="drive", scans_repeat=True, frames=n, whole_drive_frames=len(stamps) - 1,
                   voxel_m=voxel_m, window_m=window_m, load_before=list(load), load_after=list(os.getloadavg()),
-                  rolling=rolling, inline=inline, baseline=baseline, baseline_prefix=nb < n, memory=memory,
-                  overlap=overlap_figures(rolling, inline))
+                  rolling=rolling, timing=timing, baseline=baseline, baseline_prefix=nb < n, memory=memory,
+                  overlap=overlap_figures(timing, rolling))
     for k in ("realtime_factor", "device_mib_max", "host_mib_max", "latency_p50_ms", "latency_p99_ms"):
         result[k] = rolling[k]
     return result
 
 
-def overlap_figures(overlapped, inline):
-    """The reader thread's worth, from two runs of the same drive: end-to-end scans/s with the
-    reader thread, decode-alone and fuse-alone scans/s (the inline run's reading and fusing
-    timed apart), the end-to-end rate over the fuse-alone one, the share of the overlapped run's
-    wall time its device spent fusing (its own end-to-end over fuse-alone, from one process), and
-    whether the maps agree."""
-    n = inline["frames"]
-    fuse_alone = n / inline["fuse_s"]
-    return dict(end_to_end_per_s=overlapped["scans_per_s"], inline_per_s=inline["scans_per_s"],
-                decode_alone_per_s=n / inline["read_s"], fuse_alone_per_s=fuse_alone,
-                end_to_end_over_fuse_alone=overlapped["scans_per_s"] / fuse_alone,
-                fusing_share=overlapped["fuse_s"] / overlapped["wall_s"],
-                same_map=overlapped["map_digest"] == inline["map_digest"])
+def overlap_figures(timing, overlapped):
+    """The reader thread's worth, from a drive read ahead and read inline in turn (``timing``:
+    ``run_drive`` with ``alternate``): end-to-end scans/s where reading overlaps fusing (the
+    median time between two frames fused), decode-alone and fuse-alone scans/s (the medians of
+    the inline frames' reading and fusing, timed apart), the end-to-end rate over the fuse-alone
+    one; and whether its map is the map of the drive read ahead throughout (``overlapped``)."""
+    return dict(end_to_end_per_s=1 / timing["overlapped_median_s"], decode_alone_per_s=1 / timing["read_median_s"],
+                fuse_alone_per_s=1 / timing["fused_median_s"],
+                end_to_end_over_fuse_alone=timing["fused_median_s"] / timing["overlapped_median_s"],
+                frames=(timing["overlapped_frames"], timing["read_frames"], timing["fused_frames"]),
+                same_map=overlapped["map_digest"] == timing["map_digest"])
 
 
 def format_table(r):
@@ -370,10 +386,10 @@ def format_table(r):
                      f"{x['device_mib_max']:7.1f} MiB, host {x['host_mib_max']:7.1f} MiB, frame latency p50 "
                      f"{x['latency_p50_ms']:6.0f} ms p99 {x['latency_p99_ms']:6.0f} ms, {x['bricks']} bricks")
     o = r["overlap"]
-    lines.append(f"  reading ahead on a thread: end-to-end {o['end_to_end_per_s']:.2f} scans/s = "
+    lines.append(f"  reading ahead on a thread (medians of {o['frames'][0]} frames read ahead, {o['frames'][1]} read and "
+                 f"{o['frames'][2]} fused alone, in turn): end-to-end {o['end_to_end_per_s']:.2f} scans/s = "
                  f"{o['end_to_end_over_fuse_alone']:.2f}x fuse-alone {o['fuse_alone_per_s']:.2f} scans/s; "
-                 f"decode-alone {o['decode_alone_per_s']:.2f} scans/s; read inline {o['inline_per_s']:.2f} scans/s; "
-                 f"fusing {o['fusing_share']:.0%} of the overlapped run's wall time; "
+                 f"decode-alone {o['decode_alone_per_s']:.2f} scans/s; "
                  f"maps {'bit-identical' if o['same_map'] else 'DIFFER'} with and without the reader thread")
     lines.append(f"  rolling store {ro['store_mib']:.1f} MiB ({ro['bricks']} bricks; {ro['evicted']} left the window, "
                  f"{ro['restored']} came back, {ro['restored_from_disk']} read from disk; finishing {ro['finish_s']:.2f} s)")

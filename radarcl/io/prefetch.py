@@ -33,10 +33,13 @@ class _Failed:
 _DONE = object()
 
 
-def prefetched(read, n, depth=DEFAULT_DEPTH):
+def prefetched(read, n, depth=DEFAULT_DEPTH, overlap=None):
     """Yield ``read(j)`` for j in 0 .. n-1, in order, read on a thread at most ``depth`` items
     ahead of the one the consumer holds (``depth`` 0: read inline, no thread). ``read``'s
-    exception for item j is raised here when item j is due."""
+    exception for item j is raised here when item j is due. ``overlap(j)`` False holds item j's
+    reading back until the consumer is back from item j - ``depth`` (with ``depth`` 1: done with
+    the item before it), as if it were read inline: a bench times reading and consuming apart
+    that way, in the same run as the overlap."""
     if depth <= 0:
         for j in range(n):
             yield read(j)
@@ -62,14 +65,18 @@ def prefetched(read, n, depth=DEFAULT_DEPTH):
     thread = threading.Thread(target=reader, name="radarcl-reader", daemon=True)
     thread.start()
     try:
-        while True:
+        for j in range(n + 1):
             item = items.get()
             if item is _DONE:
                 return
             if isinstance(item, _Failed):
                 raise item.exc
-            ahead.release()                      # the next read starts while the consumer works on this one
-            yield item
+            if overlap is None or overlap(j + depth):
+                ahead.release()                  # the next read starts while the consumer works on this one
+                yield item
+            else:
+                yield item
+                ahead.release()                  # the consumer is back: done with this one
     finally:
         stop.set()
         thread.join()
