@@ -58,7 +58,10 @@
  * Table rows are the gather's: row t = work-item t / BLOCK_ROWS, row t % BLOCK_ROWS of its block
  * (whatever ROWS the recording gather used: a unit's lanes are consecutive voxels of the table).
  * The first entries are dense (one per voxel, read as vectors: on a regular lattice almost every
- * voxel lies in one beam), the weight's sign bit set where more follow; the rest follow per row.
+ * voxel lies in one beam), the weight's sign bit set where more follow; the rest follow per row,
+ * lane after lane, and are read as vectors too, each lane's next entry at a time (a spinning
+ * radar's voxels mostly lie in two beams). Every entry is rounded on its own and the sums are
+ * integers, so the order the entries are added in does not change them.
  */
 #include "radarcl_common.h"
 
@@ -150,6 +153,19 @@ static inline int or_lanes(intV v)
 #endif
     return q.x | q.y;
 }
+/* lane l of the result: the sum of v's lanes before l (a scan by shifted adds, no builtin) */
+static inline intV exclusive_prefix(intV v)
+{
+#if VEC == 8
+    intV s = v + (int8)(0, v.s0, v.s1, v.s2, v.s3, v.s4, v.s5, v.s6);
+    s += (int8)(0, 0, s.s0, s.s1, s.s2, s.s3, s.s4, s.s5);
+    s += (int8)(0, 0, 0, 0, s.s0, s.s1, s.s2, s.s3);
+#else
+    intV s = v + (int4)(0, v.s0, v.s1, v.s2);
+    s += (int4)(0, 0, s.s0, s.s1);
+#endif
+    return s - v;
+}
 #if LN == 16
 static inline int or_unit(int16 v)
 {
@@ -176,12 +192,13 @@ static inline int or_unit(int16 v)
 #define ROW_Z ((float16)0)
 #endif
 /* bit r set where lane r of an int16 mask is true */
-#ifdef DETSTATS
-/* one 8-byte node pair per lane: its evidence half into pe, its opportunity half into pk */
+/* one int2 per lane (a node pair, a table entry): its first half into pe, its second into pk */
 #define G2_(pe, pk, p, at, l) { const int2 q_ = p[at.s##l]; pe.s##l = q_.x; pk.s##l = q_.y; }
 #define G2_4(pe, pk, p, at) G2_(pe, pk, p, at, 0) G2_(pe, pk, p, at, 1) G2_(pe, pk, p, at, 2) G2_(pe, pk, p, at, 3)
 #define G2_8(pe, pk, p, at) G2_4(pe, pk, p, at) G2_(pe, pk, p, at, 4) G2_(pe, pk, p, at, 5) G2_(pe, pk, p, at, 6) \
     G2_(pe, pk, p, at, 7)
+#define GATHER_ENTRIES(ei, ew, p, at) CAT(G2_, VEC)(ei, ew, p, at)     /* still-table entries of a row's lanes */
+#ifdef DETSTATS
 /* the same as 64-bit loads, split after: the node pairs of a unit's lanes in one long vector (PoCL
  * then gathers whole vectors instead of inserting 2 LN lanes one by one), split into their even
  * and odd 32-bit words (two permutes, where narrowing each half was six instructions) */
@@ -558,44 +575,34 @@ __kernel void fusion_cached(
         const floatV product = convert_floatV(GATHER(evidence, index)) * as_floatV(bits & 0x7FFFFFFF);
         intV sum = RINT_INTV(product);
 #endif
-        if (or_lanes(bits) < 0) {              /* the few voxels several beams reach */
+        if (or_lanes(bits) < 0) {              /* voxels several beams reach */
+            /* their further entries, one per lane at a time, as vectors: lane l's m-th extra is at
+             * row_start + (the extras of lanes before l) + m; a spinning radar's voxels mostly
+             * lie in two beams, so this is the common path there, not the exception */
             const size_t t = (size_t)id * BLOCK_ROWS + row;
-            int extra[VEC];
+            const intV more = CAT(convert_int, VEC)(vload_ucharV(0, counts + t * VEC)) - 1;
+            const intV n_extra = more & ~(more >> 31);                    /* max(count - 1, 0) */
+            const intV start = row_start[t] + exclusive_prefix(n_extra);
+            for (int m = 0; or_lanes((intV)m - n_extra) < 0; ++m) {       /* some lane has an m-th */
+                const intV live = (intV)m < n_extra;
+                const intV ex = (start + m) & live;                       /* extras[0] exists: masked lanes read it */
+                intV ei, ew;
+                GATHER_ENTRIES(ei, ew, extras, ex);
 #ifdef DETSTATS
-            int kextra[VEC], nextra[VEC];
-#endif
-            int at = row_start[t];
-            for (int lane = 0; lane < VEC; ++lane) {
-                int add = 0;
-#ifdef DETSTATS
-                int kadd = 0, nadd = 0;
-#endif
-                const int n = counts[t * VEC + lane];
-                for (int m = 1; m < n; ++m, ++at) {
-                    const int2 entry = extras[at];
-#ifdef DETSTATS
-                    const int qe = (entry.y & 0xFFFF) - 1;
-                    const int2 node = nodes[(entry.x * CLASSES + ((entry.y >> 16) & 1)) * SEGMENTS + (qe >> 12)];
-                    add += NODE_LERP(node.x, qe & 4095);
-                    const int kn = NODE_LERP(node.y, qe & 4095);
-                    kadd += kn;
-                    nadd += kn > 0;
+                const intV qe = (ew & 0xFFFF) - 1;
+                const intV ate = ((ei * CLASSES + ((ew >> 16) & 1)) * SEGMENTS + ((qe >> 12) & (SEGMENTS - 1))) & live;
+                intV xe, xk;
+                GATHER_NODES_V(xe, xk, nodes, ate);
+                sum += NODE_LERP(xe, qe & 4095) & live;
+                const intV kn = NODE_LERP(xk, qe & 4095) & live;
+                ksum += kn;
+                nsum -= kn > 0;                                       /* true is -1 */
 #else
-                    const float p = (float)evidence[entry.x] * as_float(entry.y);
-                    add += as_int(p + 12582912.0f) - 0x4B400000;    /* rint, half to even, as RINT_INTV */
-#endif
-                }
-                extra[lane] = add;
-#ifdef DETSTATS
-                kextra[lane] = kadd;
-                nextra[lane] = nadd;
+                const intV ie = ei & live;
+                const floatV p = convert_floatV(GATHER(evidence, ie)) * as_floatV(ew);
+                sum += RINT_INTV(p) & live;
 #endif
             }
-            sum += vloadV(0, extra);
-#ifdef DETSTATS
-            ksum += vloadV(0, kextra);
-            nsum += vloadV(0, nextra);
-#endif
         }
 #ifdef DETSTATS
         if (or_lanes(ksum)) {

@@ -15,7 +15,8 @@ import pytest
 from radarcl.config.stage_config import RadarConfig
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
 from radarcl.gridspec import BRICK, GridSpec
-from radarcl.stages.fusion_plan import BLOCK, FusionPlanner, HeadFrame, brick_geometry, candidate_windows
+from radarcl.stages.fusion_plan import (BLOCK, COLUMN_TILE, FusionPlanner, HeadFrame, brick_geometry, candidate_windows,
+                                        column_tiles)
 
 RADAR = RadarConfig()
 WINDOWS_DIFFERING_MAX = 0.02     # share of bricks whose device window is wider (by one index) than float64's
@@ -117,6 +118,39 @@ def test_a_device_plan_lists_the_hosts_bricks(runtime):
     holds = (w[:, 0] <= mine[:, 0]) & (w[:, 1] >= mine[:, 1]) & (w[:, 2] <= mine[:, 2]) & (w[:, 3] >= mine[:, 3])
     assert holds[held].all()
     assert (np.abs(w - mine)[held] <= 1).all()
+
+
+def test_planar_bricks_are_listed_by_tiles_of_columns(runtime):
+    """A planar grid's plan (a spinning radar's, its pool in several chunks): the same bricks and
+    windows as in pool order, each chunk's bricks one run (a launch each), within a chunk each
+    tile of COLUMN_TILE x COLUMN_TILE columns one run, and within a tile pool order."""
+    from radarcl.grid import EvidenceGrid
+    from radarcl.stages.fusion import Fusion
+
+    lattice, model = BeamLattice.spinning(90, az0_rad=0.01), BeamModel.from_radar(RADAR)
+    spec = GridSpec((-12.0, -12.0, -1.2), 0.1, (240, 240, 24), brick_z=1)
+    grid = EvidenceGrid(runtime, spec, chunk_bricks=4096)
+    fusion = Fusion(runtime, grid, lattice, model, 512, 0.05, 4, 400)
+    plan_poses = pose_from_xyz_rpy(0.3, -0.2, 0.0, yaw=0.2)[None]
+    plan = fusion.plan(plan_poses[0])
+    b = plan.bricks.astype(np.int64)
+    chunk = b[:, 3] // grid.chunk_bricks
+    assert len(np.unique(chunk)) > 2, "the plan must span several chunks"
+    tile = (chunk * 1000 + b[:, 1] // COLUMN_TILE) * 1000 + b[:, 0] // COLUMN_TILE
+    runs = np.concatenate([[True], np.diff(tile) != 0])
+    assert len(np.unique(tile)) == runs.sum(), "each tile's bricks are one run"
+    assert (np.diff(chunk) >= 0).all()
+    same_tile = ~runs[1:]
+    assert (np.diff(b[:, 3])[same_tile] > 0).all(), "pool order within a tile"
+    assert (np.diff(b[:, 3]) < 0).any(), "tiles reorder the pool's layers"
+    pooled = np.argsort(b[:, 3])
+    assert np.array_equal(plan.bricks[pooled][column_tiles(plan.bricks[pooled], grid.chunk_bricks)], plan.bricks)
+    # each brick kept its own window: it holds the float64 window of that brick
+    want = fusion._windows(plan.bricks[:, :3], BRICK, fusion.head_frame(plan_poses))
+    held = (want[:, 0] <= want[:, 1]) & (want[:, 2] <= want[:, 3])
+    w = plan.windows.astype(np.int64)
+    assert held.sum() > 0.9 * len(held)
+    assert ((w[:, 0] <= want[:, 0]) & (w[:, 1] >= want[:, 1]) & (w[:, 2] <= want[:, 2]) & (w[:, 3] >= want[:, 3]))[held].all()
 
 
 # -- conservativeness at the paper's scale, against a brute-force sweep of the beams ----------------

@@ -10,7 +10,8 @@ A frame is a gather over the bricks its beams can reach. Planning lists those br
 allocates them in the grid) with a conservative bound in the frame's head frame (the middle
 beam's pose) that also gives each brick its window of candidate beams (``fusion_plan``:
 ``candidate_windows``, computed on the device by ``FusionPlanner``, its float32 twin), and
-lists them in the pool's order (the kernel's reads and writes then stream). The kernel narrows the window per 8x4x4 block
+lists them in the pool's order (the kernel's reads and writes then stream; planar bricks by tiles
+of columns, ``column_tiles``, so a spinning radar's node pairs are read from cache). The kernel narrows the window per 8x4x4 block
 (a bounding-sphere test) and per row of 8 voxels, and takes ``rows`` rows as one vector.
 
 The plans of the last ``PLAN_CACHE`` poses are kept. When a pose comes back (a radar on a
@@ -32,7 +33,7 @@ from radarcl.gridspec import BRICK
 from radarcl.sensor_model import NODE_SHAPE, unpack_nodes
 from radarcl.stages import Port, Stage, build, count, spacing, work_group_size
 from radarcl.stages.fusion_plan import (BLOCK, FramePlan, FusionPlanner, HeadFrame, StillTable, brick_geometry,
-                                        candidate_windows, nonempty, pool_order, take_rows)
+                                        candidate_windows, column_tiles, nonempty, pool_order, take_rows)
 
 # A work-item per block of rows of 8 voxels (as float8), its beams' windows planned on the
 # host per brick: the shape that measured fastest of those tried (docs/measured-figures.md, "Why the code is
@@ -183,6 +184,11 @@ class Fusion(Stage):
         listed = np.empty((len(slots), 4), np.int32)
         self.grid.brick_coords(index[order], out=listed)
         listed[:, 3] = slots[order]
+        if self.brick_z == 1:
+            # planar bricks by tiles of columns (column_tiles): the same integers, the node
+            # pairs' reads mostly cached
+            tiles = column_tiles(listed, self.grid.chunk_bricks)
+            listed, order = listed[tiles], order[tiles]
         plan = FramePlan(np.ascontiguousarray(beams, np.float32), listed, take_rows(windows, keep[order]),
                          self, self.grid.generation)
         if cache:

@@ -27,6 +27,7 @@ DEVICE_REACH_M = 1e-3
 BLOCK_BITS = 2
 BLOCK = 1 << BLOCK_BITS     # bricks per block edge: the coarse pass's unit
 PVEC_CPU = 8                # bricks per work-item on a CPU, one per SIMD lane
+COLUMN_TILE = 4             # brick columns per tile edge of a planar grid's listing (column_tiles)
 LOCAL_SIZE = 64             # work-items per group where the compiled kernel allows it (any size works:
                             # the kernel returns past the last brick)
 
@@ -259,6 +260,24 @@ def pool_order(slots, n_slots):
     position = np.full(n_slots, -1, np.int32)
     position[slots] = np.arange(len(slots), dtype=np.int32)
     return position[position >= 0]
+
+
+def column_tiles(listed, chunk_bricks, tile=COLUMN_TILE):
+    """An order of ``listed`` ((n, 4) int32 bx, by, bz, slot, in pool order) that keeps each pool
+    chunk's bricks a run and, within a chunk, takes tiles of ``tile`` x ``tile`` brick columns
+    one after the other, each tile's bricks in their listed (pool) order. Pool order visits a
+    whole layer of planar bricks before the next, so a spinning radar's tall beams read every
+    bin's node pairs once per layer, out of cache each time; by tiles, the layers of a tile
+    read the same few node pairs while they are cached, and each layer's bricks of a tile stay
+    a few pages of the pool."""
+    listed = np.asarray(listed)
+    if not len(listed):
+        return np.arange(0, dtype=np.intp)
+    tx = listed[:, 0].astype(np.int64) // tile
+    ty = listed[:, 1].astype(np.int64) // tile
+    chunk = listed[:, 3].astype(np.int64) // chunk_bricks
+    key = (chunk * (int(ty.max()) + 1) + ty) * (int(tx.max()) + 1) + tx
+    return np.argsort(key, kind="stable")
 
 
 def take_rows(a, order):
