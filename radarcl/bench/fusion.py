@@ -266,13 +266,13 @@ def _spinning_pipelines(runtime, spec):
     from radarcl.config import mapconfig
 
     rng = np.random.default_rng(3)
-    out = {}
+    out, scan = {}, None
     for model in ("paper", "detstats"):
         config = mapconfig.resolve("navtech-cts350x", flags={"interpret.model": model, "grid.voxel_m": spec.voxel_m,
                                                              "grid.origin_m": list(spec.origin_m),
                                                              "grid.size_m": [n * spec.voxel_m for n in spec.shape]})
         mapping = Mapping.from_config(runtime, config=config)
-        if model == "paper":
+        if scan is None:                           # one scan for both models
             scan = rng.exponential(size=mapping.frame_shape).astype(np.float32)
             spacing = config.sensor.bin_spacing_m()
             for r in np.arange(10.0, 80.0, 40.0):
