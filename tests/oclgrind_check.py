@@ -18,7 +18,7 @@ pytest as a plugin (``-p oclgrind_check``), this module
 
 - fails each test during which Oclgrind reported anything, with the reports as its failure, and
   hands the counts to ``run_pytest``;
-- keeps radarcl's device check to its small probe kernel: ``runtime.DEVICE_CHECKS`` is emptied
+- keeps radarcl's device check to its small probe kernel: ``devices.DEVICE_CHECKS`` is emptied
   and ``radarcl.self_test.register`` made a no-op before the suite's conftest registers the
   check and chooses the device, as ``test_device_check`` does. The full check
   runs every built-in sensor's pipeline against the float64 oracle; under the simulator that
@@ -204,10 +204,10 @@ def pytest_load_initial_conftests(early_config, parser, args):
 
     import radarcl.grid
     import radarcl.self_test
-    from radarcl.cl import runtime
+    from radarcl.cl import devices
 
     radarcl.self_test.register = lambda: None        # the suite's conftest registers the full check: not here
-    runtime.DEVICE_CHECKS.clear()
+    devices.DEVICE_CHECKS.clear()
     radarcl.grid.CHUNK_BYTES = CHUNK_BYTES
     asked = pyopencl.characterize.nv_compute_capability
 
