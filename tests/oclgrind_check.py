@@ -79,8 +79,8 @@ RESULTS_ENV = "RADARCL_OCLGRIND_RESULTS"       # where the plugin writes its cou
 # launches other tests of the file make too.
 SMALL = {
     "fusion": "not (test_one_update_per_beam_per_voxel"                     # a 4 M-voxel grid
-              " or test_the_table_is_recorded_when_a_pose_comes_back"       # the plan cache
               " or test_detstats_sums_do_not_depend_on_the_order_of_frames)",
+    "fusion_cached": "not test_the_table_is_recorded_when_a_pose_comes_back",  # the plan cache
     "fusion_plan": "not test_the_plans_lose_no_voxel_at_the_papers_scale",  # 112 M voxels
 }
 
