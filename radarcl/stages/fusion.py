@@ -32,8 +32,7 @@ from radarcl.geometry import BeamLattice, BeamModel, check_poses
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import BRICK
 from radarcl.sensor_model import NODE_SHAPE, unpack_nodes
-from radarcl.stages import Port, Stage, build, count, spacing, work_group_size
-from radarcl.stages import fusion_cached
+from radarcl.stages import Port, Stage, build, count, fusion_cached, spacing, work_group_size
 from radarcl.stages.fusion_plan import (BLOCK, FramePlan, FusionPlanner, HeadFrame, brick_geometry, candidate_windows,
                                         column_tiles, nonempty, pool_order, take_rows)
 
