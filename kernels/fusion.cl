@@ -8,8 +8,7 @@
  * A gather: each voxel is owned by one work-item, which tests each candidate beam once, sums
  * its updates in registers and writes the sum once. So each voxel gets at most one update per
  * beam, no atomics are needed, and the integer grid does not depend on any ordering.
- *   get_global_id(0) = listed brick * SUBS + sub-brick, a VEC x SUB_Y x SUB_Z block of the brick
- *   (VEC x 4 x 4 of an 8^3 brick; VEC x 8 x 1 of an 8 x 8 x 1 brick, BRICK_Z 1);
+ *   get_global_id(0) = listed brick * SUBS + sub-brick, a block of the brick (fusion_common.h);
  *   the work-item walks its BLOCK_ROWS rows of VEC voxels along x, ROWS rows at a time as the lanes of
  *   one vector (a unit: LN = VEC x ROWS voxels; ROWS = 2 fills AVX-512's 16 lanes with rows
  *   y, y + 1, which are contiguous in the brick). Any local size is correct.
@@ -23,84 +22,20 @@
  *     along z: 8, or 1 for a planar sensor's bricks; default 8); NEAR_FIELD (cylinder of the antenna's cross-section),
  *     GAUSSIAN (two-way weight), PER_BEAM_POSES (each beam measures range from its own origin),
  *     AZ_WRAP (the azimuths span a full turn, windows may run past either end),
- *     RECORD (1 or 2: instead of fusing, record what each voxel takes, for fusion_cached below;
- *     1 counts each voxel's beams into counts[], 2 writes each voxel's first (beam * N_BINS +
- *     bin, weight) into first[] and the rest into extras[] from row_start[], the host's prefix
- *     sums of the counts beyond the first);
- *     DETSTATS (the detection-statistics model, radarcl.sensor_model): a bin's update is not
- *     e x weight(rho2) but a function of rho2 the interpreter tabulated at NODES rho2 = 0, 1/4,
- *     ..., 1 (the CFAR's P_d falls non-linearly with the voxel's two-way gain), for each of two
- *     classes of target (0 upright, 1 terrain: a voxel whose centre lies below its beam's origin by
- *     more than -terrain_dz, i.e. z - origin z < terrain_dz, near the ground plane). nodes[] holds
- *     per (beam, bin, class, segment s) the int2 (e_s | e_{s+1} << 16, d_s | d_{s+1} << 16) of the evidence
- *     e [logodds units] and the detection opportunity d [KNOWLEDGE_SCALE units] at the segment's
- *     two ends, one 8-byte gather per voxel. rho2 is quantised to q = floor(min(rho2 x 2^14, 2^14 - 1))
- *     (a float32 multiply by a power of two, then truncation; the cap puts rho2 = 1 at the end of
- *     the last segment, and a NaN of an empty beam width there too: every q indexes a node pair),
- *     the segment is q >> 12 and the interpolation integer: e_s + ((e_{s+1} - e_s) (q & 4095) + 2048)
- *     >> 12, so the gather and
- *     the still table give the same integers whatever the compiler contracts. The evidence goes
- *     to pool[], the opportunity to knowledge[] (the knowledge channel: "never observed" apart
- *     from "observed, undecided"), and looks[] counts the updates whose opportunity is not 0 (the
- *     reading counts correlated looks once: sensor_model.read_log_odds), except where the evidence
- *     sum sat at its limit before the frame and the frame does not pull it back (STUCK). The still table keeps
- *     q + 1 (never 0, whose bits mean "no beam") as an integer in place of the weight, and the
- *     class in bit 16. PACKED_LOOKS (DETSTATS, set by the host when a frame's knowledge of one voxel,
+ *     RECORD (1 or 2: instead of fusing, record the still table that fusion_cached.cl streams
+ *     (its layout: fusion_common.h); 1 counts each voxel's beams into counts[], 2 writes each
+ *     voxel's first entry into first[] and the rest into extras[] from row_start[]);
+ *     DETSTATS (the detection-statistics model: each voxel interpolates its bin's node pairs at
+ *     its quantised rho2 and class, fusion_common.h, and writes the knowledge and looks channels
+ *     beside the evidence). PACKED_LOOKS (DETSTATS, set by the host when a frame's knowledge of one voxel,
  *     n_beams x KNOWLEDGE_SCALE, stays below 2^PACKED_LOOKS and its looks below 2^(31 - PACKED_LOOKS)):
  *     the gather keeps knowledge and looks in one accumulator (sum + count << PACKED_LOOKS), one
  *     register per unit fewer of the 32 AVX-512 holds. NO_INT64 (a device without 64-bit integers,
  *     optional in the embedded profile): DETSTATS gathers a node pair as an int2 per lane, not
  *     as lanes of one ulong vector.
- *
- * fusion_cached: a still radar's frame from the recorded table: each voxel sums
- * rint(evidence[entry] * weight) over its entries, the same integers the gather gives (the
- * weights are the gather's own float32 values), streaming the table instead of testing beams.
- * Table rows are the gather's: row t = work-item t / BLOCK_ROWS, row t % BLOCK_ROWS of its block
- * (whatever ROWS the recording gather used: a unit's lanes are consecutive voxels of the table).
- * The first entries are dense (one per voxel, read as vectors: on a regular lattice almost every
- * voxel lies in one beam), the weight's sign bit set where more follow; the rest follow per row,
- * lane after lane, and are read as vectors too, each lane's next entry at a time (a spinning
- * radar's voxels mostly lie in two beams). Every entry is rounded on its own and the sums are
- * integers, so the order the entries are added in does not change them.
  */
-#include "radarcl_common.h"
+#include "fusion_common.h"
 
-#ifndef BRICK_Z
-#define BRICK_Z 8
-#endif
-#if BRICK_Z == 8
-#define SUB_Y 4                               /* a work-item's block along y and z */
-#define SUB_Z 4
-#define SUBS ((8 / VEC) * 4)                  /* sub-bricks per brick */
-#define CORNER(sub) ((int3)(((sub) >> 2) * VEC, ((sub) & 1) * SUB_Y, (((sub) >> 1) & 1) * SUB_Z))
-#elif BRICK_Z == 1
-#define SUB_Y 8
-#define SUB_Z 1
-#define SUBS (8 / VEC)
-#define CORNER(sub) ((int3)((sub) * VEC, 0, 0))
-#else
-#error "BRICK_Z must be 8 or 1"
-#endif
-#define BLOCK_ROWS (SUB_Y * SUB_Z)            /* rows of VEC voxels per work-item: 16 or 8 */
-#define BRICK_CELLS (64 * BRICK_Z)            /* voxels per brick */
-#define ROW_DY(r) ((r) % SUB_Y)               /* row r of a block: y offset, z offset */
-#define ROW_DZ(r) ((r) / SUB_Y)
-#define CAT_(a, b) a##b
-#define CAT(a, b) CAT_(a, b)
-#define floatV CAT(float, VEC)
-#define intV CAT(int, VEC)
-#define convert_floatV CAT(convert_float, VEC)
-#define vloadV CAT(vload, VEC)
-#define vstoreV CAT(vstore, VEC)
-#if VEC == 4
-#define VEC2 8
-#define GATHER(p, j) ((int4)(p[j.s0], p[j.s1], p[j.s2], p[j.s3]))
-#elif VEC == 8
-#define VEC2 16
-#define GATHER(p, j) ((int8)(p[j.s0], p[j.s1], p[j.s2], p[j.s3], p[j.s4], p[j.s5], p[j.s6], p[j.s7]))
-#else
-#error "VEC must be 4 or 8"
-#endif
 #ifndef ROWS
 #define ROWS 1
 #endif
@@ -133,39 +68,12 @@
 #define vstoreL CAT(vstore, LN)
 #define as_intL CAT(as_int, LN)
 #define as_floatL CAT(as_float, LN)
-#define as_intV CAT(as_int, VEC)
-#define as_floatV CAT(as_float, VEC)
 /* Builtin-free forms for the hot loop (PoCL may call builtins out of line; see weight_nb):
  * component-wise max / min / select by the ternary, round half to even by the 1.5 x 2^23 trick
  * (exact for |x| < 2^22, far beyond any evidence update) */
 #define MAXF(a, b) ((a) > (b) ? (a) : (b))
 #define MINF(a, b) ((a) < (b) ? (a) : (b))
-#define RINT_INTV(x) (as_intV((x) + 12582912.0f) - 0x4B400000)
 #define RINT_INTL(x) (as_intL((x) + 12582912.0f) - 0x4B400000)
-/* the OR of an intV's or intL's lanes (any lane nonzero; any sign bit set), without any() */
-static inline int or_lanes(intV v)
-{
-#if VEC == 8
-    const int4 h = v.lo | v.hi;
-    const int2 q = h.lo | h.hi;
-#else
-    const int2 q = v.lo | v.hi;
-#endif
-    return q.x | q.y;
-}
-/* lane l of the result: the sum of v's lanes before l (a scan by shifted adds, no builtin) */
-static inline intV exclusive_prefix(intV v)
-{
-#if VEC == 8
-    intV s = v + (int8)(0, v.s0, v.s1, v.s2, v.s3, v.s4, v.s5, v.s6);
-    s += (int8)(0, 0, s.s0, s.s1, s.s2, s.s3, s.s4, s.s5);
-    s += (int8)(0, 0, 0, 0, s.s0, s.s1, s.s2, s.s3);
-#else
-    intV s = v + (int4)(0, v.s0, v.s1, v.s2);
-    s += (int4)(0, 0, s.s0, s.s1);
-#endif
-    return s - v;
-}
 #if LN == 16
 static inline int or_unit(int16 v)
 {
@@ -175,9 +83,6 @@ static inline int or_unit(int16 v)
 #define or_unit or_lanes
 #endif
 #define vstore_ucharL CAT(vstore, LN)
-#define vload_ucharV CAT(vload, VEC)
-#define intV2 CAT(int, VEC2)
-#define vloadV2 CAT(vload, VEC2)
 #define convert_ucharL_sat CAT(CAT(convert_uchar, LN), _sat)
 #define LAST CAT(s, CAT(VEC, _LAST))
 #define s4_LAST s3
@@ -191,15 +96,8 @@ static inline int or_unit(int16 v)
 #define ROW_Y ((float16)(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7))
 #define ROW_Z ((float16)0)
 #endif
-/* bit r set where lane r of an int16 mask is true */
-/* one int2 per lane (a node pair, a table entry): its first half into pe, its second into pk */
-#define G2_(pe, pk, p, at, l) { const int2 q_ = p[at.s##l]; pe.s##l = q_.x; pk.s##l = q_.y; }
-#define G2_4(pe, pk, p, at) G2_(pe, pk, p, at, 0) G2_(pe, pk, p, at, 1) G2_(pe, pk, p, at, 2) G2_(pe, pk, p, at, 3)
-#define G2_8(pe, pk, p, at) G2_4(pe, pk, p, at) G2_(pe, pk, p, at, 4) G2_(pe, pk, p, at, 5) G2_(pe, pk, p, at, 6) \
-    G2_(pe, pk, p, at, 7)
-#define GATHER_ENTRIES(ei, ew, p, at) CAT(G2_, VEC)(ei, ew, p, at)     /* still-table entries of a row's lanes */
 #ifdef DETSTATS
-/* the same as 64-bit loads, split after: the node pairs of a unit's lanes in one long vector (PoCL
+/* node pairs as 64-bit loads, split after (G2_ is the same per int2): the node pairs of a unit's lanes in one long vector (PoCL
  * then gathers whole vectors instead of inserting 2 LN lanes one by one), split into their even
  * and odd 32-bit words (two permutes, where narrowing each half was six instructions) */
 #define GL_(p, at, l) p[at.s##l]
@@ -225,20 +123,8 @@ static inline int or_unit(int16 v)
 #define GATHER_NODES(pe, pk, p, at) { const ulongL g_ = (ulongL)(CAT(GL_, LN)(((const __global ulong *)(p)), at)); \
     SPLIT_NODES(pe, pk, g_) }
 #endif
-#define GATHER_NODES_V(pe, pk, p, at) CAT(G2_, VEC)(pe, pk, p, at)
-#define SEGMENTS 4                            /* node segments over rho2 in [0, 1] */
-#define CLASSES 2                             /* target classes: upright, terrain */
-/* lanes (-1) of a voxel whose evidence sum e0 sat at a limit before this frame and whose frame's
- * sum a does not pull it back: its looks are not counted (sensor_model.read_log_odds) */
-#define STUCK(e0, a) ((((e0) >= GRID_LIMIT) & ((a) >= 0)) | (((e0) <= -GRID_LIMIT) & ((a) <= 0)))
-#define Q_ONE 16384.0f                        /* rho2 = 1 in quantisation steps (2^14; 2^12 per segment) */
-#define Q_MAX (Q_ONE - 1.0f)                  /* the last step: q stays in the last segment */
-/* the interpolated value between the signed 16-bit halves of x at the fraction f / 4096 */
-#define NODE_LERP(x, f) ((((x) << 16) >> 16) + (((((x) >> 16) - (((x) << 16) >> 16)) * (f) + 2048) >> 12))
-#if !defined(KNOWLEDGE_SCALE)
-#error "KNOWLEDGE_SCALE comes from radarcl.stages.COMMON_DEFINES"
 #endif
-#endif
+/* bit r set where lane r of an int16 mask is true */
 #define ROW_BITS(m) ((uint)(as_uint(m.s0) & 1u) | (as_uint(m.s1) & 2u) | (as_uint(m.s2) & 4u) | (as_uint(m.s3) & 8u) \
     | (as_uint(m.s4) & 16u) | (as_uint(m.s5) & 32u) | (as_uint(m.s6) & 64u) | (as_uint(m.s7) & 128u) \
     | (as_uint(m.s8) & 256u) | (as_uint(m.s9) & 512u) | (as_uint(m.sa) & 1024u) | (as_uint(m.sb) & 2048u) \
@@ -282,7 +168,7 @@ __kernel void fusion(
     __global int2 *first,             // RECORD 2: out, per voxel its first (beam * N_BINS + bin,
                                       //   as_int(weight)); (0, 0) where no beam reaches
     __global int2 *extras,            // RECORD 2: out, the voxels' further entries, row by row
-    const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (header)
+    const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (fusion_common.h)
     const float terrain_dz,           // DETSTATS: voxels with z - beam origin z below this are terrain [m]
     __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity [KNOWLEDGE_SCALE units]
     __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity [count]
@@ -430,7 +316,7 @@ __kernel void fusion(
   #if defined(DETSTATS)
                 const intL q = convert_intL(MINF(num / den * Q_ONE, Q_MAX));    /* as the gather's */
                 const int cls = qz < terrain_dz;
-                const floatL wt = as_floatL((q + 1) | (cls << 16));             /* see the header */
+                const floatL wt = as_floatL((q + 1) | (cls << 16));             /* the table entry: fusion_common.h */
   #elif defined(GAUSSIAN)
                 const floatL wt = weight_nb(num / den);
   #else
@@ -521,106 +407,6 @@ __kernel void fusion(
             __global int *cell = cells + (ROW_DZ(r0) * 8 + ROW_DY(r0)) * 8;
             const intL v = vloadL(0, cell) + acc[u];
             vstoreL(v > (intL)GRID_LIMIT ? (intL)GRID_LIMIT : (v < (intL)-GRID_LIMIT ? (intL)-GRID_LIMIT : v), 0, cell);
-        }
-    }
-}
-
-
-__kernel void fusion_cached(
-    const __global int *evidence,     // (n_beams, N_BINS) eq. 12 updates [logodds units]
-    const __global int4 *bricks,      // (n_listed,) bx, by, bz, slot: the recorded plan's
-    const __global uchar *counts,     // (n_items * BLOCK_ROWS * VEC,) entries per voxel (RECORD 1)
-    const __global int *row_start,    // (n_items * BLOCK_ROWS,) first extra entry of each table row
-    const __global int2 *first,       // (n_items * BLOCK_ROWS * VEC,) each voxel's first entry (RECORD 2)
-    const __global int2 *extras,      // the further entries (RECORD 2)
-    const int n_items,                // the gather's work-items: listed bricks x SUBS
-    const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (the class
-                                      //   of each entry is in its record)
-    __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity
-    __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity
-    __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
-{
-    const int id = get_global_id(0);
-    if (id >= n_items)
-        return;
-    const int4 brick = bricks[id / SUBS];
-    const int sub = id % SUBS;
-    const int3 corner = CORNER(sub);
-    __global int *cells = pool + brick.w * BRICK_CELLS + (corner.z * 8 + corner.y) * 8 + corner.x;
-#ifdef DETSTATS
-    __global int *kcells = knowledge + brick.w * BRICK_CELLS + (corner.z * 8 + corner.y) * 8 + corner.x;
-#endif
-    const __global int *dense = (const __global int *)first + (size_t)id * BLOCK_ROWS * VEC * 2;
-    for (int row = 0; row < BLOCK_ROWS; ++row) {
-        const intV2 pairs = vloadV2(0, dense + row * VEC * 2);       /* idx, weight, idx, weight, ... */
-        const intV bits = pairs.odd;
-        if (!or_lanes(bits))                   /* no beam reaches the row */
-            continue;
-        const intV index = pairs.even;
-#ifdef DETSTATS
-        /* q + 1 in place of the weight (0: no beam), the class in bit 16, the sign bit "more
-         * entries follow" */
-        const intV q = (bits & 0xFFFF) - 1;                     /* -1 (no beam): masked below */
-        const intV reached = bits != 0;
-        const intV seg = (q >> 12) & (SEGMENTS - 1);            /* q = -1: segment 3, in bounds */
-        const intV f = q & 4095;
-        const intV at = (index * CLASSES + ((bits >> 16) & 1)) * SEGMENTS + seg;
-        intV pe, pk;
-        GATHER_NODES_V(pe, pk, nodes, at);
-        intV sum = NODE_LERP(pe, f) & reached;
-        intV ksum = NODE_LERP(pk, f) & reached;
-        intV nsum = -(ksum > 0);
-#else
-        /* the weight's sign bit says "more entries follow" (weights are positive) */
-        const floatV product = convert_floatV(GATHER(evidence, index)) * as_floatV(bits & 0x7FFFFFFF);
-        intV sum = RINT_INTV(product);
-#endif
-        if (or_lanes(bits) < 0) {              /* voxels several beams reach */
-            /* their further entries, one per lane at a time, as vectors: lane l's m-th extra is at
-             * row_start + (the extras of lanes before l) + m; a spinning radar's voxels mostly
-             * lie in two beams, so this is the common path there, not the exception */
-            const size_t t = (size_t)id * BLOCK_ROWS + row;
-            const intV more = CAT(convert_int, VEC)(vload_ucharV(0, counts + t * VEC)) - 1;
-            const intV n_extra = more & ~(more >> 31);                    /* max(count - 1, 0) */
-            const intV start = row_start[t] + exclusive_prefix(n_extra);
-            for (int m = 0; or_lanes((intV)m - n_extra) < 0; ++m) {       /* some lane has an m-th */
-                const intV live = (intV)m < n_extra;
-                const intV ex = (start + m) & live;                       /* extras[0] exists: masked lanes read it */
-                intV ei, ew;
-                GATHER_ENTRIES(ei, ew, extras, ex);
-#ifdef DETSTATS
-                const intV qe = (ew & 0xFFFF) - 1;
-                const intV ate = ((ei * CLASSES + ((ew >> 16) & 1)) * SEGMENTS + ((qe >> 12) & (SEGMENTS - 1))) & live;
-                intV xe, xk;
-                GATHER_NODES_V(xe, xk, nodes, ate);
-                sum += NODE_LERP(xe, qe & 4095) & live;
-                const intV kn = NODE_LERP(xk, qe & 4095) & live;
-                ksum += kn;
-                nsum -= kn > 0;                                       /* true is -1 */
-#else
-                const intV ie = ei & live;
-                const floatV p = convert_floatV(GATHER(evidence, ie)) * as_floatV(ew);
-                sum += RINT_INTV(p) & live;
-#endif
-            }
-        }
-#ifdef DETSTATS
-        if (or_lanes(ksum)) {
-            __global int *cell = kcells + (ROW_DZ(row) * 8 + ROW_DY(row)) * 8;
-            const intV v = vloadV(0, cell) + ksum;
-            vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : v, 0, cell);
-            const intV e0 = vloadV(0, cells + (ROW_DZ(row) * 8 + ROW_DY(row)) * 8);   /* before its store */
-            __global int *count = looks + (cell - knowledge);
-            const intV c = vloadV(0, count) + (nsum & ~STUCK(e0, sum));
-            vstoreV(c > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : c, 0, count);
-        }
-#endif
-        if (or_lanes(sum)) {
-            /* |sum| < 255 beams x 2^14 (RECORD refuses more) and |cell| <= GRID_LIMIT = 2^30: no
-             * int32 overflow to saturate */
-            __global int *cell = cells + (ROW_DZ(row) * 8 + ROW_DY(row)) * 8;
-            const intV v = vloadV(0, cell) + sum;
-            vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : (v < (intV)-GRID_LIMIT ? (intV)-GRID_LIMIT : v), 0, cell);
         }
     }
 }

@@ -1,7 +1,7 @@
 """Is a device fit to run radarcl? ``self_test`` builds every built-in sensor's pipeline on it
 and compares one synthetic frame with the float64 oracle, stage by stage.
 
-The OpenCL runtime (``radarcl.cl.runtime``) sits below what it checks, so it runs whatever
+The OpenCL device check (``radarcl.cl.devices``) sits below what it checks, so it runs whatever
 checks the application names (``register_device_check``) in a child process before it uses a
 device, and caches the verdict. Importing this module registers nothing: each application calls
 ``register`` once before it chooses a device (``radarcl.cli.main`` for every command, a Dask
@@ -13,7 +13,7 @@ runtime's small probe kernel only.
 import numpy as np
 
 from radarcl import models, oracle
-from radarcl.cl.runtime import register_device_check
+from radarcl.cl.devices import register_device_check
 from radarcl.config import mapconfig, sensors
 from radarcl.errors import DeviceCapabilityError
 from radarcl.pipeline import Mapping
@@ -41,7 +41,7 @@ def self_test(runtime):
     device stays usable and that sensor is refused when it is asked for, with a sentence of the
     same kind (the notes hold at this check's sizes: 2 m voxels, SELF_TEST_RANGE_M; a map of
     other sizes is checked when it is built). A device that fits no built-in sensor at all is
-    unusable. ``radarcl.cl.runtime`` runs it in a child process before it uses a device (once
+    unusable. ``radarcl.cl.devices`` runs it in a child process before it uses a device (once
     ``register`` has named it), so a compiler that aborts cannot take radarcl down with it."""
     rng = np.random.default_rng(29)
     notes, ran = [], 0

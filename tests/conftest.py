@@ -17,7 +17,7 @@ DEVICES_ENV = "RADARCL_TEST_DEVICES"
 
 def _devices():
     from radarcl import self_test
-    from radarcl.cl.runtime import _all_devices, build_problem, choose_device
+    from radarcl.cl.devices import _all_devices, build_problem, choose_device
 
     self_test.register()          # the device check every radarcl application runs before it uses a device
 

@@ -18,7 +18,7 @@ pytest as a plugin (``-p oclgrind_check``), this module
 
 - fails each test during which Oclgrind reported anything, with the reports as its failure, and
   hands the counts to ``run_pytest``;
-- keeps radarcl's device check to its small probe kernel: ``runtime.DEVICE_CHECKS`` is emptied
+- keeps radarcl's device check to its small probe kernel: ``devices.DEVICE_CHECKS`` is emptied
   and ``radarcl.self_test.register`` made a no-op before the suite's conftest registers the
   check and chooses the device, as ``test_device_check`` does. The full check
   runs every built-in sensor's pipeline against the float64 oracle; under the simulator that
@@ -79,8 +79,8 @@ RESULTS_ENV = "RADARCL_OCLGRIND_RESULTS"       # where the plugin writes its cou
 # launches other tests of the file make too.
 SMALL = {
     "fusion": "not (test_one_update_per_beam_per_voxel"                     # a 4 M-voxel grid
-              " or test_the_table_is_recorded_when_a_pose_comes_back"       # the plan cache
               " or test_detstats_sums_do_not_depend_on_the_order_of_frames)",
+    "fusion_cached": "not test_the_table_is_recorded_when_a_pose_comes_back",  # the plan cache
     "fusion_plan": "not test_the_plans_lose_no_voxel_at_the_papers_scale",  # 112 M voxels
 }
 
@@ -204,10 +204,10 @@ def pytest_load_initial_conftests(early_config, parser, args):
 
     import radarcl.grid
     import radarcl.self_test
-    from radarcl.cl import runtime
+    from radarcl.cl import devices
 
     radarcl.self_test.register = lambda: None        # the suite's conftest registers the full check: not here
-    runtime.DEVICE_CHECKS.clear()
+    devices.DEVICE_CHECKS.clear()
     radarcl.grid.CHUNK_BYTES = CHUNK_BYTES
     asked = pyopencl.characterize.nv_compute_capability
 

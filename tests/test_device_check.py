@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from radarcl.cl import devices as dev_module
 from radarcl.cl import runtime as rt_module
 from radarcl.cli import main
 from radarcl.errors import NoOpenCLError
@@ -23,20 +24,20 @@ CRASHING_SITE = HERE / "crashing_device"
 def crashing(monkeypatch, tmp_path):
     """The last listed device's check aborts in the child, whatever this CPU's PoCL does
     (``crashing_device/sitecustomize.py``); verdicts go to a private cache."""
-    devices = rt_module._all_devices()
+    devices = dev_module._all_devices()
     p, d, platform, victim = devices[-1]
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(CRASHING_SITE), os.environ.get("PYTHONPATH", "")]))
     monkeypatch.setenv("RADARCL_TEST_ABORT_ON", f"{p}:{d}")
-    monkeypatch.setattr(rt_module, "DEVICE_CHECKS", [])
-    monkeypatch.setattr(rt_module, "_probed", {})
+    monkeypatch.setattr(dev_module, "DEVICE_CHECKS", [])
+    monkeypatch.setattr(dev_module, "_probed", {})
     return f"{p}:{d}", victim, [dev for _, _, _, dev in devices[:-1]]
 
 
 def test_a_device_whose_compiler_aborts_is_marked_unusable_and_never_chosen(crashing, capsys, monkeypatch):
     spec, victim, others = crashing
     status = main(["info"])
-    usable = [dev for dev in others if rt_module.build_problem(dev) is None]    # checked by info already
+    usable = [dev for dev in others if dev_module.build_problem(dev) is None]    # checked by info already
     out, err = capsys.readouterr()
     block = out[out.index(f"  {spec}  ") if f"  {spec}  " in out else out.index(f"* {spec}  "):]
     unusable = [ln for ln in block.splitlines() if "UNUSABLE" in ln][0]
@@ -45,19 +46,19 @@ def test_a_device_whose_compiler_aborts_is_marked_unusable_and_never_chosen(cras
     assert status == (0 if usable else 2) and "Traceback" not in err
     monkeypatch.setenv("RADARCL_DEVICE", spec)                 # asked for by index: a sentence, not exit 134
     with pytest.raises(NoOpenCLError, match="crashes while building"):
-        rt_module.choose_device()
+        dev_module.choose_device()
     monkeypatch.delenv("RADARCL_DEVICE")
     if usable:
-        assert rt_module.choose_device().int_ptr != victim.int_ptr
+        assert dev_module.choose_device().int_ptr != victim.int_ptr
     else:
         with pytest.raises(NoOpenCLError, match="crashes while building"):
-            rt_module.choose_device()
+            dev_module.choose_device()
     # the verdict is kept per device and driver: a new process asks no child again
     verdicts = json.loads((Path(os.environ["XDG_CACHE_HOME"]) / "radarcl" / "devices.json").read_text())
     assert any("SIGABRT" in (v["problem"] or "") and v["driver"] == victim.driver_version for v in verdicts.values())
-    monkeypatch.setattr(rt_module, "_probed", {})
-    monkeypatch.setattr(rt_module, "_probe_in_child", lambda device: pytest.fail("the cached verdict was not used"))
-    assert "SIGABRT" in rt_module.build_problem(victim)
+    monkeypatch.setattr(dev_module, "_probed", {})
+    monkeypatch.setattr(dev_module, "_probe_in_child", lambda device: pytest.fail("the cached verdict was not used"))
+    assert "SIGABRT" in dev_module.build_problem(victim)
 
 
 def test_a_damaged_verdict_cache_is_ignored_and_rewritten(crashing):
@@ -65,7 +66,7 @@ def test_a_damaged_verdict_cache_is_ignored_and_rewritten(crashing):
     cache = Path(os.environ["XDG_CACHE_HOME"]) / "radarcl"
     cache.mkdir(parents=True)
     (cache / "devices.json").write_text('{"x": {"problem": 5}, "torn": ')
-    assert "SIGABRT" in rt_module.build_problem(victim)
+    assert "SIGABRT" in dev_module.build_problem(victim)
     assert "SIGABRT" in json.dumps(json.loads((cache / "devices.json").read_text()))
     assert not list(cache.glob(".*.tmp"))
 

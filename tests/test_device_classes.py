@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from device_classes import DEVICE_CLASSES, MIB, narrowed
 
-from radarcl.cl import runtime as rt_module
+from radarcl.cl import devices as dev_module
 from radarcl.cl.runtime import Runtime
 from radarcl.config import mapconfig
 from radarcl.errors import DeviceCapabilityError
@@ -72,11 +72,11 @@ def test_a_device_that_fits_no_sensor_is_unusable(runtime):
 def test_info_names_what_a_usable_device_cannot_run(runtime, monkeypatch):
     """A device with notes is still usable and chosen; `radarcl info` lists what it cannot run."""
     notes = self_test(as_class(runtime, "gpu-32k", max_mem_alloc_size=1 * MIB))["notes"]
-    monkeypatch.setattr(rt_module, "_probed", {runtime.device.int_ptr: dict(problem=None, notes=notes)})
-    lines = rt_module.device_report()
+    monkeypatch.setattr(dev_module, "_probed", {runtime.device.int_ptr: dict(problem=None, notes=notes)})
+    lines = dev_module.device_report()
     assert all(f"      cannot run     {note}" in lines for note in notes) and notes
-    place = next(f"{p}:{d}" for p, d, _, dev in rt_module._all_devices() if dev.int_ptr == runtime.device.int_ptr)
-    assert rt_module.choose_device(spec=place).int_ptr == runtime.device.int_ptr
+    place = next(f"{p}:{d}" for p, d, _, dev in dev_module._all_devices() if dev.int_ptr == runtime.device.int_ptr)
+    assert dev_module.choose_device(spec=place).int_ptr == runtime.device.int_ptr
 
 
 def test_work_group_sizes_come_from_the_device_class(runtime):

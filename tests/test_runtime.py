@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from radarcl.cl import Runtime, choose_device, device_report, kernels_dir
+from radarcl.cl import devices as dev_module
 from radarcl.cl import runtime as rt_module
 from radarcl.errors import KernelBuildError, NoOpenCLError
 
@@ -25,8 +26,8 @@ def test_a_device_that_cannot_build_is_passed_over_and_named(monkeypatch):
     says why not, and `radarcl info` marks it."""
     default = choose_device()
     reason = "cannot build kernels (error: unknown target CPU 'generic'); install a newer PoCL"
-    monkeypatch.setattr(rt_module, "_probed", {default.int_ptr: dict(problem=reason, notes=[])})
-    chosen = [dev for _, _, _, dev in rt_module._all_devices() if rt_module.build_problem(dev) is None]
+    monkeypatch.setattr(dev_module, "_probed", {default.int_ptr: dict(problem=reason, notes=[])})
+    chosen = [dev for _, _, _, dev in dev_module._all_devices() if dev_module.build_problem(dev) is None]
     if chosen:
         assert choose_device(spec="").int_ptr == chosen[0].int_ptr != default.int_ptr
     else:
@@ -38,9 +39,9 @@ def test_a_device_that_cannot_build_is_passed_over_and_named(monkeypatch):
 
 
 def test_the_probe_reports_a_failed_build(monkeypatch):
-    monkeypatch.setattr(rt_module, "_probed", {})
-    monkeypatch.setattr(rt_module, "_PROBE_SOURCE", "__kernel void probe(__global float *x) { x[0] = nope; }")
-    problem = rt_module.build_problem(rt_module._all_devices()[0][3])
+    monkeypatch.setattr(dev_module, "_probed", {})
+    monkeypatch.setattr(dev_module, "_PROBE_SOURCE", "__kernel void probe(__global float *x) { x[0] = nope; }")
+    problem = dev_module.build_problem(dev_module._all_devices()[0][3])
     assert problem.startswith("cannot build kernels (") and "nope" in problem
 
 
@@ -153,7 +154,7 @@ def test_kernel_tests_run_on_every_device_when_asked():
     import sys
     from pathlib import Path
 
-    from radarcl.cl.runtime import _all_devices, build_problem
+    from radarcl.cl.devices import _all_devices, build_problem
 
     root = Path(__file__).resolve().parents[1]
     env = {**os.environ, "RADARCL_TEST_DEVICES": "all"}
@@ -172,7 +173,7 @@ def test_pocl_workers_are_pinned_only_where_safe(monkeypatch):
     """POCL_AFFINITY=1 by default; never over the user's value, never with a limited worker
     count (one-thread workers would all be pinned to CPU 0), never where some CPU is not
     allowed to the process (PoCL stops the process when a pin is refused)."""
-    from radarcl.cl.runtime import pin_pocl_workers
+    from radarcl.cl.devices import pin_pocl_workers
 
     n = 4
     monkeypatch.setattr("os.cpu_count", lambda: n)

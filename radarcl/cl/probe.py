@@ -1,6 +1,6 @@
-"""The child program that checks a device before radarcl uses it (``runtime.build_problem``):
+"""The child program that checks a device before radarcl uses it (``devices.build_problem``):
 ``python -m radarcl.cl.probe P D [MODULE:FUNCTION ...]`` builds a small kernel on device P:D,
-then runs each named check (``runtime.DEVICE_CHECKS``, registered by the application:
+then runs each named check (``devices.DEVICE_CHECKS``, registered by the application:
 ``radarcl.self_test``, every kernel against the float64 oracle) and prints one line,
 ``radarcl-probe: {"problem": null or why, "notes": [what it cannot run]}``.
 A compiler that aborts kills this process, not radarcl; the parent reads the signal."""
@@ -9,15 +9,15 @@ import importlib
 import json
 import sys
 
-from radarcl.cl import runtime
+from radarcl.cl import devices, runtime
 
 
 def main(argv=None):
     """Check device P:D (argv[0], argv[1]) with the checks named in argv[2:]; returns 0."""
     argv = sys.argv[1:] if argv is None else argv
     p, d, checks = int(argv[0]), int(argv[1]), argv[2:]
-    device = next(dev for pi, di, _, dev in runtime._all_devices() if (pi, di) == (p, d))
-    problem, notes = runtime.probe(device), []
+    device = next(dev for pi, di, _, dev in devices._all_devices() if (pi, di) == (p, d))
+    problem, notes = devices.probe(device), []
     for name in checks if problem is None else ():
         module, _, function = name.partition(":")
         try:
@@ -30,7 +30,7 @@ def main(argv=None):
             problem = said
         if problem is not None:
             break
-    print(runtime.PROBE_MARK + json.dumps(dict(problem=problem, notes=notes)), flush=True)
+    print(devices.PROBE_MARK + json.dumps(dict(problem=problem, notes=notes)), flush=True)
     return 0
 
 

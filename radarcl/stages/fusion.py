@@ -16,8 +16,9 @@ of columns, ``column_tiles``, so a spinning radar's node pairs are read from cac
 
 The plans of the last ``PLAN_CACHE`` poses are kept. When a pose comes back (a radar on a
 stand, a tilting stand's positions), the plan gets a ``StillTable``: what each voxel takes,
-recorded by the kernel's RECORD passes, which ``fusion_cached`` then streams (the same
-integers, about a third of the gather's time for the paper's frame).
+recorded by the kernel's RECORD passes, which ``radarcl.stages.fusion_cached`` then streams
+(``kernels/fusion_cached.cl``: the same integers, about a third of the gather's time for the
+paper's frame).
 """
 
 import math
@@ -31,9 +32,9 @@ from radarcl.geometry import BeamLattice, BeamModel, check_poses
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import BRICK
 from radarcl.sensor_model import NODE_SHAPE, unpack_nodes
-from radarcl.stages import Port, Stage, build, count, spacing, work_group_size
-from radarcl.stages.fusion_plan import (BLOCK, FramePlan, FusionPlanner, HeadFrame, StillTable, brick_geometry,
-                                        candidate_windows, column_tiles, nonempty, pool_order, take_rows)
+from radarcl.stages import Port, Stage, build, count, fusion_cached, spacing, work_group_size
+from radarcl.stages.fusion_plan import (BLOCK, FramePlan, FusionPlanner, HeadFrame, brick_geometry, candidate_windows,
+                                        column_tiles, nonempty, pool_order, take_rows)
 
 # A work-item per block of rows of 8 voxels (as float8), its beams' windows planned on the
 # host per brick: the shape that measured fastest of those tried (docs/measured-figures.md, "Why the code is
@@ -45,7 +46,6 @@ VECTOR_WIDTHS = (4, 8)             # voxels along x per row of a work-item's blo
 # brick), the same integers: the default on CPUs; elsewhere one row (a GPU's lanes are its
 # work-items: unmeasured).
 CPU_ROWS = 2
-STILL_TABLE_SHARE = 0.25           # the still tables held may take this share of the device's memory
 PLAN_CACHE = 16                    # plans kept for poses that come back (the paper's stand has 15 tilts)
 PACKED_LOOKS = 21                  # detstats gather: looks counted above bit 21 of the knowledge sum (n_beams < 512)
 
@@ -61,7 +61,7 @@ class Fusion(Stage):
     voxels along x per row of a work-item's block (4 or 8); rows: rows of the block taken
     together as one vector (1, or 2 with vector_width 8; None: 2 on a CPU, else 1); still: "auto"
     records a ``StillTable`` when a plan's pose comes back (a radar on a stand, a parked
-    vehicle) and the table fits ``STILL_TABLE_SHARE`` of the device's memory, then fuses that
+    vehicle) and the table fits ``fusion_cached.STILL_TABLE_SHARE`` of the device's memory, then fuses that
     pose's frames from it (``fusion_cached``, the same integers); True records on the first
     repeat whatever its size, False never. detstats: the detection-statistics model
     (``radarcl.sensor_model``): a frame is not one update per bin but node pairs per bin
@@ -121,8 +121,8 @@ class Fusion(Stage):
         if still not in ("auto", True, False):
             raise ConfigError(f"still must be 'auto', True or False, got {still!r}")
         self.still = still
-        kernels = build(runtime, "fusion", self._defines)
-        self._kernel, self._cached_kernel = kernels["fusion"], kernels["fusion_cached"]
+        self._kernel = build(runtime, "fusion", self._defines)["fusion"]
+        self._cached_kernel = fusion_cached.cached_kernel(runtime, self._defines)
         self._record_kernels = None
         self.local_size = work_group_size(runtime, [self._kernel, self._cached_kernel], local_size, DEFAULT_LOCAL_SIZE)
         self._local_size_requested = local_size is not None
@@ -218,59 +218,10 @@ class Fusion(Stage):
         return len(index)
 
     def record(self, plan):
-        """Record ``plan``'s ``StillTable`` (two passes of the gather that write instead of
-        fuse); returns it, or None (and remembers so) where ``still`` is "auto" and the table
-        would take more than ``STILL_TABLE_SHARE`` of the device's memory, or a voxel lies in
-        255 beams or more."""
-        import pyopencl as cl
-        import pyopencl.array as cla
-
-        if not isinstance(plan, FramePlan) or plan.owner is not self:
-            raise ConfigError("plan must be a FramePlan made by this Fusion's plan()")
-        if plan.table is not None:
-            return plan.table
-        q = self.runtime.queue
-        n_rows = self._n_items(plan) * self._block_rows
-        limits = self.runtime.limits
-        held = sum(p.table.nbytes for p in self._plans.values() if p.table is not None)
-        budget = STILL_TABLE_SHARE * limits.global_mem_size - held if self.still == "auto" else float("inf")
-        # beside everything else radarcl holds on the device (the tables are held too, below)
-        limit = min(budget, limits.max_mem_alloc_size, limits.global_mem_size - self.runtime.held_bytes)
-        dense_bytes = n_rows * (9 * self.vector_width + 4)   # counts, first entries, row starts
-        if not n_rows or dense_bytes > limit:
-            plan._table.append(None)
-            return None
-        if self._record_kernels is None:
-            self._record_kernels = [build(self.runtime, "fusion", {**self._defines, "RECORD": r})["fusion"] for r in (1, 2)]
-            # launches use one size; the work-item index, not the group, places a table row
-            fits = min(self.runtime.max_local_size(k) for k in self._record_kernels)
-            if self.local_size > fits and self._local_size_requested:
-                raise ConfigError(f"local_size {self.local_size} is more than the {fits} work-items {self.runtime.name} "
-                                  "runs the still table's recording kernels with (CL_KERNEL_WORK_GROUP_SIZE); use "
-                                  f"local_size <= {fits}, or leave it out")
-            self.local_size = min(self.local_size, fits)
-        counts = cla.zeros(q, (n_rows * self.vector_width,), np.uint8)
-        row_start = cla.zeros(q, (n_rows,), np.int32)
-        dummy = cla.zeros(q, (1, 2), np.int32)
-        self._launch(self._record_kernels[0], plan, self.arrays["evidence"], counts=counts, row_start=row_start,
-                     first=dummy, extras=dummy).wait()
-        host = counts.get(q)
-        per_row = host.reshape(n_rows, self.vector_width).sum(axis=1, dtype=np.int64)
-        total = int(per_row.sum())
-        if host.max(initial=0) == 255 or dense_bytes + 8 * total > limit:
-            plan._table.append(None)
-            return None
-        extra_per_row = np.maximum(host.reshape(n_rows, self.vector_width).astype(np.int64) - 1, 0).sum(axis=1)
-        starts = np.concatenate([[0], np.cumsum(extra_per_row)[:-1]]).astype(np.int32)
-        cl.enqueue_copy(q, row_start.data, starts, is_blocking=True)
-        first = cla.zeros(q, (n_rows * self.vector_width, 2), np.int32)     # (0, 0): evidence[0] x 0.0
-        extras = cla.zeros(q, (max(int(extra_per_row.sum()), 1), 2), np.int32)
-        self._launch(self._record_kernels[1], plan, self.arrays["evidence"], counts=counts, row_start=row_start,
-                     first=first, extras=extras).wait()
-        table = StillTable(counts, row_start, first, extras, n_rows, total)
-        self.runtime.hold(table, table.nbytes, "the still radar's table")
-        plan._table.append(table)
-        return table
+        """Record ``plan``'s ``StillTable`` (``radarcl.stages.fusion_cached.record``); returns it,
+        or None (and remembers so) where ``still`` is "auto" and the table would take more than
+        ``fusion_cached.STILL_TABLE_SHARE`` of the device's memory, or a voxel lies in 255 beams or more."""
+        return fusion_cached.record(self, plan)
 
     def head_frame(self, P):
         """The ``HeadFrame`` the windows of a frame at poses ``P`` ((n, 4, 4), checked) are
@@ -393,15 +344,7 @@ class Fusion(Stage):
         if not len(plan.bricks):
             return None
         if plan.table is not None and not gather:
-            t = plan.table
-            event = None
-            for offset, gsize, n_items, c in self._chunk_launches(plan):
-                event = self._cached_kernel(self.runtime.queue, gsize, (self.local_size,), wait_for=wait_for,
-                                            global_offset=offset, bricks=self._plan_device(plan)["bricks"],
-                                            counts=t.counts, row_start=t.row_start, first=t.first, extras=t.extras,
-                                            n_items=n_items, pool=self.grid.chunk(c),
-                                            **self._inputs(evidence, c, cached=True))
-            return event
+            return fusion_cached.enqueue(self, plan, evidence, wait_for)
         none = self._no_table
         return self._launch(self._kernel, plan, evidence, wait_for=wait_for, counts=none[0], row_start=none[1],
                             first=none[2], extras=none[2])

@@ -232,26 +232,6 @@ class FramePlan:
         return self._outside[0]
 
 
-@dataclass
-class StillTable:
-    """What every voxel of a plan takes from a frame, recorded once for a still radar (the
-    kernel's RECORD passes), on the device: per voxel its count of beams and its first entry
-    (beam * n_bins + bin, the weight's float32 bits, whose sign bit says that more entries
-    follow), the further entries row by row."""
-
-    counts: object           # pyopencl Array uint8 (n_rows * VEC,): beams per voxel
-    row_start: object        # pyopencl Array int32 (n_rows,): first extra entry of each row
-    first: object            # pyopencl Array int32 (n_rows * VEC, 2): each voxel's first entry
-    extras: object           # pyopencl Array int32 (n, 2): the further entries
-    n_rows: int
-    n_entries: int
-
-    @property
-    def nbytes(self):
-        """Device memory the table takes."""
-        return sum(a.nbytes for a in (self.counts, self.row_start, self.first, self.extras))
-
-
 def pool_order(slots, n_slots):
     """The order that sorts ``slots`` (distinct, in [0, n_slots)): a scatter where the pool is
     not much larger than the list (linear in the pool), else argsort."""

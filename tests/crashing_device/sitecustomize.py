@@ -11,16 +11,16 @@ VICTIM = os.environ.get("RADARCL_TEST_ABORT_ON")
 if VICTIM:
     import sys
 
-    from radarcl.cl import runtime
+    from radarcl.cl import devices
 
-    real_probe = runtime.probe
+    real_probe = devices.probe
 
     def probe(device):
-        place = next(f"{p}:{d}" for p, d, _, dev in runtime._all_devices() if dev.int_ptr == device.int_ptr)
+        place = next(f"{p}:{d}" for p, d, _, dev in devices._all_devices() if dev.int_ptr == device.int_ptr)
         if place == VICTIM:
             sys.stderr.write("LLVM ERROR: Cannot emit physreg copy instruction\n")
             sys.stderr.flush()
             os.abort()
         return real_probe(device)
 
-    runtime.probe = probe
+    devices.probe = probe

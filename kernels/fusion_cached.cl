@@ -1,0 +1,134 @@
+/* A still radar's frame from its recorded table (fusion_common.h: the still table): each voxel sums
+ * rint(evidence[entry] * weight) over its entries, the same integers the gather (fusion.cl) gives
+ * (the weights are the gather's own float32 values; with DETSTATS, its quantised rho2 and class
+ * for NODE_LERP), streaming the table instead of testing beams. A work-item takes the gather's
+ * block of the same id, row by row. The first entries are dense (one per voxel, read as vectors:
+ * on a regular lattice almost every voxel lies in one beam); the further entries are read as
+ * vectors too, each lane's next entry at a time (a spinning radar's voxels mostly lie in two
+ * beams). Every entry is rounded on its own and the sums are integers, so the order the entries
+ * are added in does not change them.
+ *
+ * -D: the gather's (radarcl.stages.fusion builds both with the same); this kernel reads VEC,
+ *     BRICK_Z and DETSTATS.
+ */
+#include "fusion_common.h"
+
+/* lane l of the result: the sum of v's lanes before l (a scan by shifted adds, no builtin) */
+static inline intV exclusive_prefix(intV v)
+{
+#if VEC == 8
+    intV s = v + (int8)(0, v.s0, v.s1, v.s2, v.s3, v.s4, v.s5, v.s6);
+    s += (int8)(0, 0, s.s0, s.s1, s.s2, s.s3, s.s4, s.s5);
+    s += (int8)(0, 0, 0, 0, s.s0, s.s1, s.s2, s.s3);
+#else
+    intV s = v + (int4)(0, v.s0, v.s1, v.s2);
+    s += (int4)(0, 0, s.s0, s.s1);
+#endif
+    return s - v;
+}
+#define vload_ucharV CAT(vload, VEC)
+#define intV2 CAT(int, VEC2)
+#define vloadV2 CAT(vload, VEC2)
+#define GATHER_ENTRIES(ei, ew, p, at) CAT(G2_, VEC)(ei, ew, p, at)     /* still-table entries of a row's lanes */
+#ifdef DETSTATS
+#define GATHER_NODES_V(pe, pk, p, at) CAT(G2_, VEC)(pe, pk, p, at)
+#endif
+
+__kernel void fusion_cached(
+    const __global int *evidence,     // (n_beams, N_BINS) eq. 12 updates [logodds units]
+    const __global int4 *bricks,      // (n_listed,) bx, by, bz, slot: the recorded plan's
+    const __global uchar *counts,     // (n_items * BLOCK_ROWS * VEC,) entries per voxel (RECORD 1)
+    const __global int *row_start,    // (n_items * BLOCK_ROWS,) first extra entry of each table row
+    const __global int2 *first,       // (n_items * BLOCK_ROWS * VEC,) each voxel's first entry (RECORD 2)
+    const __global int2 *extras,      // the further entries (RECORD 2)
+    const int n_items,                // the gather's work-items: listed bricks x SUBS
+    const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (the class
+                                      //   of each entry is in its record)
+    __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity
+    __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity
+    __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
+{
+    const int id = get_global_id(0);
+    if (id >= n_items)
+        return;
+    const int4 brick = bricks[id / SUBS];
+    const int sub = id % SUBS;
+    const int3 corner = CORNER(sub);
+    __global int *cells = pool + brick.w * BRICK_CELLS + (corner.z * 8 + corner.y) * 8 + corner.x;
+#ifdef DETSTATS
+    __global int *kcells = knowledge + brick.w * BRICK_CELLS + (corner.z * 8 + corner.y) * 8 + corner.x;
+#endif
+    const __global int *dense = (const __global int *)first + (size_t)id * BLOCK_ROWS * VEC * 2;
+    for (int row = 0; row < BLOCK_ROWS; ++row) {
+        const intV2 pairs = vloadV2(0, dense + row * VEC * 2);       /* idx, weight, idx, weight, ... */
+        const intV bits = pairs.odd;
+        if (!or_lanes(bits))                   /* no beam reaches the row */
+            continue;
+        const intV index = pairs.even;
+#ifdef DETSTATS
+        /* q + 1 in place of the weight (0: no beam), the class in bit 16, the sign bit "more
+         * entries follow" */
+        const intV q = (bits & 0xFFFF) - 1;                     /* -1 (no beam): masked below */
+        const intV reached = bits != 0;
+        const intV seg = (q >> 12) & (SEGMENTS - 1);            /* q = -1: segment 3, in bounds */
+        const intV f = q & 4095;
+        const intV at = (index * CLASSES + ((bits >> 16) & 1)) * SEGMENTS + seg;
+        intV pe, pk;
+        GATHER_NODES_V(pe, pk, nodes, at);
+        intV sum = NODE_LERP(pe, f) & reached;
+        intV ksum = NODE_LERP(pk, f) & reached;
+        intV nsum = -(ksum > 0);
+#else
+        /* the weight's sign bit says "more entries follow" (weights are positive) */
+        const floatV product = convert_floatV(GATHER(evidence, index)) * as_floatV(bits & 0x7FFFFFFF);
+        intV sum = RINT_INTV(product);
+#endif
+        if (or_lanes(bits) < 0) {              /* voxels several beams reach */
+            /* their further entries, one per lane at a time, as vectors: lane l's m-th extra is at
+             * row_start + (the extras of lanes before l) + m; a spinning radar's voxels mostly
+             * lie in two beams, so this is the common path there, not the exception */
+            const size_t t = (size_t)id * BLOCK_ROWS + row;
+            const intV more = CAT(convert_int, VEC)(vload_ucharV(0, counts + t * VEC)) - 1;
+            const intV n_extra = more & ~(more >> 31);                    /* max(count - 1, 0) */
+            const intV start = row_start[t] + exclusive_prefix(n_extra);
+            for (int m = 0; or_lanes((intV)m - n_extra) < 0; ++m) {       /* some lane has an m-th */
+                const intV live = (intV)m < n_extra;
+                const intV ex = (start + m) & live;                       /* extras[0] exists: masked lanes read it */
+                intV ei, ew;
+                GATHER_ENTRIES(ei, ew, extras, ex);
+#ifdef DETSTATS
+                const intV qe = (ew & 0xFFFF) - 1;
+                const intV ate = ((ei * CLASSES + ((ew >> 16) & 1)) * SEGMENTS + ((qe >> 12) & (SEGMENTS - 1))) & live;
+                intV xe, xk;
+                GATHER_NODES_V(xe, xk, nodes, ate);
+                sum += NODE_LERP(xe, qe & 4095) & live;
+                const intV kn = NODE_LERP(xk, qe & 4095) & live;
+                ksum += kn;
+                nsum -= kn > 0;                                       /* true is -1 */
+#else
+                const intV ie = ei & live;
+                const floatV p = convert_floatV(GATHER(evidence, ie)) * as_floatV(ew);
+                sum += RINT_INTV(p) & live;
+#endif
+            }
+        }
+#ifdef DETSTATS
+        if (or_lanes(ksum)) {
+            __global int *cell = kcells + (ROW_DZ(row) * 8 + ROW_DY(row)) * 8;
+            const intV v = vloadV(0, cell) + ksum;
+            vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : v, 0, cell);
+            const intV e0 = vloadV(0, cells + (ROW_DZ(row) * 8 + ROW_DY(row)) * 8);   /* before its store */
+            __global int *count = looks + (cell - knowledge);
+            const intV c = vloadV(0, count) + (nsum & ~STUCK(e0, sum));
+            vstoreV(c > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : c, 0, count);
+        }
+#endif
+        if (or_lanes(sum)) {
+            /* |sum| < 255 beams x 2^14 (RECORD refuses more) and |cell| <= GRID_LIMIT = 2^30: no
+             * int32 overflow to saturate */
+            __global int *cell = cells + (ROW_DZ(row) * 8 + ROW_DY(row)) * 8;
+            const intV v = vloadV(0, cell) + sum;
+            vstoreV(v > (intV)GRID_LIMIT ? (intV)GRID_LIMIT : (v < (intV)-GRID_LIMIT ? (intV)-GRID_LIMIT : v), 0, cell);
+        }
+    }
+}

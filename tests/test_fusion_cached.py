@@ -1,0 +1,89 @@
+"""kernels/fusion_cached.cl <-> radarcl/stages/fusion_cached.py: a still radar's frames from the
+recorded table give the gather's integers (kernels/fusion.cl, compared exactly), within the float64
+oracle's tolerance (radarcl.oracle.fusion); the table is recorded when a pose comes back, and only
+where it fits its budget.
+
+The table's frames of the detection-statistics model and of planar bricks are checked beside the
+gather's in tests/test_fusion.py (its DETSTATS and BRICK_Z cases run both paths).
+"""
+
+import math
+
+import numpy as np
+import pytest
+from test_fusion import FIRST, LAST, LATTICES, MODELS, N_BINS, POSE, SMALL, SPACING, check_against_oracle, evidence
+
+from radarcl.errors import ConfigError
+from radarcl.geometry import pose_from_xyz_rpy
+from radarcl.grid import EvidenceGrid
+from radarcl.stages import fusion_cached
+from radarcl.stages.fusion import Fusion
+
+STILL_CASES = {
+    "paper, gaussian, near field": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"], False, 8, 2),
+    "paper, one row per vector": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"], False, 8, 1),
+    "paper, uniform cone, vec 4": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=False, gaussian=False"], False, 4, 1),
+    "spinning, per-beam poses": (LATTICES["spinning, 90 azimuths"], MODELS["near_field=True, gaussian=True"], True, 8, 2),
+}
+
+
+@pytest.mark.parametrize("case", STILL_CASES.values(), ids=STILL_CASES.keys())
+def test_a_still_radars_table_gives_the_gathers_integers(runtime, case):
+    """Record once, then every frame at that pose from the table: the same integers as the
+    gather (integer results compared exactly), and within the oracle's tolerance."""
+    lattice, model, per_beam, vec, rows = case
+    poses = POSE if not per_beam else np.stack(
+        [pose_from_xyz_rpy(0.5 * f, 0.1, 0.0, yaw=0.05 * f) for f in np.linspace(0, 1, lattice.n_beams)])
+    frames = [evidence(lattice, seed=s) for s in (11, 12, 13)]
+    maps = {}
+    for still in (False, True):
+        grid = EvidenceGrid(runtime, SMALL)
+        f = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, per_beam_poses=per_beam, still=still,
+                   vector_width=vec, rows=rows)
+        steps = []
+        for ev in frames:
+            plan = f(ev, poses)
+            steps.append(grid.snapshot())
+        maps[still] = steps
+        assert (plan.table is not None) == still
+    for a, b in zip(maps[False], maps[True]):
+        assert np.array_equal(a, b)
+    # the last frame alone, from the table, against the float64 oracle
+    check_against_oracle(maps[True][2] - maps[True][1], SMALL, lattice, model, frames[2], poses)
+
+
+def test_the_table_is_recorded_when_a_pose_comes_back_and_only_if_it_fits(runtime, monkeypatch):
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
+    ev = evidence(lattice, seed=4)
+    f = Fusion(runtime, EvidenceGrid(runtime, SMALL), lattice, model, N_BINS, SPACING, FIRST, LAST)
+    first = f(ev, POSE)
+    assert first.table is None                                   # a pose seen once: the gather
+    second = f(ev, POSE)
+    assert second is first and first.table is not None          # the pose came back: recorded
+    assert first.table.n_entries > 1000 and first.table.nbytes > 0
+    moved = f(ev, pose_from_xyz_rpy(0.3, 0.2, 0.1))
+    assert moved.table is None                                   # a moving radar never records
+    monkeypatch.setattr(fusion_cached, "STILL_TABLE_SHARE", 1e-9)
+    g = Fusion(runtime, EvidenceGrid(runtime, SMALL), lattice, model, N_BINS, SPACING, FIRST, LAST)
+    g(ev, POSE)
+    assert g(ev, POSE).table is None                             # too large for the budget: the gather
+    forced = Fusion(runtime, EvidenceGrid(runtime, SMALL), lattice, model, N_BINS, SPACING, FIRST, LAST, still=True)
+    forced(ev, POSE)
+    assert forced(ev, POSE).table is not None                    # still=True ignores the budget
+    with pytest.raises(ConfigError, match="still"):
+        Fusion(runtime, EvidenceGrid(runtime, SMALL), lattice, model, N_BINS, SPACING, FIRST, LAST, still="yes")
+
+
+def test_a_tilting_stand_reuses_each_positions_plan(runtime):
+    """The plans of recent poses are kept: a stand cycling through its tilts gets a table for
+    each position on its second visit; grid.clear() drops them."""
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=False"]
+    grid = EvidenceGrid(runtime, SMALL)
+    f = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST)
+    tilts = [pose_from_xyz_rpy(0.0, 0.0, 0.5, pitch=math.radians(p)) for p in (-6.0, -4.0, -2.0)]
+    ev = evidence(lattice, seed=8)
+    first = [f(ev, pose) for pose in tilts]
+    again = [f(ev, pose) for pose in tilts]
+    assert all(a is b and a.table is not None for a, b in zip(first, again))
+    grid.clear()
+    assert f(ev, tilts[0]) is not first[0] and len(f._plans) == 1
