@@ -204,7 +204,8 @@ def test_log10_nb8_is_log10_nb_lane_for_lane(runtime):
     import pyopencl as cl
     import pyopencl.array as cla
 
-    from radarcl.cl.runtime import _define, kernels_dir
+    from radarcl.cl.devices import kernels_dir
+    from radarcl.cl.runtime import _define
     from radarcl.stages import COMMON_DEFINES
 
     rng = np.random.default_rng(7)

@@ -55,7 +55,8 @@ def probe(runtime, x, q):
     import pyopencl as cl
     import pyopencl.array as cla
 
-    from radarcl.cl.runtime import _define, kernels_dir
+    from radarcl.cl.devices import kernels_dir
+    from radarcl.cl.runtime import _define
     from radarcl.stages import COMMON_DEFINES
     from radarcl.stages.interpret_nodes import DEFAULT_LANES
 
