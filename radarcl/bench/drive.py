@@ -182,7 +182,7 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
         scan = polar_png.load_scan(scans[j % len(scans)], layout)              # decoding counts
         poses = frame_poses(track, int(stamps[j]), int(stamps[j + 1] - stamps[j]), scan, n_az)
         flags = np.where(scan.valid, 0, FLAG_SILENT).astype(np.uint8)
-        return scan.power(), poses, flags, t0, time.perf_counter() - t0
+        return scan.levels, poses, flags, t0, time.perf_counter() - t0     # the device turns levels into power
 
     latencies, device_max, host_max, trajectory, bricks_max = [], 0, _rss_bytes(), [], 0
     read_s = fuse_s = 0.0
@@ -190,11 +190,11 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
     times = dict(overlapped=[], read=[], fused=[])          # per frame, for ``overlap_figures``
     stage = _stage_bytes(mapping)
     start = t2 = time.perf_counter()
-    for j, (power, poses, flags, t0, took) in enumerate(prefetch.prefetched(read, n_frames, read_ahead, overlap)):
+    for j, (levels, poses, flags, t0, took) in enumerate(prefetch.prefetched(read, n_frames, read_ahead, overlap)):
         t1, before = time.perf_counter(), t2
         if rolling is not None:
             rolling.update(poses[n_az // 2, :3, 3])
-        mapping.fuse(power, poses, flags=flags)
+        mapping.fuse(levels, poses, flags=flags, db_per_level=layout.db_per_level)
         runtime.queue.finish()
         t2 = time.perf_counter()
         read_s, fuse_s = read_s + took, fuse_s + (t2 - t1)
