@@ -77,7 +77,8 @@ class Mapping:
     Raw input: give ``radar`` (a ``RadarConfig``) and ``n_fft``; frames are (n_az, n_el,
     n_samples) of ``dtype`` and go through the Hann-windowed range FFT in power.
     Profile input (Navtech): give ``n_bins`` and ``bin_spacing_m``; frames are power profiles
-    (*lattice.batch, n_bins) float32 and enter at CFAR.
+    (*lattice.batch, n_bins) float32 and enter at CFAR, or a polar scan's uint8 levels of that
+    shape, which the ``levels`` stage turns into power on the device first (``fuse``).
     cfar_config, interpret_config: as for ``Detection``; per_beam_poses: as for ``Fusion``.
     An evidence model with node pairs (``EvidenceModel.knowledge``: the detection-statistics
     model) needs ``bin_model`` (a ``sensor_model.BinModel``), a grid with the knowledge channel and
@@ -111,7 +112,7 @@ class Mapping:
         it = self.detection.interpreter
         self.fusion = Fusion(runtime, grid, lattice, model, n_bins, bin_spacing_m, it.first_bin, it.last_bin,
                              per_beam_poses=per_beam_poses, detstats=it.node_pairs, terrain_dz=terrain_dz)
-        self._levels_stage = None   # uint8 levels -> power on the device (``fuse``'s db_per_level)
+        self.levels = None          # the ``Levels`` stage: uint8 levels -> power (``fuse``'s db_per_level)
         self.frames = 0
         self.config = None          # the mapconfig.Resolved it was built from (from_config)
 
@@ -181,7 +182,7 @@ class Mapping:
             if db_per_level is None:
                 self.detection.cfar.check(frame)
             else:
-                levels = self._levels(db_per_level)
+                levels = self._levels_at(db_per_level)
                 levels.check(frame)
             if flags is not None:
                 flags = self.detection.interpreter.check_flags(flags)
@@ -204,14 +205,14 @@ class Mapping:
         self.frames += 1
         return plan
 
-    def _levels(self, db_per_level):
+    def _levels_at(self, db_per_level):
         """The ``Levels`` stage that writes power into the CFAR's input, built on first use, at
         ``db_per_level`` (FrameFormatError for a scale float32 cannot hold)."""
-        if self._levels_stage is None:
-            self._levels_stage = Levels(self.runtime, self.detection.cfar.input_shape, db_per_level,
+        if self.levels is None:
+            self.levels = Levels(self.runtime, self.detection.cfar.input_shape, db_per_level,
                                         power=self.detection.cfar.arrays["profiles"])
-        self._levels_stage.set_db_per_level(db_per_level)
-        return self._levels_stage
+        self.levels.set_db_per_level(db_per_level)
+        return self.levels
 
     def fuse_source(self, source, after_frame=None, before_frame=None, read_ahead=prefetch.DEFAULT_DEPTH):
         """Fuse every frame of ``source`` (an ``io.inputs.FrameSource``: frames, their poses and,

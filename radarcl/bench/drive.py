@@ -92,9 +92,10 @@ def _rss_bytes():
 
 
 def _stage_bytes(mapping):
-    """Device bytes of the pipeline's own buffers (profiles, CFAR, eq. 12, fusion inputs)."""
+    """Device bytes of the pipeline's own buffers (levels, CFAR, eq. 12, fusion inputs)."""
     total = 0
-    for stage in (mapping.range_fft, mapping.detection.cfar, mapping.detection.interpreter, mapping.fusion):
+    for stage in (mapping.range_fft, mapping.levels, mapping.detection.cfar, mapping.detection.interpreter,
+                  mapping.fusion):
         if stage is not None:
             total += sum(int(a.nbytes) for a in stage.arrays.values())
     return total
@@ -188,7 +189,6 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
     read_s = fuse_s = 0.0
     overlap = None if alternate is None else (lambda j: (j // alternate) % 2 == 0)
     times = dict(overlapped=[], read=[], fused=[])          # per frame, for ``overlap_figures``
-    stage = _stage_bytes(mapping)
     start = t2 = time.perf_counter()
     for j, (levels, poses, flags, t0, took) in enumerate(prefetch.prefetched(read, n_frames, read_ahead, overlap)):
         t1, before = time.perf_counter(), t2
@@ -207,7 +207,7 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
                 times["fused"].append(t2 - t1)              # fused with nothing read beside it
         latencies.append(t2 - t0)             # from reading the PNG, waiting in the queue included
         trajectory.append(poses[n_az // 2].copy())               # a copy: a view would keep the frame's poses
-        device_max = max(device_max, grid.memory()["device_bytes"] + stage)
+        device_max = max(device_max, grid.memory()["device_bytes"] + _stage_bytes(mapping))
         bricks_max = max(bricks_max, grid.n_bricks)
         host_max = max(host_max, _rss_bytes())
         if progress and (j + 1) % 10 == 0:
