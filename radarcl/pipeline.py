@@ -210,7 +210,7 @@ class Mapping:
         ``db_per_level`` (FrameFormatError for a scale float32 cannot hold)."""
         if self.levels is None:
             self.levels = Levels(self.runtime, self.detection.cfar.input_shape, db_per_level,
-                                        power=self.detection.cfar.arrays["profiles"])
+                                 power=self.detection.cfar.arrays["profiles"])
         self.levels.set_db_per_level(db_per_level)
         return self.levels
 
