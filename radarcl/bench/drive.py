@@ -4,7 +4,8 @@ The 11 Oxford scans (``navtech_oxford/radar``) replayed cyclically along the ful
 odometry of ``navtech_oxford/full_seq_1_gt`` (8866 steps, about 9 km): real radar texture on a
 real trajectory, but the scans REPEAT (scan j is file j mod 11, whatever the street), so the map
 is not a map of Oxford; what it measures is the engine on a drive's length and motion. Each frame
-is decoded from its PNG, CFAR'd, interpreted and fused at per-azimuth poses (the car moves during
+is decoded from its PNG, sent to the device as its 8-bit levels (turned into power there,
+``stages.levels``), CFAR'd, interpreted and fused at per-azimuth poses (the car moves during
 the turn), into a rolling map (``maps.rolling``: the window's bricks on the device, the rest in
 the map store, written as they leave).
 
