@@ -23,6 +23,7 @@ from radarcl.io import prefetch
 from radarcl.stages.cfar import Cfar, CfarResult
 from radarcl.stages.fusion import Fusion
 from radarcl.stages.interpret import Interpreter, InterpretResult
+from radarcl.stages.levels import Levels
 from radarcl.stages.range_fft import RangeFFT
 
 
@@ -76,7 +77,8 @@ class Mapping:
     Raw input: give ``radar`` (a ``RadarConfig``) and ``n_fft``; frames are (n_az, n_el,
     n_samples) of ``dtype`` and go through the Hann-windowed range FFT in power.
     Profile input (Navtech): give ``n_bins`` and ``bin_spacing_m``; frames are power profiles
-    (*lattice.batch, n_bins) float32 and enter at CFAR.
+    (*lattice.batch, n_bins) float32 and enter at CFAR, or a polar scan's uint8 levels of that
+    shape, which the ``levels`` stage turns into power on the device first (``fuse``).
     cfar_config, interpret_config: as for ``Detection``; per_beam_poses: as for ``Fusion``.
     An evidence model with node pairs (``EvidenceModel.knowledge``: the detection-statistics
     model) needs ``bin_model`` (a ``sensor_model.BinModel``), a grid with the knowledge channel and
@@ -110,6 +112,7 @@ class Mapping:
         it = self.detection.interpreter
         self.fusion = Fusion(runtime, grid, lattice, model, n_bins, bin_spacing_m, it.first_bin, it.last_bin,
                              per_beam_poses=per_beam_poses, detstats=it.node_pairs, terrain_dz=terrain_dz)
+        self.levels = None          # the ``Levels`` stage: uint8 levels -> power (``fuse``'s db_per_level)
         self.frames = 0
         self.config = None          # the mapconfig.Resolved it was built from (from_config)
 
@@ -159,18 +162,28 @@ class Mapping:
         """Shape of one frame: (n_az, n_el, n_samples) raw, (*batch, n_bins) profiles."""
         return self.range_fft.input_shape if self.range_fft is not None else self.detection.cfar.input_shape
 
-    def fuse(self, frame, poses, flags=None, azimuths=None):
+    def fuse(self, frame, poses, flags=None, azimuths=None, db_per_level=None):
         """Fuse one frame taken at ``poses`` (4x4, or one per beam). The pose and the frame are
         checked before anything runs, so a refused frame leaves the map as it was. Returns the
         ``FramePlan`` (bricks reached, beams outside the grid); the device work is queued, not
         waited for (``snapshot`` and ``flags`` wait). ``azimuths`` (lo, hi): fuse only those
-        azimuths' beams (``Fusion.restrict``): a part of a frame that has arrived so far."""
+        azimuths' beams (``Fusion.restrict``): a part of a frame that has arrived so far.
+        ``db_per_level``: the frame is a polar scan's uint8 levels of this many dB each (profile
+        input only), turned into power on the device (``stages.levels``: the same floats as
+        ``polar_png.levels_to_power``, so the same map)."""
+        levels = None
         if self.range_fft is not None:
             if flags is not None:
                 raise ConfigError("raw frames carry their own flags; pass flags with profiles only")
+            if db_per_level is not None:
+                raise ConfigError("raw frames are samples, not levels; pass db_per_level with profiles only")
             self.range_fft.check(frame)
         else:
-            self.detection.cfar.check(frame)
+            if db_per_level is None:
+                self.detection.cfar.check(frame)
+            else:
+                levels = self._levels_at(db_per_level)
+                levels.check(frame)
             if flags is not None:
                 flags = self.detection.interpreter.check_flags(flags)
         plan = self.fusion.plan(poses, record=azimuths is None)        # checks the poses; allocates bricks
@@ -180,7 +193,8 @@ class Mapping:
             done = self.range_fft.enqueue(wait_for=[self.range_fft.upload(frame)])
             profiles, flags_array = self.range_fft.arrays["profiles"], self.range_fft.arrays["flags"]
         else:
-            events = [self.detection.cfar.upload(frame)]
+            events = [self.detection.cfar.upload(frame) if levels is None
+                      else levels.enqueue(wait_for=[levels.upload(frame)])]
             flags_array = None
             if flags is not None:
                 events += self.detection.interpreter.upload(flags_in=flags)
@@ -191,25 +205,39 @@ class Mapping:
         self.frames += 1
         return plan
 
+    def _levels_at(self, db_per_level):
+        """The ``Levels`` stage that writes power into the CFAR's input, built on first use, at
+        ``db_per_level`` (FrameFormatError for a scale float32 cannot hold)."""
+        if self.levels is None:
+            self.levels = Levels(self.runtime, self.detection.cfar.input_shape, db_per_level,
+                                 power=self.detection.cfar.arrays["profiles"])
+        self.levels.set_db_per_level(db_per_level)
+        return self.levels
+
     def fuse_source(self, source, after_frame=None, before_frame=None, read_ahead=prefetch.DEFAULT_DEPTH):
         """Fuse every frame of ``source`` (an ``io.inputs.FrameSource``: frames, their poses and,
         for range profiles, their flags) in order; ``after_frame(j, trajectory)`` runs after
         frame j (progress, checkpoints), ``before_frame(j, position)`` before it, with the
         sensor's position (3,) [m] (a rolling window's eviction). The next ``read_ahead`` frames
         are read (decoded, converted) on a reader thread while the device fuses (``io.prefetch``;
-        0: read inline); the map is the same either way. Returns (the sensor's trajectory
+        0: read inline); the map is the same either way. A source that offers its frames as
+        levels (``FrameSource.levels``: polar scans) sends those, and the device turns them into
+        power (``fuse``'s ``db_per_level``): the same map. Returns (the sensor's trajectory
         (n, 4, 4): each frame's pose, or its middle beam's, the number of beams that reached no
         voxel of the grid)."""
         raw = self.range_fft is not None
+        levels = None if raw else getattr(source, "levels", None)
+        frames = source.frames if levels is None else levels
+        db_per_level = None if levels is None else source.db_per_level
 
         def read(j):
-            return source.frames[j], np.asarray(source.poses[j]), None if raw else source.flags[j]
+            return frames[j], np.asarray(source.poses[j]), None if raw else source.flags[j]
 
         trajectory, outside = [], 0
         for j, (frame, poses, flags) in enumerate(prefetch.prefetched(read, len(source), read_ahead)):
             if before_frame is not None:
                 before_frame(j, (poses if poses.ndim == 2 else poses[len(poses) // 2])[:3, 3])
-            plan = self.fuse(frame, poses, flags=flags)
+            plan = self.fuse(frame, poses, flags=flags, db_per_level=db_per_level)
             trajectory.append(poses if poses.ndim == 2 else poses[len(poses) // 2])
             outside += plan.beams_outside
             if after_frame is not None:

@@ -66,6 +66,41 @@ def test_profiles_enter_at_cfar(runtime):
     assert np.array_equal(got, ref.snapshot()) and got.max() > 0
 
 
+def test_levels_become_the_same_power_on_the_device(runtime):
+    """A polar scan's uint8 levels (``db_per_level``) fuse into the map its power makes, bit for
+    bit (the device converts through the host's table); a refused frame of levels leaves it."""
+    from radarcl.errors import FrameFormatError
+    from radarcl.io.polar_png import levels_to_power
+
+    lattice, model = BeamLattice.spinning(64), BeamModel.from_radar(PAPER_RADAR)
+    rng = np.random.default_rng(5)
+    spec = GridSpec.around((0, 0, 0), (60, 60, 1), 0.25)
+    scans = rng.integers(0, 40, size=(3, 64, 256), dtype=np.uint8)
+    for k in range(3):
+        scans[k, :, 100 + 10 * k] = 200
+    maps = {}
+    for how in ("power", "levels"):
+        m = Mapping(runtime, EvidenceGrid(runtime, spec), lattice, model, n_bins=256, bin_spacing_m=0.1)
+        for k, (levels, db) in enumerate(zip(scans, (1.0, 0.5, 1.0))):       # the table follows the scale
+            pose = pose_from_xyz_rpy(0.3 * k, 0.0, 0.0, yaw=0.1 * k)
+            if how == "power":
+                m.fuse(levels_to_power(levels, db), pose)
+            else:
+                m.fuse(levels, pose, db_per_level=db)
+        maps[how] = m.snapshot()
+    assert np.array_equal(maps["levels"], maps["power"]) and maps["power"].max() > 0
+    before = m.frames
+    with pytest.raises(ShapeError, match=r"expected levels of shape \(64, 256\) uint8, got \(64, 256\) float32"):
+        m.fuse(levels_to_power(levels), np.eye(4), db_per_level=1.0)
+    with pytest.raises(FrameFormatError, match=r"db_per_level must be in \(0, 1.4\]"):
+        m.fuse(levels, np.eye(4), db_per_level=3.0)
+    assert np.array_equal(m.snapshot(), maps["levels"]) and m.frames == before
+    raw = Mapping(runtime, EvidenceGrid(runtime, SPEC), BeamLattice.from_radar(PAPER_RADAR, tilt_deg=TILT), model,
+                  radar=PAPER_RADAR, n_fft=N_FFT, dtype=np.float32)
+    with pytest.raises(ConfigError, match="raw frames are samples, not levels"):
+        raw.fuse(paper_like_samples(seed=1, tilt_deg=TILT), np.eye(4), db_per_level=1.0)
+
+
 def test_a_refused_frame_leaves_the_map_as_it_was(runtime):
     lattice, model = BeamLattice.from_radar(PAPER_RADAR, tilt_deg=TILT), BeamModel.from_radar(PAPER_RADAR)
     grid = EvidenceGrid(runtime, SPEC)

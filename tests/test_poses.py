@@ -239,3 +239,27 @@ def test_evaluate_lidar_takes_any_configuration_file(tmp_path):
     assert label == "my-model" and config["interpret.k_occ"] == 0.3
     with pytest.raises(ConfigError, match="neither a model"):
         job.resolve_models("radiate-cts350x", ["nosuch"])
+
+
+def test_poses_between_samples_are_the_quaternions_of_their_two_poses_bit_for_bit():
+    """``Trajectory.at`` takes each pose's quaternion once for the whole trajectory: the same
+    floats as converting the two poses around each time, call by call."""
+    from radarcl.io.trajectory import slerp
+
+    rng = np.random.default_rng(4)
+    n = 200
+    yaw, pitch = np.cumsum(rng.normal(0, 0.2, n)), rng.normal(0, 0.05, n)
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
+    poses[:, 0, 0], poses[:, 0, 1], poses[:, 0, 2] = cy * cp, -sy, cy * sp
+    poses[:, 1, 0], poses[:, 1, 1], poses[:, 1, 2] = sy * cp, cy, sy * sp
+    poses[:, 2, 0], poses[:, 2, 2] = -sp, cp
+    poses[:, :3, 3] = np.cumsum(rng.normal(0, 0.5, (n, 3)), axis=0)
+    times = T0 + np.arange(n, dtype=np.int64) * 250_000_000
+    track = Trajectory(times, poses)
+    t = np.sort(rng.integers(times[0], times[-1], 4000))
+    i = np.clip(np.searchsorted(times, t, side="right"), 1, n - 1)
+    a = (t - times[i - 1]).astype(np.float64) / (times[i] - times[i - 1]).astype(np.float64)
+    want = rotations(slerp(quaternions(poses[i - 1, :3, :3]), quaternions(poses[i, :3, :3]), a))
+    got = track.at(t)
+    assert np.array_equal(got[:, :3, :3], want) and not np.array_equal(got[0], got[-1])

@@ -91,7 +91,9 @@ class _Frames:
         return self.frames[j]
 
 
-def _source(frames, bad=None):
+def _source(frames, bad=None, levels=False):
+    """A source of ``frames``; levels=True: ``frames`` are uint8 levels offered as such, and the
+    source's power (``frames``) cannot be read, so a fuse that reads it fails."""
     config = mapconfig.resolve("navtech-cts350x", program={"grid.voxel_m": 0.8, "interpret.range_max_m": 40.0})
     sensor = config.sensor.with_bins(frames.shape[-1])
     config = config.for_sensor(sensor)
@@ -100,7 +102,23 @@ def _source(frames, bad=None):
     poses = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
     poses[:, 0, 3] = np.arange(n) * 1.5 + rng.uniform(0, 0.1, n)          # driving along x
     flags = [np.zeros(sensor.n_azimuth, np.uint8)] * n
-    return config, inputs.FrameSource(sensor, _Frames(frames, bad), poses, flags, f"{n} test scans")
+    if not levels:
+        return config, inputs.FrameSource(sensor, _Frames(frames, bad), poses, flags, f"{n} test scans")
+    return config, inputs.FrameSource(sensor, _NoPower(n), poses, flags, f"{n} test scans",
+                                      levels=_Frames(frames, bad), db_per_level=1.0)
+
+
+class _NoPower:
+    """A source's power that a fuse of its levels must not read."""
+
+    def __init__(self, n):
+        self.n = n
+
+    def __len__(self):
+        return self.n
+
+    def __getitem__(self, j):
+        raise AssertionError(f"frame {j}'s power was read; the levels should have been fused")
 
 
 def _frames(n=6, n_bins=600):
@@ -141,11 +159,34 @@ def test_a_fuse_reading_ahead_makes_the_inline_map_bit_for_bit(runtime, tmp_path
     assert len(disk.read(tmp_path / "ahead.npz")[1]) > 0
 
 
+def _levels(n=6, n_bins=600):
+    rng = np.random.default_rng(12)
+    levels = rng.integers(0, 50, (n, 400, n_bins), dtype=np.uint8)
+    levels[:, ::7, 300] = 190                                                  # walls 300 bins out
+    return levels
+
+
+def test_a_source_of_levels_makes_its_powers_map_bit_for_bit(runtime, tmp_path):
+    """Polar scans travel as their uint8 levels and become power on the device: the same map as
+    their power fused (and the source's power is never read)."""
+    from radarcl.io.polar_png import levels_to_power
+
+    levels = _levels()
+    config, as_levels = _source(levels, levels=True)
+    _, as_power = _source(levels_to_power(levels))
+    fuse.run(runtime, as_levels, config, tmp_path / "levels.npz", report=lambda _: None)
+    fuse.run(runtime, as_power, config, tmp_path / "power.npz", report=lambda _: None)
+    assert _digest(tmp_path / "levels.npz") == _digest(tmp_path / "power.npz")
+    _, head = _source(levels, levels=True)
+    assert len(head.head(2).levels) == 2 and np.array_equal(head.head(2).levels[1], levels[1])
+
+
 @pytest.mark.parametrize("rolling", [False, True], ids=["map file", "rolling store"])
-def test_a_frame_that_cannot_be_read_keeps_the_map_before_it(runtime, tmp_path, rolling):
-    frames = _frames()
-    config, broken = _source(frames, bad=4)
-    _, first_four = _source(frames[:4])
+@pytest.mark.parametrize("levels", [False, True], ids=["power", "levels"])
+def test_a_frame_that_cannot_be_read_keeps_the_map_before_it(runtime, tmp_path, rolling, levels):
+    frames = _levels() if levels else _frames()
+    config, broken = _source(frames, bad=4, levels=levels)
+    _, first_four = _source(frames[:4], levels=levels)
     name = "m.rcmap" if rolling else "m.npz"
     window = dict(window_m=60.0) if rolling else {}
     said = []

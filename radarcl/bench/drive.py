@@ -4,7 +4,8 @@ The 11 Oxford scans (``navtech_oxford/radar``) replayed cyclically along the ful
 odometry of ``navtech_oxford/full_seq_1_gt`` (8866 steps, about 9 km): real radar texture on a
 real trajectory, but the scans REPEAT (scan j is file j mod 11, whatever the street), so the map
 is not a map of Oxford; what it measures is the engine on a drive's length and motion. Each frame
-is decoded from its PNG, CFAR'd, interpreted and fused at per-azimuth poses (the car moves during
+is decoded from its PNG, sent to the device as its 8-bit levels (turned into power there,
+``stages.levels``), CFAR'd, interpreted and fused at per-azimuth poses (the car moves during
 the turn), into a rolling map (``maps.rolling``: the window's bricks on the device, the rest in
 the map store, written as they leave).
 
@@ -92,9 +93,10 @@ def _rss_bytes():
 
 
 def _stage_bytes(mapping):
-    """Device bytes of the pipeline's own buffers (profiles, CFAR, eq. 12, fusion inputs)."""
+    """Device bytes of the pipeline's own buffers (levels, CFAR, eq. 12, fusion inputs)."""
     total = 0
-    for stage in (mapping.range_fft, mapping.detection.cfar, mapping.detection.interpreter, mapping.fusion):
+    for stage in (mapping.range_fft, mapping.levels, mapping.detection.cfar, mapping.detection.interpreter,
+                  mapping.fusion):
         if stage is not None:
             total += sum(int(a.nbytes) for a in stage.arrays.values())
     return total
@@ -182,19 +184,18 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
         scan = polar_png.load_scan(scans[j % len(scans)], layout)              # decoding counts
         poses = frame_poses(track, int(stamps[j]), int(stamps[j + 1] - stamps[j]), scan, n_az)
         flags = np.where(scan.valid, 0, FLAG_SILENT).astype(np.uint8)
-        return scan.power(), poses, flags, t0, time.perf_counter() - t0
+        return scan.levels, poses, flags, t0, time.perf_counter() - t0     # the device turns levels into power
 
     latencies, device_max, host_max, trajectory, bricks_max = [], 0, _rss_bytes(), [], 0
     read_s = fuse_s = 0.0
     overlap = None if alternate is None else (lambda j: (j // alternate) % 2 == 0)
     times = dict(overlapped=[], read=[], fused=[])          # per frame, for ``overlap_figures``
-    stage = _stage_bytes(mapping)
     start = t2 = time.perf_counter()
-    for j, (power, poses, flags, t0, took) in enumerate(prefetch.prefetched(read, n_frames, read_ahead, overlap)):
+    for j, (levels, poses, flags, t0, took) in enumerate(prefetch.prefetched(read, n_frames, read_ahead, overlap)):
         t1, before = time.perf_counter(), t2
         if rolling is not None:
             rolling.update(poses[n_az // 2, :3, 3])
-        mapping.fuse(power, poses, flags=flags)
+        mapping.fuse(levels, poses, flags=flags, db_per_level=layout.db_per_level)
         runtime.queue.finish()
         t2 = time.perf_counter()
         read_s, fuse_s = read_s + took, fuse_s + (t2 - t1)
@@ -207,7 +208,7 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
                 times["fused"].append(t2 - t1)              # fused with nothing read beside it
         latencies.append(t2 - t0)             # from reading the PNG, waiting in the queue included
         trajectory.append(poses[n_az // 2].copy())               # a copy: a view would keep the frame's poses
-        device_max = max(device_max, grid.memory()["device_bytes"] + stage)
+        device_max = max(device_max, grid.memory()["device_bytes"] + _stage_bytes(mapping))
         bricks_max = max(bricks_max, grid.n_bricks)
         host_max = max(host_max, _rss_bytes())
         if progress and (j + 1) % 10 == 0:

@@ -39,7 +39,10 @@ class FrameSource:
     and ``flags[i]`` (or None), for ``sensor``; ``summary`` says what was read, ``posed``
     whether the poses came from the data (False: every frame at the origin), ``notes`` what
     the readers repaired or assumed, ``trajectory`` the ``Trajectory`` the poses came from,
-    ``times_ns`` each frame's UNIX time [ns] (its middle beam's; None where the input has none)."""
+    ``times_ns`` each frame's UNIX time [ns] (its middle beam's; None where the input has none).
+    Polar scans also offer ``levels[i]``, frame i as its uint8 levels of ``db_per_level`` dB
+    each (``frames[i]`` is their power): a quarter of the bytes, for a mapping that converts
+    them on the device (``Mapping.fuse_source``); None where frames are not levels."""
 
     sensor: object
     frames: object
@@ -50,6 +53,8 @@ class FrameSource:
     notes: tuple = ()
     trajectory: object = None
     times_ns: object = None
+    levels: object = None
+    db_per_level: float = None
 
     def __len__(self):
         return len(self.frames)
@@ -59,7 +64,8 @@ class FrameSource:
         n = min(int(n), len(self))
         return dataclasses.replace(self, frames=_Head(self.frames, n), poses=self.poses[:n], flags=self.flags[:n],
                                    summary=f"the first {n} of {self.summary}",
-                                   times_ns=None if self.times_ns is None else self.times_ns[:n])
+                                   times_ns=None if self.times_ns is None else self.times_ns[:n],
+                                   levels=None if self.levels is None else _Head(self.levels, n))
 
 
 class _Head:
@@ -214,9 +220,13 @@ def _bag(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max_s
 def polar_source(sensor, scans, per_beam, summary):
     """A ``FrameSource`` of polar scans (``polar_png.PolarScan``) at per-azimuth poses
     (n, n_az, 4, 4): their power converted one scan at a time, azimuths not measured flagged
-    silent (no evidence)."""
+    silent (no evidence); their levels too, where every scan has the same dB per level."""
     flags = [np.where(s.valid, 0, FLAG_SILENT).astype(np.uint8) for s in scans]
-    return FrameSource(sensor, _LazyPower(scans), per_beam, flags, summary)
+    source = FrameSource(sensor, _LazyPower(scans), per_beam, flags, summary)
+    scales = {s.db_per_level for s in scans}
+    if len(scales) == 1:
+        source.levels, source.db_per_level = _Levels(scans), scales.pop()
+    return source
 
 
 class _LazyPower:
@@ -230,6 +240,19 @@ class _LazyPower:
 
     def __getitem__(self, i):
         return self.scans[i].power()
+
+
+class _Levels:
+    """Scans' levels, as decoded (uint8)."""
+
+    def __init__(self, scans):
+        self.scans = scans
+
+    def __len__(self):
+        return len(self.scans)
+
+    def __getitem__(self, i):
+        return self.scans[i].levels
 
 
 @dataclass(frozen=True)

@@ -79,15 +79,24 @@ class PolarScan:
 _POWER_TABLES = {}
 
 
-def levels_to_power(levels, db_per_level=1.0):
-    """Log-scaled levels -> linear power, float32 (level 255 at 1 dB/level is 3.2e25): a
-    256-entry table, the same floats as 10^(level x db_per_level / 10) in float64."""
+def power_table(db_per_level=1.0):
+    """The 256 float32 powers of levels 0 .. 255 at ``db_per_level``: 10^(level x db_per_level /
+    10) in float64, rounded once to float32 (level 255 at 1 dB/level is 3.2e25). The one table
+    both the host (``levels_to_power``) and the device (``stages.levels``) convert with."""
     if not (np.isfinite(db_per_level) and 0 < db_per_level <= 1.4):
         raise FrameFormatError(f"db_per_level must be in (0, 1.4] so that 255 levels fit float32, "
                                f"got {db_per_level!r}")
     table = _POWER_TABLES.get(db_per_level)
     if table is None:
         table = _POWER_TABLES[db_per_level] = (10.0 ** (np.arange(256) * (db_per_level / 10.0))).astype(np.float32)
+        table.flags.writeable = False
+    return table
+
+
+def levels_to_power(levels, db_per_level=1.0):
+    """Log-scaled levels -> linear power, float32: uint8 levels through ``power_table``, the same
+    floats as 10^(level x db_per_level / 10) in float64 (other integer levels in 0 .. 255 too)."""
+    table = power_table(db_per_level)
     levels = np.asarray(levels)
     if levels.dtype != np.uint8:
         if levels.size and (levels.min() < 0 or levels.max() > 255 or not np.all(levels == np.round(levels))):

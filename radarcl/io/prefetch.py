@@ -1,7 +1,8 @@
 """Reading ahead: the next frames decoded on a reader thread while the device fuses this one.
 
-A drive's host work (a PNG decoded, levels turned into power, per-azimuth poses) and the
-device's fusion of the frame before are independent, so a reader thread makes them overlap:
+A drive's host work (a PNG decoded, per-azimuth poses; a polar scan's levels become power on
+the device, ``stages.levels``) and the device's fusion of the frame before are independent, so
+a reader thread makes them overlap:
 ``prefetched(read, n)`` yields ``read(0)``, ``read(1)``, ... in order, with at most ``depth``
 of them read ahead of the one in hand (memory stays ``depth`` frames, whatever the drive's
 length; a frame is read only once there is room for it, so it waits no longer than it must).

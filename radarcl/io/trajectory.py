@@ -12,6 +12,7 @@ while its scans come every ~250 ms); farther is refused with the times named.
 """
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -93,11 +94,18 @@ class Trajectory:
         t0, t1 = self.times_ns[i - 1], self.times_ns[i]
         a = ((t - t0).astype(np.float64) / (t1 - t0).astype(np.float64))[:, None]
         p0, p1 = self.poses[i - 1], self.poses[i]
+        q = self._quaternions
         out = np.zeros((len(t), 4, 4))
         out[:, 3, 3] = 1.0
         out[:, :3, 3] = (1 - a) * p0[:, :3, 3] + a * p1[:, :3, 3]
-        out[:, :3, :3] = rotations(slerp(quaternions(p0[:, :3, :3]), quaternions(p1[:, :3, :3]), a[:, 0]))
+        out[:, :3, :3] = rotations(slerp(q[i - 1], q[i], a[:, 0]))
         return out
+
+    @cached_property
+    def _quaternions(self):
+        """Every pose's rotation as a quaternion (``quaternions``, row by row), taken once: a
+        drive asks ``at`` for each azimuth of each scan, and they fall between a few poses."""
+        return quaternions(self.poses[:, :3, :3])
 
     # -- checks and summaries ----------------------------------------------------------------------------------
     def check_motion(self, max_speed_m_s=DEFAULT_MAX_SPEED_M_S):
