@@ -331,6 +331,41 @@ except RadarclError as exc:
     assert "refused before decoding" in said and grew < 64, (grew, said)
 
 
+def _png(chunks):
+    """A PNG file's bytes of (kind, body) chunks, each with its right CRC."""
+    import struct
+    import zlib
+
+    from radarcl.io.polar_png import PNG_SIGNATURE
+
+    return PNG_SIGNATURE + b"".join(struct.pack(">I", len(body)) + kind + body
+                                    + struct.pack(">I", zlib.crc32(kind + body)) for kind, body in chunks)
+
+
+def test_pngs_with_no_pixels_or_a_malformed_header_are_refused_with_a_sentence(tmp_path):
+    """An empty image (which would hand a scan of no azimuths on, or inflate without a bound) and
+    a header chunk that is short, late or repeated: each a one-sentence refusal before decoding.
+    Their CRCs are right, so the check of the chunks alone would pass them."""
+    import struct
+    import zlib
+
+    from radarcl.io import polar_png
+
+    def header(width, height, size=13):
+        return b"IHDR", (struct.pack(">II", width, height) + bytes([8, 0, 0, 0, 0]))[:size]
+
+    data = b"IDAT", zlib.compress(b"\0" * (8 * 1000 + 1) * 4)
+    cases = {"no rows": ([header(8, 0), data], "0 pixels"), "no columns": ([header(0, 4), data], "x 4 pixels"),
+             "short header": ([header(8, 4, size=8), data], "13 bytes"),
+             "late header": ([data, header(8, 4)], "must come first"),
+             "two headers": ([header(8, 4), header(8, 4), data], "once")}
+    for name, (chunks, said) in cases.items():
+        path = tmp_path / f"{name.replace(' ', '_')}.png"
+        path.write_bytes(_png(chunks + [(b"IEND", b"")]))
+        kind, exc = outcome(polar_png.load_scan, path)
+        assert kind == "error" and "not a valid PNG" in str(exc) and said in str(exc), (name, kind, exc)
+
+
 def test_the_cli_answers_hostile_arguments_with_a_sentence(tmp_path, capsys):
     """Bad files and bad arguments through the CLI: exit 2 and one line, never a traceback or
     the "unexpected error" of a bug (exit 70)."""

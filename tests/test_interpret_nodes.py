@@ -116,8 +116,8 @@ def test_refuses_bad_input(runtime):
 
 @pytest.mark.parametrize("n_bins", [253, 264])
 def test_snr_nodes_of_any_bin_count_and_window(runtime, n_bins):
-    """"snr" evidence's nodes are computed eight bins at a time: a profile whose bins are not a
-    multiple of eight (the last chunk's lanes past the end), a window whose ends fall inside a
+    """"snr" evidence's nodes are computed LANES bins at a time (8 or 16): a profile whose bins are
+    not a multiple of eight (the last chunk's lanes past the end), a window whose ends fall inside a
     chunk, pulses and blocking across chunk edges, give the oracle's nodes within
     EVIDENCE_UNITS_TOL, and 0 outside the window, on flagged beams and past the profile's end."""
     from radarcl import sensor_model as sm

@@ -79,6 +79,50 @@ def probe(runtime, x, q):
     return e, l, lr
 
 
+def test_exp_nb_against_float64_over_its_range(runtime):
+    """exp_nb on [-87, 88] (every float32 input it takes unclamped, sampled densely, the points
+    where its reduction n = rint(x / ln 2) steps) within EXP_NB_RTOL of float64's exp of the same
+    float; outside, clamped to its ends (finite, never 0 or inf)."""
+    rng = np.random.default_rng(1)
+    steps = (np.arange(-125, 127) + 0.5) * math.log(2.0)
+    x = np.concatenate([np.linspace(-87.0, 88.0, 200001), rng.uniform(-87, 88, 100000), steps, np.nextafter(steps, 0),
+                        [0.0, -0.0, 1e-30, -1e-30]]).astype(np.float32)
+    got = probe(runtime, x, 0.1)[0].astype(np.float64)
+    exact = np.exp(x.astype(np.float64))
+    assert np.abs(got / exact - 1).max() <= EXP_NB_RTOL
+    ends = probe(runtime, np.array([88.0, 89.0, 1e30, np.inf, -87.0, -88.0, -1e30, -np.inf], np.float32), 0.1)[0]
+    assert np.isfinite(ends).all() and (ends > 0).all()
+    assert ends[:4].tolist() == [ends[0]] * 4 and ends[4:].tolist() == [ends[4]] * 4
+
+
+def test_log10_nb_against_float64_over_its_range(runtime):
+    """log10_nb over every float32 exponent, subnormals included, and the arguments the model gives
+    it (1 + delta c_det up to 1e6, the mixture's L / (1 - q + q L) in (0, 1 / q)) within
+    LOG10_NB_DECADES of float64's log10; log10(0) = -inf."""
+    rng = np.random.default_rng(2)
+    x = np.concatenate([np.ldexp(1.0, np.arange(-149, 128)), rng.uniform(0.5, 2.0, 50000),
+                        10.0 ** rng.uniform(-45, 38, 50000), 1 + 10.0 ** rng.uniform(-7, 6, 50000)]).astype(np.float32)
+    x = x[(x > 0) & np.isfinite(x)]
+    got = probe(runtime, x, 0.1)[1].astype(np.float64)
+    assert np.abs(got - np.log10(x.astype(np.float64))).max() <= LOG10_NB_DECADES
+    assert probe(runtime, np.zeros(1, np.float32), 0.1)[1].tolist() == [-np.inf]
+
+
+@pytest.mark.parametrize("q", [1e-6, 1e-3, 0.1, 0.5])
+def test_the_likelihood_ratio_against_float64_at_extreme_evidence(runtime, q):
+    """L of e = ln(L / (1 - q + q L)) (the gap mixture's first step) for e from -80 nat to
+    ln(1 / q) and past it: finite and positive everywhere (capped below 1 / q by GAP_CAP), within
+    LIKELIHOOD_RATIO_RTOL of float64 where e^e is at least a part in 10^3 below its cap (at the cap
+    L's denominator 1 - q e^e cancels, but the mixture's evidence there is ln(1 / q) whatever L)."""
+    e = np.concatenate([np.linspace(-80.0, -math.log(q) + 5.0, 20001), [-math.log(q), 88.0, 200.0]]).astype(np.float32)
+    got = probe(runtime, e, q)[2].astype(np.float64)
+    exact = likelihood_ratio(e.astype(np.float64), q)
+    assert np.isfinite(got).all() and (got > 0).all() and np.isfinite(exact).all()
+    away = np.exp(e.astype(np.float64)) * q < 1 - 1e-3
+    assert away.sum() > 10000 and np.abs(got[away] / exact[away] - 1).max() <= LIKELIHOOD_RATIO_RTOL
+
+
+
 def detect(runtime, x, model, flags=None):
     """CFAR and the default model's interpreter on profiles ``x`` (n, 256), and the float64 oracle
     on the same CFAR output: (kernel nodes e, d, oracle nodes e, d, kernel result)."""

@@ -37,12 +37,15 @@ from pathlib import Path
 
 import numpy as np
 
+from radarcl.errors import ConfigError
 from radarcl.io import polar_png, prefetch
 
 RADAR_HZ = 4.0                      # the CTS350-X turns at 4 Hz
 DEFAULT_VOXEL_M = 0.2
 MEMORY_SCANS = 22                   # scans of the planar / cubic memory comparison (twice the 11)
 ALTERNATE = 10                      # scans a block when reading ahead and reading inline take turns
+MIN_BLOCK = 3                       # the least block with a frame read beside one fused and fused beside one read
+MIN_SCANS = 2 * MIN_BLOCK           # the least drive that times the overlap: a block of each kind
 
 
 def _paths(data):
@@ -154,6 +157,9 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
     from radarcl.oracle import FLAG_SILENT
     from radarcl.pipeline import Mapping, new_grid
 
+    if alternate is not None and (read_ahead != 1 or int(alternate) < MIN_BLOCK):
+        raise ConfigError(f"timing the overlap (alternate={alternate!r}) takes blocks of at least {MIN_BLOCK} frames "
+                          f"read one ahead (read_ahead=1, got {read_ahead!r}): inline frames are held back only then")
     scans, _ = _paths(data)
     track, stamps = drive_track(data)
     stamps = stamps[int(first):]
@@ -190,9 +196,9 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
     read_s = fuse_s = 0.0
     overlap = None if alternate is None else (lambda j: (j // alternate) % 2 == 0)
     times = dict(overlapped=[], read=[], fused=[])          # per frame, for ``overlap_figures``
-    start = t2 = time.perf_counter()
+    start = t3 = time.perf_counter()
     for j, (levels, poses, flags, t0, took) in enumerate(prefetch.prefetched(read, n_frames, read_ahead, overlap)):
-        t1, before = time.perf_counter(), t2
+        t1, before = time.perf_counter(), t3       # from the last frame's bookkeeping done, as fused alone leaves it out
         if rolling is not None:
             rolling.update(poses[n_az // 2, :3, 3])
         mapping.fuse(levels, poses, flags=flags, db_per_level=layout.db_per_level)
@@ -215,6 +221,7 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
             print(f"  {'rolling' if rolling else 'unbounded'} ({brick_z}-deep bricks, read ahead {read_ahead}): "
                   f"{j + 1}/{n_frames} scans, {(j + 1) / (time.perf_counter() - start):.2f} scans/s, device "
                   f"{device_max / 2**20:.0f} MiB, host {host_max / 2**20:.0f} MiB", file=sys.stderr, flush=True)
+        t3 = time.perf_counter()                    # the bench's own bookkeeping ends: the next interval begins
     wall_s = time.perf_counter() - start
     result = dict(frames=n_frames, drive_s=float(stamps[n_frames] - stamps[0]) / 1e9, wall_s=wall_s,
                   scans_per_s=n_frames / wall_s, read_s=read_s, fuse_s=fuse_s, read_ahead=read_ahead,
@@ -329,7 +336,9 @@ def run(data, minutes=None, scans=None, voxel_m=DEFAULT_VOXEL_M, window_m=None, 
         n = min(n, int(scans))
     if minutes is not None:
         n = min(n, int(np.searchsorted(stamps, stamps[0] + minutes * 60e9)))
-    n = max(1, n)
+    if n < MIN_SCANS:
+        raise ConfigError(f"the drive has {n} scans; bench drive times reading ahead against reading inline on at "
+                          f"least {MIN_SCANS} (--scans, --minutes)")
     from radarcl.config import mapconfig
 
     if window_m is None:
@@ -341,7 +350,7 @@ def run(data, minutes=None, scans=None, voxel_m=DEFAULT_VOXEL_M, window_m=None, 
             f"voxels, window {window_m:g} m ...")
         rolling = in_process(data=data, n_frames=n, voxel_m=voxel_m, window_m=window_m, store=tmp / "drive.rcmap",
                              picture=picture)
-        block = max(1, min(ALTERNATE, n // 4))              # a short drive still has frames of each kind
+        block = max(MIN_BLOCK, min(ALTERNATE, n // 4))      # a short drive still has frames of each kind
         say(f"the same drive, blocks of {block} scans read ahead and read inline (decoding, then fusing) in "
             f"turn: end-to-end, decode-alone and fuse-alone times under the same load ...")
         timing = in_process(data=data, n_frames=n, voxel_m=voxel_m, window_m=window_m, store=tmp / "timing.rcmap",
@@ -391,7 +400,7 @@ def format_table(r):
                  f"{o['frames'][2]} fused alone, in turn): end-to-end {o['end_to_end_per_s']:.2f} scans/s = "
                  f"{o['end_to_end_over_fuse_alone']:.2f}x fuse-alone {o['fuse_alone_per_s']:.2f} scans/s; "
                  f"decode-alone {o['decode_alone_per_s']:.2f} scans/s; "
-                 f"maps {'bit-identical' if o['same_map'] else 'DIFFER'} with and without the reader thread")
+                 f"maps {'bit-identical' if o['same_map'] else 'DIFFER'} read ahead throughout and in turns")
     lines.append(f"  rolling store {ro['store_mib']:.1f} MiB ({ro['bricks']} bricks; {ro['evicted']} left the window, "
                  f"{ro['restored']} came back, {ro['restored_from_disk']} read from disk; finishing {ro['finish_s']:.2f} s)")
     lines.append(f"  planar vs cubic bricks, {m['frames']} scans unbounded: {m['planar_map_mib']:.1f} MiB vs "

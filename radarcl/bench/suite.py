@@ -222,8 +222,9 @@ def _quality_rows(r):
             label = x["label"] if x["label"].startswith(("reference", "default model")) else (
                 f"{names.get(x['model'], x['model'])}: {x['label']}")
             ece = "-" if x["ece_occupied"] is None else f"{x['ece_occupied']:.3f}"
+            auc = "-" if x["auc_detectable"] is None else f"{x['auc_detectable']:.3f}"
             rows.append(row(f"{label} ({x['voxel_m']:g} m; front: {', '.join(fronts)}; AUC det "
-                            f"{x['auc_detectable']:.3f}, ECE occupied {ece})", x["ms_per_frame"], "ms/frame",
+                            f"{auc}, ECE occupied {ece})", x["ms_per_frame"], "ms/frame",
                             "eq. 12's tuned reference", ref["ms_per_frame"], _over(x["ms_per_frame"], ref["ms_per_frame"]),
                             FIGURE_OF_BASELINE))
     return rows

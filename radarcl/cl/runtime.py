@@ -17,6 +17,7 @@ from radarcl.errors import DeviceCapabilityError, KernelBuildError
 
 log = logging.getLogger(__name__)
 
+
 class KernelSet:
     """The kernels of one built program, fetched once (``program.name`` would make a new
     ``cl.Kernel`` on every access), each called by argument name as its ``.cl`` signature

@@ -241,6 +241,8 @@ def run(runtime, scene, obs, reference_config, voxels=VOXELS, report=None, defau
     front of AUC detectable against ms per frame) and ``pareto_ece`` (the front of the occupied
     calls' ECE, lower better)."""
     say = report or (lambda _: None)
+    if isinstance(passes, bool) or not isinstance(passes, int) or passes < 1:
+        raise ConfigError(f"passes must be a whole number of timings, 1 or more, got {passes!r}")
     check_voxels(reference_config["grid.voxel_m"], voxels)
     say(f"truth and baselines at {reference_config['grid.voxel_m']} m ...")
     inst = instrument(runtime, scene, obs, reference_config)

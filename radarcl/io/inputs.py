@@ -193,7 +193,7 @@ def place_scans(sensor, scans, track, what, max_speed_m_s=DEFAULT_MAX_SPEED_M_S,
     source = polar_source(sensor, scans, per_beam, f"{len(scans)} {what} ({how})")
     source.posed, source.notes, source.trajectory = track is not None, notes, track
     if track is not None:
-        source.times_ns = np.array([s.timestamps_ns[len(s.timestamps_ns) // 2] for s in scans], np.int64)
+        source.times_ns = np.array([s.middle_ns for s in scans], np.int64)
     return source
 
 

@@ -135,6 +135,8 @@ class PolarLayout:
             else:
                 hint = "; set [beams] n_azimuth to the scans' azimuth count, or check [reader] orientation"
             raise FrameFormatError(said + f" ({az} azimuths where the sensor has {n_az})" + hint)
+        if az < 1:
+            raise FrameFormatError(said + ": no azimuths")
         if bins < 1:
             raise FrameFormatError(said + f": no range bins after {self.meta_columns} metadata columns; check "
                                           "[reader] meta_columns")

@@ -71,6 +71,12 @@ class PolarScan:
         first = 0 if self.acquired is None else int(np.argmin(self.acquired))
         return int(self.timestamps_ns[first])
 
+    @property
+    def middle_ns(self):
+        """UNIX time [ns] of the scan's middle azimuth (the middle row): the time of the pose a
+        map keeps for the turn (``Mapping.fuse_source``'s trajectory takes the middle beam's)."""
+        return int(self.timestamps_ns[len(self.timestamps_ns) // 2])
+
     def power(self):
         """Linear power (n_az, n_bins) float32: 10^(level x db_per_level / 10)."""
         return levels_to_power(self.levels, self.db_per_level)
@@ -133,7 +139,13 @@ def verify_png(path, raw=None):
         if zlib.crc32(body) != struct.unpack(">I", raw[end - 4:end])[0]:
             raise FrameFormatError(f"{path}: PNG chunk {kind!r} at byte {i} fails its CRC: the file is damaged")
         if kind == b"IHDR":
+            if size is not None or i != len(PNG_SIGNATURE) or length != 13:
+                raise FrameFormatError(f"{path}: not a valid PNG (its header chunk IHDR must come first, once, of 13 "
+                                       f"bytes; found one of {length} bytes at byte {i})")
             size = struct.unpack(">II", body[4:12])
+            if 0 in size:
+                raise FrameFormatError(f"{path}: not a valid PNG (it declares {size[0]} x {size[1]} pixels; the format "
+                                       "has no empty images)")
         ended = kind == b"IEND"
         i = end
     if not ended or size is None:
@@ -164,7 +176,7 @@ def greyscale_pixels(path, raw, width, height):
         elif kind == b"IEND":
             break
         i += 12 + length
-    if header != bytes([8, 0, 0, 0, 0]):
+    if header != bytes([8, 0, 0, 0, 0]) or not width or not height:
         return None
     expected = height * (width + 1)                     # a filter byte before each row
     inflate = isal_zlib.decompressobj()

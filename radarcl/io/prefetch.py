@@ -6,7 +6,7 @@ a reader thread makes them overlap:
 ``prefetched(read, n)`` yields ``read(0)``, ``read(1)``, ... in order, with at most ``depth``
 of them read ahead of the one in hand (memory stays ``depth`` frames, whatever the drive's
 length; a frame is read only once there is room for it, so it waits no longer than it must).
-PIL's decoding and numpy's conversions release the GIL, and so does waiting for the device,
+ISA-L's inflate (or PIL's decoding) and numpy's whole-array steps release the GIL, and so does waiting for the device,
 which is why a thread (not a process, whose frames would be pickled across) is enough.
 
 An exception in the reader (a corrupt scan's ``FrameFormatError``) is raised in the consumer
@@ -72,7 +72,7 @@ def prefetched(read, n, depth=DEFAULT_DEPTH, overlap=None):
                 return
             if isinstance(item, _Failed):
                 raise item.exc
-            if overlap is None or overlap(j + depth):
+            if overlap is None or j + depth >= n or overlap(j + depth):      # past the last: nothing to hold back
                 ahead.release()                  # the next read starts while the consumer works on this one
                 yield item
             else:

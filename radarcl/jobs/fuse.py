@@ -90,11 +90,8 @@ def frame_time_ns(source, j):
     so an export places each pose at the moment the sensor was there."""
     if source.times_ns is not None:
         return int(source.times_ns[j])
-    scans = getattr(source.frames, "scans", None)
-    if scans is None or not scans[j].timed:
-        return None
-    stamps = scans[j].timestamps_ns
-    return int(stamps[len(stamps) // 2])
+    scans = getattr(source.frames, "scans", None)         # a still radar's scans: no trajectory placed them
+    return scans[j].middle_ns if scans is not None and scans[j].timed else None
 
 
 def run(runtime, source, config, out, every=None, progress=None, report=print, inputs=(), page=None, window_m=None,

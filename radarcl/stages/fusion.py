@@ -17,8 +17,8 @@ of columns, ``column_tiles``, so a spinning radar's node pairs are read from cac
 The plans of the last ``PLAN_CACHE`` poses are kept. When a pose comes back (a radar on a
 stand, a tilting stand's positions), the plan gets a ``StillTable``: what each voxel takes,
 recorded by the kernel's RECORD passes, which ``radarcl.stages.fusion_cached`` then streams
-(``kernels/fusion_cached.cl``: the same integers, about a third of the gather's time for the
-paper's frame).
+(``kernels/fusion_cached.cl``: the same integers at a fraction of the gather's cost; ``radarcl
+bench fusion`` measures both).
 """
 
 import math
@@ -365,7 +365,8 @@ class Fusion(Stage):
 
     def _chunk_launches(self, plan):
         """(global offset, global size, n_items, chunk) of each launch over ``plan``: one per
-        pool chunk its bricks lie in (they are listed in slot order, so each chunk's are a run),
+        pool chunk its bricks lie in (they are listed chunk by chunk: in slot order, or by
+        ``fusion_plan.column_tiles`` within each chunk, so each chunk's are a run),
         as work-items offset to the run's first brick (``get_global_id`` keeps counting the
         plan's work-items, so table rows and brick rows stay where one launch puts them)."""
         ls, per = self.local_size, self._subs
