@@ -232,21 +232,26 @@ def pareto(runs, key="auc_detectable", higher=True):
     return flags
 
 
-def run(runtime, scene, obs, reference_config, voxels=VOXELS, report=None, default_config=None, passes=TIMING_PASSES):
+def run(runtime, scene, obs, reference_config, voxels=VOXELS, report=None, default_config=None, passes=TIMING_PASSES,
+        prepared=None):
     """Measure every variant of ``reference_config`` (and, given ``default_config``, of the
     default model's, with its ``readings``) on ``obs`` (simulated from ``scene``), each scored on
     the fixed voxel set of ``reference_config``'s voxel size (``evaluate.instrument``; other voxel
     sizes read on it by ``on_voxel_set``), beside the three baselines; each pipeline's run time
     the median of ``passes`` timings. Returns the --json dict; each run carries ``pareto`` (the
     front of AUC detectable against ms per frame) and ``pareto_ece`` (the front of the occupied
-    calls' ECE, lower better)."""
+    calls' ECE, lower better). ``prepared``: (the instrument, the baselines) a caller already made
+    for ``reference_config`` on ``obs`` (``evaluate.instrument``, ``evaluate.baselines``), not
+    made again."""
     say = report or (lambda _: None)
     if isinstance(passes, bool) or not isinstance(passes, int) or passes < 1:
         raise ConfigError(f"passes must be a whole number of timings, 1 or more, got {passes!r}")
     check_voxels(reference_config["grid.voxel_m"], voxels)
-    say(f"truth and baselines at {reference_config['grid.voxel_m']} m ...")
-    inst = instrument(runtime, scene, obs, reference_config)
-    base, runs = baselines(runtime, inst, obs), []
+    if prepared is None:
+        say(f"truth and baselines at {reference_config['grid.voxel_m']} m ...")
+        prepared = instrument(runtime, scene, obs, reference_config), None
+    inst, base = prepared
+    base, runs = base if base is not None else baselines(runtime, inst, obs), []
     pipelines = variants(reference_config, voxels, default_config)
     times = {id(c): [] for _, c in pipelines}
     for dim, config in pipelines:
