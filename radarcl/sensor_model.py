@@ -78,7 +78,8 @@ from radarcl.snr_evidence import Clutter, SnrTable
 
 NODES = 5                        # node values over rho2 = 0, 1/4, ..., 1
 SEGMENTS = NODES - 1
-N_CLASSES = 2                    # target classes (``CLASSES``): upright, terrain
+CLASSES = ("upright", "terrain")  # the typical target of a voxel: chosen per voxel by its height (kernels/fusion.cl)
+N_CLASSES = len(CLASSES)
 NODE_SHAPE = (N_CLASSES, SEGMENTS, 2)   # per (beam, bin): int2 (evidence pair, opportunity pair) per class, segment
 Q_ONE = 1 << 14                  # rho2 = 1 in the fusion's quantisation steps (2^12 per segment)
 Q_MAX = Q_ONE - 1                # the last step: rho2 = 1 quantises into the last segment
@@ -336,8 +337,6 @@ def _guard_for(oversampling):
 
 # -- the radar equation per bin ---------------------------------------------------------------------------------------
 R_REF_M = 10.0
-CLASSES = ("upright", "terrain")  # the typical target of a voxel: chosen per voxel by its height (kernels/fusion.cl)
-assert len(CLASSES) == N_CLASSES
 
 
 def beam_solid_angle(half_az_rad, half_el_rad):

@@ -38,7 +38,7 @@ import numpy as np
 from radarcl import physics, sensor_model
 from radarcl.config import tomlfile
 from radarcl.config.keys import check_value
-from radarcl.config.stage_config import RadarConfig, is_power_of_two
+from radarcl.config.stage_config import RadarConfig
 from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, beam_model
 from radarcl.gridspec import lattice_box
@@ -53,7 +53,7 @@ SAMPLE_TYPES = {"int16": np.int16, "float32": np.float32, "complex64": np.comple
 MAINLOBE_CELLS = 4.0       # Hann mainlobe, null to null, in resolution cells (Harris 1978)
 TRAIN_CELLS = 4.0          # training window per side, in resolution cells
 _NEEDS = {"samples": ("waveform", "beams", "range"), "profiles": ("beams", "range")}
-PADDING = 4                # n_fft = PADDING x the next power of two >= n_samples
+PADDING = 4                # n_fft = PADDING x the next power of two >= n_samples (a power of two itself)
 MAX_EXTENDS = 16           # profiles chained by ``extends``: deeper is a mistake, not a sensor
 
 _N = tomlfile.number
@@ -413,7 +413,6 @@ def derived_defaults(sensor):
     if sensor.raw:
         n = sensor.radar.n_samples
         n_fft = PADDING * (1 << max(0, math.ceil(math.log2(n))))
-        assert is_power_of_two(n_fft)
         out["range_fft.n_fft"] = (n_fft, f"x{PADDING} zero padding of {n} samples (§4.1)")
     n_bins = sensor.n_bins(out.get("range_fft.n_fft", (None,))[0])
     if n_bins is not None:

@@ -249,9 +249,11 @@ def run(runtime, scene, obs, reference_config, voxels=VOXELS, report=None, defau
     check_voxels(reference_config["grid.voxel_m"], voxels)
     if prepared is None:
         say(f"truth and baselines at {reference_config['grid.voxel_m']} m ...")
-        prepared = instrument(runtime, scene, obs, reference_config), None
-    inst, base = prepared
-    base, runs = base if base is not None else baselines(runtime, inst, obs), []
+        inst = instrument(runtime, scene, obs, reference_config)
+        base = baselines(runtime, inst, obs)
+    else:
+        inst, base = prepared
+    runs = []
     pipelines = variants(reference_config, voxels, default_config)
     times = {id(c): [] for _, c in pipelines}
     for dim, config in pipelines:

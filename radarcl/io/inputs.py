@@ -18,6 +18,7 @@ azimuth's time, and interpolated per azimuth (the radar moves during its turn).
 """
 
 import dataclasses
+import operator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -222,37 +223,25 @@ def polar_source(sensor, scans, per_beam, summary):
     (n, n_az, 4, 4): their power converted one scan at a time, azimuths not measured flagged
     silent (no evidence); their levels too, where every scan has the same dB per level."""
     flags = [np.where(s.valid, 0, FLAG_SILENT).astype(np.uint8) for s in scans]
-    source = FrameSource(sensor, _LazyPower(scans), per_beam, flags, summary)
+    source = FrameSource(sensor, _PerScan(scans, operator.methodcaller("power")), per_beam, flags, summary)
     scales = {s.db_per_level for s in scans}
     if len(scales) == 1:
-        source.levels, source.db_per_level = _Levels(scans), scales.pop()
+        source.levels, source.db_per_level = _PerScan(scans, operator.attrgetter("levels")), scales.pop()
     return source
 
 
-class _LazyPower:
-    """Scans' power, converted one at a time (a scan's float32 power is 4x its levels)."""
+class _PerScan:
+    """Polar scans read one at a time as ``read(scan)`` (their power is converted on access: a
+    scan's float32 power is 4x its levels); ``scans`` the scans themselves."""
 
-    def __init__(self, scans):
-        self.scans = scans
-
-    def __len__(self):
-        return len(self.scans)
-
-    def __getitem__(self, i):
-        return self.scans[i].power()
-
-
-class _Levels:
-    """Scans' levels, as decoded (uint8)."""
-
-    def __init__(self, scans):
-        self.scans = scans
+    def __init__(self, scans, read):
+        self.scans, self.read = scans, read
 
     def __len__(self):
         return len(self.scans)
 
     def __getitem__(self, i):
-        return self.scans[i].levels
+        return self.read(self.scans[i])
 
 
 @dataclass(frozen=True)
