@@ -162,7 +162,7 @@ class Mapping:
         """Shape of one frame: (n_az, n_el, n_samples) raw, (*batch, n_bins) profiles."""
         return self.range_fft.input_shape if self.range_fft is not None else self.detection.cfar.input_shape
 
-    def fuse(self, frame, poses, flags=None, azimuths=None, db_per_level=None):
+    def fuse(self, frame, poses, flags=None, azimuths=None, db_per_level=None, differenced=False):
         """Fuse one frame taken at ``poses`` (4x4, or one per beam). The pose and the frame are
         checked before anything runs, so a refused frame leaves the map as it was. Returns the
         ``FramePlan`` (bricks reached, beams outside the grid); the device work is queued, not
@@ -170,8 +170,11 @@ class Mapping:
         azimuths' beams (``Fusion.restrict``): a part of a frame that has arrived so far.
         ``db_per_level``: the frame is a polar scan's uint8 levels of this many dB each (profile
         input only), turned into power on the device (``stages.levels``: the same floats as
-        ``polar_png.levels_to_power``, so the same map)."""
+        ``polar_png.levels_to_power``, so the same map); ``differenced``: its rows hold their
+        levels' differences (``polar_png.PolarScan.differenced``), summed on the device."""
         levels = None
+        if differenced and db_per_level is None:
+            raise ConfigError("differenced frames are polar scans' levels; pass db_per_level with them")
         if self.range_fft is not None:
             if flags is not None:
                 raise ConfigError("raw frames carry their own flags; pass flags with profiles only")
@@ -194,7 +197,7 @@ class Mapping:
             profiles, flags_array = self.range_fft.arrays["profiles"], self.range_fft.arrays["flags"]
         else:
             events = [self.detection.cfar.upload(frame) if levels is None
-                      else levels.enqueue(wait_for=[levels.upload(frame)])]
+                      else levels.enqueue(wait_for=[levels.upload(frame)], differenced=differenced)]
             flags_array = None
             if flags is not None:
                 events += self.detection.interpreter.upload(flags_in=flags)
@@ -221,23 +224,26 @@ class Mapping:
         sensor's position (3,) [m] (a rolling window's eviction). The next ``read_ahead`` frames
         are read (decoded, converted) on a reader thread while the device fuses (``io.prefetch``;
         0: read inline); the map is the same either way. A source that offers its frames as
-        levels (``FrameSource.levels``: polar scans) sends those, and the device turns them into
-        power (``fuse``'s ``db_per_level``): the same map. Returns (the sensor's trajectory
+        levels (``FrameSource.levels``: polar scans) sends those, as their rows' differences
+        where a scan holds those (``FrameSource.differenced``), and the device turns them into
+        power (``fuse``'s ``db_per_level``, ``differenced``): the same map. Returns (the sensor's trajectory
         (n, 4, 4): each frame's pose, or its middle beam's, the number of beams that reached no
         voxel of the grid)."""
         raw = self.range_fft is not None
         levels = None if raw else getattr(source, "levels", None)
         frames = source.frames if levels is None else levels
         db_per_level = None if levels is None else source.db_per_level
+        differenced = None if levels is None else getattr(source, "differenced", None)
 
         def read(j):
-            return frames[j], np.asarray(source.poses[j]), None if raw else source.flags[j]
+            return (frames[j], np.asarray(source.poses[j]), None if raw else source.flags[j],
+                    differenced is not None and bool(differenced[j]))
 
         trajectory, outside = [], 0
-        for j, (frame, poses, flags) in enumerate(prefetch.prefetched(read, len(source), read_ahead)):
+        for j, (frame, poses, flags, diff) in enumerate(prefetch.prefetched(read, len(source), read_ahead)):
             if before_frame is not None:
                 before_frame(j, (poses if poses.ndim == 2 else poses[len(poses) // 2])[:3, 3])
-            plan = self.fuse(frame, poses, flags=flags, db_per_level=db_per_level)
+            plan = self.fuse(frame, poses, flags=flags, db_per_level=db_per_level, differenced=diff)
             trajectory.append(poses if poses.ndim == 2 else poses[len(poses) // 2])
             outside += plan.beams_outside
             if after_frame is not None:

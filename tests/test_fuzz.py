@@ -336,7 +336,7 @@ def _png(chunks):
     import struct
     import zlib
 
-    from radarcl.io.polar_png import PNG_SIGNATURE
+    from radarcl.io.png import PNG_SIGNATURE
 
     return PNG_SIGNATURE + b"".join(struct.pack(">I", len(body)) + kind + body
                                     + struct.pack(">I", zlib.crc32(kind + body)) for kind, body in chunks)

@@ -71,3 +71,25 @@ def test_refuses_bad_input(runtime):
         import pyopencl.array as cla
 
         Levels(runtime, (4, 100), power=cla.zeros(runtime.queue, (4, 100), np.float64))
+
+
+def differences(levels):
+    """Each row's differences mod 256, the first its level: a PNG's "Sub" rows."""
+    d = levels.copy()
+    d[..., 1:] -= levels[..., :-1]
+    return d
+
+
+# Rows whose length is no multiple of the kernel's 16 (13, 517), one shorter than 16 (7), whole
+# vectors only (32); every local size; the host's running sums as the oracle.
+@pytest.mark.parametrize("shape", [(7, 13), (40, 517), (3, 32), (5, 7)])
+@pytest.mark.parametrize("local_size", [1, 7, 64])
+def test_differenced_rows_are_summed_as_the_host_sums_them(runtime, shape, local_size):
+    from radarcl.io.png import running_sums
+
+    levels = every_level(shape, seed=shape[1])
+    coded = differences(levels)
+    assert np.array_equal(running_sums(coded), levels)
+    stage = Levels(runtime, shape, 0.5, local_size=local_size)
+    assert same_bits(stage(coded, differenced=True), levels_to_power(levels, 0.5))
+    assert same_bits(stage(levels), levels_to_power(levels, 0.5))      # the same stage, levels as they are

@@ -11,6 +11,7 @@ from radarcl.cli import main
 from radarcl.config.sensors import load as load_sensor
 from radarcl.config.stage_config import CfarConfig, InterpretConfig
 from radarcl.errors import FrameFormatError
+from radarcl.io import png
 from radarcl.io import polar_png as navtech
 from radarcl.pipeline import Detection
 
@@ -62,31 +63,35 @@ def _png(pixels, filters, compressed=None):
     def chunk(kind, body):
         return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
 
-    return (navtech.PNG_SIGNATURE + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
+    return (png.PNG_SIGNATURE + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
             + chunk(b"IDAT", data[: len(data) // 2]) + chunk(b"IDAT", data[len(data) // 2:]) + chunk(b"IEND", b""))
 
 
-def test_scans_decoded_by_hand_are_pil_s_pixels(scans, tmp_path):
+def test_scans_decoded_by_hand_are_pil_s_pixels(scans, tmp_path, monkeypatch):
     """The reader's own inflate and unfiltering (rows all "Sub", as Navtech writes them, or all
-    "None") gives PIL's pixels exactly; other filters are left to PIL, and a stream that inflates
-    short, long or not at all is refused with a sentence."""
+    "None"; unfiltered a block of rows at a time, a block smaller than the image here too) gives
+    PIL's pixels exactly; other filters are left to PIL, and a stream that inflates short, long
+    or not at all is refused with a sentence."""
     import io
 
     from PIL import Image
 
     for path in scans:
         raw = path.read_bytes()
-        w, h = navtech.verify_png(path, raw)
-        pixels = navtech.greyscale_pixels(path, raw, w, h)
+        w, h = png.verify_png(path, raw)
+        pixels = png.greyscale_pixels(path, raw, w, h)
         assert pixels is not None and np.array_equal(pixels, np.asarray(Image.open(io.BytesIO(raw))))
     rng = np.random.default_rng(5)
     pixels = rng.integers(0, 256, (6, 300), dtype=np.uint8)
     for filters, by_hand in (([1] * 6, True), ([0] * 6, True), ([1, 2, 1, 2, 1, 2], False), ([0, 1] * 3, False)):
         raw = _png(pixels, filters)
-        got = navtech.greyscale_pixels("x.png", raw, 300, 6)
+        got = png.greyscale_pixels("x.png", raw, 300, 6)
         assert (got is not None) == by_hand and np.array_equal(np.asarray(Image.open(io.BytesIO(raw))), pixels)
         if by_hand:
             assert np.array_equal(got, pixels)
+            with monkeypatch.context() as m:
+                m.setattr(png, "UNFILTER_BLOCK_BYTES", 4 * 300)        # blocks of 4 rows and of 2
+                assert np.array_equal(png.greyscale_pixels("x.png", raw, 300, 6), pixels)
         (tmp_path / "s.png").write_bytes(raw)
         layout = navtech.PolarLayout(meta_columns=0, timestamp_column=-1, encoder_column=-1, valid_column=-1)
         scan = navtech.load_scan(tmp_path / "s.png", layout)
@@ -95,15 +100,41 @@ def test_scans_decoded_by_hand_are_pil_s_pixels(scans, tmp_path):
 
     stream = zlib.compress(b"".join(bytes([1]) + r.tobytes() for r in pixels))
     short = zlib.compress(b"".join(bytes([1]) + r.tobytes() for r in pixels[:5]))
-    peeked = zlib.compress(b"".join(bytes([1]) + r.tobytes() for r in pixels[:navtech.PEEK_ROWS]))
+    peeked = zlib.compress(b"".join(bytes([1]) + r.tobytes() for r in pixels[:png.PEEK_ROWS]))
     long_ = zlib.compress(b"".join(bytes([1]) + r.tobytes() for r in np.vstack([pixels, pixels])))
     for damaged, said in ((stream[:-30], r"stop after 17\d\d bytes, before their stream's end; expected the 1806 "),
                           (stream[:-4], "stop after 1806 bytes, before their stream's end"),
                           (short, r"inflate to 1505 bytes, expected the 1806 bytes of 6 x 300 pixels\)$"),
-                          (peeked, f"inflate to {navtech.PEEK_ROWS * 301} bytes, expected the 1806"),
+                          (peeked, f"inflate to {png.PEEK_ROWS * 301} bytes, expected the 1806"),
                           (long_, "inflate to more than the 1806 bytes"), (b"\x00" * 40, "do not inflate")):
         with pytest.raises(FrameFormatError, match=said):
-            navtech.greyscale_pixels("x.png", _png(pixels, [1] * 6, damaged), 300, 6)
+            png.greyscale_pixels("x.png", _png(pixels, [1] * 6, damaged), 300, 6)
+
+
+@pytest.mark.parametrize("range_offset_m", [0.0, 0.2, -0.2])      # 5 bins padded, 5 dropped (0.0438 m bins)
+@pytest.mark.parametrize("clockwise", [True, False])
+def test_scans_kept_as_differences_read_as_the_pixels_do(scans, range_offset_m, clockwise):
+    """A "Sub" scan keeps its rows' differences (``PolarScan.differenced``): its metadata, its
+    levels (their running sums) and its power are those of the same scan decoded from PIL's
+    pixels, whatever bins the layout drops or pads and whichever way it turns."""
+    import dataclasses
+    import io
+
+    from PIL import Image
+
+    layout = dataclasses.replace(navtech.PolarLayout(), range_offset_m=range_offset_m, clockwise=clockwise,
+                                 **({"bin_spacing_m": 0.0438} if range_offset_m else {}))
+    for path in scans[:2]:
+        scan = navtech.load_scan(path, layout)
+        pixels = np.asarray(Image.open(io.BytesIO(path.read_bytes())))
+        expected = navtech.decode_scan(pixels, layout, path)
+        assert scan.differenced and not expected.differenced
+        for name in ("timestamps_ns", "angles_rad", "valid", "acquired"):
+            assert np.array_equal(getattr(scan, name), getattr(expected, name)), name
+        assert scan.levels.shape == expected.levels.shape == (400, 3768 + int(round(range_offset_m / 0.0438)))
+        assert np.array_equal(scan.levels, expected.levels)
+        assert np.array_equal(png.running_sums(scan.coded_levels), expected.levels)
+        assert np.array_equal(scan.power(), expected.power())
 
 
 def test_bad_files_are_refused(tmp_path):

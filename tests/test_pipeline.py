@@ -94,6 +94,8 @@ def test_levels_become_the_same_power_on_the_device(runtime):
         m.fuse(levels_to_power(levels), np.eye(4), db_per_level=1.0)
     with pytest.raises(FrameFormatError, match=r"db_per_level must be in \(0, 1.4\]"):
         m.fuse(levels, np.eye(4), db_per_level=3.0)
+    with pytest.raises(ConfigError, match="differenced frames are polar scans' levels; pass db_per_level with them"):
+        m.fuse(levels, np.eye(4), differenced=True)
     assert np.array_equal(m.snapshot(), maps["levels"]) and m.frames == before
     raw = Mapping(runtime, EvidenceGrid(runtime, SPEC), BeamLattice.from_radar(PAPER_RADAR, tilt_deg=TILT), model,
                   radar=PAPER_RADAR, n_fft=N_FFT, dtype=np.float32)

@@ -94,9 +94,10 @@ class _Frames:
         return self.frames[j]
 
 
-def _source(frames, bad=None, levels=False):
-    """A source of ``frames``; levels=True: ``frames`` are uint8 levels offered as such, and the
-    source's power (``frames``) cannot be read, so a fuse that reads it fails."""
+def _source(frames, bad=None, levels=False, differenced=False):
+    """A source of ``frames``; levels=True: ``frames`` are uint8 levels offered as such (with
+    ``differenced``: their rows' differences), and the source's power (``frames``) cannot be
+    read, so a fuse that reads it fails."""
     config = mapconfig.resolve("navtech-cts350x", program={"grid.voxel_m": 0.8, "interpret.range_max_m": 40.0})
     sensor = config.sensor.with_bins(frames.shape[-1])
     config = config.for_sensor(sensor)
@@ -108,7 +109,8 @@ def _source(frames, bad=None, levels=False):
     if not levels:
         return config, inputs.FrameSource(sensor, _Frames(frames, bad), poses, flags, f"{n} test scans")
     return config, inputs.FrameSource(sensor, _NoPower(n), poses, flags, f"{n} test scans",
-                                      levels=_Frames(frames, bad), db_per_level=1.0)
+                                      levels=_Frames(frames, bad), db_per_level=1.0,
+                                      differenced=[differenced] * n if differenced else None)
 
 
 class _NoPower:
@@ -170,18 +172,23 @@ def _levels(n=6, n_bins=600):
 
 
 def test_a_source_of_levels_makes_its_powers_map_bit_for_bit(runtime, tmp_path):
-    """Polar scans travel as their uint8 levels and become power on the device: the same map as
-    their power fused (and the source's power is never read)."""
+    """Polar scans travel as their uint8 levels, or as their rows' differences (a "Sub" PNG's,
+    summed on the device), and become power on the device: the same map as their power fused
+    (and the source's power is never read)."""
     from radarcl.io.polar_png import levels_to_power
 
     levels = _levels()
+    coded = levels.copy()
+    coded[..., 1:] -= levels[..., :-1]
     config, as_levels = _source(levels, levels=True)
+    _, as_differences = _source(coded, levels=True, differenced=True)
     _, as_power = _source(levels_to_power(levels))
-    fuse.run(runtime, as_levels, config, tmp_path / "levels.npz", report=lambda _: None)
-    fuse.run(runtime, as_power, config, tmp_path / "power.npz", report=lambda _: None)
-    assert _digest(tmp_path / "levels.npz") == _digest(tmp_path / "power.npz")
+    for name, source in (("levels", as_levels), ("differences", as_differences), ("power", as_power)):
+        fuse.run(runtime, source, config, tmp_path / f"{name}.npz", report=lambda _: None)
+    assert _digest(tmp_path / "levels.npz") == _digest(tmp_path / "differences.npz") == _digest(tmp_path / "power.npz")
     _, head = _source(levels, levels=True)
     assert len(head.head(2).levels) == 2 and np.array_equal(head.head(2).levels[1], levels[1])
+    assert as_differences.head(2).differenced == [True, True]
 
 
 @pytest.mark.parametrize("rolling", [False, True], ids=["map file", "rolling store"])

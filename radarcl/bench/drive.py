@@ -190,18 +190,20 @@ def run_drive(data, n_frames, voxel_m=DEFAULT_VOXEL_M, window_m=None, store=None
         scan = polar_png.load_scan(scans[j % len(scans)], layout)              # decoding counts
         poses = frame_poses(track, int(stamps[j]), int(stamps[j + 1] - stamps[j]), scan, n_az)
         flags = np.where(scan.valid, 0, FLAG_SILENT).astype(np.uint8)
-        return scan.levels, poses, flags, t0, time.perf_counter() - t0     # the device turns levels into power
+        # the device turns levels (their rows' differences, as the file holds them) into power
+        return scan.coded_levels, scan.differenced, poses, flags, t0, time.perf_counter() - t0
 
     latencies, device_max, host_max, trajectory, bricks_max = [], 0, _rss_bytes(), [], 0
     read_s = fuse_s = 0.0
     overlap = None if alternate is None else (lambda j: (j // alternate) % 2 == 0)
     times = dict(overlapped=[], read=[], fused=[])          # per frame, for ``overlap_figures``
     start = t3 = time.perf_counter()
-    for j, (levels, poses, flags, t0, took) in enumerate(prefetch.prefetched(read, n_frames, read_ahead, overlap)):
+    for j, (levels, differenced, poses, flags, t0, took) in enumerate(prefetch.prefetched(read, n_frames, read_ahead,
+                                                                                        overlap)):
         t1, before = time.perf_counter(), t3       # from the last frame's bookkeeping done, as fused alone leaves it out
         if rolling is not None:
             rolling.update(poses[n_az // 2, :3, 3])
-        mapping.fuse(levels, poses, flags=flags, db_per_level=layout.db_per_level)
+        mapping.fuse(levels, poses, flags=flags, db_per_level=layout.db_per_level, differenced=differenced)
         runtime.queue.finish()
         t2 = time.perf_counter()
         read_s, fuse_s = read_s + took, fuse_s + (t2 - t1)

@@ -43,7 +43,9 @@ class FrameSource:
     ``times_ns`` each frame's UNIX time [ns] (its middle beam's; None where the input has none).
     Polar scans also offer ``levels[i]``, frame i as its uint8 levels of ``db_per_level`` dB
     each (``frames[i]`` is their power): a quarter of the bytes, for a mapping that converts
-    them on the device (``Mapping.fuse_source``); None where frames are not levels."""
+    them on the device (``Mapping.fuse_source``); None where frames are not levels; where
+    ``differenced[i]`` is true, ``levels[i]`` holds its rows' differences instead
+    (``polar_png.PolarScan.differenced``: the device sums them)."""
 
     sensor: object
     frames: object
@@ -56,6 +58,7 @@ class FrameSource:
     times_ns: object = None
     levels: object = None
     db_per_level: float = None
+    differenced: object = None
 
     def __len__(self):
         return len(self.frames)
@@ -66,7 +69,8 @@ class FrameSource:
         return dataclasses.replace(self, frames=_Head(self.frames, n), poses=self.poses[:n], flags=self.flags[:n],
                                    summary=f"the first {n} of {self.summary}",
                                    times_ns=None if self.times_ns is None else self.times_ns[:n],
-                                   levels=None if self.levels is None else _Head(self.levels, n))
+                                   levels=None if self.levels is None else _Head(self.levels, n),
+                                   differenced=None if self.differenced is None else self.differenced[:n])
 
 
 class _Head:
@@ -182,7 +186,7 @@ def place_scans(sensor, scans, track, what, max_speed_m_s=DEFAULT_MAX_SPEED_M_S,
         sensor = sensor.with_bins(scans[0].n_bins)
         notes += sensor.notes
     for s in scans:
-        _check_frame(sensor, s.levels.shape, np.float32, str(s.path))
+        _check_frame(sensor, s.coded_levels.shape, np.float32, str(s.path))
     if track is not None:
         track.check_motion(max_speed_m_s)
         notes += track.notes
@@ -226,7 +230,8 @@ def polar_source(sensor, scans, per_beam, summary):
     source = FrameSource(sensor, _PerScan(scans, operator.methodcaller("power")), per_beam, flags, summary)
     scales = {s.db_per_level for s in scans}
     if len(scales) == 1:
-        source.levels, source.db_per_level = _PerScan(scans, operator.attrgetter("levels")), scales.pop()
+        source.levels, source.db_per_level = _PerScan(scans, operator.attrgetter("coded_levels")), scales.pop()
+        source.differenced = [s.differenced for s in scans]
     return source
 
 

@@ -29,17 +29,18 @@ shape does not fit the layout is refused with both shapes and the key to change.
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
 from radarcl.errors import ConfigError, FrameFormatError
 from radarcl.geometry import se2_pose
+from radarcl.io.png import greyscale_rows, running_sums, verify_png
 from radarcl.io.polar_layout import PolarLayout, file_name_time_ns, scan_times_ns
 from radarcl.io.trajectory import Trajectory
 
 MAX_PIXELS = 64 * 2 ** 20          # a scan larger than this is refused before decoding
-PEEK_ROWS = 4                      # rows inflated to see a PNG's filters before the rest (greyscale_pixels)
 
 
 @dataclass(frozen=True)
@@ -50,10 +51,19 @@ class PolarScan:
     timestamps_ns: np.ndarray   # int64 (n_az,): each azimuth's UNIX time [ns]
     angles_rad: np.ndarray      # float64 (n_az,) in [0, 2 pi), counter-clockwise from x
     valid: np.ndarray           # bool (n_az,)
-    levels: np.ndarray          # uint8 (n_az, n_bins), log power
+    coded_levels: np.ndarray    # uint8 (n_az, n_bins): the levels (log power), or their rows' differences
     db_per_level: float = 1.0
     acquired: np.ndarray = None  # int (n_az,): row i was the acquired[i]-th azimuth of the turn
     timed: bool = True          # False: the layout gave no time for this scan (a still radar only)
+    # True: coded_levels[i, j] = levels[i, j] - levels[i, j - 1] mod 256, [i, 0] the level itself
+    # (a PNG's "Sub" rows as the file holds them; the device takes their running sums)
+    differenced: bool = False
+
+    @cached_property
+    def levels(self):
+        """uint8 (n_az, n_bins): each bin's level, log power (the running sums of the
+        differences, on first access, where the scan holds those)."""
+        return running_sums(self.coded_levels) if self.differenced else self.coded_levels
 
     @property
     def timestamps_us(self):
@@ -63,7 +73,7 @@ class PolarScan:
     @property
     def n_bins(self):
         """Range bins per azimuth."""
-        return self.levels.shape[1]
+        return self.coded_levels.shape[1]
 
     @property
     def start_ns(self):
@@ -111,108 +121,6 @@ def levels_to_power(levels, db_per_level=1.0):
     return table.take(levels)                 # take: the same gather as table[levels], in less time
 
 
-PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-
-
-def verify_png(path, raw=None):
-    """Check a PNG's signature and every chunk's CRC-32 before decoding: PIL stops reading the
-    image data once it has its pixels, so a damaged final deflate block (whose Adler-32 it
-    never reads) would otherwise decode into wrong pixels without a word (found by the fuzz
-    suite). ``raw``: the file's bytes when already read. Returns the (width, height) of its IHDR."""
-    import struct
-    import zlib
-
-    if raw is None:
-        try:
-            raw = Path(path).read_bytes()
-        except OSError as exc:
-            raise FrameFormatError(f"{path}: cannot read ({exc.strerror or exc})") from exc
-    if not raw.startswith(PNG_SIGNATURE):
-        raise FrameFormatError(f"{path}: not a PNG file (no PNG signature)")
-    i, size, ended = len(PNG_SIGNATURE), None, False
-    while i + 12 <= len(raw) and not ended:
-        length, kind = struct.unpack(">I4s", raw[i:i + 8])
-        end = i + 12 + length
-        if end > len(raw):
-            break
-        body = raw[i + 4:end - 4]
-        if zlib.crc32(body) != struct.unpack(">I", raw[end - 4:end])[0]:
-            raise FrameFormatError(f"{path}: PNG chunk {kind!r} at byte {i} fails its CRC: the file is damaged")
-        if kind == b"IHDR":
-            if size is not None or i != len(PNG_SIGNATURE) or length != 13:
-                raise FrameFormatError(f"{path}: not a valid PNG (its header chunk IHDR must come first, once, of 13 "
-                                       f"bytes; found one of {length} bytes at byte {i})")
-            size = struct.unpack(">II", body[4:12])
-            if 0 in size:
-                raise FrameFormatError(f"{path}: not a valid PNG (it declares {size[0]} x {size[1]} pixels; the format "
-                                       "has no empty images)")
-        ended = kind == b"IEND"
-        i = end
-    if not ended or size is None:
-        raise FrameFormatError(f"{path}: a truncated PNG (no IHDR or IEND chunk)")
-    return size
-
-
-def greyscale_pixels(path, raw, width, height):
-    """The (height, width) uint8 pixels of a PNG that ``verify_png`` passed, when it is the kind
-    radar scans are (8-bit greyscale, not interlaced, every row filtered "None" or every row
-    "Sub"); None for any other PNG (PIL decodes those).
-
-    By hand because a drive decodes a scan per frame beside the device's fusion on the same
-    cores: PIL inflates with zlib in small blocks and undoes the filters a row at a time, while
-    ISA-L's inflate (``isal``) and one vectorised running sum over the rows (a "Sub" row is the
-    running sum, mod 256, of its bytes) take a fraction of its time for the same pixels."""
-    import struct
-
-    from isal import isal_zlib
-
-    i, header, parts = len(PNG_SIGNATURE), None, []
-    while i + 12 <= len(raw):
-        length, kind = struct.unpack(">I4s", raw[i:i + 8])
-        if kind == b"IHDR":
-            header = raw[i + 16:i + 21]                 # bit depth, colour type, compression, filter, interlace
-        elif kind == b"IDAT":
-            parts.append(raw[i + 8:i + 8 + length])
-        elif kind == b"IEND":
-            break
-        i += 12 + length
-    if header != bytes([8, 0, 0, 0, 0]) or not width or not height:
-        return None
-    expected = height * (width + 1)                     # a filter byte before each row
-    inflate = isal_zlib.decompressobj()
-    try:
-        # the first rows first: a PNG whose writer chose other filters goes to PIL uninflated
-        out = inflate.decompress(b"".join(parts), min(PEEK_ROWS * (width + 1), expected))
-        if not set(out[::width + 1]) <= {0, 1}:
-            return None
-        if len(out) == min(PEEK_ROWS * (width + 1), expected):        # bounded: a deflate bomb stops here
-            out += inflate.decompress(inflate.unconsumed_tail, expected + 1 - len(out))
-    except isal_zlib.error as exc:
-        raise FrameFormatError(f"{path}: not a readable PNG (its image data do not inflate: {exc})") from exc
-    size = f"the {expected} bytes of {height} x {width} pixels"
-    if len(out) > expected:
-        raise FrameFormatError(f"{path}: not a readable PNG (its image data inflate to more than {size})")
-    if not inflate.eof:
-        raise FrameFormatError(f"{path}: not a readable PNG (its image data stop after {len(out)} bytes, before "
-                               f"their stream's end; expected {size})")
-    if len(out) < expected:
-        raise FrameFormatError(f"{path}: not a readable PNG (its image data inflate to {len(out)} bytes, "
-                               f"expected {size})")
-    rows = np.frombuffer(out, np.uint8).reshape(height, width + 1)
-    filters = rows[:, 0]
-    if (filters == 0).all():
-        return rows[:, 1:].copy()
-    if not (filters == 1).all():
-        return None
-    # the running sums of every row at once, by doubling steps (log2(width) whole-image vector adds;
-    # numpy reads an overlapping operand before it writes): not a scalar recurrence along each row
-    pixels, step = rows[:, 1:].copy(), 1
-    while step < width:
-        pixels[:, step:] += pixels[:, :-step]          # uint8: mod 256, as the filter's sum is
-        step *= 2
-    return pixels
-
-
 def load_scan(path, layout=PolarLayout(), time_ns=None, period_ns=None):
     """Decode one scan; raises FrameFormatError naming what is wrong (for a shape that does not
     fit the layout: both shapes and the key to change).
@@ -234,7 +142,8 @@ def load_scan(path, layout=PolarLayout(), time_ns=None, period_ns=None):
         raise FrameFormatError(f"{path}: declares {width} x {height} pixels, more than the {MAX_PIXELS} a scan "
                                "may have; refused before decoding")
     layout.check_shape(path, height, width)
-    raw = greyscale_pixels(path, data, width, height)
+    found = greyscale_rows(path, data, width, height)
+    raw, differenced = found if found is not None else (None, False)
     if raw is None:
         try:
             with Image.open(io.BytesIO(data)) as image:
@@ -253,21 +162,30 @@ def load_scan(path, layout=PolarLayout(), time_ns=None, period_ns=None):
         time_ns = file_name_time_ns(path, layout.file_name_unit)
         if time_ns is not None:
             time_ns += int(round(layout.timestamp_offset_s * 1e9))
-    return decode_scan(raw, layout, path, time_ns, period_ns)
+    return decode_scan(raw, layout, path, time_ns, period_ns, differenced)
 
 
-def decode_scan(raw, layout, path, time_ns=None, period_ns=None):
+def decode_scan(raw, layout, path, time_ns=None, period_ns=None, differenced=False):
     """One scan from its 8-bit image ``raw`` (height, width) as ``layout`` says, named ``path``
     (a file, or a bag's topic and message) in messages; without a timestamp column its azimuths
-    are timed from ``time_ns`` (None: untimed) over ``period_ns`` (``load_scan``)."""
+    are timed from ``time_ns`` (None: untimed) over ``period_ns`` (``load_scan``).
+    ``differenced``: ``raw``'s rows are filtered "Sub" (``png.greyscale_rows``); a scan of
+    azimuth rows keeps its levels so (``PolarScan.differenced``) and reads its metadata from
+    their sums."""
     layout.check_shape(path, *raw.shape)
+    if differenced and layout.orientation == "range-rows":
+        raw, differenced = running_sums(raw), False     # the filter ran along a bin's azimuths
     if layout.orientation == "range-rows":
         raw = raw.T                     # (azimuths, bins): a view; the row order below copies it
     n_az = raw.shape[0]
+    meta, start = raw, None
+    if differenced:                     # the metadata columns and the first bin's level, summed
+        meta = running_sums(raw[:, :layout.meta_columns + 1])
+        start = meta[:, -1]
     timed = True
     if layout.timestamp_column >= 0:
         c = layout.timestamp_column
-        timestamps = np.ascontiguousarray(raw[:, c:c + 8]).view("<i8")[:, 0].astype(np.int64) * 1000
+        timestamps = np.ascontiguousarray(meta[:, c:c + 8]).view("<i8")[:, 0].astype(np.int64) * 1000
     else:
         if time_ns is None:
             time_ns, timed = 0, False
@@ -276,26 +194,29 @@ def decode_scan(raw, layout, path, time_ns=None, period_ns=None):
         timestamps = np.int64(time_ns) + (k * period) // n_az
     if layout.encoder_column >= 0:
         c = layout.encoder_column
-        counts = np.ascontiguousarray(raw[:, c:c + 2]).view("<u2")[:, 0]
+        counts = np.ascontiguousarray(meta[:, c:c + 2]).view("<u2")[:, 0]
         if (counts >= layout.encoder_counts).any():
             raise FrameFormatError(f"{path}: encoder counts must be below {layout.encoder_counts}, found "
                                    f"{counts.max()}: check [reader] meta_columns and encoder_column (-1: none)")
         angles = counts / layout.encoder_counts * 2 * np.pi
     else:
         angles = np.arange(n_az) * (2 * np.pi / n_az)
-    valid = raw[:, layout.valid_column] == 255 if layout.valid_column >= 0 else np.ones(n_az, bool)
-    return assemble_scan(path, timestamps, angles, valid, raw[:, layout.meta_columns:], layout, timed)
+    valid = meta[:, layout.valid_column] == 255 if layout.valid_column >= 0 else np.ones(n_az, bool)
+    return assemble_scan(path, timestamps, angles, valid, raw[:, layout.meta_columns:], layout, timed, start)
 
 
-def assemble_scan(path, timestamps, angles, valid, levels, layout, timed=True):
+def assemble_scan(path, timestamps, angles, valid, levels, layout, timed=True, start=None):
     """A ``PolarScan`` of one turn's rows in acquisition order: UNIX times [ns], the sensor's own
     angles [rad] (before ``layout.azimuth_start_deg`` and its sense), valid flags and levels
     (n_az, bins as recorded); the layout's bin shift and sense applied (the one place that
-    turns a sensor's rows into REP-103)."""
+    turns a sensor's rows into REP-103). ``start`` (n_az,) uint8: ``levels`` hold each row's
+    differences (``PolarScan.differenced``) and ``start`` each row's first level."""
     n_az = len(levels)
     angles = angles + math.radians(layout.azimuth_start_deg)
     shift = layout.bin_shift()
     if shift > 0:
+        if start is not None:               # the first bin kept: its level, the sum up to it
+            start = start + levels[:, 1:shift + 1].sum(axis=1, dtype=np.uint8)
         levels = levels[:, shift:]
     elif shift < 0:
         levels = np.concatenate([np.zeros((n_az, -shift), np.uint8), levels], axis=1)
@@ -307,8 +228,14 @@ def assemble_scan(path, timestamps, angles, valid, levels, layout, timed=True):
         angles = -angles
         order = (-order) % n_az
         timestamps, angles, valid, levels = timestamps[order], angles[order], valid[order], levels[order]
+        start = None if start is None else start[order]
     angles = np.mod(angles, 2 * np.pi)
-    return PolarScan(path, timestamps, angles, valid, np.ascontiguousarray(levels), layout.db_per_level, order, timed)
+    levels = np.ascontiguousarray(levels)
+    if start is not None:
+        if not levels.flags.writeable:      # still the inflated bytes
+            levels = levels.copy()
+        levels[:, max(-shift, 0)] = start   # a zero-padded near end differs by 0 until the first level
+    return PolarScan(path, timestamps, angles, valid, levels, layout.db_per_level, order, timed, start is not None)
 
 
 def scan_paths(directory):
@@ -451,8 +378,8 @@ def beam_poses(scans, poses, n_az, azimuth_sign=1.0, motion=True):
     motion=False puts every azimuth at its scan's start pose (a consistency check). Without a
     trajectory (None) every scan stays at the origin (a still radar)."""
     for scan in scans:
-        if scan.levels.shape[0] != n_az:
-            raise FrameFormatError(f"{scan.path}: expected {n_az} azimuths, got {scan.levels.shape[0]}")
+        if scan.coded_levels.shape[0] != n_az:
+            raise FrameFormatError(f"{scan.path}: expected {n_az} azimuths, got {scan.coded_levels.shape[0]}")
     fixed = None                        # one pose per scan, no motion within it
     if poses is None:
         fixed = np.broadcast_to(np.eye(4), (len(scans), 4, 4))

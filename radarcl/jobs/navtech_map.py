@@ -167,7 +167,7 @@ def pulse_statistics(runtime, config, scans):
     (median, 90th percentile), the share of wide pulses; over the evidence interval."""
     spacing = config.sensor.bin_spacing_m()
     # the pulses are the CFAR's runs whatever the interpreter: counted with eq. 12's, which needs no tables
-    det = Detection(runtime, (scans[0].levels.shape[0],), scans[0].n_bins, spacing, config.cfar_config(),
+    det = Detection(runtime, (len(scans[0].timestamps_ns),), scans[0].n_bins, spacing, config.cfar_config(),
                     replace(config.interpret_config(), model="paper"))
     first, last = det.interpreter.first_bin, det.interpreter.last_bin
     detections, pulses, widths, wide = [], [], [], []

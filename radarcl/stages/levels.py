@@ -4,7 +4,9 @@
 ``radarcl.io.polar_png.levels_to_power(levels, db_per_level)``, bit for bit: both index the
 same float32 ``polar_png.power_table``. A scan then travels to the device (and waits in a
 drive's read-ahead queue) as its levels, a quarter of the bytes of its power, and the host
-spends no time on the conversion.
+spends no time on the conversion. A scan that holds its rows' differences (a PNG's "Sub" rows,
+``polar_png.PolarScan.differenced``) travels as those, and the device takes their running sums
+first (``differenced``): the host only inflates the file.
 """
 
 import numpy as np
@@ -39,8 +41,10 @@ class Levels(Stage):
         if vector_width not in VECTOR_WIDTHS:
             raise ConfigError(f"vector_width must be one of {VECTOR_WIDTHS}, got {vector_width!r}")
         self.vector_width = int(vector_width)
-        self._kernel = build(runtime, "levels", dict(VEC=self.vector_width))["levels"]
-        self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
+        kernels = build(runtime, "levels", dict(VEC=self.vector_width))
+        self._kernel, self._differenced = kernels["levels"], kernels["levels_differenced"]
+        self.local_size = min(work_group_size(runtime, k, local_size, DEFAULT_LOCAL_SIZE)
+                              for k in (self._kernel, self._differenced))
         out = Port("power", self.shape, np.dtype(np.float32), "power")
         inputs = [Port("levels", self.shape, np.dtype(np.uint8), "levels"),
                   Port("table", (256,), np.dtype(np.float32), "power table")]
@@ -71,20 +75,29 @@ class Levels(Stage):
         """Copy a checked frame of levels into the plan's input array; returns the copy event."""
         return super().upload(levels=levels)[0]
 
-    def enqueue(self, levels=None, wait_for=None):
+    def enqueue(self, levels=None, wait_for=None, differenced=False):
         """Launch on a device array of levels (default: this plan's, as ``upload`` filled it);
-        the power lands in ``arrays["power"]``. Returns the kernel event."""
+        ``differenced``: its rows (the last axis) hold their levels' differences, the first its
+        level (``polar_png.PolarScan.differenced``). The power lands in ``arrays["power"]``.
+        Returns the kernel event."""
         ls = self.local_size
+        levels = self.device("levels", levels)
+        if differenced:
+            row_len = self.shape[-1]
+            rows = self.n // row_len if row_len else 0
+            return self._differenced(self.runtime.queue, (max(1, -(-rows // ls)) * ls,), (ls,), wait_for=wait_for,
+                                     coded=levels, table=self.arrays["table"], n_rows=rows, row_len=row_len,
+                                     power=self.arrays["power"])
         items = -(-self.n // self.vector_width)
         return self._kernel(self.runtime.queue, (-(-items // ls) * ls,), (ls,), wait_for=wait_for,
-                            levels=self.device("levels", levels), table=self.arrays["table"], n=self.n,
-                            power=self.arrays["power"])
+                            levels=levels, table=self.arrays["table"], n=self.n, power=self.arrays["power"])
 
     def _result(self, power):
         return power
 
-    def __call__(self, levels):
-        """One frame of levels (shape) uint8 -> its power (shape) float32 (blocking)."""
+    def __call__(self, levels, differenced=False):
+        """One frame of levels (shape) uint8 -> its power (shape) float32 (blocking);
+        ``differenced`` as ``enqueue``."""
         copy = self.upload(levels)
-        return self.download(wait_for=[self.enqueue(wait_for=[copy])])
+        return self.download(wait_for=[self.enqueue(wait_for=[copy], differenced=differenced)])
 
