@@ -185,3 +185,28 @@ def test_cli_plots_one_azimuth(scans, tmp_path, capsys):
     assert "exists; pass --force to replace it" in capsys.readouterr().err
     assert main(["navtech", str(scans[0]), "--azimuth", "400", "--out", str(out), "--force"]) == 2
     assert "--azimuth must be in [0, 399]" in capsys.readouterr().err
+
+
+def test_a_recording_read_for_fusion_leaves_its_levels_in_the_files(scans, tmp_path):
+    """``read_sequence(keep_levels=False)`` (what ``radarcl fuse`` reads a folder with) keeps each
+    scan's times and angles, not its levels: they are read again when asked for, the same
+    levels; a scan whose file changed since is refused with a sentence naming it."""
+    import shutil
+
+    for path in scans[:3]:
+        shutil.copy(path, tmp_path / path.name)
+    kept = navtech.read_sequence(tmp_path, navtech.PolarLayout(), odometry=False)
+    left = navtech.read_sequence(tmp_path, navtech.PolarLayout(), odometry=False, keep_levels=False)
+    for a, b in zip(kept.scans, left.scans):
+        assert isinstance(b.stored_levels, navtech.StoredLevels) and b.shape == a.shape == (400, 3768)
+        assert np.array_equal(a.timestamps_ns, b.timestamps_ns) and np.array_equal(a.angles_rad, b.angles_rad)
+        assert b.differenced == a.differenced and np.array_equal(b.coded_levels, a.coded_levels)
+        assert np.array_equal(b.levels, a.levels)
+    shutil.copy(scans[5], tmp_path / scans[1].name)           # the same size: read as it is now
+    assert not np.array_equal(left.scans[1].levels, kept.scans[1].levels)
+    from PIL import Image
+
+    Image.fromarray(np.zeros((400, 3000), np.uint8)).save(tmp_path / scans[2].name)
+    with pytest.raises(FrameFormatError, match=rf"{scans[2].name}: the scan changed since it was first read \(now 400 x "
+                                               r"2989 levels, first 400 x 3768\); read the recording again$"):
+        left.scans[2].coded_levels

@@ -164,7 +164,7 @@ def _polar(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max
     """Polar PNG scans (``io.polar_png``) in the sensor's layout, placed by the trajectory given
     or found beside them (see the module docstring)."""
     layout = polar_png.PolarLayout.of(sensor)
-    sequence = polar_png.read_sequence(path, layout, odometry=False)
+    sequence = polar_png.read_sequence(path, layout, odometry=False, keep_levels=False)   # read as fused
     found = (Path(poses), poses_format) if poses else pose_files.find_beside(sequence.directory)
     track = None
     if found is not None:
@@ -186,7 +186,7 @@ def place_scans(sensor, scans, track, what, max_speed_m_s=DEFAULT_MAX_SPEED_M_S,
         sensor = sensor.with_bins(scans[0].n_bins)
         notes += sensor.notes
     for s in scans:
-        _check_frame(sensor, s.coded_levels.shape, np.float32, str(s.path))
+        _check_frame(sensor, s.shape, np.float32, str(s.path))
     if track is not None:
         track.check_motion(max_speed_m_s)
         notes += track.notes

@@ -28,8 +28,7 @@ shape does not fit the layout is refused with both shapes and the key to change.
 """
 
 import math
-from dataclasses import dataclass
-from functools import cached_property
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +50,9 @@ class PolarScan:
     timestamps_ns: np.ndarray   # int64 (n_az,): each azimuth's UNIX time [ns]
     angles_rad: np.ndarray      # float64 (n_az,) in [0, 2 pi), counter-clockwise from x
     valid: np.ndarray           # bool (n_az,)
-    coded_levels: np.ndarray    # uint8 (n_az, n_bins): the levels (log power), or their rows' differences
+    # uint8 (n_az, n_bins): the levels (log power) or their rows' differences (``coded_levels``),
+    # or a ``StoredLevels`` that reads them from the scan's file when they are asked for
+    stored_levels: object
     db_per_level: float = 1.0
     acquired: np.ndarray = None  # int (n_az,): row i was the acquired[i]-th azimuth of the turn
     timed: bool = True          # False: the layout gave no time for this scan (a still radar only)
@@ -59,11 +60,25 @@ class PolarScan:
     # (a PNG's "Sub" rows as the file holds them; the device takes their running sums)
     differenced: bool = False
 
-    @cached_property
+    @property
+    def coded_levels(self):
+        """uint8 (n_az, n_bins): the levels as the scan holds them (their rows' differences where
+        ``differenced``), read from the file each time where the scan left them there."""
+        stored = self.stored_levels
+        return stored() if isinstance(stored, StoredLevels) else stored
+
+    @property
     def levels(self):
         """uint8 (n_az, n_bins): each bin's level, log power (the running sums of the
-        differences, on first access, where the scan holds those)."""
-        return running_sums(self.coded_levels) if self.differenced else self.coded_levels
+        differences, taken on each access, where the scan holds those)."""
+        coded = self.coded_levels
+        return running_sums(coded) if self.differenced else coded
+
+    @property
+    def shape(self):
+        """(n_az, n_bins) of the levels, without reading them."""
+        stored = self.stored_levels
+        return stored.shape if isinstance(stored, StoredLevels) else tuple(stored.shape)
 
     @property
     def timestamps_us(self):
@@ -73,7 +88,7 @@ class PolarScan:
     @property
     def n_bins(self):
         """Range bins per azimuth."""
-        return self.coded_levels.shape[1]
+        return self.shape[1]
 
     @property
     def start_ns(self):
@@ -90,6 +105,28 @@ class PolarScan:
     def power(self):
         """Linear power (n_az, n_bins) float32: 10^(level x db_per_level / 10)."""
         return levels_to_power(self.levels, self.db_per_level)
+
+
+@dataclass(frozen=True)
+class StoredLevels:
+    """A scan's levels left in its file (``read_sequence(keep_levels=False)``): read again, whole,
+    each time they are asked for, so that a recording's scans in memory cost their times and
+    angles, not their levels (a drive's scans are read one at a time, beside the fusion)."""
+
+    path: Path
+    layout: PolarLayout
+    time_ns: int
+    period_ns: int
+    shape: tuple                # (n_az, n_bins) as first read
+    differenced: bool           # as first read
+
+    def __call__(self):
+        scan = load_scan(self.path, self.layout, self.time_ns, self.period_ns)
+        if scan.shape != self.shape or scan.differenced != self.differenced:
+            raise FrameFormatError(f"{self.path}: the scan changed since it was first read (now {scan.shape[0]} x "
+                                   f"{scan.shape[1]} levels, first {self.shape[0]} x {self.shape[1]}); read the "
+                                   "recording again")
+        return scan.stored_levels
 
 
 _POWER_TABLES = {}
@@ -333,11 +370,13 @@ def scan_directory(path, layout):
     return path
 
 
-def read_sequence(path, layout, odometry=None):
+def read_sequence(path, layout, odometry=None, keep_levels=True):
     """A ``PolarSequence`` of one scan file or a directory of scans read with ``layout`` (or a
     recording's directory holding ``layout.scan_directory``), each azimuth timed as the layout
     says; its Oxford odometry from ``odometry``, else ``radar_odometry.csv`` beside the scans or
-    in ``../gt`` (``odometry=False``: none; ``io.inputs`` reads every trajectory format)."""
+    in ``../gt`` (``odometry=False``: none; ``io.inputs`` reads every trajectory format).
+    ``keep_levels=False``: each scan is read whole once (its checksums, times and angles) and its
+    levels left in its file (``StoredLevels``), read again when asked for."""
     path = scan_directory(path, layout)
     paths = [path] if path.is_file() else scan_paths(path)
     directory = path.parent if path.is_file() else path
@@ -351,7 +390,12 @@ def read_sequence(path, layout, odometry=None):
             raise FrameFormatError(f"{directory}: scan {paths[i + 1].name} is timed at or before scan "
                                    f"{paths[i].name} ({known[i + 1] / 1e9:.3f} <= {known[i] / 1e9:.3f} s)")
         period = int(np.median(steps))
-    scans = [load_scan(p, layout, t, period) for p, t in zip(paths, times)]
+    scans = []
+    for p, t in zip(paths, times):
+        scan = load_scan(p, layout, t, period)
+        if not keep_levels:
+            scan = replace(scan, stored_levels=StoredLevels(p, layout, t, period, scan.shape, scan.differenced))
+        scans.append(scan)
     if odometry is None and path.is_dir():
         odometry = next((c for c in (path / "radar_odometry.csv", path.parent / "gt" / "radar_odometry.csv")
                          if c.is_file()), None)
@@ -378,8 +422,8 @@ def beam_poses(scans, poses, n_az, azimuth_sign=1.0, motion=True):
     motion=False puts every azimuth at its scan's start pose (a consistency check). Without a
     trajectory (None) every scan stays at the origin (a still radar)."""
     for scan in scans:
-        if scan.coded_levels.shape[0] != n_az:
-            raise FrameFormatError(f"{scan.path}: expected {n_az} azimuths, got {scan.coded_levels.shape[0]}")
+        if scan.shape[0] != n_az:
+            raise FrameFormatError(f"{scan.path}: expected {n_az} azimuths, got {scan.shape[0]}")
     fixed = None                        # one pose per scan, no motion within it
     if poses is None:
         fixed = np.broadcast_to(np.eye(4), (len(scans), 4, 4))

@@ -17,7 +17,7 @@ def report(runtime, config, scan_path, azimuth, out, say):
     axis) over every azimuth of the scan at ``scan_path``, and plot ``azimuth`` to ``out``."""
     sensor = config.sensor
     scan = polar_png.load_scan(scan_path, polar_png.PolarLayout.of(sensor))
-    n_az = scan.coded_levels.shape[0]
+    n_az = scan.shape[0]
     if n_az != sensor.n_azimuth or (sensor.n_bins() is not None and scan.n_bins != sensor.n_bins()):
         raise ConfigError(f"{scan_path}: {n_az} azimuths x {scan.n_bins} bins; sensor {sensor.name} has "
                           f"{sensor.n_azimuth} x {sensor.n_bins()}")
