@@ -56,12 +56,13 @@ __kernel void levels(
         power[i] = table[levels[i]];
 }
 
+/* One row per work-item (the header's levels_differenced). */
 __kernel void levels_differenced(
     const __global uchar *coded,      // (n_rows, row_len) each row's differences, the first its level
     const __global float *table,      // (256,) power of each level [linear]
-    const int n_rows,
-    const int row_len,
-    __global float *power)            // (n_rows, row_len) out: table[running sum]
+    const int n_rows,                 // rows in the frame (azimuths)
+    const int row_len,                // levels per row (range bins)
+    __global float *power)            // (n_rows, row_len) out: table[running sum] [linear]
 {
     const int r = get_global_id(0);
     if (r >= n_rows)

@@ -210,3 +210,25 @@ def test_a_recording_read_for_fusion_leaves_its_levels_in_the_files(scans, tmp_p
     with pytest.raises(FrameFormatError, match=rf"{scans[2].name}: the scan changed since it was first read \(now 400 x "
                                                r"2989 levels, first 400 x 3768\); read the recording again$"):
         left.scans[2].coded_levels
+
+
+def test_differences_decoded_from_the_caller_s_array_leave_it_as_it_was():
+    """``decode_scan(..., differenced=True)`` of an array in memory (no metadata, nothing dropped,
+    counter-clockwise: no step copies it on the way) writes its first levels into a copy, not
+    into the caller's differences; a layout that drops every bin is refused with a sentence."""
+    import dataclasses
+
+    layout = navtech.PolarLayout(meta_columns=0, timestamp_column=-1, encoder_column=-1, valid_column=-1,
+                                 clockwise=False)
+    levels = np.arange(10, 60, 10, dtype=np.uint8)[None].repeat(3, axis=0)
+    coded = levels.copy()
+    coded[:, 1:] -= levels[:, :-1]
+    before = coded.copy()
+    scan = navtech.decode_scan(coded, layout, "mem", differenced=True)
+    assert np.array_equal(coded, before) and not np.shares_memory(scan.coded_levels, coded)
+    assert np.array_equal(scan.levels, levels)
+    dropped = dataclasses.replace(layout, range_offset_m=-6.0, bin_spacing_m=1.0)
+    for differenced, frame in ((True, coded), (False, levels)):
+        with pytest.raises(FrameFormatError, match=r"^mem: \[reader\] range_offset_m = -6 m drops 6 bins, every one of "
+                                                   r"the scan's 5; check range_offset_m and \[range\] bin_spacing_m$"):
+            navtech.decode_scan(frame, dropped, "mem", differenced=differenced)

@@ -59,7 +59,7 @@ def run(data_root, repeat=100, sets=tuple(SETS)):
         shape = np.asarray(Image.open(paths[0])).shape
         out.append(dict(data=name, profile=profile, scans=len(paths), png_shape=list(shape),
                         pil_scans_per_s=1 / t["pil"], read_scans_per_s=1 / t["read"],
-                        read_coded_scans_per_s=1 / t["read_coded"],
+                        read_coded_scans_per_s=1 / t["read_coded"], read_coded_vs_read=t["read_coded"] / t["read"],
                         read_power_scans_per_s=1 / t["read_power"], read_vs_pil=t["read"] / t["pil"],
                         read_power_vs_pil=t["read_power"] / t["pil"]))
     return dict(benchmark="polar-read", repeat=repeat, goal="read_vs_pil <= 1.0 (reading costs no more than "
@@ -70,11 +70,12 @@ def format_table(result):
     """Human-readable lines for a ``run`` result."""
     lines = [f"polar scans read, median of {result['repeat']} interleaved reads per variant",
              f"{'data':>8} {'PNG':>11} {'PIL alone':>12} {'reader':>12} {'for device':>12} {'reader+power':>13} "
-             f"{'reader/PIL':>11} {'+power/PIL':>11}"]
+             f"{'reader/PIL':>11} {'+power/PIL':>11} {'device/reader':>14}"]
     for r in result["runs"]:
         lines.append(f"{r['data']:>8} {'x'.join(map(str, r['png_shape'])):>11} {r['pil_scans_per_s']:>8.0f} /s "
                      f"{r['read_scans_per_s']:>8.0f} /s {r['read_coded_scans_per_s']:>8.0f} /s "
-                     f"{r['read_power_scans_per_s']:>9.0f} /s {r['read_vs_pil']:>11.2f} {r['read_power_vs_pil']:>11.2f}")
+                     f"{r['read_power_scans_per_s']:>9.0f} /s {r['read_vs_pil']:>11.2f} {r['read_power_vs_pil']:>11.2f} "
+                     f"{r['read_coded_vs_read']:>14.2f}")
     lines.append("reader: a scan's levels on the host; for device: as the device takes them (a \"Sub\" PNG's rows "
                  "kept as their differences, which the device sums)")
     lines.append(f"goal: {result['goal']}")

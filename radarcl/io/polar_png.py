@@ -251,6 +251,9 @@ def assemble_scan(path, timestamps, angles, valid, levels, layout, timed=True, s
     n_az = len(levels)
     angles = angles + math.radians(layout.azimuth_start_deg)
     shift = layout.bin_shift()
+    if shift >= levels.shape[1]:
+        raise FrameFormatError(f"{path}: [reader] range_offset_m = {layout.range_offset_m:g} m drops {shift} bins, every "
+                               f"one of the scan's {levels.shape[1]}; check range_offset_m and [range] bin_spacing_m")
     if shift > 0:
         if start is not None:               # the first bin kept: its level, the sum up to it
             start = start + levels[:, 1:shift + 1].sum(axis=1, dtype=np.uint8)
@@ -269,7 +272,7 @@ def assemble_scan(path, timestamps, angles, valid, levels, layout, timed=True, s
     angles = np.mod(angles, 2 * np.pi)
     levels = np.ascontiguousarray(levels)
     if start is not None:
-        if not levels.flags.writeable:      # still the inflated bytes
+        if not levels.flags.owndata:        # still the inflated bytes, or the caller's array
             levels = levels.copy()
         levels[:, max(-shift, 0)] = start   # a zero-padded near end differs by 0 until the first level
     return PolarScan(path, timestamps, angles, valid, levels, layout.db_per_level, order, timed, start is not None)

@@ -30,7 +30,8 @@ class Levels(Stage):
     with ``set_db_per_level``); power: a float32 device array of ``shape`` to write the power
     into (e.g. a ``Cfar``'s ``arrays["profiles"]``; default: one of its own);
     local_size: work-items per group (default 64, capped by the device); vector_width: levels
-    per work-item, one of 1, 4, 8, 16 (default 16 on a CPU device, 1 on a GPU).
+    per work-item, one of 1, 4, 8, 16 (default 16 on a CPU device, 1 on a GPU; frames of row
+    differences take a row per work-item, 16 differences at a time, whatever the width).
     """
 
     def __init__(self, runtime, shape, db_per_level=1.0, *, power=None, local_size=None, vector_width=None):
@@ -43,8 +44,7 @@ class Levels(Stage):
         self.vector_width = int(vector_width)
         kernels = build(runtime, "levels", dict(VEC=self.vector_width))
         self._kernel, self._differenced = kernels["levels"], kernels["levels_differenced"]
-        self.local_size = min(work_group_size(runtime, k, local_size, DEFAULT_LOCAL_SIZE)
-                              for k in (self._kernel, self._differenced))
+        self.local_size = work_group_size(runtime, [self._kernel, self._differenced], local_size, DEFAULT_LOCAL_SIZE)
         out = Port("power", self.shape, np.dtype(np.float32), "power")
         inputs = [Port("levels", self.shape, np.dtype(np.uint8), "levels"),
                   Port("table", (256,), np.dtype(np.float32), "power table")]
@@ -84,8 +84,8 @@ class Levels(Stage):
         levels = self.device("levels", levels)
         if differenced:
             row_len = self.shape[-1]
-            rows = self.n // row_len if row_len else 0
-            return self._differenced(self.runtime.queue, (max(1, -(-rows // ls)) * ls,), (ls,), wait_for=wait_for,
+            rows = self.n // row_len
+            return self._differenced(self.runtime.queue, (-(-rows // ls) * ls,), (ls,), wait_for=wait_for,
                                      coded=levels, table=self.arrays["table"], n_rows=rows, row_len=row_len,
                                      power=self.arrays["power"])
         items = -(-self.n // self.vector_width)
