@@ -83,8 +83,9 @@ class Interpreter(Stage):
             needed = classes_needed(bin_model.opportunity)
             self.classes = needed if classes is None else classes
             if self.classes not in (needed, N_CLASSES):
-                raise ConfigError(f"classes must be {needed} or {N_CLASSES} for this bin model (None: {needed}), "
-                                  f"got {classes!r}: its terrain class has opportunity")
+                allowed = " or ".join(str(c) for c in sorted({needed, N_CLASSES}))
+                why = ": its terrain class has opportunity" if needed == N_CLASSES else ""
+                raise ConfigError(f"classes must be {allowed} (None: {needed}) for this bin model, got {classes!r}{why}")
         elif classes is not None:
             raise ConfigError(f"classes are for a model with node pairs; the {self.model.summary} interpreter has "
                               "one value per bin")
