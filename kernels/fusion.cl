@@ -283,6 +283,10 @@ __kernel void fusion(
                     continue;
                 const floatL qy = ((float)(base.y + ROW_DY(r0)) + 0.5f + ly) * voxel - o.y;
                 const float qz = (base.z + ROW_DZ(r0) + 0.5f) * voxel - o.z;
+#if defined(DETSTATS) && !RECORD && CLASSES == 1
+                if (qz < terrain_dz)          /* terrain voxels, of a class this scene has not: they take nothing */
+                    continue;
+#endif
 #ifdef PER_BEAM_POSES
                 const floatL x = MINF(sqrt(qx * qx + (qy * qy + qz * qz)) * inv_spacing, (floatL)4194303.0f);
                 const intL raw = RINT_INTL(x);
@@ -345,7 +349,7 @@ __kernel void fusion(
                 const intL q = convert_intL(MINF(num / den * Q_ONE, Q_MAX));
                 const intL seg = q >> 12;
                 const intL f = q & 4095;
-                const intL at = (j * CLASSES + (qz < terrain_dz)) * SEGMENTS + seg;
+                const intL at = NODE_AT(j, qz < terrain_dz, seg);
                 intL pe, pk;
                 GATHER_NODES(pe, pk, row_nodes, at);
                 acc[u] += NODE_LERP(pe, f) & inside;

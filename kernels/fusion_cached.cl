@@ -9,7 +9,7 @@
  * are added in does not change them.
  *
  * -D: the gather's (radarcl.stages.fusion builds both with the same); this kernel reads VEC,
- *     BRICK_Z and DETSTATS.
+ *     BRICK_Z, DETSTATS and CLASSES.
  */
 #include "fusion_common.h"
 
@@ -43,7 +43,7 @@ __kernel void fusion_cached(
     const __global int2 *extras,      // the further entries (RECORD 2)
     const int n_items,                // the gather's work-items: listed bricks x SUBS
     const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (the class
-                                      //   of each entry is in its record)
+                                      //   of each entry is in its record; CLASSES 1: terrain entries take nothing)
     __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity
     __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity
     __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
@@ -69,10 +69,11 @@ __kernel void fusion_cached(
         /* q + 1 in place of the weight (0: no beam), the class in bit 16, the sign bit "more
          * entries follow" */
         const intV q = (bits & 0xFFFF) - 1;                     /* -1 (no beam): masked below */
-        const intV reached = bits != 0;
+        const intV cls = (bits >> 16) & 1;
+        const intV reached = (bits != 0) & TAKES(cls);          /* CLASSES 1: not a terrain voxel */
         const intV seg = (q >> 12) & (SEGMENTS - 1);            /* q = -1: segment 3, in bounds */
         const intV f = q & 4095;
-        const intV at = (index * CLASSES + ((bits >> 16) & 1)) * SEGMENTS + seg;
+        const intV at = NODE_AT(index, cls, seg);
         intV pe, pk;
         GATHER_NODES_V(pe, pk, nodes, at);
         intV sum = NODE_LERP(pe, f) & reached;
@@ -98,11 +99,13 @@ __kernel void fusion_cached(
                 GATHER_ENTRIES(ei, ew, extras, ex);
 #ifdef DETSTATS
                 const intV qe = (ew & 0xFFFF) - 1;
-                const intV ate = ((ei * CLASSES + ((ew >> 16) & 1)) * SEGMENTS + ((qe >> 12) & (SEGMENTS - 1))) & live;
+                const intV ce = (ew >> 16) & 1;
+                const intV ate = NODE_AT(ei, ce, (qe >> 12) & (SEGMENTS - 1)) & live;
+                const intV takes = live & TAKES(ce);
                 intV xe, xk;
                 GATHER_NODES_V(xe, xk, nodes, ate);
-                sum += NODE_LERP(xe, qe & 4095) & live;
-                const intV kn = NODE_LERP(xk, qe & 4095) & live;
+                sum += NODE_LERP(xe, qe & 4095) & takes;
+                const intV kn = NODE_LERP(xk, qe & 4095) & takes;
                 ksum += kn;
                 nsum -= kn > 0;                                       /* true is -1 */
 #else

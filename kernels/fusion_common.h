@@ -11,8 +11,9 @@
  * e x weight(rho2) but a function of rho2 the interpreter tabulated at NODES rho2 = 0, 1/4, ..., 1
  * (the CFAR's P_d falls non-linearly with the voxel's two-way gain), for each of two classes of
  * target (0 upright, 1 terrain: a voxel whose centre lies below its beam's origin by more than
- * -terrain_dz, i.e. z - origin z < terrain_dz, near the ground plane). nodes[] holds per (beam,
- * bin, class, segment s) the int2 (e_s | e_{s+1} << 16, d_s | d_{s+1} << 16) of the evidence e
+ * -terrain_dz, i.e. z - origin z < terrain_dz, near the ground plane; a scene without a terrain
+ * class keeps the upright class alone, CLASSES 1). nodes[] holds per (beam, bin, class of the
+ * CLASSES kept, segment s) the int2 (e_s | e_{s+1} << 16, d_s | d_{s+1} << 16) of the evidence e
  * [logodds units] and the detection opportunity d [KNOWLEDGE_SCALE units] at the segment's two
  * ends, one 8-byte gather per voxel. rho2 is quantised to q = floor(min(rho2 x 2^14, 2^14 - 1))
  * (a float32 multiply by a power of two, then truncation; the cap puts rho2 = 1 at the end of the
@@ -100,7 +101,18 @@ static inline int or_lanes(intV v)
     G2_(pe, pk, p, at, 7)
 #ifdef DETSTATS
 #define SEGMENTS 4                            /* node segments over rho2 in [0, 1] */
-#define CLASSES 2                             /* target classes: upright, terrain */
+#if !defined(CLASSES) || CLASSES < 1 || CLASSES > 2
+#error "CLASSES (1 or 2: the node pairs' classes of target) comes from radarcl/stages/fusion.py"
+#endif
+/* a voxel's node pair: bin j's class cls, segment seg. With CLASSES 1 (a scene without a terrain
+ * class) the array holds the upright class alone: a terrain voxel (cls 1) takes nothing, as from
+ * that class's all-zero nodes, its lanes masked by TAKES; its index reads an upright pair, in bounds */
+#define NODE_AT(j, cls, seg) (((j) * CLASSES + ((cls) & (CLASSES - 1))) * SEGMENTS + (seg))
+#if CLASSES == 1
+#define TAKES(cls) ((cls) == 0)
+#else
+#define TAKES(cls) (-1)
+#endif
 /* lanes (-1) of a voxel whose evidence sum e0 sat at a limit before this frame and whose frame's
  * sum a does not pull it back: its looks are not counted (sensor_model.read_log_odds) */
 #define STUCK(e0, a) ((((e0) >= GRID_LIMIT) & ((a) >= 0)) | (((e0) <= -GRID_LIMIT) & ((a) <= 0)))

@@ -29,7 +29,7 @@
  *
  * With -D DETSTATS=1, the detection-statistics model (radarcl.sensor_model; equivalent to
  * radarcl.oracle.interpret_detstats; -D NODES is sensor_model.NODES, the rho2 nodes per class):
- * evidence[] is (n_beams, N_BINS, 2 classes, 4 segments)
+ * evidence[] is (n_beams, N_BINS, CLASSES, 4 segments)
  * int2 node pairs (sensor_model.pack_nodes) of the evidence e [logodds units] and the detection
  * opportunity d [KNOWLEDGE_SCALE units] at rho2 = 0, 1/4, ..., 1, per class of target:
  *   tau = exp(-X), X the blocking of the pulses that ended before the bin (a pulse's summed
@@ -54,6 +54,8 @@
  *   OCCLUSION   0: the paper's eq. 12; 1: the occlusion-aware variant above
  *   DETSTATS    0, or 1: the detection-statistics model above (with OCCLUSION 0)
  *   GRADED      DETSTATS only: 0, or 1 for "snr" evidence (above)
+ *   CLASSES     DETSTATS only: the classes of target kept, 1 (upright; a scene without a terrain
+ *               class, whose nodes would all be 0) or 2 (and terrain)
  */
 #include "interpret_common.h"
 
@@ -66,6 +68,10 @@ static inline uint any8(const __global uchar *p)
 }
 
 #if DETSTATS
+#if !defined(CLASSES) || CLASSES < 1 || CLASSES > 2
+#error "CLASSES (1 or 2) comes from radarcl/stages/interpret.py"
+#endif
+#define TABLE_ROW (2 * NODES)         /* opportunity[] and miss[] per bin: both classes, whichever are kept */
 
 /* a node value in fixed point: rint(clamp(v, -limit, limit) x scale), without builtins */
 static inline int fixed_nb(float v, float scale)
@@ -74,11 +80,11 @@ static inline int fixed_nb(float v, float scale)
     return as_int(v * scale + 12582912.0f) - 0x4B400000;       /* rint, half to even, as logodds.to_fixed */
 }
 
-/* one bin's node pairs: for each class, the five nodes of e and d packed per segment */
+/* one bin's node pairs: for each class kept, the five nodes of e and d packed per segment */
 static inline void write_nodes(__global int2 *out, const __global float *opp, const __global float *miss,
                                float tau, float omt, int detected, float share_c)
 {
-    for (int c = 0; c < 2; ++c) {
+    for (int c = 0; c < CLASSES; ++c) {
         int e[NODES], d[NODES];
         for (int k = 0; k < NODES; ++k) {
             const float delta = tau * opp[c * NODES + k];
@@ -134,13 +140,13 @@ __kernel void interpret(
     const __global float *opportunity,  // DETSTATS: (N_BINS, 2, NODES) delta at tau = 1 per class and node
     const __global float *miss,         // DETSTATS: (N_BINS, 2, NODES) 1 - opportunity, exact from the host
     const __global float *blocking,     // DETSTATS: (N_BINS,) a pulse's blocking per unit of (r/n - 1)+ at its peak
-    const __global int2 *unblocked,     // DETSTATS: (N_BINS, 8) a noise bin's node pairs at tau = 1
+    const __global int2 *unblocked,     // DETSTATS: (N_BINS, NODE_WORDS) a noise bin's node pairs at tau = 1
     const float c_det,                  // DETSTATS: (1 - P_fa) / P_fa, P_fa the achieved false-alarm rate
     const float noise_floor,            // GRADED: the least noise floor [power] (the CFAR's)
     __global float *state,              // GRADED: (n_beams, 2, N_BINS) out, each bin's blocked and tau for interpret_nodes
     __global float *ln_floors,          // GRADED: (n_beams,) out, ln of the beam's noise floor
     const int n_beams,
-    __global int *evidence,           // (n_beams, N_BINS) out [logodds units]; DETSTATS: (n_beams, N_BINS, 8) int2
+    __global int *evidence,           // (n_beams, N_BINS) out [logodds units]; DETSTATS: (n_beams, N_BINS, NODE_WORDS) int2
     __global int4 *pulses,            // (n_beams, MAX_PULSES) out: start, end, peak, wide; -1 unused
     __global int *n_pulses,           // (n_beams,) out: pulses found (may exceed MAX_PULSES)
     __global uchar *flags_out)        // (n_beams,) out: flags_in | BAD_PROFILE | SILENT
@@ -219,7 +225,7 @@ __kernel void interpret(
                     for (int w = 0; w < NODE_WORDS; w++)
                         nd[j * NODE_WORDS + w] = unblocked[j * NODE_WORDS + w];
                 } else {
-                    write_nodes(nd + j * NODE_WORDS, opportunity + j * 10, miss + j * 10, tau, omt, 0, 0.0f);
+                    write_nodes(nd + j * NODE_WORDS, opportunity + j * TABLE_ROW, miss + j * TABLE_ROW, tau, omt, 0, 0.0f);
                 }
 #endif
                 j++;
@@ -243,7 +249,7 @@ __kernel void interpret(
 #else
             const float scale = c_det / r[peak];
             for (int i = start; i <= end; i++)
-                write_nodes(nd + i * NODE_WORDS, opportunity + i * 10, miss + i * 10, tau, omt, 1, r[i] * scale);
+                write_nodes(nd + i * NODE_WORDS, opportunity + i * TABLE_ROW, miss + i * TABLE_ROW, tau, omt, 1, r[i] * scale);
 #endif
             if (count < MAX_PULSES)
                 pl[count] = (int4)(start, end, peak, end - start + 1 >= wide_bins);

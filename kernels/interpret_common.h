@@ -6,7 +6,11 @@
 
 #include "radarcl_common.h"
 
-#define NODE_WORDS 8                  /* int2 per bin: 2 classes x 4 segments (sensor_model.pack_nodes) */
+#ifdef CLASSES
+/* int2 per bin: CLASSES x 4 segments (sensor_model.pack_nodes, node_shape); CLASSES 1 where the
+ * scene has no terrain class (radarcl.stages.interpret_nodes.classes_needed) */
+#define NODE_WORDS (4 * CLASSES)
+#endif
 #define LN10 2.302585093f
 
 /* log10 of x >= 0 without a builtin call: the exponent, and ln of the mantissa in

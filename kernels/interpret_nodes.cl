@@ -15,9 +15,9 @@
  * The node pairs are int2 (sensor_model.pack_nodes) of e [logodds units] and d [KNOWLEDGE_SCALE
  * units] at rho2 = 0, 1/4, ..., 1, per class of target (upright, terrain).
  *
- * Only the first CLASSES classes are computed: with CLASSES = 1 (a scene without a terrain class:
- * its opportunity is 0 at every bin and node, so each of its nodes is 0 by the rule above), the
- * terrain class's pairs are never written and keep the 0 of the array's allocation.
+ * Only the first CLASSES classes are computed and stored (NODE_WORDS int2 per bin): with CLASSES
+ * = 1 (a scene without a terrain class: its opportunity is 0 at every bin and node, so each of its
+ * nodes would be 0 by the rule above) the array holds the upright class alone.
  *
  * Work mapping: get_global_id(0) = beam x n_chunks + chunk, a chunk being LANES bins (from bin
  * first_bin & ~(LANES - 1); the chunks that meet the window [first_bin, last_bin]); any local
@@ -216,7 +216,7 @@ __kernel void interpret_nodes(
     const float snr_q,                  // the table's q (the evidence's bound is ln(1 / q))
     const int n_chunks,                 // chunks of LANES bins from bin first_bin & ~(LANES - 1) that meet the window
     const int n_beams,
-    __global int2 *evidence)            // (n_beams, N_BINS, 8) out: node pairs
+    __global int2 *evidence)            // (n_beams, N_BINS, NODE_WORDS) out: node pairs
 {
     const int id = get_global_id(0);
     if (id >= n_beams * n_chunks)

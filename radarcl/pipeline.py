@@ -19,6 +19,7 @@ from radarcl.errors import ConfigError, DeviceCapabilityError
 from radarcl.geometry import BeamLattice, BeamModel
 from radarcl.grid import EvidenceGrid
 from radarcl.models import BeamGeometry
+from radarcl.sensor_model import N_CLASSES
 from radarcl.io import prefetch
 from radarcl.stages.cfar import Cfar, CfarResult
 from radarcl.stages.fusion import Fusion
@@ -111,7 +112,8 @@ class Mapping:
                                    bin_model=bin_model)
         it = self.detection.interpreter
         self.fusion = Fusion(runtime, grid, lattice, model, n_bins, bin_spacing_m, it.first_bin, it.last_bin,
-                             per_beam_poses=per_beam_poses, detstats=it.node_pairs, terrain_dz=terrain_dz)
+                             per_beam_poses=per_beam_poses, detstats=it.node_pairs, terrain_dz=terrain_dz,
+                             classes=it.classes if it.node_pairs else N_CLASSES)      # one count: the interpreter's
         self.levels = None          # the ``Levels`` stage: uint8 levels -> power (``fuse``'s db_per_level)
         self.frames = 0
         self.config = None          # the mapconfig.Resolved it was built from (from_config)

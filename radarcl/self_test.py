@@ -12,7 +12,7 @@ runtime's small probe kernel only.
 
 import numpy as np
 
-from radarcl import models, oracle
+from radarcl import models, oracle, sensor_model
 from radarcl.cl.devices import register_device_check
 from radarcl.config import mapconfig, sensors
 from radarcl.errors import DeviceCapabilityError
@@ -95,7 +95,12 @@ def _self_test_one(runtime, config, rng):
     noise, _, mask = oracle.cfar(p, m.detection.cfar.config)
     row_flags = None if flags is None else flags.reshape(-1)[rows]
     want_ev = it.model.oracle(p, noise, mask, it.config, it.bin_spacing_m, it.bin_model, row_flags)
-    got_ev = it.model.comparable(evidence[rows])
+    if it.classes is not None:               # node pairs of the classes the scene has: the others must be 0
+        try:
+            sensor_model.kept_classes(want_ev, it.classes)
+        except ValueError as exc:
+            return f"the float64 oracle's nodes contradict the interpreter's classes: {exc}"
+    got_ev = it.model.comparable(evidence[rows])          # the classes dropped as the 0 they are
     share = float((np.abs(got_ev.astype(np.int64) - want_ev) <= 1).mean())
     if share < SELF_TEST_MATCH or not (want_ev != 0).any():
         return f"CFAR and the interpreter agree with the float64 oracle on only {share:.1%} of the bins"

@@ -62,8 +62,10 @@ many scans. The reading adds the prior, the world's base rate of occupied voxels
 voxel never observed reads that calibrated probability, and is told unknown by its knowledge.
 
 Node tables (what the interpreter writes and the fusion reads, ``pack_nodes``): per (beam, bin)
-the update and delta at rho2 = 0, 1/4, ..., 1, packed as SEGMENTS int2 pairs of 16-bit halves;
-the fusion interpolates them in integers (kernels/fusion.cl, DETSTATS; ``node_lerp`` here).
+the update and delta at rho2 = 0, 1/4, ..., 1, packed as SEGMENTS int2 pairs of 16-bit halves per class of target;
+the fusion interpolates them in integers (kernels/fusion.cl, DETSTATS; ``node_lerp`` here). A
+scene without a terrain class (no ground plane) keeps only the upright class (``node_shape``):
+half the bytes for the fusion to read, and the same map.
 """
 
 import functools
@@ -80,7 +82,6 @@ NODES = 5                        # node values over rho2 = 0, 1/4, ..., 1
 SEGMENTS = NODES - 1
 CLASSES = ("upright", "terrain")  # the typical target of a voxel: chosen per voxel by its height (kernels/fusion.cl)
 N_CLASSES = len(CLASSES)
-NODE_SHAPE = (N_CLASSES, SEGMENTS, 2)   # per (beam, bin): int2 (evidence pair, opportunity pair) per class, segment
 Q_ONE = 1 << 14                  # rho2 = 1 in the fusion's quantisation steps (2^12 per segment)
 Q_MAX = Q_ONE - 1                # the last step: rho2 = 1 quantises into the last segment
 
@@ -102,6 +103,37 @@ def pack_nodes(evidence, opportunity):
         word = (v[..., :-1] & 0xFFFF) | (v[..., 1:] << 16)
         out[..., c] = ((word + (1 << 31)) % (1 << 32) - (1 << 31)).astype(np.int32)
     return out
+
+
+def node_shape(classes=N_CLASSES):
+    """The shape of one (beam, bin)'s node pairs for a pipeline that keeps the first ``classes``
+    classes (1: upright targets only, a scene without a terrain class; 2: ``CLASSES``):
+    (classes, SEGMENTS, 2) int32, an int2 (evidence pair, opportunity pair) per class and segment
+    as ``pack_nodes`` lays them out."""
+    if classes not in (1, N_CLASSES):
+        raise ConfigError(f"classes must be 1 or {N_CLASSES}, got {classes!r}")
+    return (classes, SEGMENTS, 2)
+
+
+def all_classes(nodes):
+    """Unpacked nodes (..., classes, NODES) of the first ``classes`` classes as all ``N_CLASSES``
+    (..., N_CLASSES, NODES): a class a pipeline drops has no opportunity, so its nodes are 0."""
+    nodes = np.asarray(nodes)
+    pad = [(0, 0)] * nodes.ndim
+    pad[-2] = (0, N_CLASSES - nodes.shape[-2])
+    return np.pad(nodes, pad)
+
+
+def kept_classes(nodes, classes):
+    """The float64 oracle's nodes (..., N_CLASSES, NODES) of the classes a pipeline keeps (the
+    first ``classes``), checking the premise of dropping the others: their nodes are all 0
+    (ValueError where one is not)."""
+    nodes = np.asarray(nodes)
+    dropped = nodes[..., classes:, :]
+    if dropped.any():
+        raise ValueError(f"a dropped class has {np.count_nonzero(dropped)} nonzero nodes (up to "
+                         f"{np.abs(dropped).max()}): the pipeline keeps {classes} class(es) where the scene has more")
+    return nodes[..., :classes, :]
 
 
 def unpack_nodes(packed):

@@ -301,6 +301,60 @@ def test_detstats_without_terrain_reads_the_upright_nodes_only(runtime):
     check_detstats_frame(grid, fusion, lattice, model, e, d, packed, -math.inf)
 
 
+def one_class_nodes(lattice, seed):
+    """Random node pairs (e, d) of both classes with the terrain class all 0, packed as both
+    classes and as the upright class alone (a scene without a terrain class)."""
+    from radarcl import sensor_model as sm
+
+    e, d, _ = random_nodes(lattice, seed=seed)
+    e[..., 1, :] = 0
+    d[..., 1, :] = 0
+    return e, d, sm.pack_nodes(e, d), sm.pack_nodes(e[..., :1, :], d[..., :1, :])
+
+
+@pytest.mark.parametrize("accumulators", ["packed", "separate"])
+@pytest.mark.parametrize("widths", [{"rows": 1}, {"rows": 2}, {"vector_width": 4, "rows": 1}], ids=["8x1", "8x2", "4x1"])
+def test_detstats_one_class_gives_the_integers_of_two_with_zero_terrain(runtime, widths, accumulators, monkeypatch):
+    """classes 1 (the node array holds the upright class alone, half the bytes) with a finite
+    terrain_dz: a voxel below it takes nothing, the same integers (evidence, knowledge, looks) as
+    classes 2 whose terrain nodes are all 0, from the gather and from the still table, both the
+    float64 oracle's; terrain voxels are reached (their masking is tested) and the upright
+    nodes are not 0 (a terrain voxel reading them would show)."""
+    import radarcl.stages.fusion as fusion_module
+
+    if accumulators == "separate":
+        monkeypatch.setattr(fusion_module, "PACKED_LOOKS", 12)
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
+    e, d, two, one = one_class_nodes(lattice, seed=7)
+    assert e[..., 0, :].any() and d[..., 0, :].any()
+    maps = {}
+    for classes, packed in ((2, two), (1, one)):
+        grid, fusion, _ = detstats_grid(runtime, SMALL, lattice, model, packed, POSE, -0.8, still=True, classes=classes,
+                                        **widths)
+        assert fusion.evidence_shape == (lattice.n_beams, N_BINS, classes, 4, 2)
+        assert ("PACKED_LOOKS" in fusion._defines) == (accumulators == "packed")
+        reached, _, _ = check_detstats_frame(grid, fusion, lattice, model, e, d, packed, -0.8)
+        maps[classes] = grid.snapshot(), grid.knowledge_snapshot(), grid.knowledge_snapshot("looks")
+    nz, ny, nx = SMALL.array_shape
+    iz, iy, ix = np.indices((nz, ny, nx)).reshape(3, -1)
+    terrain = (SMALL.index_to_world(np.stack([ix, iy, iz], 1))[:, 2] - POSE[2, 3] < -0.8).reshape(nz, ny, nx)
+    assert (reached & terrain).sum() > 100 and (reached & ~terrain).sum() > 100
+    assert not maps[1][0][terrain].any() and maps[1][0][~terrain].any() and maps[1][2].sum() > 1000
+    assert all(np.array_equal(a, b) for a, b in zip(maps[1], maps[2]))
+
+
+def test_detstats_classes_are_checked(runtime):
+    """classes is 1 or 2; the frame's shape follows it."""
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
+    grid = EvidenceGrid(runtime, SMALL, knowledge=True)
+    with pytest.raises(ConfigError, match=r"classes must be 1 \(upright targets only\) or 2 \(and terrain\), got 0"):
+        Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, detstats=True, classes=0)
+    fusion = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, detstats=True, classes=1)
+    with pytest.raises(ShapeError, match=r"expected evidence nodes of shape \(64, 4, 160, 1, 4, 2\) int32"):
+        fusion(one_class_nodes(lattice, 0)[2], POSE)
+    assert grid.n_bricks == 0
+
+
 def check_detstats_frame(grid, fusion, lattice, model, e, d, packed, terrain_dz):
     """One frame of node pairs (e, d) fused into ``grid`` against the float64 oracle: evidence and
     knowledge within one quantisation step of rho2 per update and exact on most voxels, the looks
@@ -411,18 +465,20 @@ def test_planar_bricks_give_the_same_integers(runtime, case):
     check_against_oracle(one.snapshot(), spec, lattice, model, frames[1], poses)
 
 
+@pytest.mark.parametrize("classes", [2, 1])
 @pytest.mark.parametrize("still", [False, True], ids=["gather", "still table"])
-def test_planar_bricks_and_chunks_give_the_same_knowledge(runtime, still):
+def test_planar_bricks_and_chunks_give_the_same_knowledge(runtime, still, classes):
     """The detection-statistics model on 8 x 8 x 1 bricks and on a pool of many small chunks: the
-    sums, the knowledge and the looks equal those of 8^3 bricks over the same voxels, exactly."""
+    sums, the knowledge and the looks equal those of 8^3 bricks over the same voxels, exactly
+    (with both classes, and with the upright class alone)."""
     lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
-    frames = [random_nodes(lattice, seed=s)[2] for s in (5, 6)]
+    frames = [(random_nodes(lattice, seed=s)[2] if classes == 2 else one_class_nodes(lattice, s)[3]) for s in (5, 6)]
     got = {}
     for brick_z, chunk in ((8, None), (1, None), (1, 5)):
         spec = GridSpec((-1.0, -6.0, -2.0), 0.25, (48, 48, 11), brick_z=brick_z)
         grid = EvidenceGrid(runtime, spec, knowledge=True, chunk_bricks=chunk)
         f = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, detstats=True, terrain_dz=-0.8,
-                   still=still)
+                   still=still, classes=classes)
         for packed in frames:
             plan = f(packed, POSE)
         assert (plan.table is not None) == still

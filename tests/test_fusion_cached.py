@@ -11,7 +11,8 @@ import math
 
 import numpy as np
 import pytest
-from test_fusion import FIRST, LAST, LATTICES, MODELS, N_BINS, POSE, SMALL, SPACING, check_against_oracle, evidence
+from test_fusion import (FIRST, LAST, LATTICES, MODELS, N_BINS, POSE, SMALL, SPACING, check_against_oracle, evidence,
+                         one_class_nodes)
 
 from radarcl.errors import ConfigError
 from radarcl.geometry import pose_from_xyz_rpy
@@ -50,6 +51,37 @@ def test_a_still_radars_table_gives_the_gathers_integers(runtime, case):
         assert np.array_equal(a, b)
     # the last frame alone, from the table, against the float64 oracle
     check_against_oracle(maps[True][2] - maps[True][1], SMALL, lattice, model, frames[2], poses)
+
+
+@pytest.mark.parametrize("case", STILL_CASES.values(), ids=STILL_CASES.keys())
+def test_a_table_of_one_class_masks_the_terrain_entries(runtime, case):
+    """The detection-statistics model with the upright class alone (classes 1) and a finite
+    terrain_dz: the table keeps each entry's class and takes nothing from a terrain entry, the
+    gather's integers (evidence, knowledge, looks) frame after frame, and those of both classes
+    with all-zero terrain nodes."""
+    lattice, model, per_beam, vec, rows = case
+    poses = POSE if not per_beam else np.stack(
+        [pose_from_xyz_rpy(0.5 * f, 0.1, 0.0, yaw=0.05 * f) for f in np.linspace(0, 1, lattice.n_beams)])
+    frames = [one_class_nodes(lattice, s) for s in (14, 15)]
+    terrain_dz = 0.0 if lattice.wraps else -0.8       # a height that splits the voxels the beams reach
+    maps = {}
+    for classes, still in ((1, False), (1, True), (2, True)):
+        grid = EvidenceGrid(runtime, SMALL, knowledge=True)
+        f = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, per_beam_poses=per_beam, still=still,
+                   vector_width=vec, rows=rows, detstats=True, terrain_dz=terrain_dz, classes=classes)
+        steps = []
+        for frame in frames * 2:
+            plan = f(frame[3] if classes == 1 else frame[2], poses)
+            steps.append((grid.snapshot(), grid.knowledge_snapshot(), grid.knowledge_snapshot("looks")))
+        assert (plan.table is not None) == still
+        maps[classes, still] = steps
+    entries = plan.table.first.get()[:, 1]                  # the last table's first entries: both classes
+    terrain = (entries & (1 << 16)) != 0
+    assert terrain.any() and ((entries != 0) & ~terrain).any()
+    assert maps[1, False][-1][0].any() and maps[1, False][-1][2].sum() > 100
+    for other in ((1, True), (2, True)):
+        for a, b in zip(maps[1, False], maps[other]):
+            assert all(np.array_equal(x, y) for x, y in zip(a, b))
 
 
 def test_the_table_is_recorded_when_a_pose_comes_back_and_only_if_it_fits(runtime, monkeypatch):

@@ -242,13 +242,23 @@ def detstats_model(n_bins=256, ground_below_m=1.5, evidence="snr", **params):
                              math.radians(1.0), 0.2)
 
 
+def oracle_kept(nodes, classes):
+    """The float64 oracle's (e, d) nodes of the classes an interpreter keeps; fails unless the
+    others are all 0 (the premise of dropping them)."""
+    from radarcl import sensor_model as sm
+
+    return tuple(sm.kept_classes(v, classes) for v in nodes)
+
+
 @pytest.mark.parametrize("local_size", [1, 16, 64])
 @pytest.mark.parametrize("evidence", ["snr", "detection"])
-def test_detstats_matches_its_oracle(runtime, local_size, evidence):
+@pytest.mark.parametrize("ground_below_m, classes", [(1.5, 2), (0.0, 1)])
+def test_detstats_matches_its_oracle(runtime, local_size, evidence, ground_below_m, classes):
     """Node values within EVIDENCE_UNITS_TOL of the float64 oracle (float32 logs, blocking and,
     with "snr", the table's bilinear read), and identical to it until a beam's first pulse with
     "detection" (the host's exact table); pulses, counts and flags identical; flagged beams and
-    bins outside the window give 0."""
+    bins outside the window give 0. Without a ground plane the node array holds the upright class
+    alone, and the oracle's terrain nodes are all 0."""
     from radarcl import sensor_model as sm
 
     x = frame(seed=11 + local_size)
@@ -258,15 +268,18 @@ def test_detstats_matches_its_oracle(runtime, local_size, evidence):
     beams[5, 100:] = 0.0                         # "snr": a floor from a window half of zeros
     beams[6, 60:63] = 1e30                       # a huge echo: x beyond the table, blocking without overflow
     cfg = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4, model="detstats")
-    model = detstats_model(evidence=evidence)
+    model = detstats_model(evidence=evidence, ground_below_m=ground_below_m)
     det = Detection(runtime, x.shape[:-1], 256, SPACING, CfarConfig(guard=16, train=8), cfg, bin_model=model)
     det.interpreter = Interpreter(runtime, x.shape[:-1], 256, SPACING, cfg, bin_model=model, local_size=local_size)
+    assert det.interpreter.classes == classes
     got = det(x)
     e, d, pulses, n_pulses, flags = oracle.interpret_detstats(x, got.cfar.noise, got.cfar.mask, cfg, SPACING, model)
     assert np.array_equal(got.interpret.pulses, pulses) and np.array_equal(got.interpret.n_pulses, n_pulses)
     assert np.array_equal(got.interpret.flags, flags) and flags.reshape(-1)[4] & oracle.FLAG_SILENT
+    assert e.shape == (16, 4, 256, 2, 5)
+    e, d = oracle_kept((e, d), classes)
     ge, gd = sm.unpack_nodes(got.interpret.evidence)
-    assert ge.shape == e.shape == (16, 4, 256, 2, 5)
+    assert ge.shape == e.shape == (16, 4, 256, classes, 5)
     assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
     mask = got.cfar.mask.reshape(-1, 256).astype(bool)
     first, last = cfg.bin_interval(SPACING, 256)
@@ -275,22 +288,22 @@ def test_detstats_matches_its_oracle(runtime, local_size, evidence):
         hits = np.flatnonzero(mask[b, first:last + 1])
         before[b, first:(first + hits[0]) if len(hits) else last + 1] = True
     before &= ~mask
-    assert not ge.reshape(-1, 256, 2, 5)[4].any() and not ge[..., :first, :, :].any()
+    assert not ge.reshape(-1, 256, classes, 5)[4].any() and not ge[..., :first, :, :].any()
     assert not ge[..., last + 1:, :, :].any() and (ge != 0).any()
     window = np.zeros_like(mask)
     window[:, first:last + 1] = True
-    hit = e.reshape(-1, 256, 2, 5)[mask & window & (flags.reshape(-1)[:, None] == 0)]
+    hit = e.reshape(-1, 256, classes, 5)[mask & window & (flags.reshape(-1)[:, None] == 0)]
     if evidence == "detection":
-        assert np.array_equal(ge.reshape(-1, 256, 2, 5)[before], e.reshape(-1, 256, 2, 5)[before])
+        assert np.array_equal(ge.reshape(-1, 256, classes, 5)[before], e.reshape(-1, 256, classes, 5)[before])
         # a detection is evidence of occupancy (0 only where nearer echoes block the beam)
         assert len(hit) and (hit >= 0).all() and (hit[:, 0, 0] > 0).mean() > 0.5
     else:
         # behind the huge echo the beam is blocked: no knowledge, so no evidence (the gap's
         # ln(1 - gap) on quiet bins would otherwise add up, uncounted by the look limit, frame after
         # frame): exactly 0
-        behind_e, behind_d = ge.reshape(-1, 256, 2, 5)[6, 64:], gd.reshape(-1, 256, 2, 5)[6, 64:]
+        behind_e, behind_d = ge.reshape(-1, 256, classes, 5)[6, 64:], gd.reshape(-1, 256, classes, 5)[6, 64:]
         assert not behind_d.any() and not behind_e.any()
-        assert (ge.reshape(-1, 256, 2, 5)[6, 60:63, 0] > 0).all()
+        assert (ge.reshape(-1, 256, classes, 5)[6, 60:63, 0] > 0).all()
         # anywhere: a node without an opportunity carries no evidence, in the kernel and the oracle
         assert not ge[gd == 0].any() and not e[d == 0].any() and (gd == 0).any()
 
@@ -301,6 +314,12 @@ def test_detstats_needs_its_model(runtime):
         Interpreter(runtime, (4,), 256, SPACING, cfg)
     with pytest.raises(ConfigError, match="the bin model has 256 bins; the profiles have 128"):
         Interpreter(runtime, (4,), 128, SPACING, cfg, bin_model=detstats_model(256))
+    with pytest.raises(ConfigError, match=r"classes must be 2 \(None: 2\) for this bin model, got 1: its terrain"):
+        Interpreter(runtime, (4,), 256, SPACING, cfg, bin_model=detstats_model(256), classes=1)
+    with pytest.raises(ConfigError, match=r"classes must be 1 or 2 \(None: 1\) for this bin model, got 3"):
+        Interpreter(runtime, (4,), 256, SPACING, cfg, bin_model=detstats_model(256, ground_below_m=0.0), classes=3)
+    with pytest.raises(ConfigError, match="classes are for a model with node pairs"):
+        Interpreter(runtime, (4,), 256, SPACING, InterpretConfig(), classes=1)
 
 
 def test_snr_noise_floor_counts_negative_zero_as_zero(runtime):

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from test_interpret import SPACING, detstats_model
+from test_interpret import SPACING, detstats_model, oracle_kept
 from tolerances import EVIDENCE_UNITS_TOL
 
 from radarcl import logodds, oracle
@@ -36,15 +36,16 @@ def scene(seed=0, n_beams=12, n_bins=256):
     return x
 
 
-def run(runtime, x, model, config=CONFIG, **nodes_options):
-    """(the interpreter's node values (e, d), the oracle's (e, d), the interpreter's nodes plan)"""
+def run(runtime, x, model, config=CONFIG, classes=None, **nodes_options):
+    """(the interpreter's node values (e, d), the oracle's (e, d) of the classes it keeps (whose
+    others it checks are 0), the interpreter's nodes plan)"""
     det = Detection(runtime, x.shape[:-1], x.shape[-1], SPACING, CFAR, config, bin_model=model)
-    if nodes_options:
+    if nodes_options or classes is not None:
         det.interpreter = Interpreter(runtime, x.shape[:-1], x.shape[-1], SPACING, config, bin_model=model,
-                                      nodes_options=nodes_options)
+                                      nodes_options=nodes_options, classes=classes)
     got = det(x)
     e, d = oracle.interpret_detstats(x, got.cfar.noise, got.cfar.mask, config, SPACING, model)[:2]
-    return sm.unpack_nodes(got.interpret.evidence), (e, d), det.interpreter.nodes
+    return sm.unpack_nodes(got.interpret.evidence), oracle_kept((e, d), det.interpreter.classes), det.interpreter.nodes
 
 
 @pytest.mark.parametrize("lanes", LANE_CHOICES)
@@ -65,17 +66,20 @@ def test_lanes_and_local_sizes_give_the_same_nodes(runtime, lanes, local_size):
 
 def test_a_scene_without_terrain_computes_the_upright_class_only(runtime):
     """No ground plane (ground_below_m = 0, sensor_model.terrain_dz = -inf): the terrain class has
-    no opportunity at any bin, so the kernel computes one class, and the terrain class's nodes are
-    0 in the kernel and in the oracle alike (a node without knowledge carries no evidence); the
-    upright class's nodes are the oracle's within EVIDENCE_UNITS_TOL, and bit for bit those of a
-    model with terrain wherever the upright tables agree."""
+    no opportunity at any bin, so the kernel computes and stores one class (the oracle's terrain
+    nodes are all 0: a node without knowledge carries no evidence); the upright class's nodes are
+    the oracle's within EVIDENCE_UNITS_TOL, bit for bit those of the same interpreter made to keep
+    both classes (whose terrain nodes are then 0), and those of a model with terrain wherever the
+    upright tables agree."""
     flat = detstats_model(ground_below_m=0.0)
     assert not flat.opportunity[:, 1].any() and classes_needed(flat.opportunity) == 1
     x = scene(seed=3)
     (ge, gd), (e, d), nodes = run(runtime, x, flat)
-    assert nodes.classes == 1
-    assert not ge[..., 1, :].any() and not gd[..., 1, :].any() and not e[..., 1, :].any() and not d[..., 1, :].any()
+    assert nodes.classes == 1 and ge.shape == e.shape == (12, 256, 1, 5)
     assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
+    (we, wd), _, wide = run(runtime, x, flat, classes=2)
+    assert wide.classes == 2 and we.shape == (12, 256, 2, 5) and not we[..., 1, :].any() and not wd[..., 1, :].any()
+    assert np.array_equal(we[..., :1, :], ge) and np.array_equal(wd[..., :1, :], gd)
     assert (gd[..., 0, :] > 0).any() and (ge[..., 0, :] != 0).any()
     # the same upright tables with a terrain class beside them: two classes, the same upright nodes
     terrain = np.array(flat.opportunity)
@@ -88,8 +92,9 @@ def test_a_scene_without_terrain_computes_the_upright_class_only(runtime):
 
 
 def test_a_terrain_class_below_half_a_knowledge_unit_is_not_computed():
-    """The class test is the kernel's own, in float32: an opportunity whose knowledge rounds to 0
-    (at most half a unit) everywhere is no class to compute; one bin above it is."""
+    """The class test is the kernels' own, in float32, and the host's exact nodes', in float64: an
+    opportunity whose knowledge rounds to 0 (at most half a unit) everywhere in both is no class to
+    compute; one bin above it in either is."""
     half = np.float32(0.5) / np.float32(logodds.KNOWLEDGE_SCALE)
     opportunity = np.zeros((64, sm.N_CLASSES, sm.NODES), np.float32)
     opportunity[:, 0] = 1.0
@@ -97,18 +102,27 @@ def test_a_terrain_class_below_half_a_knowledge_unit_is_not_computed():
     assert classes_needed(opportunity) == 1
     opportunity[40, 1, 3] = np.nextafter(half, np.float32(1.0))
     assert classes_needed(opportunity) == 2
+    # a float64 table (the bin model's) just above half a unit, which float32 rounds down to half:
+    # the host's exact nodes give it a unit of knowledge, so the class is kept
+    exact = np.zeros((64, sm.N_CLASSES, sm.NODES))
+    exact[10:, 1] = float(half)
+    assert classes_needed(exact) == 1
+    exact[40, 1, 3] = float(half) * (1 + 1e-12)
+    assert np.float32(exact[40, 1, 3]) == half and classes_needed(exact) == 2
 
 
 def test_refuses_bad_input(runtime):
     model = detstats_model(n_bins=64)
     with pytest.raises(ConfigError, match=r"lanes must be one of \(8, 16\), got 12"):
-        InterpretNodes(runtime, 4, 64, 8, 60, model, lanes=12)
+        InterpretNodes(runtime, 4, 64, 8, 60, model, 2, lanes=12)
     with pytest.raises(ConfigError, match="needs a sensor_model.BinModel with 'snr' evidence"):
-        InterpretNodes(runtime, 4, 64, 8, 60, detstats_model(n_bins=64, evidence="detection"))
+        InterpretNodes(runtime, 4, 64, 8, 60, detstats_model(n_bins=64, evidence="detection"), 2)
     with pytest.raises(ConfigError, match=r"must both be \(128, 2, 5\)"):
-        InterpretNodes(runtime, 4, 128, 8, 60, model)
+        InterpretNodes(runtime, 4, 128, 8, 60, model, 2)
+    with pytest.raises(ConfigError, match=r"classes must be 1 or 2, got 0"):
+        InterpretNodes(runtime, 4, 64, 8, 60, model, 0)
     with pytest.raises(ConfigError, match=r"local_size must be an integer in \[1, "):
-        InterpretNodes(runtime, 4, 64, 8, 60, model, local_size=0)
+        InterpretNodes(runtime, 4, 64, 8, 60, model, 2, local_size=0)
     with pytest.raises(ConfigError, match="the detection statistics interpreter with detection evidence has no node"):
         Interpreter(runtime, (4,), 64, SPACING, CONFIG, bin_model=detstats_model(n_bins=64, evidence="detection"),
                     nodes_options=dict(lanes=8))
@@ -194,7 +208,8 @@ def test_a_look_that_could_hardly_see_says_at_most_what_a_detection_would_either
     cfg = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4, model="detstats")
     out = Interpreter(runtime, (2,), 256, SPACING, cfg, bin_model=model)(x, np.ones_like(x), mask)
     ge, gd = sm.unpack_nodes(out.evidence)
-    e, d = oracle.interpret_detstats(x, np.ones_like(x), mask, cfg, SPACING, model)[:2]
+    e, d = oracle_kept(oracle.interpret_detstats(x, np.ones_like(x), mask, cfg, SPACING, model)[:2], 1)
+    assert ge.shape == e.shape == (2, 256, 1, 5)                    # no ground plane: the upright class alone
     assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.array_equal(gd, d)
     q = model.snr_table.q
     most = detection_cap(0.02, q) * logodds.SCALE
@@ -207,7 +222,7 @@ def test_a_look_that_could_hardly_see_says_at_most_what_a_detection_would_either
     # sensor_model.evidence_bound = "none": the table's evidence as it is, in the kernel as in the oracle
     free = dataclasses.replace(model, bounded=False)
     ge = sm.unpack_nodes(Interpreter(runtime, (2,), 256, SPACING, cfg, bin_model=free)(x, np.ones_like(x), mask).evidence)[0]
-    e = oracle.interpret_detstats(x, np.ones_like(x), mask, cfg, SPACING, free)[0]
-    assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL
+    e = oracle_kept(oracle.interpret_detstats(x, np.ones_like(x), mask, cfg, SPACING, free)[:2], 1)[0]
+    assert ge.shape == e.shape and np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL
     table = model.snr_table(np.log(x[:, at])[:, None], np.full((2, 5), math.log(1e4))) * logodds.SCALE
     assert np.all(np.abs(e[:, at, 0] - np.rint(table)) <= EVIDENCE_UNITS_TOL)

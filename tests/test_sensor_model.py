@@ -194,7 +194,7 @@ def test_node_packing_round_trips_and_interpolates():
     e = rng.integers(-logodds.EVIDENCE_LIMIT, logodds.EVIDENCE_LIMIT + 1, (7, sm.N_CLASSES, sm.NODES))
     d = rng.integers(0, logodds.KNOWLEDGE_SCALE + 1, e.shape)
     packed = sm.pack_nodes(e, d)
-    assert packed.shape == (7, *sm.NODE_SHAPE) and packed.dtype == np.int32
+    assert packed.shape == (7, *sm.node_shape()) and packed.dtype == np.int32
     back = sm.unpack_nodes(packed)
     assert np.array_equal(back[0], e) and np.array_equal(back[1], d)
     q = np.array([0, 4096, 2048, sm.Q_ONE, sm.Q_MAX])
@@ -203,6 +203,25 @@ def test_node_packing_round_trips_and_interpolates():
     assert np.array_equal(sm.quantised_rho2([0.0, 0.25, 1.0 - 2 ** -15, 1.0, 2.0]), [0, 4096, 16383, 16383, 16383])
     with pytest.raises(ConfigError, match="node values out of range"):
         sm.pack_nodes(e + logodds.EVIDENCE_LIMIT, d)
+
+
+def test_a_pipeline_without_a_terrain_class_keeps_the_upright_class_alone():
+    """node_shape: one class or both; all_classes puts a dropped class back as the 0 it is;
+    kept_classes refuses an oracle whose dropped class is not all 0 (the premise of dropping it)."""
+    assert sm.node_shape(1) == (1, sm.SEGMENTS, 2) and sm.node_shape() == sm.node_shape(2) == (2, sm.SEGMENTS, 2)
+    with pytest.raises(ConfigError, match="classes must be 1 or 2, got 3"):
+        sm.node_shape(3)
+    rng = np.random.default_rng(1)
+    e = rng.integers(-100, 100, (3, 4, sm.N_CLASSES, sm.NODES))
+    e[..., 1, :] = 0
+    kept = sm.kept_classes(e, 1)
+    assert kept.shape == (3, 4, 1, sm.NODES) and np.array_equal(kept[..., 0, :], e[..., 0, :])
+    assert np.array_equal(sm.all_classes(kept), e) and np.array_equal(sm.kept_classes(e, 2), e)
+    e[2, 1, 1, 4] = -1
+    with pytest.raises(ValueError, match=r"a dropped class has 1 nonzero nodes \(up to 1\)"):
+        sm.kept_classes(e, 1)
+    packed = sm.pack_nodes(kept, np.abs(kept))
+    assert packed.shape == (3, 4, *sm.node_shape(1))
 
 
 def test_a_false_alarm_rate_that_leaves_pd_outside_pfa_to_1_is_refused():

@@ -131,6 +131,9 @@ def detect(runtime, x, model, flags=None):
     e, d, pulses, n_pulses, oflags = oracle.interpret_detstats(x, got.cfar.noise, got.cfar.mask, CONFIG, SPACING, model,
                                                                flags)
     ge, gd = sm.unpack_nodes(got.interpret.evidence)
+    classes = det.interpreter.classes               # the oracle's other classes must be 0: kept_classes checks
+    e, d = sm.kept_classes(e, classes), sm.kept_classes(d, classes)
+    assert ge.shape == e.shape
     assert np.array_equal(got.interpret.flags, oflags) and np.array_equal(got.interpret.n_pulses, n_pulses)
     return ge, gd, e, d, got
 
@@ -297,7 +300,9 @@ def test_120_db_reflector_beside_a_weak_target(runtime):
     det = Detection(runtime, (1,), 256, spacing, CFAR, config, bin_model=model)
     got = det(profiles)
     e, d = oracle.interpret_detstats(profiles, got.cfar.noise, got.cfar.mask, config, spacing, model)[:2]
+    e, d = sm.kept_classes(e, 1), sm.kept_classes(d, 1)           # no ground plane: the upright class alone
     ge, gd = sm.unpack_nodes(got.interpret.evidence)
+    assert ge.shape == e.shape == (1, 256, 1, 5)
     assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
     hits = np.flatnonzero(got.cfar.mask[0]) * spacing
     assert (np.abs(hits - 12.0) < 1).any() and (np.abs(hits - 30.0) < 1).any()

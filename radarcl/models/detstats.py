@@ -75,8 +75,9 @@ class DetStats(EvidenceModel):
                 unblocked[0][first:last + 1] = logodds.to_fixed(np.log(m.miss[first:last + 1]))
             unblocked[1][first:last + 1] = np.rint(m.opportunity[first:last + 1] * logodds.KNOWLEDGE_SCALE)
             unblocked[0][unblocked[1] == 0] = 0                 # no look, no evidence (as the kernel's nodes)
+        kept = interpreter.classes                              # the node array's classes (node_shape)
         tables.update(miss=cla.to_device(queue, m.miss.astype(np.float32)),
-                      unblocked=cla.to_device(queue, pack_nodes(*unblocked)))
+                      unblocked=cla.to_device(queue, pack_nodes(*(u[:, :kept] for u in unblocked))))
         return tables
 
     def after_kernel(self, interpreter, event, profiles):
@@ -92,10 +93,11 @@ class DetStats(EvidenceModel):
         return np.stack(oracle.interpret_detstats(profiles, noise, mask, config, bin_spacing_m, bin_model, flags)[:2])
 
     def comparable(self, evidence):
-        return np.stack(sensor_model.unpack_nodes(evidence))
+        # the oracle's form has both classes: a class the pipeline drops has all its nodes 0
+        return np.stack([sensor_model.all_classes(v) for v in sensor_model.unpack_nodes(evidence)])
 
     def nodes(self, evidence):
-        return sensor_model.unpack_nodes(evidence)
+        return tuple(sensor_model.all_classes(v) for v in sensor_model.unpack_nodes(evidence))
 
     def on_axis(self, evidence):
         return evidence[0, ..., 0, 0]         # the evidence (not the opportunity) of an upright target, rho2 = 0

@@ -31,7 +31,7 @@ from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, BeamModel, check_poses
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import BRICK
-from radarcl.sensor_model import NODE_SHAPE, unpack_nodes
+from radarcl.sensor_model import N_CLASSES, node_shape, unpack_nodes
 from radarcl.stages import Port, Stage, build, count, fusion_cached, spacing, work_group_size
 from radarcl.stages.fusion_plan import (BLOCK, FramePlan, FusionPlanner, HeadFrame, brick_geometry, candidate_windows,
                                         column_tiles, nonempty, pool_order, take_rows)
@@ -65,15 +65,19 @@ class Fusion(Stage):
     pose's frames from it (``fusion_cached``, the same integers); True records on the first
     repeat whatever its size, False never. detstats: the detection-statistics model
     (``radarcl.sensor_model``): a frame is not one update per bin but node pairs per bin
-    (``NODE_SHAPE``, from ``sensor_model.pack_nodes``), interpolated in the voxel's rho2, and the
-    grid must hold a knowledge pool (``EvidenceGrid(..., knowledge=True)``); a voxel whose centre
-    lies more than -``terrain_dz`` [m] below its beam's origin takes the terrain class's nodes
-    (-inf: none does); equivalent to ``oracle.fusion_at_points(..., nodes=..., terrain_dz=...)``.
+    (``sensor_model.node_shape(classes)``, from ``sensor_model.pack_nodes``), interpolated in the
+    voxel's rho2, and the grid must hold a knowledge pool (``EvidenceGrid(..., knowledge=True)``);
+    a voxel whose centre lies more than -``terrain_dz`` [m] below its beam's origin takes the
+    terrain class's nodes (-inf: none does); equivalent to ``oracle.fusion_at_points(...,
+    nodes=..., terrain_dz=...)``. classes: the node pairs' classes of target, the interpreter's
+    (``Interpreter.classes``): 2, or 1 for a scene without a terrain class, whose nodes hold the
+    upright class alone (half the bytes to read) and a terrain voxel takes nothing, as it would
+    from that class's all-zero nodes.
     """
 
     def __init__(self, runtime, grid, lattice, model, n_bins, bin_spacing_m, first_bin=0, last_bin=None,
                  *, per_beam_poses=False, still="auto", vector_width=8, rows=None, local_size=None, detstats=False,
-                 terrain_dz=-math.inf):
+                 terrain_dz=-math.inf, classes=N_CLASSES):
         if not isinstance(grid, EvidenceGrid):
             raise ConfigError(f"grid must be an EvidenceGrid, got {type(grid).__name__}")
         if not isinstance(lattice, BeamLattice) or not isinstance(model, BeamModel):
@@ -103,6 +107,9 @@ class Fusion(Stage):
         self.terrain_dz = float(terrain_dz)
         if math.isnan(self.terrain_dz) or self.terrain_dz == math.inf:
             raise ConfigError(f"terrain_dz must be a number of metres or -inf, got {terrain_dz!r}")
+        if classes not in (1, N_CLASSES):
+            raise ConfigError(f"classes must be 1 (upright targets only) or {N_CLASSES} (and terrain), got {classes!r}")
+        self.classes = int(classes)
         if self.detstats and not grid.has_knowledge:
             raise ConfigError("the detection-statistics model writes the knowledge channel: give Fusion an "
                               "EvidenceGrid(..., knowledge=True)")
@@ -115,6 +122,8 @@ class Fusion(Stage):
                        NEAR_FIELD=model.near_field, GAUSSIAN=model.gaussian,
                        PER_BEAM_POSES=self.per_beam_poses, AZ_WRAP=lattice.wraps, DETSTATS=self.detstats,
                        NO_INT64=not runtime.limits.int64)
+        if self.detstats:
+            defines["CLASSES"] = self.classes
         if self.detstats and lattice.n_beams * logodds.KNOWLEDGE_SCALE < 1 << PACKED_LOOKS:
             defines["PACKED_LOOKS"] = PACKED_LOOKS         # knowledge and looks in one accumulator
         self._defines = {k: v for k, v in defines.items() if v is not False}
@@ -135,7 +144,7 @@ class Fusion(Stage):
         self._supers = None              # the planner's coarse level: blocks of BLOCK^3 blocks of bricks
         # Evidence from a raw radar's detection comes as (n_az, n_el, n_bins) even for one
         # elevation; (n_beams, n_bins) is the same rows.
-        tail = NODE_SHAPE if self.detstats else ()
+        tail = node_shape(self.classes) if self.detstats else ()
         aliases = ((lattice.n_az, lattice.n_el, self.n_bins, *tail), (lattice.n_beams, self.n_bins, *tail))
         self._allocate([Port("evidence", (*lattice.batch, self.n_bins, *tail), np.dtype(np.int32),
                              "evidence nodes" if self.detstats else "evidence", aliases)], [])
@@ -147,8 +156,8 @@ class Fusion(Stage):
     @property
     def evidence_shape(self):
         """Shape of one frame's evidence: (n_beams, n_bins) int32, or with detstats
-        (n_beams, n_bins, *NODE_SHAPE) int32 node pairs."""
-        return (self.lattice.n_beams, self.n_bins, *(NODE_SHAPE if self.detstats else ()))
+        (n_beams, n_bins, *sensor_model.node_shape(classes)) int32 node pairs."""
+        return (self.lattice.n_beams, self.n_bins, *(node_shape(self.classes) if self.detstats else ()))
 
     # -- host side: beams, head frame, bricks ---------------------------------------------------
     def plan(self, poses, cache=True, record=True):

@@ -44,7 +44,7 @@ class StillTable:
 
 def cached_kernel(runtime, defines):
     """The ``fusion_cached`` kernel, built with the gather's -D ``defines`` (it reads VEC,
-    BRICK_Z and DETSTATS of them)."""
+    BRICK_Z, DETSTATS and CLASSES of them)."""
     return build(runtime, "fusion_cached", defines)["fusion_cached"]
 
 

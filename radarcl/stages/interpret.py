@@ -14,9 +14,9 @@ import numpy as np
 from radarcl import logodds, oracle
 from radarcl.config.stage_config import InterpretConfig
 from radarcl.errors import ConfigError
-from radarcl.sensor_model import N_CLASSES, NODE_SHAPE, NODES, BinModel
+from radarcl.sensor_model import N_CLASSES, NODES, BinModel, node_shape
 from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_group_size
-from radarcl.stages.interpret_nodes import InterpretNodes
+from radarcl.stages.interpret_nodes import InterpretNodes, classes_needed
 
 # Beams per work-group. One work-item walks one beam; any size is correct.
 DEFAULT_LOCAL_SIZE = 16
@@ -26,7 +26,7 @@ DEFAULT_LOCAL_SIZE = 16
 class InterpretResult:
     """Evidence and pulses of one frame; ``batch`` is the frame's beam shape."""
 
-    evidence: np.ndarray   # int32 (*batch, n_bins), logodds units; detstats: (*batch, n_bins, *NODE_SHAPE) node pairs
+    evidence: np.ndarray   # int32 (*batch, n_bins), logodds units; detstats: (*batch, n_bins, classes, 4, 2) node pairs
     pulses: np.ndarray     # int32 (*batch, max_pulses, 4): start, end, peak, wide; -1 unused
     n_pulses: np.ndarray   # int32 (*batch,): pulses found, may exceed max_pulses
     flags: np.ndarray      # uint8 (*batch,): oracle.FLAG_* bits
@@ -46,8 +46,10 @@ class Interpreter(Stage):
     node pairs (``EvidenceModel.knowledge``: the detection-statistics model), the
     ``sensor_model.BinModel`` of this sensor, CFAR and voxel (its tables go to the device once;
     ``radarcl.models`` says what each model puts there). With detstats the evidence is
-    (*batch, n_bins, *sensor_model.NODE_SHAPE) int32 node pairs (``sensor_model.unpack_nodes``),
-    equivalent to ``radarcl.oracle.interpret_detstats``: node values identical to the oracle's
+    (*batch, n_bins, *sensor_model.node_shape(classes)) int32 node pairs
+    (``sensor_model.unpack_nodes``) of the first ``classes`` classes of target: None, those the
+    bin model's scene has (``interpret_nodes.classes_needed``: 1 without a terrain class, whose
+    nodes would all be 0; the fusion is then built with the same count), or 2 for both; equivalent to ``radarcl.oracle.interpret_detstats``: node values identical to the oracle's
     until a beam's first pulse and within ``EVIDENCE_UNITS_TOL`` after it (except, with "snr"
     evidence, a node whose float32 and float64 opportunity round to 0 on different sides of 1/2,
     where one has the evidence and the other 0; the seeded tests keep far from it).
@@ -57,7 +59,7 @@ class Interpreter(Stage):
     """
 
     def __init__(self, runtime, batch, n_bins, bin_spacing_m, config=None, *, local_size=None, bin_model=None,
-                 nodes_options=None):
+                 nodes_options=None, classes=None):
         self.runtime = runtime
         self.config = config if config is not None else InterpretConfig()
         if not isinstance(self.config, InterpretConfig):
@@ -76,16 +78,30 @@ class Interpreter(Stage):
         if self.node_pairs and bin_model.opportunity.shape != (self.n_bins, N_CLASSES, NODES):
             raise ConfigError(f"the bin model has {bin_model.opportunity.shape[0]} bins; the profiles have {self.n_bins}")
         self.bin_model = bin_model if self.node_pairs else None
+        self.classes = None                          # node pairs' classes of target (node_shape)
+        if self.node_pairs:
+            needed = classes_needed(bin_model.opportunity)
+            self.classes = needed if classes is None else classes
+            if self.classes not in (needed, N_CLASSES):
+                allowed = " or ".join(str(c) for c in sorted({needed, N_CLASSES}))
+                why = ": its terrain class has opportunity" if needed == N_CLASSES else ""
+                raise ConfigError(f"classes must be {allowed} (None: {needed}) for this bin model, got {classes!r}{why}")
+        elif classes is not None:
+            raise ConfigError(f"classes are for a model with node pairs; the {self.model.summary} interpreter has "
+                              "one value per bin")
         if self.node_pairs and bin_model.graded and np.shape(bin_model.ln_snr) != bin_model.opportunity.shape:
             raise ConfigError(f"the bin model's ln_snr is {np.shape(bin_model.ln_snr)}, its opportunity "
                               f"{bin_model.opportunity.shape}: 'snr' evidence needs both per bin, class and node")
-        self.kernels = build(runtime, "interpret", dict(N_BINS=self.n_bins, MAX_PULSES=self.config.max_pulses,
-                                                        NODES=NODES, **self.model.defines(self.bin_model)))
+        defines = dict(N_BINS=self.n_bins, MAX_PULSES=self.config.max_pulses, NODES=NODES,
+                       **self.model.defines(self.bin_model))
+        if self.node_pairs:
+            defines["CLASSES"] = self.classes
+        self.kernels = build(runtime, "interpret", defines)
         self._kernel = self.kernels["interpret"]
         self.nodes = None
         if self.node_pairs and bin_model.graded:    # "snr" evidence: the nodes are a second launch's
             self.nodes = InterpretNodes(runtime, self.n_beams, self.n_bins, self.first_bin, self.last_bin, bin_model,
-                                        **(nodes_options or {}))
+                                        self.classes, **(nodes_options or {}))
         elif nodes_options:
             raise ConfigError(f"nodes_options are for the detection-statistics model with 'snr' evidence; the "
                               f"{self.model.summary} interpreter{' with detection evidence' if self.node_pairs else ''} "
@@ -93,7 +109,7 @@ class Interpreter(Stage):
         self.local_size = work_group_size(runtime, self._kernel, local_size, DEFAULT_LOCAL_SIZE)
         f32, u8, i32 = np.dtype(np.float32), np.dtype(np.uint8), np.dtype(np.int32)
         shape = self.input_shape
-        out_shape = (*shape, *NODE_SHAPE) if self.node_pairs else shape
+        out_shape = (*shape, *node_shape(self.classes)) if self.node_pairs else shape
         self._allocate([Port("profiles", shape, f32, "profiles"), Port("noise", shape, f32, "noise"),
                         Port("mask", shape, u8, "mask"), Port("flags_in", self.batch, u8, "flags")],
                        [Port("evidence", out_shape, i32, "evidence nodes" if self.node_pairs else "evidence"),

@@ -7,10 +7,11 @@ noise floor; the two launches together are equivalent to ``radarcl.oracle.interp
 node values within ``EVIDENCE_UNITS_TOL`` of it (float32 logs, blocking and the table's bilinear
 read; tests/test_interpret_nodes.py).
 
-Only the classes of target the scene has are computed: a bin model whose terrain class has no
-opportunity at any bin (no ground plane: ``sensor_model.terrain_dz`` is -inf, and the fusion never
-reads that class) gets ``classes == 1``, and the terrain class's pairs stay the 0 they would be
-(a node without knowledge carries no evidence).
+Only the classes of target the scene has are computed and stored: a bin model whose terrain class
+has no opportunity at any bin (no ground plane: ``sensor_model.terrain_dz`` is -inf) needs
+``classes == 1`` (``classes_needed``), and the node array holds the upright class alone
+(``sensor_model.node_shape``): the terrain class's pairs would all be 0 (a node without knowledge
+carries no evidence), and the fusion takes nothing from a terrain voxel then.
 """
 
 import numpy as np
@@ -31,19 +32,25 @@ DEFAULT_LANES = {"cpu": 16, "other": 8}
 
 
 def classes_needed(opportunity):
-    """1 where the terrain class has no node the kernel would compute (its float32 opportunity
-    rounds to 0 knowledge units at every bin and node: the kernel's own test), else 2."""
-    terrain = np.asarray(opportunity, np.float32)[:, 1]
-    return 2 if (terrain * np.float32(logodds.KNOWLEDGE_SCALE) > np.float32(0.5)).any() else 1
+    """The classes of target a pipeline keeps for a bin model's ``opportunity`` (n_bins, N_CLASSES,
+    NODES): 1 where the terrain class has no node with knowledge (its opportunity rounds to 0
+    knowledge units at every bin and node, in float32 as the kernels round it and in float64 as
+    the host's exact nodes do: then all its nodes are 0, and the fusion need not read them), else 2."""
+    terrain = np.asarray(opportunity)[:, 1]
+    units32 = np.asarray(terrain, np.float32) * np.float32(logodds.KNOWLEDGE_SCALE)
+    units64 = np.rint(np.asarray(terrain, np.float64) * logodds.KNOWLEDGE_SCALE)
+    return 2 if (units32 > np.float32(0.5)).any() or (units64 > 0).any() else 1
 
 
 class InterpretNodes:
     """The node kernel for frames of ``n_beams`` beams of ``n_bins`` bins, window [first_bin,
     last_bin] (the interpreter's), from ``bin_model`` (a ``sensor_model.BinModel`` with "snr"
-    evidence; its tables go to the device once). ``lanes``: bins per work-item (8 or 16; None:
+    evidence; its tables go to the device once), of which the first ``classes`` classes are
+    computed (``classes_needed``; the pipeline's count, which its node array is laid out for). ``lanes``: bins per work-item (8 or 16; None:
     ``DEFAULT_LANES`` for the device); ``local_size``: work-items per work-group."""
 
-    def __init__(self, runtime, n_beams, n_bins, first_bin, last_bin, bin_model, *, lanes=None, local_size=None):
+    def __init__(self, runtime, n_beams, n_bins, first_bin, last_bin, bin_model, classes, *, lanes=None,
+                 local_size=None):
         if not isinstance(bin_model, BinModel) or not bin_model.graded:
             got = "one with 'detection' evidence" if isinstance(bin_model, BinModel) else type(bin_model).__name__
             raise ConfigError(f"the node kernel needs a sensor_model.BinModel with 'snr' evidence, got {got}")
@@ -57,7 +64,9 @@ class InterpretNodes:
         self.runtime = runtime
         self.n_beams, self.n_bins, self.first_bin, self.last_bin = n_beams, n_bins, first_bin, last_bin
         self.lanes = lanes
-        self.classes = classes_needed(bin_model.opportunity)
+        if classes not in (1, N_CLASSES):
+            raise ConfigError(f"classes must be 1 or {N_CLASSES}, got {classes!r}")
+        self.classes = classes
         q = bin_model.snr_table.q
         self.kernels = build(runtime, "interpret_nodes", dict(
             N_BINS=n_bins, NODES=NODES, CLASSES=self.classes, LANES=lanes,
@@ -86,7 +95,7 @@ class InterpretNodes:
         """Launch on the walk's device arrays: ``profiles`` (n_beams, n_bins) float32, its
         ``flags`` (n_beams,) uint8, ``state`` (n_beams, 2, n_bins) float32 (each bin's blocking
         and tau), ``ln_floors`` (n_beams,) float32; writes the node pairs of the window's bins
-        into ``evidence`` (n_beams, n_bins, 8) int2, whose other bins must hold 0. Returns the
+        into ``evidence`` (n_beams, n_bins, 4 x classes) int2, whose other bins must hold 0. Returns the
         kernel's event (a marker after ``wait_for`` where the window is empty)."""
         n, ls = self.n_beams * self.n_chunks, self.local_size
         if not n:
