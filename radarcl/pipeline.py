@@ -19,8 +19,8 @@ from radarcl.errors import ConfigError, DeviceCapabilityError
 from radarcl.geometry import BeamLattice, BeamModel
 from radarcl.grid import EvidenceGrid
 from radarcl.models import BeamGeometry
-from radarcl.sensor_model import N_CLASSES
 from radarcl.io import prefetch
+from radarcl.sensor_model import N_CLASSES
 from radarcl.stages.cfar import Cfar, CfarResult
 from radarcl.stages.fusion import Fusion
 from radarcl.stages.interpret import Interpreter, InterpretResult
@@ -228,9 +228,9 @@ class Mapping:
         0: read inline); the map is the same either way. A source that offers its frames as
         levels (``FrameSource.levels``: polar scans) sends those, as their rows' differences
         where a scan holds those (``FrameSource.differenced``), and the device turns them into
-        power (``fuse``'s ``db_per_level``, ``differenced``): the same map. Returns (the sensor's trajectory
-        (n, 4, 4): each frame's pose, or its middle beam's, the number of beams that reached no
-        voxel of the grid)."""
+        power (``fuse``'s ``db_per_level``, ``differenced``): the same map. Returns (the
+        sensor's trajectory (n, 4, 4): each frame's pose, or its middle beam's, the number of
+        beams that reached no voxel of the grid)."""
         raw = self.range_fft is not None
         levels = None if raw else getattr(source, "levels", None)
         frames = source.frames if levels is None else levels
