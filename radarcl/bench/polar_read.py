@@ -42,20 +42,16 @@ def run(data_root, repeat=100, sets=tuple(SETS)):
             with Image.open(paths[next_path()]) as image:
                 return np.asarray(image)
 
-        def reader():
-            i = next_path()
-            return polar_png.load_scan(paths[i], layout, times[i]).levels
+        def reading(take):
+            """The next scan read, then ``take(scan)``."""
+            def read():
+                i = next_path()
+                return take(polar_png.load_scan(paths[i], layout, times[i]))
+            return read
 
-        def reader_for_device():
-            i = next_path()
-            return polar_png.load_scan(paths[i], layout, times[i]).coded_levels
-
-        def reader_and_power():
-            i = next_path()
-            return polar_png.load_scan(paths[i], layout, times[i]).power()
-
-        t = interleaved_medians(dict(pil=pil_only, read=reader, read_coded=reader_for_device, read_power=reader_and_power),
-                                repeat)
+        t = interleaved_medians(dict(pil=pil_only, read=reading(lambda s: s.levels),
+                                     read_coded=reading(lambda s: s.coded_levels),
+                                     read_power=reading(lambda s: s.power())), repeat)
         shape = np.asarray(Image.open(paths[0])).shape
         out.append(dict(data=name, profile=profile, scans=len(paths), png_shape=list(shape),
                         pil_scans_per_s=1 / t["pil"], read_scans_per_s=1 / t["read"],

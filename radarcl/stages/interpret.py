@@ -49,7 +49,8 @@ class Interpreter(Stage):
     (*batch, n_bins, *sensor_model.node_shape(classes)) int32 node pairs
     (``sensor_model.unpack_nodes``) of the first ``classes`` classes of target: None, those the
     bin model's scene has (``interpret_nodes.classes_needed``: 1 without a terrain class, whose
-    nodes would all be 0; the fusion is then built with the same count), or 2 for both; equivalent to ``radarcl.oracle.interpret_detstats``: node values identical to the oracle's
+    nodes would all be 0; the fusion is then built with the same count), or 2 for both;
+    equivalent to ``radarcl.oracle.interpret_detstats``: node values identical to the oracle's
     until a beam's first pulse and within ``EVIDENCE_UNITS_TOL`` after it (except, with "snr"
     evidence, a node whose float32 and float64 opportunity round to 0 on different sides of 1/2,
     where one has the evidence and the other 0; the seeded tests keep far from it).

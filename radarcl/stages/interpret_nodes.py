@@ -18,7 +18,7 @@ import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError
-from radarcl.sensor_model import N_CLASSES, NODES, BinModel
+from radarcl.sensor_model import N_CLASSES, NODES, BinModel, node_shape
 from radarcl.snr_evidence import GAP_CAP, SNR_U, SNR_V, detection_cap
 from radarcl.stages import build, work_group_size
 
@@ -46,8 +46,9 @@ class InterpretNodes:
     """The node kernel for frames of ``n_beams`` beams of ``n_bins`` bins, window [first_bin,
     last_bin] (the interpreter's), from ``bin_model`` (a ``sensor_model.BinModel`` with "snr"
     evidence; its tables go to the device once), of which the first ``classes`` classes are
-    computed (``classes_needed``; the pipeline's count, which its node array is laid out for). ``lanes``: bins per work-item (8 or 16; None:
-    ``DEFAULT_LANES`` for the device); ``local_size``: work-items per work-group."""
+    computed (``classes_needed``; the pipeline's count, which its node array is laid out for).
+    ``lanes``: bins per work-item (8 or 16; None: ``DEFAULT_LANES`` for the device);
+    ``local_size``: work-items per work-group."""
 
     def __init__(self, runtime, n_beams, n_bins, first_bin, last_bin, bin_model, classes, *, lanes=None,
                  local_size=None):
@@ -64,8 +65,7 @@ class InterpretNodes:
         self.runtime = runtime
         self.n_beams, self.n_bins, self.first_bin, self.last_bin = n_beams, n_bins, first_bin, last_bin
         self.lanes = lanes
-        if classes not in (1, N_CLASSES):
-            raise ConfigError(f"classes must be 1 or {N_CLASSES}, got {classes!r}")
+        node_shape(classes)                         # ConfigError for a count no node array has
         self.classes = classes
         q = bin_model.snr_table.q
         self.kernels = build(runtime, "interpret_nodes", dict(
