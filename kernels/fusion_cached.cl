@@ -29,10 +29,6 @@ static inline intV exclusive_prefix(intV v)
 #define vload_ucharV CAT(vload, VEC)
 #define intV2 CAT(int, VEC2)
 #define vloadV2 CAT(vload, VEC2)
-#define GATHER_ENTRIES(ei, ew, p, at) CAT(G2_, VEC)(ei, ew, p, at)     /* still-table entries of a row's lanes */
-#ifdef DETSTATS
-#define GATHER_NODES_V(pe, pk, p, at) CAT(G2_, VEC)(pe, pk, p, at)
-#endif
 
 __kernel void fusion_cached(
     const __global int *evidence,     // (n_beams, N_BINS) eq. 12 updates [logodds units]
@@ -75,7 +71,7 @@ __kernel void fusion_cached(
         const intV f = q & 4095;
         const intV at = NODE_AT(index, cls, seg);
         intV pe, pk;
-        GATHER_NODES_V(pe, pk, nodes, at);
+        GATHER_PAIRS(pe, pk, nodes, at);
         intV sum = NODE_LERP(pe, f) & reached;
         intV ksum = NODE_LERP(pk, f) & reached;
         intV nsum = -(ksum > 0);
@@ -96,14 +92,14 @@ __kernel void fusion_cached(
                 const intV live = (intV)m < n_extra;
                 const intV ex = (start + m) & live;                       /* extras[0] exists: masked lanes read it */
                 intV ei, ew;
-                GATHER_ENTRIES(ei, ew, extras, ex);
+                CAT(G2_, VEC)(ei, ew, extras, ex);   /* a load a lane: GATHER_PAIRS ran slower here */
 #ifdef DETSTATS
                 const intV qe = (ew & 0xFFFF) - 1;
                 const intV ce = (ew >> 16) & 1;
                 const intV ate = NODE_AT(ei, ce, (qe >> 12) & (SEGMENTS - 1)) & live;
                 const intV takes = live & TAKES(ce);
                 intV xe, xk;
-                GATHER_NODES_V(xe, xk, nodes, ate);
+                GATHER_PAIRS(xe, xk, nodes, ate);
                 sum += NODE_LERP(xe, qe & 4095) & takes;
                 const intV kn = NODE_LERP(xk, qe & 4095) & takes;
                 ksum += kn;

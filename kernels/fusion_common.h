@@ -99,6 +99,21 @@ static inline int or_lanes(intV v)
 #define G2_4(pe, pk, p, at) G2_(pe, pk, p, at, 0) G2_(pe, pk, p, at, 1) G2_(pe, pk, p, at, 2) G2_(pe, pk, p, at, 3)
 #define G2_8(pe, pk, p, at) G2_4(pe, pk, p, at) G2_(pe, pk, p, at, 4) G2_(pe, pk, p, at, 5) G2_(pe, pk, p, at, 6) \
     G2_(pe, pk, p, at, 7)
+/* the same as one vector of VEC 64-bit loads split into its even and odd 32-bit words (one gather
+ * instruction and two permutes, where one load and two inserts a lane compiled to about four
+ * times the instructions); NO_INT64 (a device without 64-bit integers) keeps G2_ */
+#ifdef NO_INT64
+#define GATHER_PAIRS(pe, pk, p, at) CAT(G2_, VEC)(pe, pk, p, at)
+#else
+#define GQ_(p, at, l) ((const __global ulong *)(p))[at.s##l]
+#if VEC == 4
+#define GQ_V(p, at) (ulong4)(GQ_(p, at, 0), GQ_(p, at, 1), GQ_(p, at, 2), GQ_(p, at, 3))
+#else
+#define GQ_V(p, at) (ulong8)(GQ_(p, at, 0), GQ_(p, at, 1), GQ_(p, at, 2), GQ_(p, at, 3), GQ_(p, at, 4), \
+    GQ_(p, at, 5), GQ_(p, at, 6), GQ_(p, at, 7))
+#endif
+#define GATHER_PAIRS(pe, pk, p, at) { const CAT(int, VEC2) w_ = CAT(as_int, VEC2)(GQ_V(p, at)); pe = w_.even; pk = w_.odd; }
+#endif
 #ifdef DETSTATS
 #define SEGMENTS 4                            /* node segments over rho2 in [0, 1] */
 #if !defined(CLASSES) || CLASSES < 1 || CLASSES > 2
