@@ -125,6 +125,42 @@ def test_interpolation_per_azimuth_moves_the_radar_during_its_turn(tmp_path):
     assert per[:, 0, 3].max() - per[:, 0, 3].min() > 2.4                      # 0.25 s of 10 m/s within one turn
 
 
+def test_beam_poses_a_scan_at_a_time_are_the_stacked_ones(tmp_path):
+    """BeamPoses (what a fuse holds: a scan's poses computed when its turn comes) gives, item by
+    item, slice by slice, the float64 array beam_poses stacks, for a trajectory, a still radar,
+    per-scan poses and no motion; the scans are read with progress reported to the last one."""
+    from PIL import Image
+
+    n = 7
+    (tmp_path / "Navtech_Polar").mkdir()
+    rng = np.random.default_rng(2)
+    lines = []
+    for k in range(n):
+        Image.fromarray(rng.integers(0, 255, (40, 400), np.uint8)).save(tmp_path / "Navtech_Polar" / f"{k + 1:06d}.png")
+        stamp = T0 + 250_000_000 * (k + 1)
+        lines.append(f"Frame: {k + 1:06d} Time: {stamp // 10**9}.{stamp % 10**9:09d}")
+    (tmp_path / "Navtech_Polar.txt").write_text("\n".join(lines) + "\n")
+    heard = []
+    layout = polar_png.PolarLayout.of(sensors.load("radiate-cts350x"))
+    scans = polar_png.read_sequence(tmp_path, layout, odometry=False,
+                                    progress=lambda done, total, what: heard.append((done, total))).scans
+    assert heard[-1] == (n, n) and [d for d, _ in heard] == sorted({d for d, _ in heard})
+    t, p = _track(n=12, dt=0.25)
+    for track, motion in ((Trajectory(t, p, "car"), True), (Trajectory(t, p, "car"), False), (None, True),
+                          (p[:n], True)):
+        lazy = polar_png.BeamPoses(scans, track, 400, motion=motion)
+        whole = polar_png.beam_poses(scans, track, 400, motion=motion)
+        assert whole.shape == lazy.shape == (n, 400, 4, 4) and whole.dtype == np.float64
+        assert all(np.array_equal(lazy[k], whole[k]) for k in range(-n, n))
+        assert np.array_equal(np.asarray(lazy), whole) and np.array_equal(np.stack(list(lazy)), whole)
+        part = lazy[2:6][1:]
+        assert len(part) == 3 and np.array_equal(np.asarray(part), whole[3:6])
+    assert not np.array_equal(polar_png.beam_poses(scans, Trajectory(t, p, "car"), 400)[:, 0],
+                              polar_png.beam_poses(scans, None, 400)[:, 0])     # the cases differ
+    with pytest.raises(FrameFormatError, match="expected 401 azimuths, got 400"):
+        polar_png.BeamPoses(scans, None, 401)
+
+
 def test_radiate_gps_imu_traps(shared_data, tmp_path):
     """Duplicated frames dropped, frames 29-49 restamped +0.41 s, a corrupt line named by file and
     line, the heading along the track (not the quaternion), the clock offset given or found."""

@@ -109,7 +109,7 @@ def run(args):
         raise ConfigError("give --odometry or --poses, not both")
     source = open_input(config.sensor, args.input, args.odometry, args.poses, args.poses_format, args.clock_offset,
                         args.max_speed, args.poses_times, report=lambda line: print(f"radarcl: {line}", file=sys.stderr),
-                        topic=args.topic, pose_topic=args.pose_topic, msg_dir=args.msg_dir)
+                        progress=progress(args), topic=args.topic, pose_topic=args.pose_topic, msg_dir=args.msg_dir)
     if not source.posed and not args.still:
         raise ConfigError(f"{args.input}: no poses for these frames ({source.summary}); give --poses FILE "
                           "(--poses-format: oxford, tum, kitti, xyzrpy, radiate, boreas), put them beside the scans, "

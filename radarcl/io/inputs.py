@@ -89,14 +89,16 @@ class _Head:
 
 
 def open_input(sensor, path, odometry=None, poses=None, poses_format=None, clock_offset_s=None,
-               max_speed_m_s=DEFAULT_MAX_SPEED_M_S, poses_times=None, report=None, **options):
+               max_speed_m_s=DEFAULT_MAX_SPEED_M_S, poses_times=None, report=None, progress=None, **options):
     """A ``FrameSource`` for ``path`` read as ``sensor``'s [reader] format says (a file whose
     extension a reader claims, a recording's ``.npz``, is read by that reader whatever the
     profile says). Polar scans: their poses from ``poses`` (a file in ``poses_format``, see
     ``io.poses``; ``odometry`` is the older name for an Oxford odometry file), else found beside
     them; ``clock_offset_s``: how far the pose file's clock runs ahead of the radar's; a
-    trajectory faster than ``max_speed_m_s`` is refused with the jump named. ``options``: a
-    reader's own (``Reader.options``; None values are left out), e.g. a bag's ``topic``."""
+    trajectory faster than ``max_speed_m_s`` is refused with the jump named. ``report(line)``
+    hears what the readers repaired or assumed, ``progress(done, total, what)`` how far a long read
+    has come. ``options``: a reader's own (``Reader.options``; None values are left out), e.g. a
+    bag's ``topic``."""
     if isinstance(sensor, (str, Path)):
         raise ConfigError(f"open_input takes a sensor profile, got the name {str(sensor)!r}: load it with "
                           "radarcl.config.sensors.load, or call radarcl.open_input, which takes names")
@@ -117,7 +119,7 @@ def open_input(sensor, path, odometry=None, poses=None, poses_format=None, clock
     return reader.open(sensor, path, poses=poses or odometry,
                        poses_format=poses_format or ("oxford" if odometry and not poses else None),
                        clock_offset_s=clock_offset_s, max_speed_m_s=max_speed_m_s, poses_times=poses_times,
-                       report=report, **options)
+                       report=report, progress=progress, **options)
 
 
 def _check_frame(sensor, shape, dtype, what):
@@ -160,11 +162,12 @@ def _ti_capture(sensor, path, **_):
 
 
 def _polar(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max_speed_m_s=DEFAULT_MAX_SPEED_M_S,
-           poses_times=None, report=None):
+           poses_times=None, report=None, progress=None):
     """Polar PNG scans (``io.polar_png``) in the sensor's layout, placed by the trajectory given
     or found beside them (see the module docstring)."""
     layout = polar_png.PolarLayout.of(sensor)
-    sequence = polar_png.read_sequence(path, layout, odometry=False, keep_levels=False)   # read as fused
+    sequence = polar_png.read_sequence(path, layout, odometry=False, keep_levels=False,    # levels read as fused
+                                       progress=progress)
     found = (Path(poses), poses_format) if poses else pose_files.find_beside(sequence.directory)
     track = None
     if found is not None:
@@ -194,7 +197,7 @@ def place_scans(sensor, scans, track, what, max_speed_m_s=DEFAULT_MAX_SPEED_M_S,
         how = f"poses from {track.source}, in the first scan's frame"
     else:
         how = "no poses: a still radar at the origin"
-    per_beam = polar_png.beam_poses(scans, track, sensor.n_azimuth)
+    per_beam = polar_png.BeamPoses(scans, track, sensor.n_azimuth)         # computed a scan at a time, as fused
     source = polar_source(sensor, scans, per_beam, f"{len(scans)} {what} ({how})")
     source.posed, source.notes, source.trajectory = track is not None, notes, track
     if track is not None:
@@ -203,7 +206,7 @@ def place_scans(sensor, scans, track, what, max_speed_m_s=DEFAULT_MAX_SPEED_M_S,
 
 
 def _bag(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max_speed_m_s=DEFAULT_MAX_SPEED_M_S,
-         poses_times=None, report=None, topic=None, pose_topic=None, msg_dir=None):
+         poses_times=None, report=None, topic=None, pose_topic=None, msg_dir=None, progress=None):
     """A ROS 2 bag (``io.rosbag``): its radar topic's scans, placed by the trajectory file given or
     the bag's own poses; a damaged bag gives the scans before the damage, named in the notes."""
     try:
@@ -224,7 +227,7 @@ def _bag(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max_s
 
 def polar_source(sensor, scans, per_beam, summary):
     """A ``FrameSource`` of polar scans (``polar_png.PolarScan``) at per-azimuth poses
-    (n, n_az, 4, 4): their power converted one scan at a time, azimuths not measured flagged
+    (n, n_az, 4, 4), an array or a ``polar_png.BeamPoses``: their power converted one scan at a time, azimuths not measured flagged
     silent (no evidence); their levels too, where every scan has the same dB per level."""
     flags = [np.where(s.valid, 0, FLAG_SILENT).astype(np.uint8) for s in scans]
     source = FrameSource(sensor, _PerScan(scans, operator.methodcaller("power")), per_beam, flags, summary)
@@ -255,8 +258,8 @@ class Reader:
 
     name: the profile's ``[reader] format``; what: what it reads, in a few words (``radarcl fuse``'s
     INPUT); describes: the same at length (its help); open(sensor, path, poses=, poses_format=,
-    clock_offset_s=, max_speed_m_s=, poses_times=, report=): the ``FrameSource`` (a reader takes
-    the trajectory options it uses and ignores the others); claims: extensions of files it reads
+    clock_offset_s=, max_speed_m_s=, poses_times=, report=, progress=): the ``FrameSource`` (a
+    reader takes the trajectory options it uses and ignores the others); claims: extensions of files it reads
     whatever the profile's format; check_profile(sensor): raises ``ConfigError`` where the
     profile's [reader] table does not describe files it can read (run when a profile is loaded),
     or None; recognises(path): True for inputs it reads whatever the profile's format (a bag's

@@ -373,13 +373,14 @@ def scan_directory(path, layout):
     return path
 
 
-def read_sequence(path, layout, odometry=None, keep_levels=True):
+def read_sequence(path, layout, odometry=None, keep_levels=True, progress=None):
     """A ``PolarSequence`` of one scan file or a directory of scans read with ``layout`` (or a
     recording's directory holding ``layout.scan_directory``), each azimuth timed as the layout
     says; its Oxford odometry from ``odometry``, else ``radar_odometry.csv`` beside the scans or
     in ``../gt`` (``odometry=False``: none; ``io.inputs`` reads every trajectory format).
     ``keep_levels=False``: each scan is read whole once (its checksums, times and angles) and its
-    levels left in its file (``StoredLevels``), read again when asked for."""
+    levels left in its file (``StoredLevels``), read again when asked for. ``progress(done,
+    total, what)``, if given, hears of the scans read (a hundred times at most)."""
     path = scan_directory(path, layout)
     paths = [path] if path.is_file() else scan_paths(path)
     directory = path.parent if path.is_file() else path
@@ -393,12 +394,14 @@ def read_sequence(path, layout, odometry=None, keep_levels=True):
             raise FrameFormatError(f"{directory}: scan {paths[i + 1].name} is timed at or before scan "
                                    f"{paths[i].name} ({known[i + 1] / 1e9:.3f} <= {known[i] / 1e9:.3f} s)")
         period = int(np.median(steps))
-    scans = []
+    scans, step = [], max(1, len(paths) // 100)
     for p, t in zip(paths, times):
         scan = load_scan(p, layout, t, period)
         if not keep_levels:
             scan = replace(scan, stored_levels=StoredLevels(p, layout, t, period, scan.shape, scan.differenced))
         scans.append(scan)
+        if progress is not None and (len(scans) % step == 0 or len(scans) == len(paths)):
+            progress(len(scans), len(paths), "scans read (times, angles)")
     if odometry is None and path.is_dir():
         odometry = next((c for c in (path / "radar_odometry.csv", path.parent / "gt" / "radar_odometry.csv")
                          if c.is_file()), None)
@@ -423,33 +426,65 @@ def beam_poses(scans, poses, n_az, azimuth_sign=1.0, motion=True):
     i x 2 pi / n_az. ``poses`` is a ``Trajectory``, or (n_scans, 4, 4) scan poses at each
     scan's first azimuth (interpolated between scans, extended past the last one).
     motion=False puts every azimuth at its scan's start pose (a consistency check). Without a
-    trajectory (None) every scan stays at the origin (a still radar)."""
-    for scan in scans:
-        if scan.shape[0] != n_az:
-            raise FrameFormatError(f"{scan.path}: expected {n_az} azimuths, got {scan.shape[0]}")
-    fixed = None                        # one pose per scan, no motion within it
-    if poses is None:
-        fixed = np.broadcast_to(np.eye(4), (len(scans), 4, 4))
-    elif not isinstance(poses, Trajectory):
-        poses = np.asarray(poses)[:len(scans)]
-        starts = np.array([s.start_ns for s in scans], np.int64)
-        if len(scans) == 1 or not all(s.timed for s in scans) or (np.diff(starts) <= 0).any():
-            fixed = poses               # untimed scans stay at their own poses
+    trajectory (None) every scan stays at the origin (a still radar). ``BeamPoses`` gives the
+    same a scan at a time."""
+    return np.asarray(BeamPoses(scans, poses, n_az, azimuth_sign, motion))
+
+
+class BeamPoses:
+    """``beam_poses`` as a sequence: item k is scan k's (n_az, 4, 4) poses, computed when asked
+    (a drive's thousands of scans would hold 51 KB each), a slice the same for those scans;
+    ``np.asarray`` stacks them all. Scans of another azimuth count are refused up front."""
+
+    def __init__(self, scans, poses, n_az, azimuth_sign=1.0, motion=True):
+        for scan in scans:
+            if scan.shape[0] != n_az:
+                raise FrameFormatError(f"{scan.path}: expected {n_az} azimuths, got {scan.shape[0]}")
+        fixed = None                        # one pose per scan, no motion within it
+        if poses is None:
+            fixed = np.broadcast_to(np.eye(4), (len(scans), 4, 4))
+        elif not isinstance(poses, Trajectory):
+            poses = np.asarray(poses)[:len(scans)]
+            starts = np.array([s.start_ns for s in scans], np.int64)
+            if len(scans) == 1 or not all(s.timed for s in scans) or (np.diff(starts) <= 0).any():
+                fixed = poses               # untimed scans stay at their own poses
+            else:
+                poses = Trajectory(starts, poses, "scan poses")
+        if fixed is None and not motion:
+            fixed = poses.at([s.start_ns for s in scans])
+        self.scans, self.n_az, self.azimuth_sign = list(scans), int(n_az), float(azimuth_sign)
+        self._fixed, self._track = fixed, poses
+
+    def __len__(self):
+        return len(self.scans)
+
+    @property
+    def shape(self):
+        """(n_scans, n_az, 4, 4), as the stacked array's."""
+        return (len(self.scans), self.n_az, 4, 4)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            part = object.__new__(BeamPoses)
+            part.scans, part.n_az, part.azimuth_sign = self.scans[k], self.n_az, self.azimuth_sign
+            part._fixed = None if self._fixed is None else self._fixed[k]
+            part._track = self._track
+            return part
+        scan = self.scans[k]
+        if self._fixed is not None:
+            moved = np.broadcast_to(self._fixed[k], (self.n_az, 4, 4))
         else:
-            poses = Trajectory(starts, poses, "scan poses")
-    if fixed is None and not motion:
-        fixed = poses.at([s.start_ns for s in scans])
-    i = np.arange(n_az)
-    out = []
-    for k, scan in enumerate(scans):
-        if fixed is not None:
-            moved = np.broadcast_to(fixed[k], (n_az, 4, 4))
-        else:
-            moved = poses.at(np.rint(azimuth_times(scan)).astype(np.int64))
-        turn = azimuth_sign * scan.angles_rad - i * (2 * math.pi / n_az)
+            moved = self._track.at(np.rint(azimuth_times(scan)).astype(np.int64))
+        turn = self.azimuth_sign * scan.angles_rad - np.arange(self.n_az) * (2 * math.pi / self.n_az)
         c, s = np.cos(turn), np.sin(turn)
-        rot = np.zeros((n_az, 4, 4))
+        rot = np.zeros((self.n_az, 4, 4))
         rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
         rot[:, 2, 2] = rot[:, 3, 3] = 1.0
-        out.append(moved @ rot)
-    return np.stack(out)
+        return moved @ rot
+
+    def __iter__(self):
+        return (self[k] for k in range(len(self)))
+
+    def __array__(self, dtype=None, copy=None):
+        out = np.stack(list(self)) if len(self) else np.zeros((0, self.n_az, 4, 4))
+        return out if dtype is None else out.astype(dtype)

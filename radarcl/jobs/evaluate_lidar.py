@@ -161,7 +161,7 @@ def lidar_part(sensor, data, voxel_m=0.3, range_m=L.BANDS_M[-1], poses=None, pos
     is_part = (start, stop) != (0, len(all_scans))
     if is_part:
         source = scan_part(source, start, stop)
-    scans, per_beam = source.frames.scans, source.poses
+    scans, per_beam = source.frames.scans, np.asarray(source.poses)      # a part's poses, held
     scan_range = _scan_range(all_scans, start, stop, lidar_within=is_part)
     window = (int(scans[0].timestamps_ns.min()), int(scans[-1].timestamps_ns.max())) if is_part else None
     frames = lidar_frames(Path(data), source.trajectory, report, window_ns=window)
@@ -184,7 +184,7 @@ def run(runtime, models, data, voxel_m=0.3, bands=L.BANDS_M, poses=None, poses_f
     source, scan_range, frames, truth = lidar_part(sensor, data, voxel_m, bands[-1], poses, poses_format,
                                                    clock_offset_s, report, scan_slice)
     models = [(label, c.for_sensor(source.sensor)) for label, c in models]
-    scans, per_beam, track = source.frames.scans, source.poses, source.trajectory
+    scans, per_beam, track = source.frames.scans, np.asarray(source.poses), source.trajectory
     spec, root = truth.spec, Path(data)
     maps, known = {}, {}
     for k, (label, config) in enumerate(models):
