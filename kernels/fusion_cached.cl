@@ -70,10 +70,10 @@ __kernel void fusion_cached(
         const intV seg = (q >> 12) & (SEGMENTS - 1);            /* q = -1: segment 3, in bounds */
         const intV f = q & 4095;
         const intV at = NODE_AT(index, cls, seg);
-        intV pe, pk;
-        GATHER_PAIRS(pe, pk, nodes, at);
-        intV sum = NODE_LERP(pe, f) & reached;
-        intV ksum = NODE_LERP(pk, f) & reached;
+        intV sum, ksum;
+        LERP_NODES(sum, ksum, nodes, at, f);
+        sum &= reached;
+        ksum &= reached;
         intV nsum = -(ksum > 0);
 #else
         /* the weight's sign bit says "more entries follow" (weights are positive) */
@@ -92,16 +92,16 @@ __kernel void fusion_cached(
                 const intV live = (intV)m < n_extra;
                 const intV ex = (start + m) & live;                       /* extras[0] exists: masked lanes read it */
                 intV ei, ew;
-                CAT(G2_, VEC)(ei, ew, extras, ex);   /* a load a lane: GATHER_PAIRS ran slower here */
+                CAT(G2_, VEC)(ei, ew, extras, ex);   /* a load a lane: a 64-bit gather ran slower here */
 #ifdef DETSTATS
                 const intV qe = (ew & 0xFFFF) - 1;
                 const intV ce = (ew >> 16) & 1;
                 const intV ate = NODE_AT(ei, ce, (qe >> 12) & (SEGMENTS - 1)) & live;
                 const intV takes = live & TAKES(ce);
                 intV xe, xk;
-                GATHER_PAIRS(xe, xk, nodes, ate);
-                sum += NODE_LERP(xe, qe & 4095) & takes;
-                const intV kn = NODE_LERP(xk, qe & 4095) & takes;
+                LERP_NODES(xe, xk, nodes, ate, qe & 4095);
+                sum += xe & takes;
+                const intV kn = xk & takes;
                 ksum += kn;
                 nsum -= kn > 0;                                       /* true is -1 */
 #else

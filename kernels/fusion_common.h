@@ -99,21 +99,6 @@ static inline int or_lanes(intV v)
 #define G2_4(pe, pk, p, at) G2_(pe, pk, p, at, 0) G2_(pe, pk, p, at, 1) G2_(pe, pk, p, at, 2) G2_(pe, pk, p, at, 3)
 #define G2_8(pe, pk, p, at) G2_4(pe, pk, p, at) G2_(pe, pk, p, at, 4) G2_(pe, pk, p, at, 5) G2_(pe, pk, p, at, 6) \
     G2_(pe, pk, p, at, 7)
-/* the same as one vector of VEC 64-bit loads split into its even and odd 32-bit words (one gather
- * instruction and two permutes, where one load and two inserts a lane compiled to about four
- * times the instructions); NO_INT64 (a device without 64-bit integers) keeps G2_ */
-#ifdef NO_INT64
-#define GATHER_PAIRS(pe, pk, p, at) CAT(G2_, VEC)(pe, pk, p, at)
-#else
-#define GQ_(p, at, l) ((const __global ulong *)(p))[at.s##l]
-#if VEC == 4
-#define GQ_V(p, at) (ulong4)(GQ_(p, at, 0), GQ_(p, at, 1), GQ_(p, at, 2), GQ_(p, at, 3))
-#else
-#define GQ_V(p, at) (ulong8)(GQ_(p, at, 0), GQ_(p, at, 1), GQ_(p, at, 2), GQ_(p, at, 3), GQ_(p, at, 4), \
-    GQ_(p, at, 5), GQ_(p, at, 6), GQ_(p, at, 7))
-#endif
-#define GATHER_PAIRS(pe, pk, p, at) { const CAT(int, VEC2) w_ = CAT(as_int, VEC2)(GQ_V(p, at)); pe = w_.even; pk = w_.odd; }
-#endif
 #ifdef DETSTATS
 #define SEGMENTS 4                            /* node segments over rho2 in [0, 1] */
 #if !defined(CLASSES) || CLASSES < 1 || CLASSES > 2
@@ -135,6 +120,27 @@ static inline int or_lanes(intV v)
 #define Q_MAX (Q_ONE - 1.0f)                  /* the last step: q stays in the last segment */
 /* the interpolated value between the signed 16-bit halves of x at the fraction f / 4096 */
 #define NODE_LERP(x, f) ((((x) << 16) >> 16) + (((((x) >> 16) - (((x) << 16) >> 16)) * (f) + 2048) >> 12))
+/* VEC lanes' node pairs at `at`, interpolated at their fractions f: the evidence into le, the
+ * opportunity into lk. Gathered as one vector of VEC 64-bit loads and interpolated as 2 VEC words
+ * at once, each lane's f twice, then split into even and odd words: half the instructions of a
+ * load and two inserts a lane and two interpolations of VEC words. NO_INT64 (a device without
+ * 64-bit integers): G2_, then each half. */
+#ifdef NO_INT64
+#define LERP_NODES(le, lk, p, at, f) { intV e_, k_; const intV f_ = (f); CAT(G2_, VEC)(e_, k_, p, at) \
+    le = NODE_LERP(e_, f_); lk = NODE_LERP(k_, f_); }
+#else
+#define GQ_(p, at, l) ((const __global ulong *)(p))[at.s##l]
+#if VEC == 4
+#define GQ_V(p, at) (ulong4)(GQ_(p, at, 0), GQ_(p, at, 1), GQ_(p, at, 2), GQ_(p, at, 3))
+#define TWICE(f) ((int8)(f.s0, f.s0, f.s1, f.s1, f.s2, f.s2, f.s3, f.s3))
+#else
+#define GQ_V(p, at) (ulong8)(GQ_(p, at, 0), GQ_(p, at, 1), GQ_(p, at, 2), GQ_(p, at, 3), GQ_(p, at, 4), \
+    GQ_(p, at, 5), GQ_(p, at, 6), GQ_(p, at, 7))
+#define TWICE(f) ((int16)(f.s0, f.s0, f.s1, f.s1, f.s2, f.s2, f.s3, f.s3, f.s4, f.s4, f.s5, f.s5, f.s6, f.s6, f.s7, f.s7))
+#endif
+#define LERP_NODES(le, lk, p, at, f) { const intV f_ = (f); \
+    const CAT(int, VEC2) l_ = NODE_LERP(CAT(as_int, VEC2)(GQ_V(p, at)), TWICE(f_)); le = l_.even; lk = l_.odd; }
+#endif
 #if !defined(KNOWLEDGE_SCALE)
 #error "KNOWLEDGE_SCALE comes from radarcl.stages.COMMON_DEFINES"
 #endif
