@@ -164,10 +164,10 @@ __kernel void fusion(
     const float a_el,
     const int n_items,                // listed bricks x SUBS: work-items past it do nothing
     __global uchar *counts,           // RECORD: (n_items * BLOCK_ROWS * VEC,) beams per voxel (out with 1)
-    const __global int *row_start,    // RECORD 2: (n_items * BLOCK_ROWS,) first extra entry of each table row
+    const __global int *row_start,    // RECORD 2: (n_items * BLOCK_ROWS,) first block of extras of each table row
     __global int2 *first,             // RECORD 2: out, per voxel its first (beam * N_BINS + bin,
                                       //   as_int(weight)); (0, 0) where no beam reaches
-    __global int2 *extras,            // RECORD 2: out, the voxels' further entries, row by row
+    __global int2 *extras,            // RECORD 2: out, the voxels' further entries, in blocks of VEC (fusion_common.h)
     const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (fusion_common.h)
     const float terrain_dz,           // DETSTATS: voxels with z - beam origin z below this are terrain [m]
     __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity [KNOWLEDGE_SCALE units]
@@ -333,12 +333,9 @@ __kernel void fusion(
                         const int2 entry = (int2)(b * N_BINS + ((const int *)&j)[lane], as_int(((const float *)&wt)[lane]));
                         if (written == 0) {                   /* sign bit: more entries follow */
                             first[v0 + lane] = counts[v0 + lane] > 1 ? (int2)(entry.x, entry.y | (int)0x80000000) : entry;
-                        } else {                              /* the row's extras, lane by lane */
-                            const int row_lane0 = lane - lane % VEC;
-                            int at = row_start[(size_t)id * BLOCK_ROWS + r0 + lane / VEC];
-                            for (int l = row_lane0; l < lane; ++l)
-                                at += max((int)counts[v0 + l] - 1, 0);
-                            extras[at + written - 1] = entry;
+                        } else {                              /* the row's extras: its (written)-th block, this lane */
+                            const int block = row_start[(size_t)id * BLOCK_ROWS + r0 + lane / VEC] + written - 1;
+                            extras[(size_t)block * VEC + lane % VEC] = entry;
                         }
                     }
                 }

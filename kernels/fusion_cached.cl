@@ -4,8 +4,8 @@
  * for NODE_LERP), streaming the table instead of testing beams. A work-item takes the gather's
  * block of the same id, row by row. The first entries are dense (one per voxel, read as vectors:
  * on a regular lattice almost every voxel lies in one beam); the further entries are read as
- * vectors too, each lane's next entry at a time (a spinning radar's voxels mostly lie in two
- * beams). Every entry is rounded on its own and the sums are integers, so the order the entries
+ * vectors too: a row's m-th further entries lie together, one block of VEC (a spinning radar's
+ * voxels mostly lie in two beams). Every entry is rounded on its own and the sums are integers, so the order the entries
  * are added in does not change them.
  *
  * -D: the gather's (radarcl.stages.fusion builds both with the same); this kernel reads VEC,
@@ -13,19 +13,6 @@
  */
 #include "fusion_common.h"
 
-/* lane l of the result: the sum of v's lanes before l (a scan by shifted adds, no builtin) */
-static inline intV exclusive_prefix(intV v)
-{
-#if VEC == 8
-    intV s = v + (int8)(0, v.s0, v.s1, v.s2, v.s3, v.s4, v.s5, v.s6);
-    s += (int8)(0, 0, s.s0, s.s1, s.s2, s.s3, s.s4, s.s5);
-    s += (int8)(0, 0, 0, 0, s.s0, s.s1, s.s2, s.s3);
-#else
-    intV s = v + (int4)(0, v.s0, v.s1, v.s2);
-    s += (int4)(0, 0, s.s0, s.s1);
-#endif
-    return s - v;
-}
 #define vload_ucharV CAT(vload, VEC)
 #define intV2 CAT(int, VEC2)
 #define vloadV2 CAT(vload, VEC2)
@@ -34,9 +21,9 @@ __kernel void fusion_cached(
     const __global int *evidence,     // (n_beams, N_BINS) eq. 12 updates [logodds units]
     const __global int4 *bricks,      // (n_listed,) bx, by, bz, slot: the recorded plan's
     const __global uchar *counts,     // (n_items * BLOCK_ROWS * VEC,) entries per voxel (RECORD 1)
-    const __global int *row_start,    // (n_items * BLOCK_ROWS,) first extra entry of each table row
+    const __global int *row_start,    // (n_items * BLOCK_ROWS,) first block of extras of each table row
     const __global int2 *first,       // (n_items * BLOCK_ROWS * VEC,) each voxel's first entry (RECORD 2)
-    const __global int2 *extras,      // the further entries (RECORD 2)
+    const __global int2 *extras,      // the further entries, in blocks of VEC (RECORD 2)
     const int n_items,                // the gather's work-items: listed bricks x SUBS
     const __global int2 *nodes,       // DETSTATS: (n_beams, N_BINS, CLASSES, SEGMENTS) packed node pairs (the class
                                       //   of each entry is in its record; CLASSES 1: terrain entries take nothing)
@@ -87,12 +74,11 @@ __kernel void fusion_cached(
             const size_t t = (size_t)id * BLOCK_ROWS + row;
             const intV more = CAT(convert_int, VEC)(vload_ucharV(0, counts + t * VEC)) - 1;
             const intV n_extra = more & ~(more >> 31);                    /* max(count - 1, 0) */
-            const intV start = row_start[t] + exclusive_prefix(n_extra);
+            const __global int *blocks = (const __global int *)(extras + (size_t)row_start[t] * VEC);
             for (int m = 0; or_lanes((intV)m - n_extra) < 0; ++m) {       /* some lane has an m-th */
                 const intV live = (intV)m < n_extra;
-                const intV ex = (start + m) & live;                       /* extras[0] exists: masked lanes read it */
-                intV ei, ew;
-                CAT(G2_, VEC)(ei, ew, extras, ex);   /* a load a lane: a 64-bit gather ran slower here */
+                const intV2 pairs_m = vloadV2(0, blocks + m * VEC * 2);  /* the lanes' m-th entries, (0, 0) past a lane's last */
+                const intV ei = pairs_m.even, ew = pairs_m.odd;
 #ifdef DETSTATS
                 const intV qe = (ew & 0xFFFF) - 1;
                 const intV ce = (ew >> 16) & 1;

@@ -31,8 +31,11 @@
  * gather used: a unit's lanes are consecutive voxels of the table). counts[] holds each voxel's
  * number of beams (RECORD 1), first[] each voxel's first entry (beam * N_BINS + bin, as_int(weight)),
  * (0, 0) where no beam reaches, the weight's sign bit set where more entries follow (weights are
- * positive), and extras[] the further entries, per row, lane after lane, from row_start[] (the
- * host's prefix sums of the counts beyond the first) (RECORD 2). With DETSTATS an entry keeps
+ * positive), and extras[] the further entries, per row in blocks of VEC: a voxel's m-th further
+ * entry is lane l of block row_start[row] + m - 1, so the row's m-th entries are one vector load
+ * (a row has as many blocks as its voxels' largest count beyond the first; a lane with fewer
+ * holds (0, 0) there; row_start[] is the host's prefix sums of those block counts) (RECORD 2).
+ * With DETSTATS an entry keeps
  * q + 1 (never 0, whose bits mean "no beam") as an integer in place of the weight, and the class
  * in bit 16.
  */

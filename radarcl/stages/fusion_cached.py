@@ -27,12 +27,13 @@ class StillTable:
     """What every voxel of a plan takes from a frame, recorded once for a still radar (the
     kernel's RECORD passes), on the device: per voxel its count of beams and its first entry
     (beam * n_bins + bin, the weight's float32 bits, whose sign bit says that more entries
-    follow), the further entries row by row."""
+    follow), the further entries row by row, each row's m-th ones together (the layout:
+    kernels/fusion_common.h)."""
 
     counts: object           # pyopencl Array uint8 (n_rows * VEC,): beams per voxel
-    row_start: object        # pyopencl Array int32 (n_rows,): first extra entry of each row
+    row_start: object        # pyopencl Array int32 (n_rows,): first block of further entries of each row
     first: object            # pyopencl Array int32 (n_rows * VEC, 2): each voxel's first entry
-    extras: object           # pyopencl Array int32 (n, 2): the further entries
+    extras: object           # pyopencl Array int32 (n_blocks * VEC, 2): the further entries, a block of VEC at a time
     n_rows: int
     n_entries: int
 
@@ -87,17 +88,18 @@ def record(fusion, plan):
     dummy = cla.zeros(q, (1, 2), np.int32)
     fusion._launch(fusion._record_kernels[0], plan, fusion.arrays["evidence"], counts=counts, row_start=row_start,
                    first=dummy, extras=dummy).wait()
-    host = counts.get(q)
-    per_row = host.reshape(n_rows, vec).sum(axis=1, dtype=np.int64)
-    total = int(per_row.sum())
-    if host.max(initial=0) == 255 or dense_bytes + 8 * total > limit:
+    host = counts.get(q).reshape(n_rows, vec)
+    total = int(host.sum(dtype=np.int64))
+    # a row's further entries in blocks of VEC, one per further entry of its most-reached voxel
+    blocks_per_row = np.maximum(host.max(axis=1).astype(np.int64) - 1, 0)
+    n_blocks = int(blocks_per_row.sum())
+    if host.max(initial=0) == 255 or n_blocks >= 2**31 or dense_bytes + 8 * vec * n_blocks > limit:
         plan._table.append(None)
         return None
-    extra_per_row = np.maximum(host.reshape(n_rows, vec).astype(np.int64) - 1, 0).sum(axis=1)
-    starts = np.concatenate([[0], np.cumsum(extra_per_row)[:-1]]).astype(np.int32)
+    starts = np.concatenate([[0], np.cumsum(blocks_per_row)[:-1]]).astype(np.int32)
     cl.enqueue_copy(q, row_start.data, starts, is_blocking=True)
     first = cla.zeros(q, (n_rows * vec, 2), np.int32)     # (0, 0): evidence[0] x 0.0
-    extras = cla.zeros(q, (max(int(extra_per_row.sum()), 1), 2), np.int32)
+    extras = cla.zeros(q, (max(n_blocks * vec, 1), 2), np.int32)      # (0, 0) where a lane has fewer
     fusion._launch(fusion._record_kernels[1], plan, fusion.arrays["evidence"], counts=counts, row_start=row_start,
                    first=first, extras=extras).wait()
     table = StillTable(counts, row_start, first, extras, n_rows, total)
