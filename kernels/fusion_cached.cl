@@ -5,11 +5,11 @@
  * block of the same id, row by row. The first entries are dense (one per voxel, read as vectors:
  * on a regular lattice almost every voxel lies in one beam); the further entries are read as
  * vectors too: a row's m-th further entries lie together, one block of VEC (a spinning radar's
- * voxels mostly lie in two beams). Every entry is rounded on its own and the sums are integers, so the order the entries
- * are added in does not change them.
+ * voxels mostly lie in two beams). Every entry is rounded on its own and the sums are integers,
+ * so the order the entries are added in does not change them.
  *
  * -D: the gather's (radarcl.stages.fusion builds both with the same); this kernel reads VEC,
- *     BRICK_Z, DETSTATS and CLASSES.
+ *     BRICK_Z, DETSTATS, CLASSES and NO_INT64.
  */
 #include "fusion_common.h"
 
@@ -68,9 +68,9 @@ __kernel void fusion_cached(
         intV sum = RINT_INTV(product);
 #endif
         if (or_lanes(bits) < 0) {              /* voxels several beams reach */
-            /* their further entries, one per lane at a time, as vectors: lane l's m-th extra is at
-             * row_start + (the extras of lanes before l) + m; a spinning radar's voxels mostly
-             * lie in two beams, so this is the common path there, not the exception */
+            /* their further entries, the row's m-th ones as one vector: lane l of the row's m-th
+             * block; a spinning radar's voxels mostly lie in two beams, so this is the common
+             * path there, not the exception */
             const size_t t = (size_t)id * BLOCK_ROWS + row;
             const intV more = CAT(convert_int, VEC)(vload_ucharV(0, counts + t * VEC)) - 1;
             const intV n_extra = more & ~(more >> 31);                    /* max(count - 1, 0) */

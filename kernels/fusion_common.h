@@ -35,9 +35,8 @@
  * entry is lane l of block row_start[row] + m - 1, so the row's m-th entries are one vector load
  * (a row has as many blocks as its voxels' largest count beyond the first; a lane with fewer
  * holds (0, 0) there; row_start[] is the host's prefix sums of those block counts) (RECORD 2).
- * With DETSTATS an entry keeps
- * q + 1 (never 0, whose bits mean "no beam") as an integer in place of the weight, and the class
- * in bit 16.
+ * With DETSTATS an entry keeps q + 1 (never 0, whose bits mean "no beam") as an integer in place
+ * of the weight, and the class in bit 16.
  */
 #ifndef FUSION_COMMON_H
 #define FUSION_COMMON_H
@@ -141,8 +140,8 @@ static inline int or_lanes(intV v)
     GQ_(p, at, 5), GQ_(p, at, 6), GQ_(p, at, 7))
 #define TWICE(f) ((int16)(f.s0, f.s0, f.s1, f.s1, f.s2, f.s2, f.s3, f.s3, f.s4, f.s4, f.s5, f.s5, f.s6, f.s6, f.s7, f.s7))
 #endif
-#define LERP_NODES(le, lk, p, at, f) { const intV f_ = (f); \
-    const CAT(int, VEC2) l_ = NODE_LERP(CAT(as_int, VEC2)(GQ_V(p, at)), TWICE(f_)); le = l_.even; lk = l_.odd; }
+#define LERP_NODES(le, lk, p, at, f) { const intV f_ = (f); const CAT(int, VEC2) w_ = CAT(as_int, VEC2)(GQ_V(p, at)); \
+    const CAT(int, VEC2) l_ = NODE_LERP(w_, TWICE(f_)); le = l_.even; lk = l_.odd; }
 #endif
 #if !defined(KNOWLEDGE_SCALE)
 #error "KNOWLEDGE_SCALE comes from radarcl.stages.COMMON_DEFINES"

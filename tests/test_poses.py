@@ -159,6 +159,12 @@ def test_beam_poses_a_scan_at_a_time_are_the_stacked_ones(tmp_path):
                               polar_png.beam_poses(scans, None, 400)[:, 0])     # the cases differ
     with pytest.raises(FrameFormatError, match="expected 401 azimuths, got 400"):
         polar_png.BeamPoses(scans, None, 401)
+    # refused when made, not when a scan's turn comes: a trajectory that ends before the last
+    # scan, too few scan poses
+    with pytest.raises(FrameFormatError, match=r"the trajectory covers .* after its end"):
+        polar_png.BeamPoses(scans, Trajectory(t[:4], p[:4], "short"), 400)
+    with pytest.raises(FrameFormatError, match="7 scans need a pose each, got 6 poses"):
+        polar_png.BeamPoses(scans, p[:6], 400)
 
 
 def test_radiate_gps_imu_traps(shared_data, tmp_path):

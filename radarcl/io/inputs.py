@@ -119,7 +119,7 @@ def open_input(sensor, path, odometry=None, poses=None, poses_format=None, clock
     return reader.open(sensor, path, poses=poses or odometry,
                        poses_format=poses_format or ("oxford" if odometry and not poses else None),
                        clock_offset_s=clock_offset_s, max_speed_m_s=max_speed_m_s, poses_times=poses_times,
-                       report=report, progress=progress, **options)
+                       report=report, **({"progress": progress} if progress is not None else {}), **options)
 
 
 def _check_frame(sensor, shape, dtype, what):

@@ -380,7 +380,7 @@ def read_sequence(path, layout, odometry=None, keep_levels=True, progress=None):
     in ``../gt`` (``odometry=False``: none; ``io.inputs`` reads every trajectory format).
     ``keep_levels=False``: each scan is read whole once (its checksums, times and angles) and its
     levels left in its file (``StoredLevels``), read again when asked for. ``progress(done,
-    total, what)``, if given, hears of the scans read (a hundred times at most)."""
+    total, what)``, if given, hears of the scans read (about a hundred times, and at the last)."""
     path = scan_directory(path, layout)
     paths = [path] if path.is_file() else scan_paths(path)
     directory = path.parent if path.is_file() else path
@@ -394,7 +394,7 @@ def read_sequence(path, layout, odometry=None, keep_levels=True, progress=None):
             raise FrameFormatError(f"{directory}: scan {paths[i + 1].name} is timed at or before scan "
                                    f"{paths[i].name} ({known[i + 1] / 1e9:.3f} <= {known[i] / 1e9:.3f} s)")
         period = int(np.median(steps))
-    scans, step = [], max(1, len(paths) // 100)
+    scans, step = [], max(1, -(-len(paths) // 100))
     for p, t in zip(paths, times):
         scan = load_scan(p, layout, t, period)
         if not keep_levels:
@@ -445,6 +445,8 @@ class BeamPoses:
             fixed = np.broadcast_to(np.eye(4), (len(scans), 4, 4))
         elif not isinstance(poses, Trajectory):
             poses = np.asarray(poses)[:len(scans)]
+            if len(poses) < len(scans):
+                raise FrameFormatError(f"{len(scans)} scans need a pose each, got {len(poses)} poses")
             starts = np.array([s.start_ns for s in scans], np.int64)
             if len(scans) == 1 or not all(s.timed for s in scans) or (np.diff(starts) <= 0).any():
                 fixed = poses               # untimed scans stay at their own poses
@@ -452,6 +454,11 @@ class BeamPoses:
                 poses = Trajectory(starts, poses, "scan poses")
         if fixed is None and not motion:
             fixed = poses.at([s.start_ns for s in scans])
+        elif fixed is None:
+            # every azimuth's time checked now: a trajectory that does not cover the scans is
+            # refused when they are opened, not midway through a fusion
+            ends = [(t.min(), t.max()) for t in (np.rint(azimuth_times(s)).astype(np.int64) for s in scans)]
+            poses.covers(np.array(ends, np.int64).reshape(-1))
         self.scans, self.n_az, self.azimuth_sign = list(scans), int(n_az), float(azimuth_sign)
         self._fixed, self._track = fixed, poses
 

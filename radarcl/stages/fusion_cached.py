@@ -45,7 +45,7 @@ class StillTable:
 
 def cached_kernel(runtime, defines):
     """The ``fusion_cached`` kernel, built with the gather's -D ``defines`` (it reads VEC,
-    BRICK_Z, DETSTATS and CLASSES of them)."""
+    BRICK_Z, DETSTATS, CLASSES and NO_INT64 of them)."""
     return build(runtime, "fusion_cached", defines)["fusion_cached"]
 
 
