@@ -155,6 +155,9 @@ def test_beam_poses_a_scan_at_a_time_are_the_stacked_ones(tmp_path):
         assert np.array_equal(np.asarray(lazy), whole) and np.array_equal(np.stack(list(lazy)), whole)
         part = lazy[2:6][1:]
         assert len(part) == 3 and np.array_equal(np.asarray(part), whole[3:6])
+        for i in (0, 200, 399):                      # one azimuth's positions alone: the same floats
+            assert np.array_equal(lazy.positions(i), whole[:, i, :3, 3])
+        assert np.array_equal(part.positions(200), whole[3:6, 200, :3, 3])
     assert not np.array_equal(polar_png.beam_poses(scans, Trajectory(t, p, "car"), 400)[:, 0],
                               polar_png.beam_poses(scans, None, 400)[:, 0])     # the cases differ
     with pytest.raises(FrameFormatError, match="expected 401 azimuths, got 400"):

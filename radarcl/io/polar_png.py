@@ -492,6 +492,14 @@ class BeamPoses:
     def __iter__(self):
         return (self[k] for k in range(len(self)))
 
+    def positions(self, azimuth):
+        """(n_scans, 3) [m]: every scan's position at azimuth ``azimuth``, item k's [azimuth, :3, 3]
+        (the azimuth's turn leaves the translation as it is), without the other azimuths' poses."""
+        if self._fixed is not None:
+            return np.array([f[:3, 3] for f in self._fixed], np.float64).reshape(-1, 3)
+        times = [np.rint(azimuth_times(s)).astype(np.int64)[azimuth] for s in self.scans]
+        return self._track.at(times)[:, :3, 3].copy() if times else np.zeros((0, 3))
+
     def __array__(self, dtype=None, copy=None):
         out = np.stack(list(self)) if len(self) else np.zeros((0, self.n_az, 4, 4))
         return out if dtype is None else out.astype(dtype)

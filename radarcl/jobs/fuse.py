@@ -53,6 +53,8 @@ def drive_spec(config, positions):
 
 def frame_positions(source):
     """Each frame's sensor position (n, 3) [m] (its middle beam's with one pose per beam)."""
+    if hasattr(source.poses, "positions"):          # polar scans' poses, made a scan at a time: one azimuth each
+        return source.poses.positions(source.poses.n_az // 2)
     out = np.zeros((len(source), 3))
     for j in range(len(source)):
         p = np.asarray(source.poses[j])
