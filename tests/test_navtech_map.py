@@ -8,7 +8,7 @@ import pytest
 
 from radarcl.config import mapconfig
 from radarcl.errors import ConfigError
-from radarcl.io import polar_png
+from radarcl.io import polar_png, scan_poses
 from radarcl.jobs import navtech_map as nm
 
 VOXEL, RANGE = 0.5, 40.0
@@ -48,7 +48,7 @@ def test_odometry_is_converted_from_the_oxford_frame(shared_data, tmp_path):
 def test_true_geometry_is_the_most_self_consistent(runtime, data):
     config, scans, odometry, stamps = data
     poses = polar_png.scan_poses(stamps, odometry)
-    true = polar_png.beam_poses(scans, poses, 400)
+    true = scan_poses.beam_poses(scans, poses, 400)
     spec = nm.grid_for(true, RANGE, VOXEL)
 
     def agreement(per_beam, both=False):
@@ -59,9 +59,9 @@ def test_true_geometry_is_the_most_self_consistent(runtime, data):
     best = agreement(true)
     assert best > 0.3
     for altered in (nm._moved(true, dx=1.0), nm._moved(true, dyaw=math.radians(2)),
-                    nm._moved(true, dyaw=math.radians(-2)), polar_png.beam_poses(scans, poses, 400, motion=False)):
+                    nm._moved(true, dyaw=math.radians(-2)), scan_poses.beam_poses(scans, poses, 400, motion=False)):
         assert agreement(altered) < best - 0.05
-    assert agreement(polar_png.beam_poses(scans, poses, 400, azimuth_sign=-1.0), both=True) < best - 0.05
+    assert agreement(scan_poses.beam_poses(scans, poses, 400, azimuth_sign=-1.0), both=True) < best - 0.05
 
 
 def test_consistency_of_maps_with_knowledge_counts_only_what_both_observed():

@@ -12,7 +12,7 @@ from radarcl.cli import main
 from radarcl.config import sensors
 from radarcl.errors import FrameFormatError
 from radarcl.geometry import pose_from_xyz_rpy
-from radarcl.io import polar_png, radiate
+from radarcl.io import polar_png, radiate, scan_poses
 from radarcl.io import poses as pose_files
 from radarcl.io.trajectory import Trajectory, quaternions, rotations
 
@@ -119,8 +119,8 @@ def test_interpolation_per_azimuth_moves_the_radar_during_its_turn(tmp_path):
     (tmp_path / "Navtech_Polar.txt").write_text(f"Frame: 000001 Time: {stamp // 10**9}.{stamp % 10**9:09d}\n")
     layout = polar_png.PolarLayout.of(sensors.load("radiate-cts350x"))
     scan = polar_png.read_sequence(tmp_path, layout, odometry=False).scans[0]
-    per = polar_png.beam_poses([scan], track, 400)[0]
-    times = polar_png.azimuth_times(scan)
+    per = scan_poses.beam_poses([scan], track, 400)[0]
+    times = scan_poses.azimuth_times(scan)
     assert np.allclose(per[:, 0, 3], 10.0 * (times - T0) / 1e9, atol=1e-6)   # x = speed x time
     assert per[:, 0, 3].max() - per[:, 0, 3].min() > 2.4                      # 0.25 s of 10 m/s within one turn
 
@@ -148,8 +148,8 @@ def test_beam_poses_a_scan_at_a_time_are_the_stacked_ones(tmp_path):
     t, p = _track(n=12, dt=0.25)
     for track, motion in ((Trajectory(t, p, "car"), True), (Trajectory(t, p, "car"), False), (None, True),
                           (p[:n], True)):
-        lazy = polar_png.BeamPoses(scans, track, 400, motion=motion)
-        whole = polar_png.beam_poses(scans, track, 400, motion=motion)
+        lazy = scan_poses.BeamPoses(scans, track, 400, motion=motion)
+        whole = scan_poses.beam_poses(scans, track, 400, motion=motion)
         assert whole.shape == lazy.shape == (n, 400, 4, 4) and whole.dtype == np.float64
         assert all(np.array_equal(lazy[k], whole[k]) for k in range(-n, n))
         assert np.array_equal(np.asarray(lazy), whole) and np.array_equal(np.stack(list(lazy)), whole)
@@ -158,16 +158,16 @@ def test_beam_poses_a_scan_at_a_time_are_the_stacked_ones(tmp_path):
         for i in (0, 200, 399):                      # one azimuth's positions alone: the same floats
             assert np.array_equal(lazy.positions(i), whole[:, i, :3, 3])
         assert np.array_equal(part.positions(200), whole[3:6, 200, :3, 3])
-    assert not np.array_equal(polar_png.beam_poses(scans, Trajectory(t, p, "car"), 400)[:, 0],
-                              polar_png.beam_poses(scans, None, 400)[:, 0])     # the cases differ
+    assert not np.array_equal(scan_poses.beam_poses(scans, Trajectory(t, p, "car"), 400)[:, 0],
+                              scan_poses.beam_poses(scans, None, 400)[:, 0])     # the cases differ
     with pytest.raises(FrameFormatError, match="expected 401 azimuths, got 400"):
-        polar_png.BeamPoses(scans, None, 401)
+        scan_poses.BeamPoses(scans, None, 401)
     # refused when made, not when a scan's turn comes: a trajectory that ends before the last
     # scan, too few scan poses
     with pytest.raises(FrameFormatError, match=r"the trajectory covers .* after its end"):
-        polar_png.BeamPoses(scans, Trajectory(t[:4], p[:4], "short"), 400)
+        scan_poses.BeamPoses(scans, Trajectory(t[:4], p[:4], "short"), 400)
     with pytest.raises(FrameFormatError, match="7 scans need a pose each, got 6 poses"):
-        polar_png.BeamPoses(scans, p[:6], 400)
+        scan_poses.BeamPoses(scans, p[:6], 400)
 
 
 def test_radiate_gps_imu_traps(shared_data, tmp_path):

@@ -75,10 +75,10 @@ def drive_track(data):
 def frame_poses(track, start_ns, period_ns, scan, n_az):
     """(n_az, 4, 4) per-azimuth poses of ``scan`` replayed at ``start_ns``: the drive's pose at
     each azimuth's time (the scan's own azimuth times, moved to start there, within one period),
-    turned by the azimuth's measured angle less the lattice's (as ``polar_png.beam_poses``)."""
-    from radarcl.io import polar_png
+    turned by the azimuth's measured angle less the lattice's (as ``scan_poses.beam_poses``)."""
+    from radarcl.io import scan_poses
 
-    t = polar_png.azimuth_times(scan)
+    t = scan_poses.azimuth_times(scan)
     frac = (t - t.min()) / max(float(np.ptp(t)), 1.0) * (n_az - 1) / n_az
     hi = track.times_ns[-1]
     moved = track.at(np.minimum(start_ns + np.rint(frac * period_ns).astype(np.int64), hi))

@@ -22,7 +22,7 @@ from radarcl.errors import ConfigError
 from radarcl.evaluation.evaluate import read_units
 from radarcl.evaluation.heldout import (detection_probability, frequency_map, predictions, raw_map, score,
                                          score_probability)
-from radarcl.io import polar_png
+from radarcl.io import scan_poses
 from radarcl.jobs import navtech_map
 from radarcl.pipeline import evidence_config
 
@@ -33,7 +33,7 @@ def run(runtime, config, data_dir, report=None):
     scans, poses, _, _ = navtech_map.load(config, data_dir)
     if config.sensor.n_bins() is None:
         config = config.for_sensor(config.sensor.with_bins(scans[0].n_bins))
-    per_beam = polar_png.beam_poses(scans, poses, config.sensor.n_azimuth)
+    per_beam = scan_poses.beam_poses(scans, poses, config.sensor.n_azimuth)
     spec = navtech_map.grid_for(per_beam, config["interpret.range_max_m"], config["grid.voxel_m"])
     train, test = list(range(0, len(scans), 2)), list(range(1, len(scans), 2))
     say(f"{len(scans)} scans: map of scans {train}, held out {test}")

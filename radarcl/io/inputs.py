@@ -26,7 +26,7 @@ from typing import Callable
 import numpy as np
 
 from radarcl.errors import ConfigError, FrameFormatError
-from radarcl.io import polar_png, recording, rosbag
+from radarcl.io import polar_png, recording, rosbag, scan_poses
 from radarcl.io import poses as pose_files
 from radarcl.io.polar_layout import PolarLayout
 from radarcl.io.ti_adc import load_capture
@@ -197,7 +197,7 @@ def place_scans(sensor, scans, track, what, max_speed_m_s=DEFAULT_MAX_SPEED_M_S,
         how = f"poses from {track.source}, in the first scan's frame"
     else:
         how = "no poses: a still radar at the origin"
-    per_beam = polar_png.BeamPoses(scans, track, sensor.n_azimuth)         # computed a scan at a time, as fused
+    per_beam = scan_poses.BeamPoses(scans, track, sensor.n_azimuth)         # computed a scan at a time, as fused
     source = polar_source(sensor, scans, per_beam, f"{len(scans)} {what} ({how})")
     source.posed, source.notes, source.trajectory = track is not None, notes, track
     if track is not None:
@@ -227,7 +227,7 @@ def _bag(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max_s
 
 def polar_source(sensor, scans, per_beam, summary):
     """A ``FrameSource`` of polar scans (``polar_png.PolarScan``) at per-azimuth poses
-    (n, n_az, 4, 4), an array or a ``polar_png.BeamPoses``: their power converted one scan at a time, azimuths not measured flagged
+    (n, n_az, 4, 4), an array or a ``scan_poses.BeamPoses``: their power converted one scan at a time, azimuths not measured flagged
     silent (no evidence); their levels too, where every scan has the same dB per level."""
     flags = [np.where(s.valid, 0, FLAG_SILENT).astype(np.uint8) for s in scans]
     source = FrameSource(sensor, _PerScan(scans, operator.methodcaller("power")), per_beam, flags, summary)

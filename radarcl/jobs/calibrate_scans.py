@@ -29,7 +29,7 @@ from radarcl.evaluation import calibration as cal
 from radarcl.evaluation import heldout
 from radarcl.evaluation.metrics import calibration
 from radarcl.grid import EvidenceGrid
-from radarcl.io import polar_png
+from radarcl.io import scan_poses
 from radarcl.jobs import navtech_map
 from radarcl.jobs.calibrate import with_fit
 from radarcl.pipeline import Mapping, evidence_config
@@ -86,7 +86,7 @@ def run(runtime, config, data_dir, model="occlusion", report=None):
         raise ConfigError(f"calibrating on scans needs at least 8 (4 to fit, 4 to report on), found {len(scans)}")
     if config.sensor.n_bins() is None:
         config = config.for_sensor(config.sensor.with_bins(scans[0].n_bins))
-    per_beam = polar_png.beam_poses(scans, poses, config.sensor.n_azimuth)
+    per_beam = scan_poses.beam_poses(scans, poses, config.sensor.n_azimuth)
     spec = navtech_map.grid_for(per_beam, config["interpret.range_max_m"], config["grid.voxel_m"])
     n_fit = 2 * ((len(scans) + 1) // 4)           # an even count, about half: 6 of 11
     fit_part, report_part = list(range(n_fit)), list(range(n_fit, len(scans)))

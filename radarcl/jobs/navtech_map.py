@@ -5,7 +5,7 @@ right.
 Frames: x forward, y left, z up (REP-103); the reader (``io.polar_png``) converts the Oxford
 frame. The world is the first scan's frame. Scan k's pose chains the odometry rows: pose_k =
 pose_(k-1) @ T(k-1 <- k). The radar turns while the car moves 2 m per scan: each azimuth gets
-its own pose, interpolated between scan poses at its time (``polar_png.beam_poses``), and its
+its own pose, interpolated between scan poses at its time (``scan_poses.beam_poses``), and its
 own encoder angle, folded into that pose (so one lattice of azimuths serves every scan).
 
 Consistency: the map of scans 1-5 and the map of scans 6-11 see the same street; with the
@@ -27,7 +27,7 @@ from radarcl.errors import FrameFormatError
 from radarcl.evaluation.evaluate import read_map, read_units
 from radarcl.geometry import se2_pose
 from radarcl.gridspec import GridSpec, lattice_box
-from radarcl.io import polar_png
+from radarcl.io import polar_png, scan_poses
 from radarcl.io import poses as pose_files
 from radarcl.io.inputs import polar_source
 from radarcl.io.trajectory import DEFAULT_MAX_SPEED_M_S
@@ -128,7 +128,7 @@ def run(runtime, config, data_dir, report=print, progress=None, poses=None, pose
     range_max_m = config["interpret.range_max_m"]
     report(f"{len(scans)} scans, {n_az} azimuths x {scans[0].n_bins} bins; the car moves "
            f"{np.linalg.norm(poses[-1, :2, 3]):.1f} m and turns {math.degrees(math.atan2(poses[-1, 1, 0], poses[-1, 0, 0])):.1f} deg")
-    true_beams = polar_png.beam_poses(scans, poses, n_az)
+    true_beams = scan_poses.beam_poses(scans, poses, n_az)
     spec = grid_for(true_beams, range_max_m, config["grid.voxel_m"], sensors.brick_depth(config.sensor))
 
     def build(sc, pb):
@@ -143,9 +143,9 @@ def run(runtime, config, data_dir, report=print, progress=None, poses=None, pose
         "second half +1 m along y": (_moved(true_beams, dy=1.0), False),
         "second half turned +2 deg": (_moved(true_beams, dyaw=math.radians(2)), False),
         "second half turned -2 deg": (_moved(true_beams, dyaw=math.radians(-2)), False),
-        "one pose per scan (no motion within a scan)": (polar_png.beam_poses(scans, poses, n_az, motion=False), False),
-        "azimuths reversed": (polar_png.beam_poses(scans, poses, n_az, azimuth_sign=-1.0), True),
-        "odometry inverted": (polar_png.beam_poses(scans, _inverted(poses), n_az), True),
+        "one pose per scan (no motion within a scan)": (scan_poses.beam_poses(scans, poses, n_az, motion=False), False),
+        "azimuths reversed": (scan_poses.beam_poses(scans, poses, n_az, azimuth_sign=-1.0), True),
+        "odometry inverted": (scan_poses.beam_poses(scans, _inverted(poses), n_az), True),
     }
     results = {}
     for k, (name, (per_beam, both_halves)) in enumerate(cases.items()):
