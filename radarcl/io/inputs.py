@@ -227,8 +227,9 @@ def _bag(sensor, path, poses=None, poses_format=None, clock_offset_s=None, max_s
 
 def polar_source(sensor, scans, per_beam, summary):
     """A ``FrameSource`` of polar scans (``polar_png.PolarScan``) at per-azimuth poses
-    (n, n_az, 4, 4), an array or a ``scan_poses.BeamPoses``: their power converted one scan at a time, azimuths not measured flagged
-    silent (no evidence); their levels too, where every scan has the same dB per level."""
+    (n, n_az, 4, 4), an array or a ``scan_poses.BeamPoses``: their power converted one scan at a
+    time, azimuths not measured flagged silent (no evidence); their levels too, where every scan
+    has the same dB per level."""
     flags = [np.where(s.valid, 0, FLAG_SILENT).astype(np.uint8) for s in scans]
     source = FrameSource(sensor, _PerScan(scans, operator.methodcaller("power")), per_beam, flags, summary)
     scales = {s.db_per_level for s in scans}
@@ -259,11 +260,12 @@ class Reader:
     name: the profile's ``[reader] format``; what: what it reads, in a few words (``radarcl fuse``'s
     INPUT); describes: the same at length (its help); open(sensor, path, poses=, poses_format=,
     clock_offset_s=, max_speed_m_s=, poses_times=, report=, progress=): the ``FrameSource`` (a
-    reader takes the trajectory options it uses and ignores the others); claims: extensions of files it reads
-    whatever the profile's format; check_profile(sensor): raises ``ConfigError`` where the
-    profile's [reader] table does not describe files it can read (run when a profile is loaded),
-    or None; recognises(path): True for inputs it reads whatever the profile's format (a bag's
-    folder), or None; options: the names of its own keyword arguments to ``open``."""
+    reader takes the trajectory options it uses and ignores the others; ``progress`` comes only
+    when a caller asks for it); claims: extensions of files it reads whatever the profile's
+    format; check_profile(sensor): raises ``ConfigError`` where the profile's [reader] table does
+    not describe files it can read (run when a profile is loaded), or None; recognises(path): True
+    for inputs it reads whatever the profile's format (a bag's folder), or None; options: the
+    names of its own keyword arguments to ``open``."""
 
     name: str
     what: str
