@@ -28,9 +28,9 @@
  * OCCLUSION=0 is eq. 12 exactly; e_high_far and surface_decades are then unused.
  *
  * With -D DETSTATS=1, the detection-statistics model (radarcl.sensor_model; equivalent to
- * radarcl.oracle.interpret_detstats; -D NODES is sensor_model.NODES, the rho2 nodes per class):
+ * radarcl.oracle.interpret_detstats; -D NODES is node_pairs.NODES, the rho2 nodes per class):
  * evidence[] is (n_beams, N_BINS, CLASSES, 4 segments)
- * int2 node pairs (sensor_model.pack_nodes) of the evidence e [logodds units] and the detection
+ * int2 node pairs (node_pairs.pack_nodes) of the evidence e [logodds units] and the detection
  * opportunity d [KNOWLEDGE_SCALE units] at rho2 = 0, 1/4, ..., 1, per class of target:
  *   tau = exp(-X), X the blocking of the pulses that ended before the bin (a pulse's summed
  *       (r/n - 1)+ times blocking[] at its peak); delta = tau opportunity[bin, class, node];

@@ -7,7 +7,7 @@
 #include "radarcl_common.h"
 
 #ifdef CLASSES
-/* int2 per bin: CLASSES x 4 segments (sensor_model.pack_nodes, node_shape); CLASSES 1 where the
+/* int2 per bin: CLASSES x 4 segments (node_pairs.pack_nodes, node_shape); CLASSES 1 where the
  * scene has no terrain class (radarcl.stages.interpret_nodes.classes_needed) */
 #define NODE_WORDS (4 * CLASSES)
 #endif

@@ -12,7 +12,7 @@
  * tau opportunity elsewhere. Every look's e lies within +-known x snr_cap[class, node, bin] (tau,
  * or the gap's, times what a detection says at the node's opportunity: snr_evidence.bounded). A
  * node whose knowledge d rounds to 0 gets e = 0 (the reading counts only looks with knowledge).
- * The node pairs are int2 (sensor_model.pack_nodes) of e [logodds units] and d [KNOWLEDGE_SCALE
+ * The node pairs are int2 (node_pairs.pack_nodes) of e [logodds units] and d [KNOWLEDGE_SCALE
  * units] at rho2 = 0, 1/4, ..., 1, per class of target (upright, terrain).
  *
  * Only the first CLASSES classes are computed and stored (NODE_WORDS int2 per bin): with CLASSES
@@ -32,7 +32,7 @@
  *
  * -D constants (set by radarcl/stages/interpret_nodes.py):
  *   N_BINS      bins per profile
- *   NODES       sensor_model.NODES, the rho2 nodes per class
+ *   NODES       node_pairs.NODES, the rho2 nodes per class
  *   CLASSES     1 (upright targets only) or 2 (and terrain)
  *   LANES       bins per work-item: 8 or 16
  *   SNR_NU, SNR_NV, SNR_U0, SNR_V0, SNR_U_SCALE, SNR_V_SCALE   the table's grid (grid points per

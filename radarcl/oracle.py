@@ -11,7 +11,7 @@ import numpy as np
 from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import check_poses
-from radarcl.sensor_model import node_lerp, quantised_rho2
+from radarcl.node_pairs import node_lerp, quantised_rho2
 from radarcl.snr_evidence import bounded, gap_mixture, noise_floor
 
 WINDOWS = ("hann", "rect")
@@ -315,8 +315,8 @@ def fusion_at_points(centres, evidence, lattice, model, poses, bin_spacing_m, fi
     Returns (sums, updates, ambiguous), each (n,).
 
     With ``nodes`` = (evidence nodes, opportunity nodes), each (n_beams, n_bins, CLASSES, NODES)
-    int (the detection-statistics model, ``sensor_model.unpack_nodes``), ``evidence`` is ignored:
-    a voxel takes ``sensor_model.node_lerp`` of its bin's nodes of its class at its quantised
+    int (the detection-statistics model, ``node_pairs.unpack_nodes``), ``evidence`` is ignored:
+    a voxel takes ``node_pairs.node_lerp`` of its bin's nodes of its class at its quantised
     rho2 (class 1, terrain, where its centre lies more than -``terrain_dz`` below the beam's
     origin: z - origin z < terrain_dz; else class 0), and the result has two more arrays, the
     knowledge sums and the counts of updates with an opportunity above 0 (n,)."""

@@ -20,7 +20,7 @@ from radarcl.geometry import BeamLattice, BeamModel
 from radarcl.grid import EvidenceGrid
 from radarcl.models import BeamGeometry
 from radarcl.io import prefetch
-from radarcl.sensor_model import N_CLASSES
+from radarcl.node_pairs import N_CLASSES
 from radarcl.stages.cfar import Cfar, CfarResult
 from radarcl.stages.fusion import Fusion
 from radarcl.stages.interpret import Interpreter, InterpretResult

@@ -12,7 +12,7 @@ runtime's small probe kernel only.
 
 import numpy as np
 
-from radarcl import models, oracle, sensor_model
+from radarcl import models, node_pairs, oracle, sensor_model
 from radarcl.cl.devices import register_device_check
 from radarcl.config import mapconfig, sensors
 from radarcl.errors import DeviceCapabilityError
@@ -97,7 +97,7 @@ def _self_test_one(runtime, config, rng):
     want_ev = it.model.oracle(p, noise, mask, it.config, it.bin_spacing_m, it.bin_model, row_flags)
     if it.classes is not None:               # node pairs of the classes the scene has: the others must be 0
         try:
-            sensor_model.kept_classes(want_ev, it.classes)
+            node_pairs.kept_classes(want_ev, it.classes)
         except ValueError as exc:
             return f"the float64 oracle's nodes contradict the interpreter's classes: {exc}"
     got_ev = it.model.comparable(evidence[rows])          # the classes dropped as the 0 they are

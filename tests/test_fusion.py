@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from tolerances import FUSION_AMBIGUOUS_MAX, FUSION_DECISION_MARGIN, FUSION_UNITS_PER_UPDATE
 
-from radarcl import oracle
+from radarcl import node_pairs, oracle
 from radarcl.config.stage_config import RadarConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import BeamLattice, BeamModel, pose_from_xyz_rpy
@@ -239,13 +239,12 @@ def test_updates_beyond_the_evidence_limit_are_refused(runtime):
 
 # -- the detection-statistics model (DETSTATS): node pairs interpolated in rho2, the knowledge pool -----------------
 def random_nodes(lattice, seed=0, spread=3000):
-    from radarcl import sensor_model as sm
 
     rng = np.random.default_rng(seed)
-    e = rng.integers(-spread, spread, (lattice.n_beams, N_BINS, sm.N_CLASSES, sm.NODES))
+    e = rng.integers(-spread, spread, (lattice.n_beams, N_BINS, node_pairs.N_CLASSES, node_pairs.NODES))
     d = rng.integers(0, logodds_scale() + 1, e.shape)
     d[:, ::3] = 0                                    # bins whose looks see nothing: not counted as looks
-    return e, d, sm.pack_nodes(e, d)
+    return e, d, node_pairs.pack_nodes(e, d)
 
 
 def logodds_scale():
@@ -304,12 +303,10 @@ def test_detstats_without_terrain_reads_the_upright_nodes_only(runtime):
 def one_class_nodes(lattice, seed):
     """Random node pairs (e, d) of both classes with the terrain class all 0, packed as both
     classes and as the upright class alone (a scene without a terrain class)."""
-    from radarcl import sensor_model as sm
-
     e, d, _ = random_nodes(lattice, seed=seed)
     e[..., 1, :] = 0
     d[..., 1, :] = 0
-    return e, d, sm.pack_nodes(e, d), sm.pack_nodes(e[..., :1, :], d[..., :1, :])
+    return e, d, node_pairs.pack_nodes(e, d), node_pairs.pack_nodes(e[..., :1, :], d[..., :1, :])
 
 
 @pytest.mark.parametrize("accumulators", ["packed", "separate"])
@@ -411,9 +408,8 @@ def test_detstats_refusals(runtime):
     with pytest.raises(ShapeError, match=r"expected evidence nodes of shape \(64, 4, 160, 2, 4, 2\) int32"):
         fusion(evidence(lattice), POSE)
     e, d, _ = random_nodes(lattice)
-    from radarcl import sensor_model as sm
 
-    bad = sm.pack_nodes(e, d)
+    bad = node_pairs.pack_nodes(e, d)
     bad[0, 0, 0, 0, 1] = -1                          # an opportunity below 0
     with pytest.raises(ConfigError, match="opportunity within"):
         fusion(bad, POSE)

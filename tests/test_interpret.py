@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from tolerances import EVIDENCE_UNITS_TOL
 
-from radarcl import logodds, oracle
+from radarcl import logodds, node_pairs, oracle
 from radarcl.config.stage_config import CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError, ShapeError
 from radarcl.pipeline import Detection
@@ -245,9 +245,7 @@ def detstats_model(n_bins=256, ground_below_m=1.5, evidence="snr", **params):
 def oracle_kept(nodes, classes):
     """The float64 oracle's (e, d) nodes of the classes an interpreter keeps; fails unless the
     others are all 0 (the premise of dropping them)."""
-    from radarcl import sensor_model as sm
-
-    return tuple(sm.kept_classes(v, classes) for v in nodes)
+    return tuple(node_pairs.kept_classes(v, classes) for v in nodes)
 
 
 @pytest.mark.parametrize("local_size", [1, 16, 64])
@@ -259,8 +257,6 @@ def test_detstats_matches_its_oracle(runtime, local_size, evidence, ground_below
     "detection" (the host's exact table); pulses, counts and flags identical; flagged beams and
     bins outside the window give 0. Without a ground plane the node array holds the upright class
     alone, and the oracle's terrain nodes are all 0."""
-    from radarcl import sensor_model as sm
-
     x = frame(seed=11 + local_size)
     beams = x.reshape(-1, 256)
     beams[3, 40:44] = 30.0                       # a weak pulse: partial blocking behind it
@@ -278,7 +274,7 @@ def test_detstats_matches_its_oracle(runtime, local_size, evidence, ground_below
     assert np.array_equal(got.interpret.flags, flags) and flags.reshape(-1)[4] & oracle.FLAG_SILENT
     assert e.shape == (16, 4, 256, 2, 5)
     e, d = oracle_kept((e, d), classes)
-    ge, gd = sm.unpack_nodes(got.interpret.evidence)
+    ge, gd = node_pairs.unpack_nodes(got.interpret.evidence)
     assert ge.shape == e.shape == (16, 4, 256, classes, 5)
     assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
     mask = got.cfar.mask.reshape(-1, 256).astype(bool)
@@ -325,8 +321,6 @@ def test_detstats_needs_its_model(runtime):
 def test_snr_noise_floor_counts_negative_zero_as_zero(runtime):
     """-0.0 passes the profile check; the kernel's median (a bisection on the floats' bits) counts
     it as +0.0, as the oracle's partition does, instead of above +inf."""
-    from radarcl import sensor_model as sm
-
     rng = np.random.default_rng(5)
     x = rng.exponential(1.0, (4, 256)).astype(np.float32)
     x[0, ::2] = -0.0                                  # every other bin
@@ -336,6 +330,6 @@ def test_snr_noise_floor_counts_negative_zero_as_zero(runtime):
     det = Detection(runtime, (4,), 256, SPACING, CfarConfig(guard=16, train=8), cfg, bin_model=model)
     got = det(x)
     e, d, *_ = oracle.interpret_detstats(x, got.cfar.noise, got.cfar.mask, cfg, SPACING, model)
-    ge, gd = sm.unpack_nodes(got.interpret.evidence)
+    ge, gd = node_pairs.unpack_nodes(got.interpret.evidence)
     assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
     assert (got.interpret.flags == 0).all() and (e[0] != 0).any()

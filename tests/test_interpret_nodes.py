@@ -10,7 +10,7 @@ import pytest
 from test_interpret import SPACING, detstats_model, oracle_kept
 from tolerances import EVIDENCE_UNITS_TOL
 
-from radarcl import logodds, oracle
+from radarcl import logodds, node_pairs, oracle
 from radarcl import sensor_model as sm
 from radarcl.config.stage_config import CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError
@@ -45,7 +45,7 @@ def run(runtime, x, model, config=CONFIG, classes=None, **nodes_options):
                                       nodes_options=nodes_options, classes=classes)
     got = det(x)
     e, d = oracle.interpret_detstats(x, got.cfar.noise, got.cfar.mask, config, SPACING, model)[:2]
-    return sm.unpack_nodes(got.interpret.evidence), oracle_kept((e, d), det.interpreter.classes), det.interpreter.nodes
+    return node_pairs.unpack_nodes(got.interpret.evidence), oracle_kept((e, d), det.interpreter.classes), det.interpreter.nodes
 
 
 @pytest.mark.parametrize("lanes", LANE_CHOICES)
@@ -96,7 +96,7 @@ def test_a_terrain_class_below_half_a_knowledge_unit_is_not_computed():
     opportunity whose knowledge rounds to 0 (at most half a unit) everywhere in both is no class to
     compute; one bin above it in either is."""
     half = np.float32(0.5) / np.float32(logodds.KNOWLEDGE_SCALE)
-    opportunity = np.zeros((64, sm.N_CLASSES, sm.NODES), np.float32)
+    opportunity = np.zeros((64, node_pairs.N_CLASSES, node_pairs.NODES), np.float32)
     opportunity[:, 0] = 1.0
     opportunity[10:, 1] = half
     assert classes_needed(opportunity) == 1
@@ -104,7 +104,7 @@ def test_a_terrain_class_below_half_a_knowledge_unit_is_not_computed():
     assert classes_needed(opportunity) == 2
     # a float64 table (the bin model's) just above half a unit, which float32 rounds down to half:
     # the host's exact nodes give it a unit of knowledge, so the class is kept
-    exact = np.zeros((64, sm.N_CLASSES, sm.NODES))
+    exact = np.zeros((64, node_pairs.N_CLASSES, node_pairs.NODES))
     exact[10:, 1] = float(half)
     assert classes_needed(exact) == 1
     exact[40, 1, 3] = float(half) * (1 + 1e-12)
@@ -134,8 +134,6 @@ def test_snr_nodes_of_any_bin_count_and_window(runtime, n_bins):
     not a multiple of eight (the last chunk's lanes past the end), a window whose ends fall inside a
     chunk, pulses and blocking across chunk edges, give the oracle's nodes within
     EVIDENCE_UNITS_TOL, and 0 outside the window, on flagged beams and past the profile's end."""
-    from radarcl import sensor_model as sm
-
     rng = np.random.default_rng(n_bins)
     x = rng.exponential(size=(6, n_bins)).astype(np.float32)
     x[0, 14:18] = 1e3                                # a pulse across the chunk edge at bin 16
@@ -149,7 +147,7 @@ def test_snr_nodes_of_any_bin_count_and_window(runtime, n_bins):
     got = det(x)
     e, d, pulses, n_pulses, flags = oracle.interpret_detstats(x, got.cfar.noise, got.cfar.mask, cfg, SPACING, model)
     assert np.array_equal(got.interpret.pulses, pulses) and np.array_equal(got.interpret.flags, flags)
-    ge, gd = sm.unpack_nodes(got.interpret.evidence)
+    ge, gd = node_pairs.unpack_nodes(got.interpret.evidence)
     assert ge.shape == e.shape == (6, n_bins, 2, 5)
     assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
     first, last = cfg.bin_interval(SPACING, n_bins)
@@ -163,8 +161,6 @@ def test_a_gap_in_a_blocker_lets_the_echo_behind_it_count(runtime):
     knowledge with a gap (the mixture of the blocked and the unblocked target's likelihoods), and
     none with hard blocking; the noise behind the blocker gives no knowledge either way. The
     kernel matches its oracle in both."""
-    from radarcl import sensor_model as sm
-
     x = np.random.default_rng(5).exponential(size=(2, 256)).astype(np.float32)
     x[:, 40:42] = 1e7                             # the blocker: x ~ 1e7, far beyond the blocking unit
     x[:, 120:122] = 1e4                           # an echo behind it
@@ -175,7 +171,7 @@ def test_a_gap_in_a_blocker_lets_the_echo_behind_it_count(runtime):
         det = Detection(runtime, (2,), 256, SPACING, CfarConfig(guard=16, train=8), cfg, bin_model=model)
         out = det(x)
         e, d = oracle.interpret_detstats(x, out.cfar.noise, out.cfar.mask, cfg, SPACING, model)[:2]
-        ge, gd = sm.unpack_nodes(out.interpret.evidence)
+        ge, gd = node_pairs.unpack_nodes(out.interpret.evidence)
         assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
         assert out.interpret.n_pulses.tolist() == [2, 2]
         got[gap] = ge[:, 120:122, 0], gd[:, 120:122, 0], gd[:, 60:110]
@@ -191,7 +187,6 @@ def test_a_look_that_could_hardly_see_says_at_most_what_a_detection_would_either
     target's opportunity is 0.02 gives that (about 0.89 nat), not the ln(1 / q) of the table it
     gives where the look sees the voxel; a bin far under the noise no more either way (and where the
     look sees, no more than -ln(1 / q) though the table says more). Kernel and oracle alike."""
-    from radarcl import sensor_model as sm
     from radarcl.snr_evidence import detection_cap
 
     base = detstats_model(ground_below_m=0.0)
@@ -207,7 +202,7 @@ def test_a_look_that_could_hardly_see_says_at_most_what_a_detection_would_either
     mask = np.zeros(x.shape, np.uint8)
     cfg = InterpretConfig(range_min_m=1.0, range_max_m=30.0, wide_pulse_m=2.0, max_pulses=4, model="detstats")
     out = Interpreter(runtime, (2,), 256, SPACING, cfg, bin_model=model)(x, np.ones_like(x), mask)
-    ge, gd = sm.unpack_nodes(out.evidence)
+    ge, gd = node_pairs.unpack_nodes(out.evidence)
     e, d = oracle_kept(oracle.interpret_detstats(x, np.ones_like(x), mask, cfg, SPACING, model)[:2], 1)
     assert ge.shape == e.shape == (2, 256, 1, 5)                    # no ground plane: the upright class alone
     assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.array_equal(gd, d)
@@ -221,7 +216,7 @@ def test_a_look_that_could_hardly_see_says_at_most_what_a_detection_would_either
     assert np.all(np.abs(e[1, at, 0, 1:] + most) <= EVIDENCE_UNITS_TOL)
     # sensor_model.evidence_bound = "none": the table's evidence as it is, in the kernel as in the oracle
     free = dataclasses.replace(model, bounded=False)
-    ge = sm.unpack_nodes(Interpreter(runtime, (2,), 256, SPACING, cfg, bin_model=free)(x, np.ones_like(x), mask).evidence)[0]
+    ge = node_pairs.unpack_nodes(Interpreter(runtime, (2,), 256, SPACING, cfg, bin_model=free)(x, np.ones_like(x), mask).evidence)[0]
     e = oracle_kept(oracle.interpret_detstats(x, np.ones_like(x), mask, cfg, SPACING, free)[:2], 1)[0]
     assert ge.shape == e.shape and np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL
     table = model.snr_table(np.log(x[:, at])[:, None], np.full((2, 5), math.log(1e4))) * logodds.SCALE

@@ -55,7 +55,7 @@ LAYERS = (
     ("engine", (("livemap", "self_test"), ("pipeline",), ("stages", "scene", "viewer"))),
     ("configuration and the map", (("config", "maps"),)),
     ("models and inputs", (("io", "models"),)),
-    ("core numerics and device", (("oracle",), ("geometry", "grid", "sensor_model"),
+    ("core numerics and device", (("oracle",), ("geometry", "grid", "sensor_model"), ("node_pairs",),
                                   ("physics", "cfar_theory", "cl", "logodds", "gridspec", "snr_evidence"),
                                   ("errors", "__init__"))),
 )

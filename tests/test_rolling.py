@@ -152,17 +152,17 @@ def test_a_detection_statistics_drive_rolls_its_knowledge_channel_bit_for_bit(ru
     """A grid with the knowledge channel rolls too: its knowledge and looks leave the device and
     come back with its sums, and the store after the drive out and back holds the unbounded
     grid's three channels, bit for bit, with the map's reading."""
-    from radarcl import logodds, sensor_model
+    from radarcl import logodds, node_pairs, sensor_model
     from radarcl.maps.map import Map
 
     reading = sensor_model.ModelParams().reading
-    shape = (LATTICE.n_beams, N_BINS, sensor_model.N_CLASSES)
+    shape = (LATTICE.n_beams, N_BINS, node_pairs.N_CLASSES)
 
     def frame(j):
         rng = np.random.default_rng(j)
-        e = rng.integers(-3000, 3000, (*shape, sensor_model.NODES))
-        d = rng.integers(0, logodds.KNOWLEDGE_SCALE + 1, (*shape, sensor_model.NODES))
-        return sensor_model.pack_nodes(e, d)
+        e = rng.integers(-3000, 3000, (*shape, node_pairs.NODES))
+        d = rng.integers(0, logodds.KNOWLEDGE_SCALE + 1, (*shape, node_pairs.NODES))
+        return node_pairs.pack_nodes(e, d)
 
     def run(window):
         grid = window.grid if window else EvidenceGrid(runtime, SPEC, knowledge=True)

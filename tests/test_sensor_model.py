@@ -22,7 +22,7 @@ import math
 import numpy as np
 import pytest
 
-from radarcl import cfar_theory, logodds, oracle
+from radarcl import cfar_theory, logodds, node_pairs, oracle
 from radarcl import sensor_model as sm
 from radarcl import snr_evidence as se
 from radarcl.config import keys, mapconfig, sensors
@@ -43,8 +43,8 @@ def point_model(cells, snr_db, n_bins, at):
     """A BinModel whose bin ``at`` holds a point target (kappa 1) of ``snr_db`` on the axis, with
     no spread, built by hand from the CFAR's table; nothing blocks."""
     table = sm.DetectionTable.build("ca", CA.alpha, CA.n_train, None, None if cells == "independent" else 4.0, 0.0)
-    t = np.arange(sm.NODES) / (sm.NODES - 1)
-    opportunity = np.zeros((n_bins, sm.N_CLASSES, sm.NODES))
+    t = np.arange(node_pairs.NODES) / (node_pairs.NODES - 1)
+    opportunity = np.zeros((n_bins, node_pairs.N_CLASSES, node_pairs.NODES))
     opportunity[at, 0] = table(math.log(10 ** (snr_db / 10)) - t * math.log(4.0))
     return sm.BinModel(opportunity, 1.0 - opportunity, np.zeros(n_bins), table.pfa)
 
@@ -74,7 +74,7 @@ def test_point_target_on_the_axis_and_at_the_half_power_edge(cells):
     profiles[1, at] = 50.0
     cfg = InterpretConfig(range_min_m=0.0, range_max_m=7.0, wide_pulse_m=1.0)
     e, d, *_ = oracle.interpret_detstats(profiles, noise, mask, cfg, SPACING, model)
-    for node, rho2 in ((0, 0.0), (sm.NODES - 1, 1.0)):
+    for node, rho2 in ((0, 0.0), (node_pairs.NODES - 1, 1.0)):
         pd, e_miss, e_det, pfa = HAND[(cells, rho2)]
         assert abs(e[0, at, 0, node] - e_miss * logodds.SCALE) <= 2
         assert abs(e[1, at, 0, node] - e_det * logodds.SCALE) <= 2
@@ -191,37 +191,37 @@ def test_the_default_reading_puts_the_prior_everywhere_and_an_old_map_reads_as_i
 
 def test_node_packing_round_trips_and_interpolates():
     rng = np.random.default_rng(0)
-    e = rng.integers(-logodds.EVIDENCE_LIMIT, logodds.EVIDENCE_LIMIT + 1, (7, sm.N_CLASSES, sm.NODES))
+    e = rng.integers(-logodds.EVIDENCE_LIMIT, logodds.EVIDENCE_LIMIT + 1, (7, node_pairs.N_CLASSES, node_pairs.NODES))
     d = rng.integers(0, logodds.KNOWLEDGE_SCALE + 1, e.shape)
-    packed = sm.pack_nodes(e, d)
-    assert packed.shape == (7, *sm.node_shape()) and packed.dtype == np.int32
-    back = sm.unpack_nodes(packed)
+    packed = node_pairs.pack_nodes(e, d)
+    assert packed.shape == (7, *node_pairs.node_shape()) and packed.dtype == np.int32
+    back = node_pairs.unpack_nodes(packed)
     assert np.array_equal(back[0], e) and np.array_equal(back[1], d)
-    q = np.array([0, 4096, 2048, sm.Q_ONE, sm.Q_MAX])
-    assert np.array_equal(sm.node_lerp(np.array([[0, 100, 200, 300, 400]] * 5), q), [0, 100, 50, 400, 400])
+    q = np.array([0, 4096, 2048, node_pairs.Q_ONE, node_pairs.Q_MAX])
+    assert np.array_equal(node_pairs.node_lerp(np.array([[0, 100, 200, 300, 400]] * 5), q), [0, 100, 50, 400, 400])
     # the beam's edge and beyond quantise into the last segment, within 1 unit of the last node
-    assert np.array_equal(sm.quantised_rho2([0.0, 0.25, 1.0 - 2 ** -15, 1.0, 2.0]), [0, 4096, 16383, 16383, 16383])
+    assert np.array_equal(node_pairs.quantised_rho2([0.0, 0.25, 1.0 - 2 ** -15, 1.0, 2.0]), [0, 4096, 16383, 16383, 16383])
     with pytest.raises(ConfigError, match="node values out of range"):
-        sm.pack_nodes(e + logodds.EVIDENCE_LIMIT, d)
+        node_pairs.pack_nodes(e + logodds.EVIDENCE_LIMIT, d)
 
 
 def test_a_pipeline_without_a_terrain_class_keeps_the_upright_class_alone():
     """node_shape: one class or both; all_classes puts a dropped class back as the 0 it is;
     kept_classes refuses an oracle whose dropped class is not all 0 (the premise of dropping it)."""
-    assert sm.node_shape(1) == (1, sm.SEGMENTS, 2) and sm.node_shape() == sm.node_shape(2) == (2, sm.SEGMENTS, 2)
+    assert node_pairs.node_shape(1) == (1, node_pairs.SEGMENTS, 2) and node_pairs.node_shape() == node_pairs.node_shape(2) == (2, node_pairs.SEGMENTS, 2)
     with pytest.raises(ConfigError, match="classes must be 1 or 2, got 3"):
-        sm.node_shape(3)
+        node_pairs.node_shape(3)
     rng = np.random.default_rng(1)
-    e = rng.integers(-100, 100, (3, 4, sm.N_CLASSES, sm.NODES))
+    e = rng.integers(-100, 100, (3, 4, node_pairs.N_CLASSES, node_pairs.NODES))
     e[..., 1, :] = 0
-    kept = sm.kept_classes(e, 1)
-    assert kept.shape == (3, 4, 1, sm.NODES) and np.array_equal(kept[..., 0, :], e[..., 0, :])
-    assert np.array_equal(sm.all_classes(kept), e) and np.array_equal(sm.kept_classes(e, 2), e)
+    kept = node_pairs.kept_classes(e, 1)
+    assert kept.shape == (3, 4, 1, node_pairs.NODES) and np.array_equal(kept[..., 0, :], e[..., 0, :])
+    assert np.array_equal(node_pairs.all_classes(kept), e) and np.array_equal(node_pairs.kept_classes(e, 2), e)
     e[2, 1, 1, 4] = -1
     with pytest.raises(ValueError, match=r"a dropped class has 1 nonzero nodes \(up to 1\)"):
-        sm.kept_classes(e, 1)
-    packed = sm.pack_nodes(kept, np.abs(kept))
-    assert packed.shape == (3, 4, *sm.node_shape(1))
+        node_pairs.kept_classes(e, 1)
+    packed = node_pairs.pack_nodes(kept, np.abs(kept))
+    assert packed.shape == (3, 4, *node_pairs.node_shape(1))
 
 
 def test_a_false_alarm_rate_that_leaves_pd_outside_pfa_to_1_is_refused():
@@ -314,8 +314,8 @@ def test_snr_evidence_of_a_point_target_through_the_oracle():
     x = 1 there, beam 1 x = 5 (under any CFAR threshold: no detection), beam 2 x = 50 (detected);
     the oracle's nodes at rho2 = 0 and 1 are the hand values."""
     n_bins, at = 64, 30
-    t = np.arange(sm.NODES) / (sm.NODES - 1)
-    ln_snr = np.full((n_bins, sm.N_CLASSES, sm.NODES), -np.inf)
+    t = np.arange(node_pairs.NODES) / (node_pairs.NODES - 1)
+    ln_snr = np.full((n_bins, node_pairs.N_CLASSES, node_pairs.NODES), -np.inf)
     ln_snr[at, 0] = math.log(100.0) - t * math.log(4.0)
     opportunity = np.zeros(ln_snr.shape)
     opportunity[at, 0] = 1.0                          # the look sees the target (no evidence without)
@@ -328,7 +328,7 @@ def test_snr_evidence_of_a_point_target_through_the_oracle():
     cfg = InterpretConfig(range_min_m=0.0, range_max_m=7.0, wide_pulse_m=1.0)
     e, d, *_ = oracle.interpret_detstats(profiles, np.ones((3, n_bins)), mask, cfg, SPACING, model)
     for beam, x in enumerate((1.0, 5.0, 50.0)):
-        for node, s in ((0, 100.0), (sm.NODES - 1, 25.0)):
+        for node, s in ((0, 100.0), (node_pairs.NODES - 1, 25.0)):
             assert abs(e[beam, at, 0, node] - SNR_HAND[(x, s)] * logodds.SCALE) <= SNR_TABLE_MAX_NATS * logodds.SCALE
     assert not e[:, at, 1].any()                       # no terrain class without a ground plane: nothing
     assert np.all(np.diff(e[0, at, 0]) > 0)            # a noise-like bin: weaker free evidence towards the edge

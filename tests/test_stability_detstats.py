@@ -13,7 +13,7 @@ import pytest
 from test_interpret import SPACING, detstats_model
 from tolerances import EVIDENCE_UNITS_TOL, EXP_NB_RTOL, LIKELIHOOD_RATIO_RTOL, LOG10_NB_DECADES, READ_NATS_TOL
 
-from radarcl import logodds, oracle
+from radarcl import logodds, node_pairs, oracle
 from radarcl import sensor_model as sm
 from radarcl.config.stage_config import PAPER_RADAR, CfarConfig, InterpretConfig
 from radarcl.errors import ConfigError
@@ -65,7 +65,7 @@ def probe(runtime, x, q):
     defines = dict(COMMON_DEFINES, N_BINS=64, CLASSES=2, LANES=LANES, SNR_NU=SNR_U[2],
                    SNR_NV=SNR_V[2], SNR_U0=float(SNR_U[0]), SNR_V0=float(SNR_V[0]),
                    SNR_U_SCALE=(SNR_U[2] - 1) / (SNR_U[1] - SNR_U[0]), SNR_V_SCALE=(SNR_V[2] - 1) / (SNR_V[1] - SNR_V[0]),
-                   GAP_CAP=GAP_CAP, NODES=sm.NODES)
+                   GAP_CAP=GAP_CAP, NODES=node_pairs.NODES)
     program = cl.Program(runtime.context, PROBE).build(
         options=[f"-I{kernels_dir()}"] + [_define(k, v) for k, v in sorted(defines.items())])
     qu = runtime.queue
@@ -130,9 +130,9 @@ def detect(runtime, x, model, flags=None):
     got = det(x, flags) if flags is not None else det(x)
     e, d, pulses, n_pulses, oflags = oracle.interpret_detstats(x, got.cfar.noise, got.cfar.mask, CONFIG, SPACING, model,
                                                                flags)
-    ge, gd = sm.unpack_nodes(got.interpret.evidence)
+    ge, gd = node_pairs.unpack_nodes(got.interpret.evidence)
     classes = det.interpreter.classes               # the oracle's other classes must be 0: kept_classes checks
-    e, d = sm.kept_classes(e, classes), sm.kept_classes(d, classes)
+    e, d = node_pairs.kept_classes(e, classes), node_pairs.kept_classes(d, classes)
     assert ge.shape == e.shape
     assert np.array_equal(got.interpret.flags, oflags) and np.array_equal(got.interpret.n_pulses, n_pulses)
     return ge, gd, e, d, got
@@ -191,8 +191,8 @@ def looks_grid(runtime, e_units, frames, still="auto"):
     model = BeamModel(0.1, 0.1, 0.0, 0.0, near_field=False, gaussian=False)
     grid = EvidenceGrid(runtime, spec, knowledge=True)
     fusion = Fusion(runtime, grid, lattice, model, 64, 0.1, 1, 63, detstats=True, still=still)
-    shape = (lattice.n_beams, 64, sm.N_CLASSES, sm.NODES)
-    packed = sm.pack_nodes(np.full(shape, e_units), np.full(shape, logodds.KNOWLEDGE_SCALE))
+    shape = (lattice.n_beams, 64, node_pairs.N_CLASSES, node_pairs.NODES)
+    packed = node_pairs.pack_nodes(np.full(shape, e_units), np.full(shape, logodds.KNOWLEDGE_SCALE))
     fusion(packed, np.eye(4))
     for _ in range(frames - 1):                # the same frame again: checked and uploaded once
         fusion.enqueue(plan=fusion.plan(np.eye(4)))
@@ -237,8 +237,8 @@ def test_knowledge_at_zero_reads_the_prior(runtime):
     grid = EvidenceGrid(runtime, spec, knowledge=True)
     fusion = Fusion(runtime, grid, lattice, BeamModel(0.1, 0.1, 0.0, 0.0, near_field=False, gaussian=False), 64, 0.1,
                     1, 63, detstats=True)
-    shape = (lattice.n_beams, 64, sm.N_CLASSES, sm.NODES)
-    fusion(sm.pack_nodes(np.zeros(shape, int), np.zeros(shape, int)), np.eye(4))
+    shape = (lattice.n_beams, 64, node_pairs.N_CLASSES, node_pairs.NODES)
+    fusion(node_pairs.pack_nodes(np.zeros(shape, int), np.zeros(shape, int)), np.eye(4))
     assert (grid.snapshot().item(), grid.knowledge_snapshot().item(), grid.knowledge_snapshot("looks").item()) == (0, 0, 0)
     reading = dict(look_limit=2.0, prior_nats=-2.5, prior_looks=0.0, known_looks=0.5)
     assert float(sm.read_log_odds(0, 0, 0, reading)) == -2.5
@@ -300,8 +300,8 @@ def test_120_db_reflector_beside_a_weak_target(runtime):
     det = Detection(runtime, (1,), 256, spacing, CFAR, config, bin_model=model)
     got = det(profiles)
     e, d = oracle.interpret_detstats(profiles, got.cfar.noise, got.cfar.mask, config, spacing, model)[:2]
-    e, d = sm.kept_classes(e, 1), sm.kept_classes(d, 1)           # no ground plane: the upright class alone
-    ge, gd = sm.unpack_nodes(got.interpret.evidence)
+    e, d = node_pairs.kept_classes(e, 1), node_pairs.kept_classes(d, 1)           # no ground plane: the upright class alone
+    ge, gd = node_pairs.unpack_nodes(got.interpret.evidence)
     assert ge.shape == e.shape == (1, 256, 1, 5)
     assert np.abs(ge - e).max() <= EVIDENCE_UNITS_TOL and np.abs(gd - d).max() <= EVIDENCE_UNITS_TOL
     hits = np.flatnonzero(got.cfar.mask[0]) * spacing

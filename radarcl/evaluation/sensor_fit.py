@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radarcl import sensor_model
+from radarcl import node_pairs, sensor_model
 from radarcl.errors import ConfigError
 from radarcl.snr_evidence import DB, SPREAD_STEPS, Clutter, noise_floor
 
@@ -121,7 +121,7 @@ class Geometry:
         in the beam (rho2 = 0 .. 1), at ``sensitivity_db``."""
         p = dataclasses.replace(self.params, snr_1m2_at_10m_db=float(sensitivity_db))
         ln_s, kappa = sensor_model.upright_snr(p, ranges_m.reshape(-1), self.half_az_rad, self.half_el_rad)
-        t = np.arange(sensor_model.NODES) / (sensor_model.NODES - 1) * math.log(4.0)
+        t = np.arange(node_pairs.NODES) / (node_pairs.NODES - 1) * math.log(4.0)
         out = ln_s[:, None] - kappa[:, None] * t[None, :]
         return out.reshape(ranges_m.shape[0], -1)
 

@@ -38,7 +38,7 @@ class EvidenceModel:
     axis_label: the axis of a plot of one beam's evidence (``on_axis``).
     label_keys: key prefixes a configuration's short label names for this model.
     knowledge: the model fuses node pairs (evidence and opportunity per target class and rho2 node,
-        ``sensor_model.node_shape``) built from the sensor's ``sensor_model.BinModel`` into a map
+        ``node_pairs.node_shape``) built from the sensor's ``sensor_model.BinModel`` into a map
         with the knowledge channel (looks), read by its reading; otherwise one evidence value per bin
         is summed into the map as eq. 9 says.
     occludes: eq. 12's family: the first strong pulse is a surface and E_h ramps in range to

@@ -9,7 +9,7 @@ import numpy as np
 
 from radarcl import logodds, sensor_model
 from radarcl.models.base import Choice, EvidenceModel, Number, placeholder_tables
-from radarcl.sensor_model import N_CLASSES, NODES, pack_nodes
+from radarcl.node_pairs import N_CLASSES, NODES, all_classes, pack_nodes, unpack_nodes
 
 
 class DetStats(EvidenceModel):
@@ -94,10 +94,10 @@ class DetStats(EvidenceModel):
 
     def comparable(self, evidence):
         # the oracle's form has both classes: a class the pipeline drops has all its nodes 0
-        return np.stack([sensor_model.all_classes(v) for v in sensor_model.unpack_nodes(evidence)])
+        return np.stack([all_classes(v) for v in unpack_nodes(evidence)])
 
     def nodes(self, evidence):
-        return tuple(sensor_model.all_classes(v) for v in sensor_model.unpack_nodes(evidence))
+        return tuple(all_classes(v) for v in unpack_nodes(evidence))
 
     def on_axis(self, evidence):
         return evidence[0, ..., 0, 0]         # the evidence (not the opportunity) of an upright target, rho2 = 0

@@ -31,7 +31,7 @@ from radarcl.errors import ConfigError
 from radarcl.geometry import BeamLattice, BeamModel, check_poses
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import BRICK
-from radarcl.sensor_model import N_CLASSES, node_shape, unpack_nodes
+from radarcl.node_pairs import N_CLASSES, node_shape, unpack_nodes
 from radarcl.stages import Port, Stage, build, count, fusion_cached, spacing, work_group_size
 from radarcl.stages.fusion_plan import (BLOCK, FramePlan, FusionPlanner, HeadFrame, brick_geometry, candidate_windows,
                                         column_tiles, nonempty, pool_order, take_rows)
@@ -65,7 +65,7 @@ class Fusion(Stage):
     pose's frames from it (``fusion_cached``, the same integers); True records on the first
     repeat whatever its size, False never. detstats: the detection-statistics model
     (``radarcl.sensor_model``): a frame is not one update per bin but node pairs per bin
-    (``sensor_model.node_shape(classes)``, from ``sensor_model.pack_nodes``), interpolated in the
+    (``node_pairs.node_shape(classes)``, from ``node_pairs.pack_nodes``), interpolated in the
     voxel's rho2, and the grid must hold a knowledge pool (``EvidenceGrid(..., knowledge=True)``);
     a voxel whose centre lies more than -``terrain_dz`` [m] below its beam's origin takes the
     terrain class's nodes (-inf: none does); equivalent to ``oracle.fusion_at_points(...,
@@ -156,7 +156,7 @@ class Fusion(Stage):
     @property
     def evidence_shape(self):
         """Shape of one frame's evidence: (n_beams, n_bins) int32, or with detstats
-        (n_beams, n_bins, *sensor_model.node_shape(classes)) int32 node pairs."""
+        (n_beams, n_bins, *node_pairs.node_shape(classes)) int32 node pairs."""
         return (self.lattice.n_beams, self.n_bins, *(node_shape(self.classes) if self.detstats else ()))
 
     # -- host side: beams, head frame, bricks ---------------------------------------------------

@@ -14,7 +14,8 @@ import numpy as np
 from radarcl import logodds, oracle
 from radarcl.config.stage_config import InterpretConfig
 from radarcl.errors import ConfigError
-from radarcl.sensor_model import N_CLASSES, NODES, BinModel, node_shape
+from radarcl.sensor_model import BinModel
+from radarcl.node_pairs import N_CLASSES, NODES, node_shape
 from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_group_size
 from radarcl.stages.interpret_nodes import InterpretNodes, classes_needed
 
@@ -46,8 +47,8 @@ class Interpreter(Stage):
     node pairs (``EvidenceModel.knowledge``: the detection-statistics model), the
     ``sensor_model.BinModel`` of this sensor, CFAR and voxel (its tables go to the device once;
     ``radarcl.models`` says what each model puts there). With detstats the evidence is
-    (*batch, n_bins, *sensor_model.node_shape(classes)) int32 node pairs
-    (``sensor_model.unpack_nodes``) of the first ``classes`` classes of target: None, those the
+    (*batch, n_bins, *node_pairs.node_shape(classes)) int32 node pairs
+    (``node_pairs.unpack_nodes``) of the first ``classes`` classes of target: None, those the
     bin model's scene has (``interpret_nodes.classes_needed``: 1 without a terrain class, whose
     nodes would all be 0; the fusion is then built with the same count), or 2 for both;
     equivalent to ``radarcl.oracle.interpret_detstats``: node values identical to the oracle's

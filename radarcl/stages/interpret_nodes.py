@@ -10,7 +10,7 @@ read; tests/test_interpret_nodes.py).
 Only the classes of target the scene has are computed and stored: a bin model whose terrain class
 has no opportunity at any bin (no ground plane: ``sensor_model.terrain_dz`` is -inf) needs
 ``classes == 1`` (``classes_needed``), and the node array holds the upright class alone
-(``sensor_model.node_shape``): the terrain class's pairs would all be 0 (a node without knowledge
+(``node_pairs.node_shape``): the terrain class's pairs would all be 0 (a node without knowledge
 carries no evidence), and the fusion takes nothing from a terrain voxel then.
 """
 
@@ -18,7 +18,8 @@ import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError
-from radarcl.sensor_model import N_CLASSES, NODES, BinModel, node_shape
+from radarcl.sensor_model import BinModel
+from radarcl.node_pairs import N_CLASSES, NODES, node_shape
 from radarcl.snr_evidence import GAP_CAP, SNR_U, SNR_V, detection_cap
 from radarcl.stages import build, work_group_size
 
