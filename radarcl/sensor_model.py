@@ -60,7 +60,8 @@ the reading divides the evidence E of a voxel looked at more than ``look_limit``
 n / look_limit (``read_log_odds``): at most that many looks' worth of mean evidence, however
 many scans. The reading adds the prior, the world's base rate of occupied voxels, everywhere: a
 voxel never observed reads that calibrated probability, and is told unknown by its knowledge.
-Node pairs, what the interpreter writes and the fusion reads: ``radarcl.node_pairs``.
+
+The node pairs, what the interpreter writes and the fusion reads: ``radarcl.node_pairs``.
 """
 
 import functools

@@ -193,7 +193,7 @@ def oracle_deviation(runtime, obs, config, beams=ORACLE_BEAMS):
     want = it.model.oracle(profiles, noise, mask, config.interpret_config(), fusion.bin_spacing_m, it.bin_model)
     if pairs:
         shape = (lattice.n_beams, it.n_bins) + want.shape[-2:]
-        node_pairs.kept_classes(want, it.classes)     # the premise of the classes the pipeline dropped: all 0
+        node_pairs.kept_classes(want, it.classes)       # the premise of the classes the pipeline dropped: all 0
         evidence64, nodes = None, (want[0].reshape(shape), want[1].reshape(shape))
     else:
         evidence64, nodes = want.reshape(lattice.n_beams, -1), None

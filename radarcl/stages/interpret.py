@@ -14,8 +14,8 @@ import numpy as np
 from radarcl import logodds, oracle
 from radarcl.config.stage_config import InterpretConfig
 from radarcl.errors import ConfigError
-from radarcl.sensor_model import BinModel
 from radarcl.node_pairs import N_CLASSES, NODES, node_shape
+from radarcl.sensor_model import BinModel
 from radarcl.stages import Port, Stage, beam_batch, build, count, spacing, work_group_size
 from radarcl.stages.interpret_nodes import InterpretNodes, classes_needed
 

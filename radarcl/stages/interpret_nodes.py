@@ -18,8 +18,8 @@ import numpy as np
 
 from radarcl import logodds
 from radarcl.errors import ConfigError
-from radarcl.sensor_model import BinModel
 from radarcl.node_pairs import N_CLASSES, NODES, node_shape
+from radarcl.sensor_model import BinModel
 from radarcl.snr_evidence import GAP_CAP, SNR_U, SNR_V, detection_cap
 from radarcl.stages import build, work_group_size
 
