@@ -97,3 +97,18 @@ def test_a_program_without_its_kernels_is_built_again_past_the_cache(runtime, mo
     assert len(seen) == 2 and "-DRADARCL_CACHE_BYPASS=1" in seen[1] and "-DRADARCL_CACHE_BYPASS=1" not in seen[0]
     assert "without kernel(s) cfar" in caplog.text
     assert stage is not None and build is not None
+
+
+def test_a_verdict_is_kept_only_while_the_python_it_rests_on_is_unchanged(runtime, monkeypatch):
+    """The self-test's verdict rests on every module of radarcl, not only the stages and the check
+    itself: a change anywhere (here one byte more in the default model's module, whose bug once
+    made the check fail) is a new key, so a verdict a bug gave does not outlive its fix."""
+    import radarcl.models.detstats as detstats
+
+    assert "radarcl.self_test:self_test" in dev_module.DEVICE_CHECKS           # the suite's conftest registered it
+    before = dev_module._identity(runtime.device)
+    assert dev_module._identity(runtime.device) == before                       # a key, not a draw
+    target = Path(detstats.__file__).resolve()
+    real = Path.read_bytes
+    monkeypatch.setattr(Path, "read_bytes", lambda self: real(self) + (b"#" if self.resolve() == target else b""))
+    assert dev_module._identity(runtime.device) != before

@@ -1,8 +1,8 @@
 """Which OpenCL device radarcl runs on: the devices listed, each checked in a child process
 before it is used (``build_problem``: a small kernel, then the application's ``DEVICE_CHECKS``),
-the verdicts cached per device, driver and kernel sources, the choice among the usable ones
-(``choose_device``) and ``radarcl info``'s report (``device_report``). ``radarcl.cl.runtime``
-builds and runs the kernels on the chosen device.
+the verdicts cached per device, driver and the sources checked (kernels and Python), the choice
+among the usable ones (``choose_device``) and ``radarcl info``'s report (``device_report``).
+``radarcl.cl.runtime`` builds and runs the kernels on the chosen device.
 """
 
 import contextlib
@@ -126,8 +126,9 @@ _COVERS = {}                                  # check name -> modules whose sour
 def register_device_check(function, covers=()):
     """Have the child check devices with ``function`` (a module-level function taking a
     ``Runtime``, returning None or a reason) before any is used; registering twice is once.
-    ``covers``: further modules (dotted names) whose sources the verdict rests on besides the
-    function's own (the pipeline it builds): a verdict is kept until one of them changes."""
+    ``covers``: further modules or packages (dotted names; a package: every module in it) whose
+    sources the verdict rests on besides the function's own (the pipeline it builds): a verdict
+    is kept until one of them changes."""
     name = f"{function.__module__}:{function.__qualname__}"
     if name not in DEVICE_CHECKS:
         DEVICE_CHECKS.append(name)
@@ -182,7 +183,8 @@ def _verdict(device):
 
 def _identity(device):
     """The key of a device's verdict: what it is, its driver, and what was checked on it: the
-    kernel sources, and the Python that sizes and runs them (the checks' modules, the stages)."""
+    kernel sources, and the Python that sizes and runs them (the stages, ``cl``, the checks'
+    modules and the modules and packages they cover)."""
     from radarcl import __version__
 
     h = hashlib.sha256()
@@ -194,10 +196,13 @@ def _identity(device):
         sources = [*sorted(kernels_dir().iterdir()), *sorted((package / "stages").glob("*.py")),
                    *sorted((package / "cl").glob("*.py"))]
         modules = [m for name in DEVICE_CHECKS for m in (name.partition(":")[0], *_COVERS.get(name, ()))]
-        sources += [package.parent / (m.replace(".", "/") + ".py") for m in modules]
+        for m in modules:
+            path = package.parent / m.replace(".", "/")
+            sources += sorted(path.rglob("*.py")) if path.is_dir() else [path.with_suffix(".py")]
         for p in sources:
             if p.is_file():
-                h.update(p.name.encode() + b"\0" + p.read_bytes())
+                h.update(str(p.relative_to(package.parent) if p.is_relative_to(package.parent) else p.name).encode()
+                         + b"\0" + p.read_bytes())
     except (KernelBuildError, OSError):
         pass
     return h.hexdigest()
