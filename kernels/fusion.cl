@@ -97,17 +97,10 @@ static inline int or_unit(int16 v)
 #define ROW_Z ((float16)0)
 #endif
 #ifdef DETSTATS
-/* node pairs as 64-bit loads, split after (G2_ is the same per int2): the node pairs of a unit's lanes in one long vector (PoCL
- * then gathers whole vectors instead of inserting 2 LN lanes one by one), split into their even
- * and odd 32-bit words (two permutes, where narrowing each half was six instructions) */
-#define GL_(p, at, l) p[at.s##l]
-#define GL_4(p, at) GL_(p, at, 0), GL_(p, at, 1), GL_(p, at, 2), GL_(p, at, 3)
-#define GL_8(p, at) GL_4(p, at), GL_(p, at, 4), GL_(p, at, 5), GL_(p, at, 6), GL_(p, at, 7)
-#define GL_16(p, at) GL_8(p, at), GL_(p, at, 8), GL_(p, at, 9), GL_(p, at, a), GL_(p, at, b), GL_(p, at, c), \
-    GL_(p, at, d), GL_(p, at, e), GL_(p, at, f)
-#define ulongL CAT(ulong, LN)
-#define as_uintL CAT(as_uint, LN)
-#define convert_uintL CAT(convert_uint, LN)
+/* node pairs as 64-bit loads, split after (G2_ is the same per int2): the node pairs of a unit's
+ * lanes in one long vector (GATHER_U64: PoCL then gathers whole vectors instead of inserting 2 LN
+ * lanes one by one), split into their even and odd 32-bit words (two permutes, where narrowing
+ * each half was six instructions) */
 #if LN == 16
 #define SPLIT_NODES(pe, pk, g) { const int16 lo_ = as_int16(g.lo), hi_ = as_int16(g.hi); \
     pe = (int16)(lo_.even, hi_.even); pk = (int16)(lo_.odd, hi_.odd); }
@@ -120,8 +113,7 @@ static inline int or_unit(int16 v)
     G2_(pe, pk, p, at, b) G2_(pe, pk, p, at, c) G2_(pe, pk, p, at, d) G2_(pe, pk, p, at, e) G2_(pe, pk, p, at, f)
 #define GATHER_NODES(pe, pk, p, at) CAT(G2_, LN)(pe, pk, p, at)
 #else
-#define GATHER_NODES(pe, pk, p, at) { const ulongL g_ = (ulongL)(CAT(GL_, LN)(((const __global ulong *)(p)), at)); \
-    SPLIT_NODES(pe, pk, g_) }
+#define GATHER_NODES(pe, pk, p, at) { const CAT(ulong, LN) g_ = GATHER_U64(LN, p, at); SPLIT_NODES(pe, pk, g_) }
 #endif
 #endif
 /* bit r set where lane r of an int16 mask is true */

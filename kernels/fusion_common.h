@@ -131,16 +131,20 @@ static inline int or_lanes(intV v)
 #define LERP_NODES(le, lk, p, at, f) { intV e_, k_; const intV f_ = (f); CAT(G2_, VEC)(e_, k_, p, at) \
     le = NODE_LERP(e_, f_); lk = NODE_LERP(k_, f_); }
 #else
-#define GQ_(p, at, l) ((const __global ulong *)(p))[at.s##l]
+/* n lanes' 8-byte words of p at the indices of the vector at, as one ulong vector (fusion.cl's
+ * gather takes it for its LN lanes) */
+#define GL_(p, at, l) p[at.s##l]
+#define GL_4(p, at) GL_(p, at, 0), GL_(p, at, 1), GL_(p, at, 2), GL_(p, at, 3)
+#define GL_8(p, at) GL_4(p, at), GL_(p, at, 4), GL_(p, at, 5), GL_(p, at, 6), GL_(p, at, 7)
+#define GL_16(p, at) GL_8(p, at), GL_(p, at, 8), GL_(p, at, 9), GL_(p, at, a), GL_(p, at, b), GL_(p, at, c), \
+    GL_(p, at, d), GL_(p, at, e), GL_(p, at, f)
+#define GATHER_U64(n, p, at) (CAT(ulong, n))(CAT(GL_, n)(((const __global ulong *)(p)), at))
 #if VEC == 4
-#define GQ_V(p, at) (ulong4)(GQ_(p, at, 0), GQ_(p, at, 1), GQ_(p, at, 2), GQ_(p, at, 3))
 #define TWICE(f) ((int8)(f.s0, f.s0, f.s1, f.s1, f.s2, f.s2, f.s3, f.s3))
 #else
-#define GQ_V(p, at) (ulong8)(GQ_(p, at, 0), GQ_(p, at, 1), GQ_(p, at, 2), GQ_(p, at, 3), GQ_(p, at, 4), \
-    GQ_(p, at, 5), GQ_(p, at, 6), GQ_(p, at, 7))
 #define TWICE(f) ((int16)(f.s0, f.s0, f.s1, f.s1, f.s2, f.s2, f.s3, f.s3, f.s4, f.s4, f.s5, f.s5, f.s6, f.s6, f.s7, f.s7))
 #endif
-#define LERP_NODES(le, lk, p, at, f) { const intV f_ = (f); const CAT(int, VEC2) w_ = CAT(as_int, VEC2)(GQ_V(p, at)); \
+#define LERP_NODES(le, lk, p, at, f) { const intV f_ = (f); const CAT(int, VEC2) w_ = CAT(as_int, VEC2)(GATHER_U64(VEC, p, at)); \
     const CAT(int, VEC2) l_ = NODE_LERP(w_, TWICE(f_)); le = l_.even; lk = l_.odd; }
 #endif
 #if !defined(KNOWLEDGE_SCALE)

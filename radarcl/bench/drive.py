@@ -75,19 +75,14 @@ def drive_track(data):
 def frame_poses(track, start_ns, period_ns, scan, n_az):
     """(n_az, 4, 4) per-azimuth poses of ``scan`` replayed at ``start_ns``: the drive's pose at
     each azimuth's time (the scan's own azimuth times, moved to start there, within one period),
-    turned by the azimuth's measured angle less the lattice's (as ``scan_poses.beam_poses``)."""
+    turned by the azimuth's measured angle less the lattice's (``scan_poses.azimuth_turns``)."""
     from radarcl.io import scan_poses
 
     t = scan_poses.azimuth_times(scan)
     frac = (t - t.min()) / max(float(np.ptp(t)), 1.0) * (n_az - 1) / n_az
     hi = track.times_ns[-1]
     moved = track.at(np.minimum(start_ns + np.rint(frac * period_ns).astype(np.int64), hi))
-    turn = scan.angles_rad - np.arange(n_az) * (2 * math.pi / n_az)
-    c, s = np.cos(turn), np.sin(turn)
-    rot = np.zeros((n_az, 4, 4))
-    rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
-    rot[:, 2, 2] = rot[:, 3, 3] = 1.0
-    return moved @ rot
+    return moved @ scan_poses.azimuth_turns(scan.angles_rad, n_az)
 
 
 def _rss_bytes():

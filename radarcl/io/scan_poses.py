@@ -23,6 +23,22 @@ def azimuth_times(scan):
     return np.polyval(np.polyfit(order, ts - ts.min(), 1), order) + ts.min()
 
 
+def azimuth_turns(angles_rad, n_az, azimuth_sign=1.0):
+    """(n_az, 4, 4) rotations about z by each azimuth's measured angle (times ``azimuth_sign``)
+    less the lattice's i x 2 pi / n_az: what folds a scan's own angles into one lattice."""
+    turn = azimuth_sign * angles_rad - np.arange(n_az) * (2 * math.pi / n_az)
+    c, s = np.cos(turn), np.sin(turn)
+    rot = np.zeros((n_az, 4, 4))
+    rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
+    rot[:, 2, 2] = rot[:, 3, 3] = 1.0
+    return rot
+
+
+def _azimuth_ns(scan):
+    """Each azimuth's time as the trajectory is read at it: ``azimuth_times`` to whole ns."""
+    return np.rint(azimuth_times(scan)).astype(np.int64)
+
+
 def beam_poses(scans, poses, n_az, azimuth_sign=1.0, motion=True):
     """(n_scans, n_az, 4, 4) per-azimuth poses for a spinning lattice of ``n_az`` azimuths: the
     trajectory at each azimuth's time (motion compensation: the radar moves during its turn),
@@ -61,7 +77,7 @@ class BeamPoses:
         elif fixed is None:
             # every azimuth's time checked now: a trajectory that does not cover the scans is
             # refused when they are opened, not midway through a fusion
-            ends = [(t.min(), t.max()) for t in (np.rint(azimuth_times(s)).astype(np.int64) for s in scans)]
+            ends = [(t.min(), t.max()) for t in map(_azimuth_ns, scans)]
             poses.covers(np.array(ends, np.int64).reshape(-1))
         self.scans, self.n_az, self.azimuth_sign = list(scans), int(n_az), float(azimuth_sign)
         self._fixed, self._track = fixed, poses
@@ -85,13 +101,8 @@ class BeamPoses:
         if self._fixed is not None:
             moved = np.broadcast_to(self._fixed[k], (self.n_az, 4, 4))
         else:
-            moved = self._track.at(np.rint(azimuth_times(scan)).astype(np.int64))
-        turn = self.azimuth_sign * scan.angles_rad - np.arange(self.n_az) * (2 * math.pi / self.n_az)
-        c, s = np.cos(turn), np.sin(turn)
-        rot = np.zeros((self.n_az, 4, 4))
-        rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
-        rot[:, 2, 2] = rot[:, 3, 3] = 1.0
-        return moved @ rot
+            moved = self._track.at(_azimuth_ns(scan))
+        return moved @ azimuth_turns(scan.angles_rad, self.n_az, self.azimuth_sign)
 
     def __iter__(self):
         return (self[k] for k in range(len(self)))
@@ -101,7 +112,7 @@ class BeamPoses:
         (the azimuth's turn leaves the translation as it is), without the other azimuths' poses."""
         if self._fixed is not None:
             return np.array([f[:3, 3] for f in self._fixed], np.float64).reshape(-1, 3)
-        times = [np.rint(azimuth_times(s)).astype(np.int64)[azimuth] for s in self.scans]
+        times = [_azimuth_ns(s)[azimuth] for s in self.scans]
         return self._track.at(times)[:, :3, 3].copy() if times else np.zeros((0, 3))
 
     def __array__(self, dtype=None, copy=None):
