@@ -38,22 +38,25 @@ static inline float log10_nb(float x)
     return (float)e * 0.30102999566f + ln_m * 0.43429448190f;
 }
 
-/* log10_nb on eight values at once, lane for lane the same floats (the same operations, the
- * branches as selects) */
-static inline float8 log10_nb8(float8 x)
-{
-    const int8 sub = x < 1.17549435e-38f;                       /* FLT_MIN; also 0 and below */
-    const float8 xs = sub ? x * 18446744073709551616.0f : x;     /* 2^64 */
-    const int8 i = as_int8(xs);
-    int8 e = ((i >> 23) & 255) - 127 + (sub & -64);
-    float8 m = as_float8((i & 0x7FFFFF) | 0x3F800000);
-    const int8 big = m > 1.41421356f;
-    m = big ? m * 0.5f : m;
-    e -= big;                                                    /* big is -1 */
-    const float8 t = (m - 1.0f) / (m + 1.0f), t2 = t * t;
-    const float8 ln_m = 2.0f * t * (1.0f + t2 * (1.0f / 3.0f + t2 * (0.2f + t2 * (1.0f / 7.0f + t2 * (1.0f / 9.0f)))));
-    const float8 y = convert_float8(e) * 0.30102999566f + ln_m * 0.43429448190f;
-    return x == 0.0f ? (float8)(-INFINITY) : (x < 0.0f ? (float8)(NAN) : y);
+/* log10_nb on N = 8 or 16 values at once (log10_nb8, log10_nb16), lane for lane the same floats
+ * (the same operations, the branches as selects) */
+#define LOG10_NB_LANES(N) \
+static inline float##N log10_nb##N(float##N x) \
+{ \
+    const int##N sub = x < 1.17549435e-38f;                     /* FLT_MIN; also 0 and below */ \
+    const float##N xs = sub ? x * 18446744073709551616.0f : x;   /* 2^64 */ \
+    const int##N i = as_int##N(xs); \
+    int##N e = ((i >> 23) & 255) - 127 + (sub & -64); \
+    float##N m = as_float##N((i & 0x7FFFFF) | 0x3F800000); \
+    const int##N big = m > 1.41421356f; \
+    m = big ? m * 0.5f : m; \
+    e -= big;                                                  /* big is -1 */ \
+    const float##N t = (m - 1.0f) / (m + 1.0f), t2 = t * t; \
+    const float##N ln_m = 2.0f * t * (1.0f + t2 * (1.0f / 3.0f + t2 * (0.2f + t2 * (1.0f / 7.0f + t2 * (1.0f / 9.0f))))); \
+    const float##N y = convert_float##N(e) * 0.30102999566f + ln_m * 0.43429448190f; \
+    return x == 0.0f ? (float##N)(-INFINITY) : (x < 0.0f ? (float##N)(NAN) : y); \
 }
+LOG10_NB_LANES(8)
+LOG10_NB_LANES(16)
 
 #endif

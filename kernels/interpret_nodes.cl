@@ -64,7 +64,7 @@
 #define GATHER(p, i) ((floatV)(p[(i).s0], p[(i).s1], p[(i).s2], p[(i).s3], p[(i).s4], p[(i).s5], p[(i).s6], p[(i).s7]))
 #define EACH_LANE(M) M(0) M(1) M(2) M(3) M(4) M(5) M(6) M(7)
 #define TABLE_PAIRS(p, i, at_i, at_next) { const float16 f = PAIRS8(p, i); at_i = f.even; at_next = f.odd; }
-/* log10_nb of each lane: the header's eight lanes at a time */
+/* log10_nb of each lane: the header's vector of as many lanes */
 #define LOG10_NB(x) log10_nb8(x)
 #elif LANES == 16
 #define LANE_IDS (intV)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15)
@@ -73,7 +73,7 @@
 #define EACH_LANE(M) M(0) M(1) M(2) M(3) M(4) M(5) M(6) M(7) M(8) M(9) M(a) M(b) M(c) M(d) M(e) M(f)
 #define TABLE_PAIRS(p, i, at_i, at_next) { const float16 f0 = PAIRS8(p, (i).lo), f1 = PAIRS8(p, (i).hi); \
                                      at_i = (floatV)(f0.even, f1.even); at_next = (floatV)(f0.odd, f1.odd); }
-#define LOG10_NB(x) ((floatV)(log10_nb8((x).lo), log10_nb8((x).hi)))
+#define LOG10_NB(x) log10_nb16(x)
 #else
 #error "LANES (8 or 16) comes from radarcl/stages/interpret_nodes.py"
 #endif

@@ -183,20 +183,25 @@ def test_the_occlusion_keys_are_checked():
 LOG10_PROBE = """
 #include "interpret_common.h"
 
-/* test only: log10_nb and log10_nb8 of the same floats, for a bit-for-bit comparison */
-__kernel void probe_log10(const __global float *x, __global float *scalar, __global float *vector)
+/* test only: log10_nb and log10_nb8 / log10_nb16 of the same floats, for a bit-for-bit comparison */
+__kernel void probe_log10(const __global float *x, __global float *scalar, __global float *vector8,
+                          __global float *vector16)
 {
     const int g = get_global_id(0);
-    for (int l = 0; l < 8; ++l)
-        scalar[8 * g + l] = log10_nb(x[8 * g + l]);
-    vstore8(log10_nb8(vload8(g, x)), g, vector);
+    for (int l = 0; l < 16; ++l)
+        scalar[16 * g + l] = log10_nb(x[16 * g + l]);
+    vstore8(log10_nb8(vload8(2 * g, x)), 2 * g, vector8);
+    vstore8(log10_nb8(vload8(2 * g + 1, x)), 2 * g + 1, vector8);
+    vstore16(log10_nb16(vload16(g, x)), g, vector16);
 }
 """
 
 
-def test_log10_nb8_is_log10_nb_lane_for_lane(runtime):
+@pytest.mark.parametrize("lanes", [8, 16])
+def test_log10_nb8_is_log10_nb_lane_for_lane(runtime, lanes):
     """docs/guide/pipeline.md ("Eq. 12"): a chunk of eight bins takes its logs as one vector, ``log10_nb8``, lane
-    for lane the same floats as the scalar ``log10_nb`` the other bins take. Both on the device,
+    for lane the same floats as the scalar ``log10_nb`` the other bins take; the nodes kernel's
+    sixteen bins take theirs as ``log10_nb16``, the same floats again. Both on the device,
     compared bit for bit: every exponent of the float range, subnormals, 0, the mantissa around
     sqrt(2) where the reduction switches, random bit patterns, in every lane; NaN for negatives in
     both (a profile's NaN and Inf never reach the logs: the beam is flagged first, yet even their
@@ -216,15 +221,15 @@ def test_log10_nb8_is_log10_nb_lane_for_lane(runtime):
     near = (np.float32(1.41421356) * (1 + rng.uniform(-1e-6, 1e-6, 2000))).astype(np.float32)
     x = np.concatenate([special, powers, powers * np.float32(1.5), bits, near])
     x = np.concatenate([x, np.roll(x, 3)])                       # every value in another lane too
-    x = np.concatenate([x, np.zeros(-len(x) % 8, np.float32)])
+    x = np.concatenate([x, np.zeros(-len(x) % 16, np.float32)])
     defines = dict(COMMON_DEFINES, N_BINS=64, MAX_PULSES=4, OCCLUSION=0)
     program = cl.Program(runtime.context, LOG10_PROBE).build(
         options=[f"-I{kernels_dir()}"] + [_define(k, v) for k, v in sorted(defines.items())])
     q = runtime.queue
     xd = cla.to_device(q, x)
-    scalar, vector = cla.empty(q, x.shape, np.float32), cla.empty(q, x.shape, np.float32)
-    program.probe_log10(q, (len(x) // 8,), None, xd.data, scalar.data, vector.data)
-    s, v = scalar.get(), vector.get()
+    scalar, vector8, vector16 = (cla.empty(q, x.shape, np.float32) for _ in range(3))
+    program.probe_log10(q, (len(x) // 16,), None, xd.data, scalar.data, vector8.data, vector16.data)
+    s, v = scalar.get(), (vector8 if lanes == 8 else vector16).get()
     both_nan = np.isnan(s) & np.isnan(v)
     assert np.array_equal(np.isnan(s), np.isnan(v)) and np.array_equal(both_nan, x < 0)   # -1.0, in two lanes
     assert np.array_equal(s.view(np.uint32)[~both_nan], v.view(np.uint32)[~both_nan])      # NaN and Inf in too
