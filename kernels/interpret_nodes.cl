@@ -59,12 +59,12 @@
  * load a lane (TABLE_PAIRS: split into the lanes' p[i] and p[i + 1]) */
 #define PAIRS8(p, i) ((float16)(vload2(0, p + (i).s0), vload2(0, p + (i).s1), vload2(0, p + (i).s2), vload2(0, p + (i).s3), \
                                 vload2(0, p + (i).s4), vload2(0, p + (i).s5), vload2(0, p + (i).s6), vload2(0, p + (i).s7)))
+/* LOG10_NB: log10_nb of each lane, as the header's log10_nb8 / log10_nb16, one vector of LANES */
 #if LANES == 8
 #define LANE_IDS (intV)(0, 1, 2, 3, 4, 5, 6, 7)
 #define GATHER(p, i) ((floatV)(p[(i).s0], p[(i).s1], p[(i).s2], p[(i).s3], p[(i).s4], p[(i).s5], p[(i).s6], p[(i).s7]))
 #define EACH_LANE(M) M(0) M(1) M(2) M(3) M(4) M(5) M(6) M(7)
 #define TABLE_PAIRS(p, i, at_i, at_next) { const float16 f = PAIRS8(p, i); at_i = f.even; at_next = f.odd; }
-/* log10_nb of each lane: the header's vector of as many lanes */
 #define LOG10_NB(x) log10_nb8(x)
 #elif LANES == 16
 #define LANE_IDS (intV)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15)

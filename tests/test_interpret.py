@@ -198,7 +198,7 @@ __kernel void probe_log10(const __global float *x, __global float *scalar, __glo
 
 
 @pytest.mark.parametrize("lanes", [8, 16])
-def test_log10_nb8_is_log10_nb_lane_for_lane(runtime, lanes):
+def test_log10_nb_vectors_are_log10_nb_lane_for_lane(runtime, lanes):
     """docs/guide/pipeline.md ("Eq. 12"): a chunk of eight bins takes its logs as one vector, ``log10_nb8``, lane
     for lane the same floats as the scalar ``log10_nb`` the other bins take; the nodes kernel's
     sixteen bins take theirs as ``log10_nb16``, the same floats again. Both on the device,

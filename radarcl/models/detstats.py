@@ -66,10 +66,9 @@ class DetStats(EvidenceModel):
                           ln_floors=cla.zeros(queue, (n_beams,), np.float32))
             # the beam's walk leaves each bin's blocking; the interpreter's nodes kernel makes the
             # nodes of the window's bins only: the others are 0 from here on. Zeroed by the
-            # driver's fill (cla.zeros): Array.fill(0) launches an elementwise kernel, which on
+            # driver's fill (cla.zeros_like): Array.fill(0) launches an elementwise kernel, which on
             # PoCL takes many times as long over a spinning radar's tens of MB of nodes
-            evidence = interpreter.arrays["evidence"]
-            interpreter.arrays["evidence"] = cla.zeros(queue, evidence.shape, evidence.dtype)
+            interpreter.arrays["evidence"] = cla.zeros_like(interpreter.arrays["evidence"])
             return tables
         first, last, n_bins = interpreter.first_bin, interpreter.last_bin, interpreter.n_bins
         unblocked = np.zeros((n_bins, N_CLASSES, NODES), np.int64), np.zeros((n_bins, N_CLASSES, NODES), np.int64)

@@ -118,8 +118,9 @@ class Interpreter(Stage):
                         Port("pulses", (*self.batch, self.config.max_pulses, 4), i32, "pulses"),
                         Port("n_pulses", self.batch, i32, "pulse counts"),
                         Port("flags_out", self.batch, u8, "flags")])
-        self._no_flags = self.arrays["flags_in"].copy()     # all zero: "no flags from upstream"
-        self._no_flags.fill(0)
+        import pyopencl.array as cla
+
+        self._no_flags = cla.zeros_like(self.arrays["flags_in"])     # "no flags from upstream"
         self._tables = self.model.device_tables(runtime.queue, self)
 
     @property
