@@ -90,8 +90,10 @@ static inline floatV grid_position(floatV x, float x0, float scale, int n)
     return f > 0.0f ? (f < (float)(n - 1) ? f : (floatV)(n - 1)) : (floatV)0.0f;
 }
 
-/* the table's bilinear read at rows iu, iu + 1 (offsets i0 = iu * SNR_NV) and fraction du, column ln v */
-static inline floatV table_at(const __global float *table, intV i0, floatV du, floatV lnv)
+/* the table's bilinear read at rows iu, iu + 1 (offsets i0 = iu * SNR_NV) and fraction du, column ln v.
+ * Inlined by force: PoCL's LLVM called it out of line (it is read twice a node), spilling the
+ * caller's vector registers around each call (docs/measured-figures.md) */
+static inline __attribute__((always_inline)) floatV table_at(const __global float *table, intV i0, floatV du, floatV lnv)
 {
     const floatV fv = grid_position(lnv, SNR_V0, SNR_V_SCALE, SNR_NV);
     const intV t = convert_intV(fv);                   /* fv >= 0: truncation is floor */
