@@ -156,8 +156,11 @@ static inline void write_graded(__global int2 *out, intV write, const __global f
     const intV behind = (gap > 0.0f ? (intV)-1 : (intV)0) & (blocked > 0.0f);
     const int whole = j0 + LANES <= N_BINS;
     for (int c = 0; c < CLASSES; ++c) {
-        intV e[NODES], d[NODES];
+        /* each segment's pair words made as soon as its second node is: the five nodes' e and d
+         * vectors held to the end spilled registers */
+        intV pe[4], pd[4], e_last = (intV)0, d_last = (intV)0;
         for (int k = 0; k < NODES; ++k) {
+            intV ek, dk;
             const int node = (c * NODES + k) * N_BINS;
             const floatV opp = whole ? vloadV(0, opportunity + node + j0) : GATHER(opportunity, node + jt);
             /* knowledge is at most opp (tau, w <= 1): a node it rounds to 0 for is a look that is
@@ -165,34 +168,35 @@ static inline void write_graded(__global int2 *out, intV write, const __global f
              * terrain class), nothing to compute */
             const intV none = opp * (float)KNOWLEDGE_SCALE <= 0.5f;
             if (all_lanes(none)) {
-                e[k] = d[k] = (intV)0;
-                continue;
+                ek = dk = (intV)0;
+            } else {
+                const floatV ln_s = whole ? vloadV(0, ln_snr + node + j0) : GATHER(ln_snr, node + jt);
+                const floatV cap = whole ? vloadV(0, snr_cap + node + j0) : GATHER(snr_cap, node + jt);
+                floatV v = table_at(table, i0, du, ln_s - blocked);
+                floatV known = tau;
+                /* only behind an echo, and only for a target there is (ln_s at the table's first
+                 * column, e.g. terrain without a ground plane: both reads are 0, the mixture too);
+                 * the lanes of a node without one compute it and drop it */
+                const intV mix = behind & (ln_s > SNR_V0);
+                if (any_lane(mix)) {
+                    const floatV lb = likelihood_ratio(v, q);
+                    const floatV l0 = likelihood_ratio(table_at(table, i0, du, ln_s), q);
+                    const floatV lm = (1.0f - gap) * lb + gap * l0;
+                    const floatV w = gap * l0 / lm;       /* the gap's posterior chance */
+                    v = mix ? LOG10_NB(lm / (1.0f - q + q * lm)) * LN10 : v;
+                    known = (mix & (w > 0.5f)) ? (1.0f - w) * tau + w : tau;   /* see the oracle */
+                }
+                const floatV most = known * cap;    /* no more than a detection would say, either way */
+                v = v < most ? (v > -most ? v : -most) : most;
+                dk = none ? (intV)0 : as_intV(known * opp * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
+                ek = dk != 0 ? fixed_nb(v, LOGODDS_SCALE) : (intV)0;   /* no evidence from a look that is not one */
             }
-            const floatV ln_s = whole ? vloadV(0, ln_snr + node + j0) : GATHER(ln_snr, node + jt);
-            const floatV cap = whole ? vloadV(0, snr_cap + node + j0) : GATHER(snr_cap, node + jt);
-            floatV v = table_at(table, i0, du, ln_s - blocked);
-            floatV known = tau;
-            /* only behind an echo, and only for a target there is (ln_s at the table's first
-             * column, e.g. terrain without a ground plane: both reads are 0, the mixture too);
-             * the lanes of a node without one compute it and drop it */
-            const intV mix = behind & (ln_s > SNR_V0);
-            if (any_lane(mix)) {
-                const floatV lb = likelihood_ratio(v, q);
-                const floatV l0 = likelihood_ratio(table_at(table, i0, du, ln_s), q);
-                const floatV lm = (1.0f - gap) * lb + gap * l0;
-                const floatV w = gap * l0 / lm;       /* the gap's posterior chance */
-                v = mix ? LOG10_NB(lm / (1.0f - q + q * lm)) * LN10 : v;
-                known = (mix & (w > 0.5f)) ? (1.0f - w) * tau + w : tau;   /* see the oracle */
+            if (k > 0) {                                 /* segment k - 1: nodes k - 1 and k */
+                pe[k - 1] = (e_last & 0xFFFF) | (ek << 16);
+                pd[k - 1] = (d_last & 0xFFFF) | (dk << 16);
             }
-            const floatV most = known * cap;    /* no more than a detection would say, either way */
-            v = v < most ? (v > -most ? v : -most) : most;
-            d[k] = none ? (intV)0 : as_intV(known * opp * (float)KNOWLEDGE_SCALE + 12582912.0f) - 0x4B400000;
-            e[k] = d[k] != 0 ? fixed_nb(v, LOGODDS_SCALE) : (intV)0;   /* no evidence from a look that is not one */
-        }
-        intV pe[4], pd[4];
-        for (int k = 0; k < 4; ++k) {
-            pe[k] = (e[k] & 0xFFFF) | (e[k + 1] << 16);
-            pd[k] = (d[k] & 0xFFFF) | (d[k + 1] << 16);
+            e_last = ek;
+            d_last = dk;
         }
         /* bin l's four pairs of this class are eight ints in a row: lane l of the eight vectors */
 #define PAIRS(l) (int8)(pe[0].s##l, pd[0].s##l, pe[1].s##l, pd[1].s##l, pe[2].s##l, pd[2].s##l, pe[3].s##l, pd[3].s##l)
