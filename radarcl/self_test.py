@@ -12,7 +12,7 @@ runtime's small probe kernel only.
 
 import numpy as np
 
-from radarcl import models, node_pairs, oracle, sensor_model
+from radarcl import models, node_pairs, oracle
 from radarcl.cl.devices import register_device_check
 from radarcl.config import mapconfig, sensors
 from radarcl.errors import DeviceCapabilityError
