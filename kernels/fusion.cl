@@ -24,7 +24,9 @@
  *     AZ_WRAP (the azimuths span a full turn, windows may run past either end),
  *     RECORD (1 or 2: instead of fusing, record the still table that fusion_cached.cl streams
  *     (its layout: fusion_common.h); 1 counts each voxel's beams into counts[], 2 writes each
- *     voxel's first entry into first[] and the rest into extras[] from row_start[]);
+ *     voxel's first entry into first[] and the rest into extras[] from row_start[], and with DETSTATS
+ *     sets in node_use[] the classes whose node pairs the entries read: the node kernel computes
+ *     those alone for the table's frames);
  *     DETSTATS (the detection-statistics model: each voxel interpolates its bin's node pairs at
  *     its quantised rho2 and class, fusion_common.h, and writes the knowledge and looks channels
  *     beside the evidence). PACKED_LOOKS (DETSTATS, set by the host when a frame's knowledge of one voxel,
@@ -164,6 +166,8 @@ __kernel void fusion(
     const float terrain_dz,           // DETSTATS: voxels with z - beam origin z below this are terrain [m]
     __global int *knowledge,          // DETSTATS: (slots, 8, 8, 8) detection opportunity [KNOWLEDGE_SCALE units]
     __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity [count]
+    __global uint *node_use,          // RECORD 2 with DETSTATS: (n_beams, N_BINS), or'd into: bit c where a voxel
+                                      //   reads class c's node pairs of that beam's bin (the node kernel's work)
     __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
 {
     const int id = get_global_id(0);
@@ -319,10 +323,19 @@ __kernel void fusion(
                 const floatL wt = (floatL)1.0f;
   #endif
                 const size_t v0 = ((size_t)id * BLOCK_ROWS + r0) * VEC;  /* the unit's first voxel in the table */
+  #if defined(DETSTATS)
+                int used = -1;                                /* the last bin this unit marked used (lanes run along x) */
+  #endif
                 for (int lane = 0; lane < LN; ++lane) {
                     if (((const int *)&inside)[lane]) {
                         const int written = ((const int *)&acc[u])[lane];
                         const int2 entry = (int2)(b * N_BINS + ((const int *)&j)[lane], as_int(((const float *)&wt)[lane]));
+  #if defined(DETSTATS)
+                        if (entry.x != used) {                /* neighbours along x may share a bin: one atomic */
+                            atomic_or(node_use + entry.x, 1u << cls);
+                            used = entry.x;
+                        }
+  #endif
                         if (written == 0) {                   /* sign bit: more entries follow */
                             first[v0 + lane] = counts[v0 + lane] > 1 ? (int2)(entry.x, entry.y | (int)0x80000000) : entry;
                         } else {                              /* the row's extras: its (written)-th block, this lane */

@@ -30,6 +30,11 @@
  * builtins. Bins outside the window hold 0 from the evidence array's allocation (nothing writes
  * them but the zeroing of a flagged beam's and a chunk's outside bins).
  *
+ * Only what the frame's voxels read (selective, a still plan's node_use): a chunk computes and
+ * stores only the classes some voxel reads in one of its bins; the pairs of the others keep what
+ * an earlier frame left there, which no voxel of this plan reads. Nodes a voxel reads are
+ * the same floats either way.
+ *
  * -D constants (set by radarcl/stages/interpret_nodes.py):
  *   N_BINS      bins per profile
  *   NODES       node_pairs.NODES, the rho2 nodes per class
@@ -143,7 +148,7 @@ static inline intV fixed_nb(floatV v, float scale)
  * (2, NODES, N_BINS)) from the SNR table: u = ln x, ln tau = -blocked; behind nearer echoes
  * (blocked > 0) the mixture with a gap of chance gap (q: the table's); every look within its
  * known share of the node's cap, either way. Lanes not in `write` store nothing. */
-static inline void write_graded(__global int2 *out, intV write, const __global float *ln_snr,
+static inline void write_graded(__global int2 *out, intV write, int classes, const __global float *ln_snr,
                                 const __global float *opportunity, const __global float *snr_cap,
                                 const __global float *table, int j0, intV jt, floatV u, floatV blocked, floatV tau,
                                 float gap, float q)
@@ -156,6 +161,8 @@ static inline void write_graded(__global int2 *out, intV write, const __global f
     const intV behind = (gap > 0.0f ? (intV)-1 : (intV)0) & (blocked > 0.0f);
     const int whole = j0 + LANES <= N_BINS;
     for (int c = 0; c < CLASSES; ++c) {
+        if (!((classes >> c) & 1))                       /* no voxel reads this class's pairs here */
+            continue;
         /* each segment's pair words made as soon as its second node is: the five nodes' e and d
          * vectors held to the end spilled registers */
         intV pe[4], pd[4], e_last = (intV)0, d_last = (intV)0;
@@ -222,6 +229,8 @@ __kernel void interpret_nodes(
     const float snr_q,                  // the table's q (the evidence's bound is ln(1 / q))
     const int n_chunks,                 // chunks of LANES bins from bin first_bin & ~(LANES - 1) that meet the window
     const int n_beams,
+    const __global uint *node_use,      // (n_beams, N_BINS) bit c: some voxel reads class c's pairs of the bin
+    const int selective,                //   (a still plan's table, fusion.cl's RECORD 2); 0: every class everywhere
     __global int2 *evidence)            // (n_beams, N_BINS, NODE_WORDS) out: node pairs
 {
     const int id = get_global_id(0);
@@ -241,6 +250,20 @@ __kernel void interpret_nodes(
                 nd[l * NODE_WORDS + w] = (int2)(0);
     if (!valid || !any_lane(in_range))
         return;
+    int classes = (1 << CLASSES) - 1;
+    if (selective) {                    /* only the classes some voxel reads in the chunk's bins */
+        intV use;
+        if (j0 + LANES <= N_BINS)
+            use = as_intV(vloadV(0, node_use + row + j0));
+        else {
+#define USE_LANE(l) use.s##l = (int)node_use[row + jt.s##l];
+            EACH_LANE(USE_LANE)
+#undef USE_LANE
+        }
+        classes &= any_lane(use & in_range);
+        if (!classes)
+            return;
+    }
     const __global float *r = profiles + row, *st = state + 2 * row;
     floatV power, blocked, tau;
     if (j0 + LANES <= N_BINS) {
@@ -252,6 +275,6 @@ __kernel void interpret_nodes(
         blocked = GATHER(st, jt);
         tau = GATHER((st + N_BINS), jt);
     }
-    write_graded(nd, in_range, ln_snr, opportunity, snr_cap, snr_table, j0, jt,
+    write_graded(nd, in_range, classes, ln_snr, opportunity, snr_cap, snr_table, j0, jt,
                  LOG10_NB(power) * LN10 - ln_floors[beam], blocked, tau, blocker_gap, snr_q);
 }

@@ -50,13 +50,15 @@ class Detection:
         self.cfar = Cfar(runtime, batch, n_bins, cfar_config, **cfar_options)
         self.interpreter = Interpreter(runtime, batch, n_bins, bin_spacing_m, interpret_config, bin_model=bin_model)
 
-    def enqueue(self, profiles=None, flags=None, wait_for=None):
+    def enqueue(self, profiles=None, flags=None, wait_for=None, node_use=None):
         """Launch both stages on a device array of power profiles (default: the CFAR's own, as
-        ``upload`` filled it) and optional per-beam flags; returns the last event."""
+        ``upload`` filled it) and optional per-beam flags; ``node_use``: the node pairs to
+        make (``Interpreter.enqueue``). Returns the last event."""
         c = self.cfar
         done = c.enqueue(profiles, wait_for=wait_for)
         profiles = c.device("profiles", profiles)
-        return self.interpreter.enqueue(profiles, c.arrays["noise"], c.arrays["mask"], flags, wait_for=[done])
+        return self.interpreter.enqueue(profiles, c.arrays["noise"], c.arrays["mask"], flags, wait_for=[done],
+                                        node_use=node_use)
 
     def __call__(self, profiles, flags=None):
         """One frame of power profiles (*batch, n_bins) float32 (host) -> DetectionResult."""
@@ -205,7 +207,10 @@ class Mapping:
                 events += self.detection.interpreter.upload(flags_in=flags)
                 flags_array = self.detection.interpreter.arrays["flags_in"]
             profiles, done = None, events
-        done = self.detection.enqueue(profiles, flags_array, wait_for=done if isinstance(done, list) else [done])
+        # a still plan's table says which node pairs its voxels read: the interpreter makes those alone
+        node_use = None if plan.table is None else plan.table.node_use
+        done = self.detection.enqueue(profiles, flags_array, wait_for=done if isinstance(done, list) else [done],
+                                      node_use=node_use)
         self.fusion.enqueue(self.detection.interpreter.arrays["evidence"], plan, wait_for=[done])
         self.frames += 1
         return plan

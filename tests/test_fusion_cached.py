@@ -84,6 +84,35 @@ def test_a_table_of_one_class_masks_the_terrain_entries(runtime, case):
             assert all(np.array_equal(x, y) for x, y in zip(a, b))
 
 
+
+@pytest.mark.parametrize("case", STILL_CASES.values(), ids=STILL_CASES.keys())
+def test_the_table_marks_the_node_pairs_its_entries_read(runtime, case):
+    """The detection-statistics table's ``node_use``: bit c of (beam, bin) set exactly where one of
+    its entries (first or further) reads class c's node pairs there (the interpreter makes those
+    alone), compared as integers with the set the entries make on the host; eq. 12's table has none."""
+    lattice, model, per_beam, vec, rows = case
+    poses = POSE if not per_beam else np.stack(
+        [pose_from_xyz_rpy(0.5 * f, 0.1, 0.0, yaw=0.05 * f) for f in np.linspace(0, 1, lattice.n_beams)])
+    frame = one_class_nodes(lattice, 16)[2]
+    terrain_dz = 0.0 if lattice.wraps else -0.8       # a height that splits the voxels the beams reach
+    f = Fusion(runtime, EvidenceGrid(runtime, SMALL, knowledge=True), lattice, model, N_BINS, SPACING, FIRST, LAST,
+               per_beam_poses=per_beam, still=True, vector_width=vec, rows=rows, detstats=True, terrain_dz=terrain_dz)
+    f(frame, poses)
+    table = f(frame, poses).table
+    entries = np.concatenate([table.first.get(), table.extras.get()])
+    entries = entries[entries[:, 1] != 0]                   # (0, 0): no entry
+    want = np.zeros(lattice.n_beams * N_BINS, np.uint32)
+    for c in (0, 1):
+        want[entries[(entries[:, 1] >> 16 & 1) == c, 0]] |= 1 << c
+    got = table.node_use.get().ravel()
+    assert np.array_equal(got, want)
+    assert (got & 1).any() and (got & 2).any() and (got == 0).any()
+    eq12 = Fusion(runtime, EvidenceGrid(runtime, SMALL), lattice, model, N_BINS, SPACING, FIRST, LAST,
+                  per_beam_poses=per_beam, still=True, vector_width=vec, rows=rows)
+    eq12(evidence(lattice, seed=3), poses)
+    assert eq12(evidence(lattice, seed=3), poses).table.node_use is None
+
+
 def test_the_table_is_recorded_when_a_pose_comes_back_and_only_if_it_fits(runtime, monkeypatch):
     lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
     ev = evidence(lattice, seed=4)

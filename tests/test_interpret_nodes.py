@@ -13,7 +13,7 @@ from tolerances import EVIDENCE_UNITS_TOL
 from radarcl import logodds, node_pairs, oracle
 from radarcl import sensor_model as sm
 from radarcl.config.stage_config import CfarConfig, InterpretConfig
-from radarcl.errors import ConfigError
+from radarcl.errors import ConfigError, ShapeError
 from radarcl.pipeline import Detection
 from radarcl.stages.interpret import Interpreter
 from radarcl.stages.interpret_nodes import LANE_CHOICES, InterpretNodes, classes_needed
@@ -89,6 +89,56 @@ def test_a_scene_without_terrain_computes_the_upright_class_only(runtime):
     (be, bd), _, plan = run(runtime, x, both)
     assert plan.classes == 2 and (bd[..., 1, :] > 0).any()
     assert np.array_equal(be[..., 0, :], ge[..., 0, :]) and np.array_equal(bd[..., 0, :], gd[..., 0, :])
+
+
+
+@pytest.mark.parametrize("lanes", LANE_CHOICES)
+def test_node_use_makes_only_the_classes_a_chunk_reads(runtime, lanes):
+    """With ``node_use`` (a still plan's table: bit c where some voxel reads class c's pairs of a
+    bin) a chunk of ``lanes`` bins makes the classes one of its bins has, the same integers as
+    making every pair, and leaves the others' pairs as they were (a sentinel here): the work
+    saved is the chunks and classes no voxel reads."""
+    import pyopencl.array as cla
+
+    x = scene(seed=9)
+    det = Detection(runtime, x.shape[:-1], x.shape[-1], SPACING, CFAR, CONFIG, bin_model=detstats_model())
+    det.interpreter = it = Interpreter(runtime, x.shape[:-1], x.shape[-1], SPACING, CONFIG,
+                                       bin_model=detstats_model(), nodes_options=dict(lanes=lanes))
+    every = det(x).interpret.evidence                       # (beams, bins, classes x segments, 2)
+    n_beams, n_bins = x.shape
+    use = np.zeros((n_beams, n_bins), np.uint32)
+    rng = np.random.default_rng(lanes)
+    use[rng.random(use.shape) < 0.02] |= 1                  # sparse: most chunks read no upright pair
+    use[:, 150:170] |= 2                                    # a run of terrain bins in every beam
+    sentinel = np.int32(0x5A5A5A5A)
+    q = runtime.queue
+    it.arrays["evidence"].set(np.full(it.arrays["evidence"].shape, sentinel, np.int32), queue=q)
+    det.enqueue(node_use=cla.to_device(q, use)).wait()
+    got = it.arrays["evidence"].get(q)
+    assert it.classes == 2
+    pairs = lambda a: a.reshape(n_beams, n_bins, 2, -1)       # (beam, bin, class, the class's words)
+    g, w = pairs(got), pairs(every)
+    flags = it.arrays["flags_out"].get(q)
+    valid = (flags & oracle.NO_EVIDENCE_FLAGS) == 0
+    lo, first, last = it.first_bin & ~(lanes - 1), it.first_bin, it.last_bin
+    made = skipped = 0
+    for b in np.flatnonzero(valid):
+        for j0 in range(lo, last + 1, lanes):
+            window = np.arange(max(j0, first), min(j0 + lanes - 1, last, n_bins - 1) + 1)
+            chunk_use = np.bitwise_or.reduce(use[b, window])
+            for c in range(2):
+                if chunk_use >> c & 1:
+                    assert np.array_equal(g[b, window, c], w[b, window, c]), (b, j0, c)
+                    made += 1
+                else:
+                    assert (g[b, window, c] == sentinel).all(), (b, j0, c)
+                    skipped += 1
+    assert made > 50 and skipped > made                     # both kinds of chunk, most of them skipped
+    inside = slice(first, last + 1)
+    assert np.array_equal(g[~valid, inside], w[~valid, inside])     # a flagged beam's are zeroed either way
+    for bad in (use, cla.to_device(q, use.astype(np.int32)), cla.to_device(q, use[:, :-1].copy())):
+        with pytest.raises(ShapeError, match="node_use must be a device array of uint32"):
+            det.enqueue(node_use=bad)
 
 
 def test_a_terrain_class_below_half_a_knowledge_unit_is_not_computed():

@@ -121,3 +121,40 @@ def test_a_refused_frame_leaves_the_map_as_it_was(runtime):
     assert np.array_equal(m.snapshot(), before) and m.frames == 1
     with pytest.raises(ConfigError, match="either radar"):
         Mapping(runtime, grid, lattice, model)
+
+
+def test_a_still_radar_makes_only_the_node_pairs_its_voxels_read(runtime):
+    """The default model on a still radar: once its pose's table is recorded, the interpreter makes
+    only the node pairs the table reads (``StillTable.node_use``) and leaves the others. Frame
+    after frame at that pose, between frames at another pose (which make every pair), the map
+    (evidence, knowledge, looks) is the one a Mapping that never records a table makes, integer
+    for integer; the pairs read are that Mapping's, and some not read were left."""
+    from radarcl.config.presets import paper_config
+    from radarcl.pipeline import bin_model
+    from radarcl.sensor_model import terrain_dz
+
+    config = paper_config(SPEC.voxel_m)
+    lattice, model = BeamLattice.from_radar(PAPER_RADAR, tilt_deg=TILT), BeamModel.from_radar(PAPER_RADAR)
+    still, moved = np.eye(4), pose_from_xyz_rpy(0.4, 0.2, 0.0, yaw=0.03)
+    maps = []
+    for record in (True, False):
+        m = Mapping(runtime, EvidenceGrid(runtime, SPEC, knowledge=True), lattice, model, radar=PAPER_RADAR,
+                    n_fft=config.n_fft, dtype=np.float32, interpret_config=config.interpret_config(), bin_model=bin_model(config, SPEC.voxel_m),
+                    terrain_dz=terrain_dz(config.model_params()))
+        m.fusion.still = record
+        for seed in range(3):
+            samples = paper_like_samples(seed=seed, tilt_deg=TILT)
+            plan = m.fuse(samples, still)
+            m.fuse(samples, moved)
+            m.fuse(paper_like_samples(seed=seed + 5, tilt_deg=TILT), still)
+        assert (plan.table is not None) == record
+        maps.append(m)
+        table = plan.table if record else table
+    grids = [(m.grid.snapshot(), m.grid.knowledge_snapshot(), m.grid.knowledge_snapshot("looks")) for m in maps]
+    assert all(np.array_equal(a, b) for a, b in zip(*grids))
+    assert (grids[0][0] > 0).sum() > 1000 and (grids[0][2] > 3).any()
+    use = table.node_use.get().reshape(-1)
+    nodes = [m.detection.interpreter.arrays["evidence"].get().reshape(len(use), 2, -1) for m in maps]
+    read = np.stack([use & 1, use & 2], -1).astype(bool)     # (beam x bin, class)
+    assert np.array_equal(nodes[0][read], nodes[1][read])
+    assert read.any() and not read.all() and not np.array_equal(nodes[0], nodes[1])

@@ -90,10 +90,12 @@ class EvidenceModel:
         """The kernel's table arguments (placeholders where this model reads none)."""
         return placeholder_tables(queue)
 
-    def after_kernel(self, interpreter, event, profiles):
+    def after_kernel(self, interpreter, event, profiles, node_use=None):
         """Device work after kernels/interpret.cl (a model whose evidence the kernel does not make
         writes it here into ``interpreter.arrays["evidence"]``; ``profiles``: the frame on the
-        device, ``interpreter.kernels``: the program's kernels); returns the last event."""
+        device, ``interpreter.kernels``: the program's kernels; ``node_use``: which node pairs the
+        frame's voxels read, as ``Interpreter.enqueue``, passed only where a still plan of node
+        pairs gives it); returns the last event."""
         return event
 
     # -- the oracle ----------------------------------------------------------------------------------

@@ -82,12 +82,12 @@ class DetStats(EvidenceModel):
                       unblocked=cla.to_device(queue, pack_nodes(*(u[:, :kept] for u in unblocked))))
         return tables
 
-    def after_kernel(self, interpreter, event, profiles):
+    def after_kernel(self, interpreter, event, profiles, node_use=None):
         if interpreter.nodes is None:     # "detection" evidence: the beam's walk made the nodes
             return event
         t = interpreter._tables
         return interpreter.nodes.enqueue(profiles, interpreter.arrays["flags_out"], t["state"], t["ln_floors"],
-                                         interpreter.arrays["evidence"], wait_for=[event])
+                                         interpreter.arrays["evidence"], wait_for=[event], node_use=node_use)
 
     def oracle(self, profiles, noise, mask, config, bin_spacing_m, bin_model=None, flags=None):
         from radarcl import oracle

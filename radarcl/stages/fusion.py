@@ -220,8 +220,7 @@ class Fusion(Stage):
             n = self.lattice.n_beams
             plan = FramePlan(np.zeros((n, 3, 4), np.float32), np.zeros((1, 4), np.int32),
                              np.array([[0, -1, 0, -1]], np.int32), self, self.grid.generation)
-            self._launch(self._kernel, plan, self.arrays["evidence"], counts=self._no_table[0],
-                         row_start=self._no_table[1], first=self._no_table[2], extras=self._no_table[2])
+            self._launch(self._kernel, plan, self.arrays["evidence"])
             self.runtime.queue.finish()
             self._uploaded = self._plan_arrays = None
         return len(index)
@@ -354,9 +353,7 @@ class Fusion(Stage):
             return None
         if plan.table is not None and not gather:
             return fusion_cached.enqueue(self, plan, evidence, wait_for)
-        none = self._no_table
-        return self._launch(self._kernel, plan, evidence, wait_for=wait_for, counts=none[0], row_start=none[1],
-                            first=none[2], extras=none[2])
+        return self._launch(self._kernel, plan, evidence, wait_for=wait_for)
 
     def _inputs(self, evidence, c, cached=False):
         """The kernels' evidence arguments for pool chunk ``c``: eq. 12's updates, or the node
@@ -409,7 +406,10 @@ class Fusion(Stage):
         return len(plan.bricks) * self._subs
 
     def _launch(self, kernel, plan, evidence, wait_for=None, **record):
-        """One gather launch over ``plan`` (the fusion, or a RECORD pass with its buffers)."""
+        """One gather launch over ``plan`` (the fusion, or a RECORD pass with its buffers; those
+        it is not given get a placeholder)."""
+        none = self._no_table
+        record = {**dict(counts=none[0], row_start=none[1], first=none[2], extras=none[2], node_use=none[1]), **record}
         rt, m = self.runtime, self.model
         a_az, a_el = m.apertures
         nx, ny, nz = self.grid.spec.shape

@@ -36,11 +36,14 @@ class StillTable:
     extras: object           # pyopencl Array int32 (n_blocks * VEC, 2): the further entries, a block of VEC at a time
     n_rows: int
     n_entries: int
+    node_use: object = None  # detstats: pyopencl Array uint32 (n_beams, n_bins): bit c where an entry reads class c's
+                             #   node pairs of that bin (the interpreter's node kernel computes those alone)
 
     @property
     def nbytes(self):
         """Device memory the table takes."""
-        return sum(a.nbytes for a in (self.counts, self.row_start, self.first, self.extras))
+        return sum(a.nbytes for a in (self.counts, self.row_start, self.first, self.extras, self.node_use)
+                   if a is not None)
 
 
 def cached_kernel(runtime, defines):
@@ -93,16 +96,19 @@ def record(fusion, plan):
     # a row's further entries in blocks of VEC, one per further entry of its most-reached voxel
     blocks_per_row = np.maximum(host.max(axis=1).astype(np.int64) - 1, 0)
     n_blocks = int(blocks_per_row.sum())
-    if host.max(initial=0) == 255 or n_blocks >= 2**31 or dense_bytes + 8 * vec * n_blocks > limit:
+    use_bytes = 4 * fusion.lattice.n_beams * fusion.n_bins if fusion.detstats else 0
+    if host.max(initial=0) == 255 or n_blocks >= 2**31 or dense_bytes + 8 * vec * n_blocks + use_bytes > limit:
         plan._table.append(None)
         return None
     starts = np.concatenate([[0], np.cumsum(blocks_per_row)[:-1]]).astype(np.int32)
     cl.enqueue_copy(q, row_start.data, starts, is_blocking=True)
     first = cla.zeros(q, (n_rows * vec, 2), np.int32)     # (0, 0): evidence[0] x 0.0
     extras = cla.zeros(q, (max(n_blocks * vec, 1), 2), np.int32)      # (0, 0) where a lane has fewer
+    node_use = cla.zeros(q, (fusion.lattice.n_beams, fusion.n_bins), np.uint32) if fusion.detstats else None
+    use = {} if node_use is None else dict(node_use=node_use)
     fusion._launch(fusion._record_kernels[1], plan, fusion.arrays["evidence"], counts=counts, row_start=row_start,
-                   first=first, extras=extras).wait()
-    table = StillTable(counts, row_start, first, extras, n_rows, total)
+                   first=first, extras=extras, **use).wait()
+    table = StillTable(counts, row_start, first, extras, n_rows, total, node_use)
     runtime.hold(table, table.nbytes, "the still radar's table")
     plan._table.append(table)
     return table

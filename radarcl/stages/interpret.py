@@ -132,11 +132,13 @@ class Interpreter(Stage):
         """Per-beam flags as a contiguous uint8 array of shape ``batch``, or ShapeError."""
         return self.check_input("flags_in", flags)
 
-    def enqueue(self, profiles=None, noise=None, mask=None, flags=None, wait_for=None):
+    def enqueue(self, profiles=None, noise=None, mask=None, flags=None, wait_for=None, node_use=None):
         """Launch on device arrays (profiles float32, CFAR noise float32 and mask uint8, e.g. a
         ``Cfar``'s ``arrays``; per-beam uint8 flags or None for none; None for the others means
         this plan's own, as ``upload`` filled them). Results stay in ``arrays["evidence"]``,
-        ``["pulses"]``, ``["n_pulses"]``, ``["flags_out"]``. Returns the kernel event."""
+        ``["pulses"]``, ``["n_pulses"]``, ``["flags_out"]``. ``node_use``: the node pairs the
+        frame's voxels read (a still plan's ``StillTable.node_use``; ``InterpretNodes.enqueue``),
+        the others left as they were; None: all. Returns the kernel event."""
         ls = self.local_size
         gsize = (-(-self.n_beams // ls) * ls,)
         a = self.arrays
@@ -151,7 +153,9 @@ class Interpreter(Stage):
                             **self._tables,
                             n_beams=self.n_beams, evidence=a["evidence"], pulses=a["pulses"],
                             n_pulses=a["n_pulses"], flags_out=a["flags_out"])
-        return self.model.after_kernel(self, done, profiles)
+        # node_use is asked of a model only with one (a still plan of node pairs): a model's hook
+        # written before it takes three arguments
+        return self.model.after_kernel(self, done, profiles, **({} if node_use is None else dict(node_use=node_use)))
 
     def _result(self, evidence, pulses, n_pulses, flags_out):
         return InterpretResult(evidence, pulses, n_pulses, flags_out)

@@ -17,7 +17,7 @@ carries no evidence), and the fusion takes nothing from a terrain voxel then.
 import numpy as np
 
 from radarcl import logodds
-from radarcl.errors import ConfigError
+from radarcl.errors import ConfigError, ShapeError
 from radarcl.node_pairs import N_CLASSES, NODES, node_shape
 from radarcl.sensor_model import BinModel
 from radarcl.snr_evidence import GAP_CAP, SNR_U, SNR_V, detection_cap
@@ -89,15 +89,28 @@ class InterpretNodes:
                            snr_cap=bins_last(cap),
                            snr_table=cla.to_device(queue, bin_model.snr_table.values.astype(np.float32)))
         self.blocker_gap, self.snr_q = float(bin_model.blocker_gap), float(q)
+        self._every = cla.zeros(queue, (1,), np.uint32)     # node_use's placeholder: every class computed
         # chunks of LANES bins that meet the window
         self.n_chunks = max(0, last_bin // lanes - first_bin // lanes + 1) if first_bin <= last_bin else 0
 
-    def enqueue(self, profiles, flags, state, ln_floors, evidence, wait_for=None):
+    def enqueue(self, profiles, flags, state, ln_floors, evidence, wait_for=None, node_use=None):
         """Launch on the walk's device arrays: ``profiles`` (n_beams, n_bins) float32, its
         ``flags`` (n_beams,) uint8, ``state`` (n_beams, 2, n_bins) float32 (each bin's blocking
         and tau), ``ln_floors`` (n_beams,) float32; writes the node pairs of the window's bins
-        into ``evidence`` (n_beams, n_bins, 4 x classes) int2, whose other bins must hold 0. Returns the
-        kernel's event (a marker after ``wait_for`` where the window is empty)."""
+        into ``evidence`` (n_beams, n_bins, 4 x classes) int2, whose other bins must hold 0.
+        ``node_use``: None, or a device array (n_beams, n_bins) uint32 whose bit c says that
+        some voxel reads class c's pairs of that bin (a still plan's ``StillTable.node_use``):
+        then a chunk of ``lanes`` bins computes only the classes one of its bins has, and the
+        other pairs keep what they held. Returns the kernel's event (a marker after ``wait_for``
+        where the window is empty)."""
+        if node_use is not None:
+            import pyopencl.array as cla
+
+            want = (self.n_beams, self.n_bins)
+            if not isinstance(node_use, cla.Array) or node_use.dtype != np.uint32 or node_use.shape != want:
+                got = (f"{node_use.dtype} {node_use.shape}" if isinstance(node_use, cla.Array)
+                       else type(node_use).__name__)
+                raise ShapeError(f"node_use must be a device array of uint32 {want} (beams, bins), got {got}")
         n, ls = self.n_beams * self.n_chunks, self.local_size
         if not n:
             import pyopencl as cl
@@ -106,4 +119,6 @@ class InterpretNodes:
         return self._kernel(self.runtime.queue, (-(-n // ls) * ls,), (ls,), wait_for=wait_for,
                             profiles=profiles, flags_out=flags, state=state, ln_floors=ln_floors, **self.tables,
                             first_bin=self.first_bin, last_bin=self.last_bin, blocker_gap=self.blocker_gap,
-                            snr_q=self.snr_q, n_chunks=self.n_chunks, n_beams=self.n_beams, evidence=evidence)
+                            snr_q=self.snr_q, n_chunks=self.n_chunks, n_beams=self.n_beams,
+                            node_use=self._every if node_use is None else node_use, selective=int(node_use is not None),
+                            evidence=evidence)
