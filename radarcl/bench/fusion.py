@@ -129,7 +129,7 @@ def run(runtime, repeat=20, report=None, spec=PAPER_GRID, spin_spec=SPIN_GRID):
         numpy_planning(fusion, moving_pose())
 
     ds = _detstats(runtime, spec, lattice, model, samples, pose, moving_pose)
-    interpret = _interpreter_only(runtime, mapping)
+    interpret = _interpreter_only(runtime, mapping, pose)
     spin = _spinning(runtime, spin_spec)
     spin_pipe = _spinning_pipelines(runtime, spin_spec)
     say(f"timing a still, a moving and a spinning radar, planning and the pipeline, {repeat} frames each ...")
@@ -218,16 +218,19 @@ def _detstats(runtime, spec, lattice, model, samples, pose, moving_pose):
     return dict(still=lambda: fusion.enqueue(nodes, plan).wait(), gather=lambda: fusion.enqueue(nodes, plan, gather=True).wait(),
                 moving=lambda: fusion.enqueue(nodes, fusion.plan(moving_pose(), cache=False)).wait(),
                 pipeline=lambda: (mapping.fuse(samples, pose), runtime.queue.finish()),
-                interpret=_interpreter_only(runtime, mapping))
+                interpret=_interpreter_only(runtime, mapping, pose))
 
 
-def _interpreter_only(runtime, mapping):
+def _interpreter_only(runtime, mapping, pose):
     """A callable running ``mapping``'s interpreter alone (all its launches) on the CFAR's outputs
-    of the frame it fused last."""
+    of the frame it fused last, as its pipeline runs it at ``pose``: where that pose's still table
+    is recorded, making only the node pairs the table reads (``StillTable.node_use``)."""
     detection = mapping.detection
     cfar = detection.cfar
     profiles = mapping.range_fft.arrays["profiles"] if mapping.range_fft is not None else cfar.arrays["profiles"]
-    return lambda: (detection.interpreter.enqueue(profiles, cfar.arrays["noise"], cfar.arrays["mask"]),
+    table = mapping.fusion.plan(pose).table
+    use = None if table is None else table.node_use
+    return lambda: (detection.interpreter.enqueue(profiles, cfar.arrays["noise"], cfar.arrays["mask"], node_use=use),
                     runtime.queue.finish())
 
 
@@ -283,7 +286,7 @@ def _spinning_pipelines(runtime, spec):
             mapping.fuse(scan, pose)
         runtime.queue.finish()
         out[model] = lambda m=mapping: (m.fuse(scan, pose), runtime.queue.finish())
-        out[model + "_interpret"] = _interpreter_only(runtime, mapping)
+        out[model + "_interpret"] = _interpreter_only(runtime, mapping, pose)
     return out
 
 
