@@ -24,9 +24,10 @@
  *     AZ_WRAP (the azimuths span a full turn, windows may run past either end),
  *     RECORD (1 or 2: instead of fusing, record the still table that fusion_cached.cl streams
  *     (its layout: fusion_common.h); 1 counts each voxel's beams into counts[], 2 writes each
- *     voxel's first entry into first[] and the rest into extras[] from row_start[], and with DETSTATS
- *     sets in node_use[] the classes whose node pairs the entries read: the node kernel computes
- *     those alone for the table's frames);
+ *     voxel's first entry into first[] and the rest into extras[] from row_start[]; with DETSTATS
+ *     both leave out an entry in a segment whose nodes never carry anything (live[]), and 2 sets
+ *     in node_use[] the classes whose node pairs the entries read: the node kernel computes those
+ *     alone for the table's frames);
  *     DETSTATS (the detection-statistics model: each voxel interpolates its bin's node pairs at
  *     its quantised rho2 and class, fusion_common.h, and writes the knowledge and looks channels
  *     beside the evidence). PACKED_LOOKS (DETSTATS, set by the host when a frame's knowledge of one voxel,
@@ -168,6 +169,8 @@ __kernel void fusion(
     __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity [count]
     __global uint *node_use,          // RECORD 2 with DETSTATS: (n_beams, N_BINS), or'd into: bit c where a voxel
                                       //   reads class c's node pairs of that beam's bin (the node kernel's work)
+    const __global uchar *live,       // RECORD with DETSTATS: (N_BINS, CLASSES) bit s: segment s may carry an update
+                                      //   (node_pairs.live_segments); an entry in another is left out of the table
     __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
 {
     const int id = get_global_id(0);
@@ -303,6 +306,21 @@ __kernel void fusion(
                 const floatL wa2 = wa * wa, we2 = we * we;
                 const floatL num = y * y * we2 + z * z * wa2, den = wa2 * we2;
                 const intL inside = (bin >= 0) & (d > 0.0f) & (den > 0.0f) & (num <= den);
+#if RECORD && defined(DETSTATS)
+                {
+                    /* an entry in a segment whose nodes never carry anything adds nothing, ever:
+                     * left out (a terrain voxel of a scene without that class is kept, as before) */
+                    const intL qs = convert_intL(MINF(num / den * Q_ONE, Q_MAX)) >> 12;     /* as RECORD 2's */
+                    const int c = qz < terrain_dz;
+                    if (c < CLASSES)
+                        for (int lane = 0; lane < LN; ++lane)
+                            if (((const int *)&inside)[lane]) {
+                                const int jl = ((const int *)&bin)[lane], sl = ((const int *)&qs)[lane];
+                                if (!((live[jl * CLASSES + c] >> sl) & 1))
+                                    ((int *)&inside)[lane] = 0;
+                            }
+                }
+#endif
 #if RECORD
                 if (!or_unit(inside))
                     continue;

@@ -20,7 +20,7 @@ from radarcl.geometry import BeamLattice, BeamModel
 from radarcl.grid import EvidenceGrid
 from radarcl.models import BeamGeometry
 from radarcl.io import prefetch
-from radarcl.node_pairs import N_CLASSES
+from radarcl.node_pairs import N_CLASSES, live_segments
 from radarcl.stages.cfar import Cfar, CfarResult
 from radarcl.stages.fusion import Fusion
 from radarcl.stages.interpret import Interpreter, InterpretResult
@@ -115,7 +115,8 @@ class Mapping:
         it = self.detection.interpreter
         self.fusion = Fusion(runtime, grid, lattice, model, n_bins, bin_spacing_m, it.first_bin, it.last_bin,
                              per_beam_poses=per_beam_poses, detstats=it.node_pairs, terrain_dz=terrain_dz,
-                             classes=it.classes if it.node_pairs else N_CLASSES)      # one count: the interpreter's
+                             classes=it.classes if it.node_pairs else N_CLASSES,      # one count: the interpreter's
+                             live_segments=live_segments(bin_model.opportunity, it.classes) if it.node_pairs else None)
         self.levels = None          # the ``Levels`` stage: uint8 levels -> power (``fuse``'s db_per_level)
         self.frames = 0
         self.config = None          # the mapconfig.Resolved it was built from (from_config)

@@ -12,9 +12,10 @@ import math
 import numpy as np
 import pytest
 from test_fusion import (FIRST, LAST, LATTICES, MODELS, N_BINS, POSE, SMALL, SPACING, check_against_oracle, evidence,
-                         one_class_nodes)
+                         one_class_nodes, random_nodes)
 
-from radarcl.errors import ConfigError
+from radarcl import node_pairs
+from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import pose_from_xyz_rpy
 from radarcl.grid import EvidenceGrid
 from radarcl.stages import fusion_cached
@@ -113,6 +114,51 @@ def test_the_table_marks_the_node_pairs_its_entries_read(runtime, case):
     assert eq12(evidence(lattice, seed=3), poses).table.node_use is None
 
 
+
+@pytest.mark.parametrize("case", STILL_CASES.values(), ids=STILL_CASES.keys())
+def test_the_table_leaves_out_entries_in_segments_that_never_carry_anything(runtime, case):
+    """``live_segments`` (node_pairs.live_segments: which segments of a bin and class may carry
+    an update) takes out of the table every entry in another segment, and nothing else; with those
+    segments' node pairs 0 (what the interpreter writes there, every frame) the table's frames give
+    the gather's integers (evidence, knowledge, looks), frame after frame."""
+    lattice, model, per_beam, vec, rows = case
+    poses = POSE if not per_beam else np.stack(
+        [pose_from_xyz_rpy(0.5 * f, 0.1, 0.0, yaw=0.05 * f) for f in np.linspace(0, 1, lattice.n_beams)])
+    rng = np.random.default_rng(21)
+    live = rng.integers(0, 16, (N_BINS, 2)).astype(np.uint8)
+    live[: N_BINS // 3] = 0xF                                # some bins live in every segment
+    frames = []
+    for s in (22, 23, 24):
+        e, d, _ = random_nodes(lattice, seed=s)
+        for k in range(node_pairs.SEGMENTS):                  # a dead segment's two nodes are 0
+            dead = ((live >> k) & 1) == 0
+            for node in (k, k + 1):
+                e[:, dead, node], d[:, dead, node] = 0, 0
+        frames.append(node_pairs.pack_nodes(e, d))
+    terrain_dz = 0.0 if lattice.wraps else -0.8
+    maps, tables = {}, {}
+    for name, still, segments in (("gather", False, None), ("all", True, None), ("live", True, live)):
+        grid = EvidenceGrid(runtime, SMALL, knowledge=True)
+        f = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, per_beam_poses=per_beam, still=still,
+                   vector_width=vec, rows=rows, detstats=True, terrain_dz=terrain_dz, live_segments=segments)
+        steps = []
+        for frame in frames:
+            plan = f(frame, poses)
+            steps.append((grid.snapshot(), grid.knowledge_snapshot(), grid.knowledge_snapshot("looks")))
+        maps[name], tables[name] = steps, plan.table
+    for other in ("all", "live"):
+        for a, b in zip(maps["gather"], maps[other]):
+            assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    assert maps["gather"][-1][2].sum() > 100
+    def entries(table):
+        got = np.concatenate([table.first.get(), table.extras.get()])
+        got = got[got[:, 1] != 0]
+        return got[:, 0] % N_BINS, (got[:, 1] >> 16) & 1, ((got[:, 1] & 0xFFFF) - 1) >> 12
+    every, kept = entries(tables["all"]), entries(tables["live"])
+    alive = lambda b, c, s: (live[b, c] >> s) & 1 == 1
+    assert alive(*kept).all() and len(kept[0]) == alive(*every).sum() < len(every[0])
+
+
 def test_the_table_is_recorded_when_a_pose_comes_back_and_only_if_it_fits(runtime, monkeypatch):
     lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
     ev = evidence(lattice, seed=4)
@@ -148,3 +194,14 @@ def test_a_tilting_stand_reuses_each_positions_plan(runtime):
     assert all(a is b and a.table is not None for a, b in zip(first, again))
     grid.clear()
     assert f(ev, tilts[0]) is not first[0] and len(f._plans) == 1
+
+
+def test_live_segments_of_the_wrong_form_are_refused(runtime):
+    lattice, model = LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"]
+    ok = np.full((N_BINS, 2), 0xF, np.uint8)
+    for bad in (ok.astype(np.int32), ok[:-1], ok[:, :1], ok.tolist()):
+        with pytest.raises(ShapeError, match="live_segments must be a uint8 array"):
+            Fusion(runtime, EvidenceGrid(runtime, SMALL, knowledge=True), lattice, model, N_BINS, SPACING, FIRST, LAST,
+                   detstats=True, live_segments=bad)
+    with pytest.raises(ConfigError, match="detection-statistics"):
+        Fusion(runtime, EvidenceGrid(runtime, SMALL), lattice, model, N_BINS, SPACING, FIRST, LAST, live_segments=ok)

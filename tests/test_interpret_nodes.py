@@ -161,6 +161,37 @@ def test_a_terrain_class_below_half_a_knowledge_unit_is_not_computed():
     assert np.float32(exact[40, 1, 3]) == half and classes_needed(exact) == 2
 
 
+
+@pytest.mark.parametrize("evidence", ["snr", "detection"])
+def test_live_segments_are_those_a_node_with_knowledge_ends(runtime, evidence):
+    """``node_pairs.live_segments``: bit s of a bin and class is set where node s or s + 1 has more
+    than half a knowledge unit of opportunity, in float32 (the kernels') or float64 (the host's exact
+    nodes). The premise a still table leaves entries out on: a node at most half a unit is (0, 0)
+    in every frame, from the node kernel ("snr") and from the walk ("detection") alike."""
+    half = np.float32(0.5) / np.float32(logodds.KNOWLEDGE_SCALE)
+    opportunity = np.zeros((5, node_pairs.N_CLASSES, node_pairs.NODES))
+    opportunity[0] = 1.0                                     # every segment of both classes
+    opportunity[1, 1, 2] = 0.6 / logodds.KNOWLEDGE_SCALE     # node 2: segments 1 and 2 of the terrain class
+    opportunity[2, 0, 4] = float(half)                      # half a unit: nothing
+    opportunity[3, 0, 0] = float(half) * (1 + 1e-12)         # float32 rounds it to half; float64's rint gives 1
+    live = node_pairs.live_segments(opportunity)
+    assert live.dtype == np.uint8 and live.tolist() == [[15, 15], [0, 6], [0, 0], [1, 0], [0, 0]]
+    assert node_pairs.live_segments(opportunity, classes=1).tolist() == [[15], [0], [0], [1], [0]]
+    with pytest.raises(ShapeError):
+        node_pairs.live_segments(opportunity[:, :1])
+    model = detstats_model(evidence=evidence)
+    opp = np.array(model.opportunity)
+    opp[150:200, 1] = 0.4 / logodds.KNOWLEDGE_SCALE         # looks that can hardly see: below half a unit
+    opp[200:, 0, 3:] = 0.0
+    model = dataclasses.replace(model, opportunity=opp, miss=1.0 - opp)
+    units = np.asarray(model.opportunity, np.float32) * np.float32(logodds.KNOWLEDGE_SCALE)
+    never = (units <= 0.5) & (np.asarray(model.opportunity) * logodds.KNOWLEDGE_SCALE <= 0.5)
+    assert never.any() and not never.all()
+    (ge, gd), _, _ = run(runtime, scene(seed=11), model)
+    assert not ge[:, never].any() and not gd[:, never].any()
+    assert gd[:, ~never].any()
+
+
 def test_refuses_bad_input(runtime):
     model = detstats_model(n_bins=64)
     with pytest.raises(ConfigError, match=r"lanes must be one of \(8, 16\), got 12"):

@@ -27,7 +27,7 @@ from collections import OrderedDict
 import numpy as np
 
 from radarcl import logodds
-from radarcl.errors import ConfigError
+from radarcl.errors import ConfigError, ShapeError
 from radarcl.geometry import BeamLattice, BeamModel, check_poses
 from radarcl.grid import EvidenceGrid
 from radarcl.gridspec import BRICK
@@ -72,12 +72,14 @@ class Fusion(Stage):
     nodes=..., terrain_dz=...)``. classes: the node pairs' classes of target, the interpreter's
     (``Interpreter.classes``): 2, or 1 for a scene without a terrain class, whose nodes hold the
     upright class alone (half the bytes to read) and a terrain voxel takes nothing, as it would
-    from that class's all-zero nodes.
+    from that class's all-zero nodes. live_segments: with detstats, ``node_pairs.live_segments``
+    of the interpreter's bin model (n_bins, classes) uint8: a still table leaves out the entries
+    in a segment whose nodes never carry anything (None: every segment may).
     """
 
     def __init__(self, runtime, grid, lattice, model, n_bins, bin_spacing_m, first_bin=0, last_bin=None,
                  *, per_beam_poses=False, still="auto", vector_width=8, rows=None, local_size=None, detstats=False,
-                 terrain_dz=-math.inf, classes=N_CLASSES):
+                 terrain_dz=-math.inf, classes=N_CLASSES, live_segments=None):
         if not isinstance(grid, EvidenceGrid):
             raise ConfigError(f"grid must be an EvidenceGrid, got {type(grid).__name__}")
         if not isinstance(lattice, BeamLattice) or not isinstance(model, BeamModel):
@@ -152,6 +154,13 @@ class Fusion(Stage):
 
         q = runtime.queue               # the RECORD buffers the plain gather ignores, and the other model's
         self._no_table = (cla.zeros(q, (1,), np.uint8), cla.zeros(q, (1,), np.int32), cla.zeros(q, (1, 2), np.int32))
+        live = np.full((self.n_bins, self.classes), 0xF, np.uint8) if live_segments is None else live_segments
+        if not isinstance(live, np.ndarray) or live.dtype != np.uint8 or live.shape != (self.n_bins, self.classes):
+            raise ShapeError(f"live_segments must be a uint8 array ({self.n_bins}, {self.classes}) (bins, classes), "
+                             f"got {getattr(live, 'dtype', type(live).__name__)} {getattr(live, 'shape', '')}")
+        if live_segments is not None and not self.detstats:
+            raise ConfigError("live_segments are the detection-statistics model's (detstats=True)")
+        self._live = cla.to_device(q, np.ascontiguousarray(live))     # the RECORD passes' (fusion.cl)
 
     @property
     def evidence_shape(self):
@@ -409,7 +418,8 @@ class Fusion(Stage):
         """One gather launch over ``plan`` (the fusion, or a RECORD pass with its buffers; those
         it is not given get a placeholder)."""
         none = self._no_table
-        record = {**dict(counts=none[0], row_start=none[1], first=none[2], extras=none[2], node_use=none[1]), **record}
+        record = {**dict(counts=none[0], row_start=none[1], first=none[2], extras=none[2], node_use=none[1],
+                         live=self._live), **record}
         rt, m = self.runtime, self.model
         a_az, a_el = m.apertures
         nx, ny, nz = self.grid.spec.shape
