@@ -35,7 +35,9 @@
  *     the gather keeps knowledge and looks in one accumulator (sum + count << PACKED_LOOKS), one
  *     register per unit fewer of the 32 AVX-512 holds. NO_INT64 (a device without 64-bit integers,
  *     optional in the embedded profile): DETSTATS gathers a node pair as an int2 per lane, not
- *     as lanes of one ulong vector.
+ *     as lanes of one ulong vector. DEAD_SEGMENTS (DETSTATS, set by the host where live[] says some
+ *     segment of the window never carries anything): the fusing gather skips a unit whose lanes all
+ *     lie in such segments (it would add nothing).
  */
 #include "fusion_common.h"
 
@@ -169,8 +171,9 @@ __kernel void fusion(
     __global int *looks,              // DETSTATS: (slots, 8, 8, 8) updates with an opportunity [count]
     __global uint *node_use,          // RECORD 2 with DETSTATS: (n_beams, N_BINS), or'd into: bit c where a voxel
                                       //   reads class c's node pairs of that beam's bin (the node kernel's work)
-    const __global uchar *live,       // RECORD with DETSTATS: (N_BINS, CLASSES) bit s: segment s may carry an update
+    const __global int *live,         // DETSTATS: (N_BINS, CLASSES) bit s: segment s may carry an update
                                       //   (node_pairs.live_segments); an entry in another is left out of the table
+                                      //   (RECORD), a unit with no lane in one skipped (DEAD_SEGMENTS)
     __global int *pool)               // (slots, 8, 8, 8) the grid's bricks [logodds units]
 {
     const int id = get_global_id(0);
@@ -370,6 +373,18 @@ __kernel void fusion(
                 const intL seg = q >> 12;
                 const intL f = q & 4095;
                 const intL at = NODE_AT(j, qz < terrain_dz, seg);
+  #ifdef DEAD_SEGMENTS
+                {
+                    /* a unit whose inside lanes all lie in segments that never carry anything
+                     * (far terrain a tilted radar cannot see) adds nothing: its node gather is
+                     * skipped (a terrain voxel of a scene without the class reads the upright
+                     * class's bits: it takes nothing either way) */
+                    const __global int *lc = live + ((qz < terrain_dz) & (CLASSES - 1));
+                    const intL lj = j * CLASSES;
+                    if (!or_unit(inside & (((GATHER_L(lc, lj) >> seg) & 1) != 0)))
+                        continue;
+                }
+  #endif
                 intL pe, pk;
                 GATHER_NODES(pe, pk, row_nodes, at);
                 acc[u] += NODE_LERP(pe, f) & inside;

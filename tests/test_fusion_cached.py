@@ -120,7 +120,8 @@ def test_the_table_leaves_out_entries_in_segments_that_never_carry_anything(runt
     """``live_segments`` (node_pairs.live_segments: which segments of a bin and class may carry
     an update) takes out of the table every entry in another segment, and nothing else; with those
     segments' node pairs 0 (what the interpreter writes there, every frame) the table's frames give
-    the gather's integers (evidence, knowledge, looks), frame after frame."""
+    the gather's integers (evidence, knowledge, looks), frame after frame, and so does the gather
+    that skips the units lying in them (DEAD_SEGMENTS)."""
     lattice, model, per_beam, vec, rows = case
     poses = POSE if not per_beam else np.stack(
         [pose_from_xyz_rpy(0.5 * f, 0.1, 0.0, yaw=0.05 * f) for f in np.linspace(0, 1, lattice.n_beams)])
@@ -137,7 +138,8 @@ def test_the_table_leaves_out_entries_in_segments_that_never_carry_anything(runt
         frames.append(node_pairs.pack_nodes(e, d))
     terrain_dz = 0.0 if lattice.wraps else -0.8
     maps, tables = {}, {}
-    for name, still, segments in (("gather", False, None), ("all", True, None), ("live", True, live)):
+    for name, still, segments in (("gather", False, None), ("all", True, None), ("live", True, live),
+                                  ("gather, live", False, live)):
         grid = EvidenceGrid(runtime, SMALL, knowledge=True)
         f = Fusion(runtime, grid, lattice, model, N_BINS, SPACING, FIRST, LAST, per_beam_poses=per_beam, still=still,
                    vector_width=vec, rows=rows, detstats=True, terrain_dz=terrain_dz, live_segments=segments)
@@ -146,7 +148,7 @@ def test_the_table_leaves_out_entries_in_segments_that_never_carry_anything(runt
             plan = f(frame, poses)
             steps.append((grid.snapshot(), grid.knowledge_snapshot(), grid.knowledge_snapshot("looks")))
         maps[name], tables[name] = steps, plan.table
-    for other in ("all", "live"):
+    for other in ("all", "live", "gather, live"):         # the last skips the units of dead segments
         for a, b in zip(maps["gather"], maps[other]):
             assert all(np.array_equal(x, y) for x, y in zip(a, b))
     assert maps["gather"][-1][2].sum() > 100

@@ -128,6 +128,9 @@ class Fusion(Stage):
             defines["CLASSES"] = self.classes
         if self.detstats and lattice.n_beams * logodds.KNOWLEDGE_SCALE < 1 << PACKED_LOOKS:
             defines["PACKED_LOOKS"] = PACKED_LOOKS         # knowledge and looks in one accumulator
+        live = self._live_segments(live_segments)
+        # some segment of the window never carries anything: the gather skips the units lying there
+        defines["DEAD_SEGMENTS"] = self.detstats and bool((live[self.first_bin:self.last_bin + 1] != 0xF).any())
         self._defines = {k: v for k, v in defines.items() if v is not False}
         if still not in ("auto", True, False):
             raise ConfigError(f"still must be 'auto', True or False, got {still!r}")
@@ -154,13 +157,20 @@ class Fusion(Stage):
 
         q = runtime.queue               # the RECORD buffers the plain gather ignores, and the other model's
         self._no_table = (cla.zeros(q, (1,), np.uint8), cla.zeros(q, (1,), np.int32), cla.zeros(q, (1, 2), np.int32))
-        live = np.full((self.n_bins, self.classes), 0xF, np.uint8) if live_segments is None else live_segments
+        self._live = cla.to_device(q, live)           # the RECORD passes' and DEAD_SEGMENTS' (fusion.cl)
+
+    def _live_segments(self, live_segments):
+        """``live_segments`` checked, as the kernels read it: int32 (n_bins, classes), every segment
+        live where None."""
+        if live_segments is None:
+            return np.full((self.n_bins, self.classes), 0xF, np.int32)
+        live = live_segments
+        if not self.detstats:
+            raise ConfigError("live_segments are the detection-statistics model's (detstats=True)")
         if not isinstance(live, np.ndarray) or live.dtype != np.uint8 or live.shape != (self.n_bins, self.classes):
             raise ShapeError(f"live_segments must be a uint8 array ({self.n_bins}, {self.classes}) (bins, classes), "
                              f"got {getattr(live, 'dtype', type(live).__name__)} {getattr(live, 'shape', '')}")
-        if live_segments is not None and not self.detstats:
-            raise ConfigError("live_segments are the detection-statistics model's (detstats=True)")
-        self._live = cla.to_device(q, np.ascontiguousarray(live))     # the RECORD passes' (fusion.cl)
+        return live.astype(np.int32)
 
     @property
     def evidence_shape(self):
