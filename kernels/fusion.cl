@@ -25,7 +25,8 @@
  *     RECORD (1 or 2: instead of fusing, record the still table that fusion_cached.cl streams
  *     (its layout: fusion_common.h); 1 counts each voxel's beams into counts[], 2 writes each
  *     voxel's first entry into first[] and the rest into extras[] from row_start[]; with DETSTATS
- *     both leave out an entry in a segment whose nodes never carry anything (live[]), and 2 sets
+ *     both leave out an entry in a segment whose nodes never carry anything (live[]; a terrain
+ *     entry of a scene without that class is kept, and takes nothing), and 2 sets
  *     in node_use[] the classes whose node pairs the entries read: the node kernel computes those
  *     alone for the table's frames);
  *     DETSTATS (the detection-statistics model: each voxel interpolates its bin's node pairs at
@@ -308,11 +309,13 @@ __kernel void fusion(
                 /* rho2 = (y / wa)^2 + (z / we)^2 <= 1, without dividing by a vanishing width */
                 const floatL wa2 = wa * wa, we2 = we * we;
                 const floatL num = y * y * we2 + z * z * wa2, den = wa2 * we2;
-                const intL inside = (bin >= 0) & (d > 0.0f) & (den > 0.0f) & (num <= den);
+                intL inside = (bin >= 0) & (d > 0.0f) & (den > 0.0f) & (num <= den);   /* RECORD drops dead lanes */
 #if RECORD && defined(DETSTATS)
                 {
                     /* an entry in a segment whose nodes never carry anything adds nothing, ever:
-                     * left out (a terrain voxel of a scene without that class is kept, as before) */
+                     * left out. A terrain voxel of a scene without that class (c == CLASSES) is
+                     * kept, as before: its entries take nothing (TAKES), and the table's tests
+                     * count them */
                     const intL qs = convert_intL(MINF(num / den * Q_ONE, Q_MAX)) >> 12;     /* as RECORD 2's */
                     const int c = qz < terrain_dz;
                     if (c < CLASSES)
@@ -377,8 +380,7 @@ __kernel void fusion(
                 {
                     /* a unit whose inside lanes all lie in segments that never carry anything
                      * (far terrain a tilted radar cannot see) adds nothing: its node gather is
-                     * skipped (a terrain voxel of a scene without the class reads the upright
-                     * class's bits: it takes nothing either way) */
+                     * skipped. (With CLASSES 1, terrain units never get here: see above.) */
                     const __global int *lc = live + ((qz < terrain_dz) & (CLASSES - 1));
                     const intL lj = j * CLASSES;
                     if (!or_unit(inside & (((GATHER_L(lc, lj) >> seg) & 1) != 0)))

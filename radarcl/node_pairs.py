@@ -50,7 +50,6 @@ def node_shape(classes=N_CLASSES):
     return (classes, SEGMENTS, 2)
 
 
-
 def live_segments(opportunity, classes=N_CLASSES):
     """Which segments of each bin and class can ever carry an update: (n_bins, classes) uint8, bit s
     set where node s or s + 1 of a bin model's ``opportunity`` (n_bins, N_CLASSES, NODES, the delta
@@ -58,6 +57,7 @@ def live_segments(opportunity, classes=N_CLASSES):
     round it or in float64 as the host's exact nodes do. A node at most half a unit has knowledge
     0 in every frame, and so no evidence (a look that is not one): a voxel's entry in a segment of
     two such nodes adds nothing to any channel, ever, and a still table leaves it out."""
+    node_shape(classes)                         # ConfigError for a count no node array has
     opp = np.asarray(opportunity)
     if opp.ndim != 3 or opp.shape[1:] != (N_CLASSES, NODES):
         raise ShapeError(f"expected opportunity (n_bins, {N_CLASSES}, {NODES}), got {opp.shape}")
@@ -66,6 +66,7 @@ def live_segments(opportunity, classes=N_CLASSES):
     either = live[..., :-1] | live[..., 1:]                      # (n_bins, N_CLASSES, SEGMENTS)
     bits = (either << np.arange(SEGMENTS)).sum(-1).astype(np.uint8)
     return np.ascontiguousarray(bits[:, :classes])
+
 
 def all_classes(nodes):
     """Unpacked nodes (..., classes, NODES) of the first ``classes`` classes as all ``N_CLASSES``

@@ -205,5 +205,8 @@ def test_live_segments_of_the_wrong_form_are_refused(runtime):
         with pytest.raises(ShapeError, match="live_segments must be a uint8 array"):
             Fusion(runtime, EvidenceGrid(runtime, SMALL, knowledge=True), lattice, model, N_BINS, SPACING, FIRST, LAST,
                    detstats=True, live_segments=bad)
+    with pytest.raises(ConfigError, match="one bit per segment"):
+        Fusion(runtime, EvidenceGrid(runtime, SMALL, knowledge=True), lattice, model, N_BINS, SPACING, FIRST, LAST,
+               detstats=True, live_segments=ok | 0x10)
     with pytest.raises(ConfigError, match="detection-statistics"):
         Fusion(runtime, EvidenceGrid(runtime, SMALL), lattice, model, N_BINS, SPACING, FIRST, LAST, live_segments=ok)

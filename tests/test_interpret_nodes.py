@@ -135,7 +135,7 @@ def test_node_use_makes_only_the_classes_a_chunk_reads(runtime, lanes):
                     skipped += 1
     assert made > 50 and skipped > made                     # both kinds of chunk, most of them skipped
     inside = slice(first, last + 1)
-    assert np.array_equal(g[~valid, inside], w[~valid, inside])     # a flagged beam's are zeroed either way
+    assert (~valid).any() and np.array_equal(g[~valid, inside], w[~valid, inside])   # a flagged beam's: zeroed
     for bad in (use, cla.to_device(q, use.astype(np.int32)), cla.to_device(q, use[:, :-1].copy())):
         with pytest.raises(ShapeError, match="node_use must be a device array of uint32"):
             det.enqueue(node_use=bad)
@@ -179,6 +179,8 @@ def test_live_segments_are_those_a_node_with_knowledge_ends(runtime, evidence):
     assert node_pairs.live_segments(opportunity, classes=1).tolist() == [[15], [0], [0], [1], [0]]
     with pytest.raises(ShapeError):
         node_pairs.live_segments(opportunity[:, :1])
+    with pytest.raises(ConfigError):
+        node_pairs.live_segments(opportunity, classes=3)
     model = detstats_model(evidence=evidence)
     opp = np.array(model.opportunity)
     opp[150:200, 1] = 0.4 / logodds.KNOWLEDGE_SCALE         # looks that can hardly see: below half a unit
@@ -190,6 +192,28 @@ def test_live_segments_are_those_a_node_with_knowledge_ends(runtime, evidence):
     (ge, gd), _, _ = run(runtime, scene(seed=11), model)
     assert not ge[:, never].any() and not gd[:, never].any()
     assert gd[:, ~never].any()
+
+
+
+def test_a_model_hook_without_node_use_gets_none():
+    """A model's ``after_kernel`` written before ``node_use`` (three arguments) is called without
+    it, and so makes every node; one that names it, or takes **kwargs, gets it."""
+    from radarcl.stages.interpret import _takes_keyword
+
+    def old(interpreter, event, profiles):
+        return event
+
+    def named(interpreter, event, profiles, node_use=None):
+        return event
+
+    def open_ended(interpreter, event, profiles, **options):
+        return event
+
+    assert not _takes_keyword(old, "node_use")
+    assert _takes_keyword(named, "node_use") and _takes_keyword(open_ended, "node_use")
+    from radarcl.models.detstats import DetStats
+
+    assert _takes_keyword(DetStats().after_kernel, "node_use")
 
 
 def test_refuses_bad_input(runtime):

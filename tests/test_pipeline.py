@@ -126,9 +126,10 @@ def test_a_refused_frame_leaves_the_map_as_it_was(runtime):
 def test_a_still_radar_makes_only_the_node_pairs_its_voxels_read(runtime):
     """The default model on a still radar: once its pose's table is recorded, the interpreter makes
     only the node pairs the table reads (``StillTable.node_use``) and leaves the others. Frame
-    after frame at that pose, between frames at another pose (which make every pair), the map
-    (evidence, knowledge, looks) is the one a Mapping that never records a table makes, integer
-    for integer; the pairs read are that Mapping's, and some not read were left."""
+    after frame at that pose, alternating with another pose (whose first frame makes every pair,
+    and whose own table then makes its own), the map (evidence, knowledge, looks) is the one a
+    Mapping that never records a table makes, integer for integer; the pairs read are that
+    Mapping's, and some not read were left."""
     from radarcl.config.presets import paper_config
     from radarcl.pipeline import bin_model
     from radarcl.sensor_model import terrain_dz

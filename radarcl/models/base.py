@@ -95,7 +95,8 @@ class EvidenceModel:
         writes it here into ``interpreter.arrays["evidence"]``; ``profiles``: the frame on the
         device, ``interpreter.kernels``: the program's kernels; ``node_use``: which node pairs the
         frame's voxels read, as ``Interpreter.enqueue``, passed only where a still plan of node
-        pairs gives it); returns the last event."""
+        pairs gives it and the hook takes it: a hook without it makes every node); returns the
+        last event."""
         return event
 
     # -- the oracle ----------------------------------------------------------------------------------

@@ -74,7 +74,9 @@ class Fusion(Stage):
     upright class alone (half the bytes to read) and a terrain voxel takes nothing, as it would
     from that class's all-zero nodes. live_segments: with detstats, ``node_pairs.live_segments``
     of the interpreter's bin model (n_bins, classes) uint8: a still table leaves out the entries
-    in a segment whose nodes never carry anything (None: every segment may).
+    in a segment whose nodes never carry anything, and the gather skips the voxels that lie only
+    in such segments (None: every segment may carry something). It must be the bin model's: a
+    segment marked dead whose nodes are not 0 would lose their updates.
     """
 
     def __init__(self, runtime, grid, lattice, model, n_bins, bin_spacing_m, first_bin=0, last_bin=None,
@@ -130,7 +132,7 @@ class Fusion(Stage):
             defines["PACKED_LOOKS"] = PACKED_LOOKS         # knowledge and looks in one accumulator
         live = self._live_segments(live_segments)
         # some segment of the window never carries anything: the gather skips the units lying there
-        defines["DEAD_SEGMENTS"] = self.detstats and bool((live[self.first_bin:self.last_bin + 1] != 0xF).any())
+        defines["DEAD_SEGMENTS"] = self.detstats and bool((live[self.first_bin:self.last_bin + 1] & 0xF != 0xF).any())
         self._defines = {k: v for k, v in defines.items() if v is not False}
         if still not in ("auto", True, False):
             raise ConfigError(f"still must be 'auto', True or False, got {still!r}")
@@ -170,6 +172,8 @@ class Fusion(Stage):
         if not isinstance(live, np.ndarray) or live.dtype != np.uint8 or live.shape != (self.n_bins, self.classes):
             raise ShapeError(f"live_segments must be a uint8 array ({self.n_bins}, {self.classes}) (bins, classes), "
                              f"got {getattr(live, 'dtype', type(live).__name__)} {getattr(live, 'shape', '')}")
+        if (live > 0xF).any():
+            raise ConfigError(f"live_segments holds one bit per segment (0..15), got {int(live.max())}")
         return live.astype(np.int32)
 
     @property

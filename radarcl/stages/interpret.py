@@ -74,6 +74,8 @@ class Interpreter(Stage):
         self.e_high, self.e_low, self.e_high_far = (int(v) for v in logodds.to_fixed(
             [self.config.e_high, self.config.e_low, self.config.e_high_far]))
         self.model = self.config.evidence_model
+        # a model's hook written before node_use takes three arguments: it gets none, and makes every node
+        self._hook_takes_node_use = _takes_keyword(self.model.after_kernel, "node_use")
         self.node_pairs = self.model.knowledge       # evidence per class and rho2 node, not one value per bin
         if self.node_pairs and not isinstance(bin_model, BinModel):
             raise ConfigError(f"the {self.model.summary} interpreter needs its sensor_model.BinModel (bin_model=...)")
@@ -153,9 +155,8 @@ class Interpreter(Stage):
                             **self._tables,
                             n_beams=self.n_beams, evidence=a["evidence"], pulses=a["pulses"],
                             n_pulses=a["n_pulses"], flags_out=a["flags_out"])
-        # node_use is asked of a model only with one (a still plan of node pairs): a model's hook
-        # written before it takes three arguments
-        return self.model.after_kernel(self, done, profiles, **({} if node_use is None else dict(node_use=node_use)))
+        use = {} if node_use is None or not self._hook_takes_node_use else dict(node_use=node_use)
+        return self.model.after_kernel(self, done, profiles, **use)
 
     def _result(self, evidence, pulses, n_pulses, flags_out):
         return InterpretResult(evidence, pulses, n_pulses, flags_out)
@@ -172,3 +173,14 @@ class Interpreter(Stage):
         copies = self.upload(**host)
         done = self.enqueue(flags=None if flags is None else self.arrays["flags_in"], wait_for=copies)
         return self.download(wait_for=[done])
+
+
+def _takes_keyword(function, name):
+    """Whether ``function`` accepts the keyword argument ``name`` (by name, or through **kwargs)."""
+    import inspect
+
+    try:
+        parameters = inspect.signature(function).parameters.values()
+    except (TypeError, ValueError):
+        return False
+    return any(p.name == name or p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters)
