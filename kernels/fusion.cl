@@ -311,21 +311,19 @@ __kernel void fusion(
                 const floatL num = y * y * we2 + z * z * wa2, den = wa2 * we2;
                 intL inside = (bin >= 0) & (d > 0.0f) & (den > 0.0f) & (num <= den);   /* RECORD drops dead lanes */
 #if RECORD && defined(DETSTATS)
-                {
-                    /* an entry in a segment whose nodes never carry anything adds nothing, ever:
-                     * left out. A terrain voxel of a scene without that class (c == CLASSES) is
-                     * kept, as before: its entries take nothing (TAKES), and the table's tests
-                     * count them */
-                    const intL qs = convert_intL(MINF(num / den * Q_ONE, Q_MAX)) >> 12;     /* as RECORD 2's */
-                    const int c = qz < terrain_dz;
-                    if (c < CLASSES)
-                        for (int lane = 0; lane < LN; ++lane)
-                            if (((const int *)&inside)[lane]) {
-                                const int jl = ((const int *)&bin)[lane], sl = ((const int *)&qs)[lane];
-                                if (!((live[jl * CLASSES + c] >> sl) & 1))
-                                    ((int *)&inside)[lane] = 0;
-                            }
-                }
+                /* the entries' quantised rho2 and class, as the gather's (fusion_common.h). An entry
+                 * in a segment whose nodes never carry anything adds nothing, ever: left out. A
+                 * terrain voxel of a scene without that class (cls == CLASSES) is kept, as before:
+                 * its entries take nothing (TAKES), and the table's tests count them */
+                const intL q = convert_intL(MINF(num / den * Q_ONE, Q_MAX));
+                const int cls = qz < terrain_dz;
+                if (cls < CLASSES)
+                    for (int lane = 0; lane < LN; ++lane)
+                        if (((const int *)&inside)[lane]) {
+                            const int jl = ((const int *)&bin)[lane], sl = ((const int *)&q)[lane] >> 12;
+                            if (!((live[jl * CLASSES + cls] >> sl) & 1))
+                                ((int *)&inside)[lane] = 0;
+                        }
 #endif
 #if RECORD
                 if (!or_unit(inside))
@@ -338,8 +336,6 @@ __kernel void fusion(
                 acc[u] -= inside;                                 /* inside is -1 */
 #elif RECORD == 2
   #if defined(DETSTATS)
-                const intL q = convert_intL(MINF(num / den * Q_ONE, Q_MAX));    /* as the gather's */
-                const int cls = qz < terrain_dz;
                 const floatL wt = as_floatL((q + 1) | (cls << 16));             /* the table entry: fusion_common.h */
   #elif defined(GAUSSIAN)
                 const floatL wt = weight_nb(num / den);

@@ -16,9 +16,8 @@ carries no evidence), and the fusion takes nothing from a terrain voxel then.
 
 import numpy as np
 
-from radarcl import logodds
 from radarcl.errors import ConfigError, ShapeError
-from radarcl.node_pairs import N_CLASSES, NODES, node_shape
+from radarcl.node_pairs import N_CLASSES, NODES, live_segments, node_shape
 from radarcl.sensor_model import BinModel
 from radarcl.snr_evidence import GAP_CAP, SNR_U, SNR_V, detection_cap
 from radarcl.stages import build, work_group_size
@@ -37,10 +36,7 @@ def classes_needed(opportunity):
     NODES): 1 where the terrain class has no node with knowledge (its opportunity rounds to 0
     knowledge units at every bin and node, in float32 as the kernels round it and in float64 as
     the host's exact nodes do: then all its nodes are 0, and the fusion need not read them), else 2."""
-    terrain = np.asarray(opportunity)[:, 1]
-    units32 = np.asarray(terrain, np.float32) * np.float32(logodds.KNOWLEDGE_SCALE)
-    units64 = np.rint(np.asarray(terrain, np.float64) * logodds.KNOWLEDGE_SCALE)
-    return 2 if (units32 > np.float32(0.5)).any() or (units64 > 0).any() else 1
+    return 2 if live_segments(opportunity)[:, 1].any() else 1      # the rule of a node with knowledge: one place
 
 
 class InterpretNodes:
