@@ -30,10 +30,10 @@
  * builtins. Bins outside the window hold 0 from the evidence array's allocation (nothing writes
  * them but the zeroing of a flagged beam's and a chunk's outside bins).
  *
- * Only what the frame's voxels read (selective, a still plan's node_use): a chunk computes and
- * stores only the classes some voxel reads in one of its bins; the pairs of the others keep what
- * an earlier frame left there, which no voxel of this plan reads. Nodes a voxel reads are
- * the same floats either way.
+ * Only what the frame's voxels read (selective: a still plan's node_use, or a moving frame's bound
+ * of it from its beams, node_reach.cl): a chunk computes and stores only the classes some voxel
+ * reads in one of its bins; the pairs of the others keep what an earlier frame left there, which
+ * no voxel of this plan reads. Nodes a voxel reads are the same floats either way.
  *
  * -D constants (set by radarcl/stages/interpret_nodes.py):
  *   N_BINS      bins per profile
@@ -230,7 +230,8 @@ __kernel void interpret_nodes(
     const int n_chunks,                 // chunks of LANES bins from bin first_bin & ~(LANES - 1) that meet the window
     const int n_beams,
     const __global uint *node_use,      // (n_beams, N_BINS) bit c: some voxel reads class c's pairs of the bin
-    const int selective,                //   (a still plan's table, fusion.cl's RECORD 2); 0: every class everywhere
+    const int selective,                //   (a still plan's table, fusion.cl's RECORD 2, or node_reach.cl's bound);
+                                        //   0: every class everywhere
     __global int2 *evidence)            // (n_beams, N_BINS, NODE_WORDS) out: node pairs
 {
     const int id = get_global_id(0);

@@ -85,7 +85,10 @@ class Mapping:
     cfar_config, interpret_config: as for ``Detection``; per_beam_poses: as for ``Fusion``.
     An evidence model with node pairs (``EvidenceModel.knowledge``: the detection-statistics
     model) needs ``bin_model`` (a ``sensor_model.BinModel``), a grid with the knowledge channel and
-    its ``terrain_dz``; ``from_config`` builds all three.
+    its ``terrain_dz``; ``from_config`` builds all three. Its interpreter then makes only the
+    node pairs a frame's voxels read (a still plan's table knows them, a moving frame's beams bound
+    them: ``Fusion.node_reach``); set ``every_node_pair`` to have it make them all, as a caller
+    that reads the interpreter's arrays needs (``self_test``). The map is the same either way.
     """
 
     def __init__(self, runtime, grid, lattice, model, *, radar=None, n_fft=None, dtype=np.int16, n_bins=None,
@@ -119,6 +122,7 @@ class Mapping:
                              live_segments=live_segments(bin_model.opportunity, it.classes) if it.node_pairs else None)
         self.levels = None          # the ``Levels`` stage: uint8 levels -> power (``fuse``'s db_per_level)
         self.frames = 0
+        self.every_node_pair = False    # True: the interpreter makes every node pair, read or not
         self.config = None          # the mapconfig.Resolved it was built from (from_config)
 
     @classmethod
@@ -208,13 +212,21 @@ class Mapping:
                 events += self.detection.interpreter.upload(flags_in=flags)
                 flags_array = self.detection.interpreter.arrays["flags_in"]
             profiles, done = None, events
-        # a still plan's table says which node pairs its voxels read: the interpreter makes those alone
-        node_use = None if plan.table is None else plan.table.node_use
-        done = self.detection.enqueue(profiles, flags_array, wait_for=done if isinstance(done, list) else [done],
-                                      node_use=node_use)
+        node_use, reached = self._node_use(plan)
+        done = (done if isinstance(done, list) else [done]) + ([] if reached is None else [reached])
+        done = self.detection.enqueue(profiles, flags_array, wait_for=done, node_use=node_use)
         self.fusion.enqueue(self.detection.interpreter.arrays["evidence"], plan, wait_for=[done])
         self.frames += 1
         return plan
+
+    def _node_use(self, plan):
+        """(node_use, its event or None): the node pairs ``plan``'s voxels read, which the
+        interpreter then makes alone; (None, None): it makes every pair."""
+        if self.every_node_pair or self.detection.interpreter.nodes is None:
+            return None, None
+        if plan.table is not None:                  # a still plan's table knows them
+            return plan.table.node_use, None
+        return self.fusion.node_reach(plan) or (None, None)     # a moving frame's beams bound them
 
     def _levels_at(self, db_per_level):
         """The ``Levels`` stage that writes power into the CFAR's input, built on first use, at

@@ -126,10 +126,10 @@ def test_a_refused_frame_leaves_the_map_as_it_was(runtime):
 def test_a_still_radar_makes_only_the_node_pairs_its_voxels_read(runtime):
     """The default model on a still radar: once its pose's table is recorded, the interpreter makes
     only the node pairs the table reads (``StillTable.node_use``) and leaves the others. Frame
-    after frame at that pose, alternating with another pose (whose first frame makes every pair,
-    and whose own table then makes its own), the map (evidence, knowledge, looks) is the one a
-    Mapping that never records a table makes, integer for integer; the pairs read are that
-    Mapping's, and some not read were left."""
+    after frame at that pose, alternating with another pose (whose first frame makes the pairs its
+    beams may reach, and whose own table then makes its own), the map (evidence, knowledge, looks)
+    is the one a Mapping that never records a table and makes every pair makes, integer for
+    integer; the pairs read are that Mapping's, and some not read were left."""
     from radarcl.config.presets import paper_config
     from radarcl.pipeline import bin_model
     from radarcl.sensor_model import terrain_dz
@@ -142,7 +142,7 @@ def test_a_still_radar_makes_only_the_node_pairs_its_voxels_read(runtime):
         m = Mapping(runtime, EvidenceGrid(runtime, SPEC, knowledge=True), lattice, model, radar=PAPER_RADAR,
                     n_fft=config.n_fft, dtype=np.float32, interpret_config=config.interpret_config(), bin_model=bin_model(config, SPEC.voxel_m),
                     terrain_dz=terrain_dz(config.model_params()))
-        m.fusion.still = record
+        m.fusion.still, m.every_node_pair = record, not record
         for seed in range(3):
             samples = paper_like_samples(seed=seed, tilt_deg=TILT)
             plan = m.fuse(samples, still)
@@ -159,3 +159,44 @@ def test_a_still_radar_makes_only_the_node_pairs_its_voxels_read(runtime):
     read = np.stack([use & 1, use & 2], -1).astype(bool)     # (beam x bin, class)
     assert np.array_equal(nodes[0][read], nodes[1][read])
     assert read.any() and not read.all() and not np.array_equal(nodes[0], nodes[1])
+
+
+def test_a_moving_radar_makes_only_the_node_pairs_its_beams_may_reach(runtime):
+    """The default model on a moving radar (a new pose every frame, pitched and rolled, no table):
+    the interpreter makes only the node pairs inside the bound from the frame's beams
+    (``Fusion.node_reach``). Its map (evidence, knowledge, looks) is, frame after frame, the one
+    made with every node pair (``every_node_pair``), integer for integer; the pairs in the bound
+    are that Mapping's, and the bound left some of each class out."""
+    from radarcl.config.presets import paper_config
+    from radarcl.pipeline import bin_model
+    from radarcl.sensor_model import terrain_dz
+
+    config = paper_config(SPEC.voxel_m)
+    lattice, model = BeamLattice.from_radar(PAPER_RADAR, tilt_deg=TILT), BeamModel.from_radar(PAPER_RADAR)
+    poses = [pose_from_xyz_rpy(0.3 * k, -0.2 * k, 0.1 * (k % 2), roll=0.02 * k, pitch=-0.03 * k, yaw=0.05 * k)
+             for k in range(4)]
+    maps, nodes = [], []
+    for every in (False, True):
+        m = Mapping(runtime, EvidenceGrid(runtime, SPEC, knowledge=True), lattice, model, radar=PAPER_RADAR,
+                    n_fft=config.n_fft, dtype=np.float32, interpret_config=config.interpret_config(),
+                    bin_model=bin_model(config, SPEC.voxel_m), terrain_dz=terrain_dz(config.model_params()))
+        m.every_node_pair = every
+        steps = []
+        for k, pose in enumerate(poses):
+            plan = m.fuse(paper_like_samples(seed=k, tilt_deg=TILT), pose)
+            assert plan.table is None
+            steps.append((m.grid.snapshot(), m.grid.knowledge_snapshot(), m.grid.knowledge_snapshot("looks")))
+        maps.append(steps)
+        nodes.append(m.detection.interpreter.arrays["evidence"].get())
+        if not every:
+            use = m.fusion.node_reach(plan)[0].get()               # the last frame's bound, made again
+    for a, b in zip(*maps):
+        assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    assert (maps[0][-1][0] != 0).sum() > 1000 and (maps[0][-1][2] > 0).any()
+    within = np.stack([use & 1, use & 2], -1).astype(bool)              # (beams, bins, class)
+    pairs = [n.reshape(*use.shape, 2, -1) for n in nodes]
+    assert np.array_equal(pairs[0][within], pairs[1][within]) and not np.array_equal(pairs[0], pairs[1])
+    it = m.detection.interpreter
+    window = within[:, it.first_bin:it.last_bin + 1]
+    for c in (0, 1):
+        assert window[..., c].any() and not window[..., c].all()

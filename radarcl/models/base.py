@@ -94,9 +94,9 @@ class EvidenceModel:
         """Device work after kernels/interpret.cl (a model whose evidence the kernel does not make
         writes it here into ``interpreter.arrays["evidence"]``; ``profiles``: the frame on the
         device, ``interpreter.kernels``: the program's kernels; ``node_use``: which node pairs the
-        frame's voxels read, as ``Interpreter.enqueue``, passed only where a still plan of node
-        pairs gives it and the hook takes it: a hook without it makes every node); returns the
-        last event."""
+        frame's voxels read, as ``Interpreter.enqueue``, passed only where the pipeline knows them (a
+        still plan's table, a moving frame's bound) and the hook takes it: a hook without it makes
+        every node); returns the last event."""
         return event
 
     # -- the oracle ----------------------------------------------------------------------------------

@@ -35,6 +35,7 @@ from radarcl.node_pairs import N_CLASSES, node_shape, unpack_nodes
 from radarcl.stages import Port, Stage, build, count, fusion_cached, spacing, work_group_size
 from radarcl.stages.fusion_plan import (BLOCK, FramePlan, FusionPlanner, HeadFrame, brick_geometry, candidate_windows,
                                         column_tiles, nonempty, pool_order, take_rows)
+from radarcl.stages.node_reach import NodeReach
 
 # A work-item per block of rows of 8 voxels (as float8), its beams' windows planned on the
 # host per brick: the shape that measured fastest of those tried (docs/measured-figures.md, "Why the code is
@@ -159,7 +160,21 @@ class Fusion(Stage):
 
         q = runtime.queue               # the RECORD buffers the plain gather ignores, and the other model's
         self._no_table = (cla.zeros(q, (1,), np.uint8), cla.zeros(q, (1,), np.int32), cla.zeros(q, (1, 2), np.int32))
+        self.live_segments = live                     # (n_bins, classes) int32, as the kernels read it
         self._live = cla.to_device(q, live)           # the RECORD passes' and DEAD_SEGMENTS' (fusion.cl)
+        self._reach = None                            # a NodeReach, built on a moving frame's first node_reach
+
+    def node_reach(self, plan):
+        """(node_use, event): the node pairs ``plan``'s voxels may read, bounded from its beams'
+        geometry on the device (``node_reach``; a still plan's table knows them exactly), for the
+        interpreter of a detection-statistics Fusion; None without a terrain class, where the
+        bound would split no classes and only trim the range past the grid, which a rolling
+        window has none of."""
+        if self.detstats and self.classes == 1:
+            return None
+        if self._reach is None:
+            self._reach = NodeReach(self)            # ConfigError without detstats
+        return self._reach.node_use, self._reach.enqueue(self._plan_device(plan)["beams"])
 
     def _live_segments(self, live_segments):
         """``live_segments`` checked, as the kernels read it: int32 (n_bins, classes), every segment

@@ -95,7 +95,8 @@ class InterpretNodes:
         and tau), ``ln_floors`` (n_beams,) float32; writes the node pairs of the window's bins
         into ``evidence`` (n_beams, n_bins, 4 x classes) int2, whose other bins must hold 0.
         ``node_use``: None, or a device array (n_beams, n_bins) uint32 whose bit c says that
-        some voxel reads class c's pairs of that bin (a still plan's ``StillTable.node_use``):
+        some voxel reads class c's pairs of that bin (a still plan's ``StillTable.node_use``, or
+        a moving frame's bound from its beams, ``Fusion.node_reach``):
         then a chunk of ``lanes`` bins computes only the classes one of its bins has, and the
         other pairs keep what they held. Returns the kernel's event (a marker after ``wait_for``
         where the window is empty)."""

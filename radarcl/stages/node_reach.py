@@ -1,0 +1,115 @@
+"""The node pairs a moving frame's voxels may read (the detection-statistics model).
+
+A still plan's table records exactly which (beam, bin, class) node pairs its voxels read
+(``StillTable.node_use``), and the node kernel computes those alone. A moving frame has no
+table; ``NodeReach`` wraps ``kernels/node_reach.cl``, which bounds the same set from the beams'
+geometry: a beam tilted down sees only terrain past where its upper edge meets the ground, and
+only upright targets before its lower edge does; a bin past the grid's far corner is read by no
+voxel. ``node_reach`` is its float64 oracle in numpy (tests/test_node_reach.py): the device's
+bits hold the oracle's, and both hold every pair the gather reads.
+"""
+
+import math
+
+import numpy as np
+
+from radarcl.errors import ConfigError
+from radarcl.stages import build, work_group_size
+
+# [m] and [m per m of range]: every bound is widened by REACH_M + REACH_REL x range, beyond
+# float32's rounding of the gather's ranges, heights and rho2 (~1e-6 relative).
+REACH_M = 1e-3
+REACH_REL = 1e-5
+# Bins bounded together by one work-item (their ranges' union): one bound per bin cost more than
+# the node kernel saved, and the node kernel decides per 8 or 16 bins anyway.
+REACH_BINS = 8
+LOCAL_SIZE = 64             # work-items per group where the kernel allows it (any size works)
+
+
+def node_reach(beams, box_lo, box_hi, spacing, first_bin, last_bin, n_bins, tans, apertures, terrain_dz, live):
+    """Float64 bound of the node pairs a frame's voxels may read: (n_beams, n_bins) uint32, bit c
+    where class c (0 upright, 1 terrain; ``live``'s columns) of a bin in [first_bin, last_bin] may
+    be read, bounded over groups of REACH_BINS bins from first_bin. ``beams``: (n_beams, 3, 4)
+    the plan's axes u, v, w in grid coordinates, column 3 the origin; ``box_lo``, ``box_hi``: the
+    grid's first and last voxel centres [m, grid coordinates];
+    ``tans``: tan of the half beamwidths (az, el); ``apertures``: half apertures (0 without the
+    near-field cylinder); ``live``: (n_bins, classes) ``node_pairs.live_segments``. The bound is
+    the kernel's (kernels/node_reach.cl), widened by REACH_M + REACH_REL x range."""
+    beams = np.asarray(beams, np.float64)
+    live = np.asarray(live)
+    classes = live.shape[1]
+    ta, te = tans
+    a_az, a_el = apertures
+    o = beams[:, :, 3]
+    U, V, W = beams[:, 0, :3], beams[:, 1, :3], beams[:, 2, :3]
+    lo, hi = np.asarray(box_lo, np.float64) - o, np.asarray(box_hi, np.float64) - o
+    near = np.linalg.norm(np.maximum(np.maximum(lo, -hi), 0.0), axis=1)[:, None]
+    far = np.linalg.norm(np.maximum(np.abs(lo), np.abs(hi)), axis=1)[:, None]
+    j0 = np.arange(first_bin, last_bin + 1, REACH_BINS, dtype=np.float64)[None, :]      # each group's bins: [j0, j1)
+    j1 = np.minimum(j0 + REACH_BINS, last_bin + 1)
+    reach = (j1 - 0.5) * spacing
+    m = REACH_M + REACH_REL * reach
+    r_lo, r_hi = np.maximum((j0 - 0.5) * spacing - m, 0.0), reach + m
+    d_lo = np.sqrt(np.maximum(r_lo ** 2 - (a_az ** 2 + a_el ** 2), 0.0) / (1.0 + ta ** 2 + te ** 2))
+
+    def half_height(d):
+        return np.hypot(np.maximum(d * ta, a_az) * V[:, 2:], np.maximum(d * te, a_el) * W[:, 2:])
+
+    uz = U[:, 2:]
+    top = np.minimum(np.maximum(d_lo * uz + half_height(d_lo), r_hi * uz + half_height(r_hi)), hi[:, 2:]) + m
+    bottom = np.maximum(np.minimum(d_lo * uz - half_height(d_lo), r_hi * uz - half_height(r_hi)), lo[:, 2:]) - m
+    ok = (r_lo <= far + m) & (r_hi >= near - m) & (bottom <= top)
+    bits = (ok & (top >= terrain_dz)) * 1 | (ok & (bottom < terrain_dz)) * 2
+    bits &= (1 << classes) - 1
+    window = slice(first_bin, last_bin + 1)
+    bits = np.repeat(bits, REACH_BINS, axis=1)[:, :last_bin + 1 - first_bin]
+    for c in range(classes):
+        bits[:, (live[window, c] & 0xF) == 0] &= ~(1 << c)
+    out = np.zeros((len(beams), n_bins), np.uint32)
+    out[:, window] = bits
+    return out
+
+
+class NodeReach:
+    """The node-reach kernel of a ``Fusion`` with the detection-statistics model: ``enqueue(beams)``
+    writes, on the device, the node pairs that the voxels of a plan with those beams may read
+    (``node_reach``) into one array it keeps, ``node_use`` (n_beams, n_bins) uint32, which the
+    interpreter takes as it takes a still table's."""
+
+    def __init__(self, fusion):
+        import pyopencl.array as cla
+
+        if not fusion.detstats:
+            raise ConfigError("node reach is the detection-statistics model's (Fusion(..., detstats=True))")
+        self.fusion, rt = fusion, fusion.runtime
+        self._kernel = build(rt, "node_reach", dict(N_BINS=fusion.n_bins, CLASSES=fusion.classes,
+                                                    REACH_BINS=REACH_BINS, REACH_M=REACH_M,
+                                                    REACH_REL=REACH_REL))["node_reach"]
+        self.local_size = work_group_size(rt, self._kernel, None, LOCAL_SIZE)
+        live = fusion.live_segments & 0xF                # bit c of a bin: some segment of class c is live
+        self._live = cla.to_device(rt.queue, ((live != 0) << np.arange(live.shape[1])).sum(axis=1).astype(np.uint32))
+        self.node_use = cla.zeros(rt.queue, (fusion.lattice.n_beams, fusion.n_bins), np.uint32)   # 0 past the window
+
+    def arguments(self):
+        """``node_reach``'s arguments but the beams: the fusion's geometry and live segments."""
+        f, spec = self.fusion, self.fusion.grid.spec
+        m = f.model
+        v = spec.voxel_m
+        box_lo = np.full(3, 0.5 * v)
+        box_hi = (np.asarray(spec.shape, np.float64) - 0.5) * v
+        return dict(box_lo=box_lo, box_hi=box_hi, spacing=f.bin_spacing_m, first_bin=f.first_bin, last_bin=f.last_bin,
+                    n_bins=f.n_bins, tans=(math.tan(m.beamwidth_az_rad / 2), math.tan(m.beamwidth_el_rad / 2)),
+                    apertures=m.apertures, terrain_dz=f.terrain_dz, live=f.live_segments)
+
+    def enqueue(self, beams, wait_for=None):
+        """Launch over the plan's ``beams`` (a device array (n_beams, 3) float4); returns the event."""
+        a, f = self.arguments(), self.fusion
+        n_groups = -(-(f.last_bin - f.first_bin + 1) // REACH_BINS)
+        n, ls = f.lattice.n_beams * n_groups, self.local_size
+        (ta, te), (a_az, a_el) = a["tans"], a["apertures"]
+        nx, ny, nz = f.grid.spec.shape
+        return self._kernel(f.runtime.queue, (-(-n // ls) * ls,), (ls,), wait_for=wait_for, beams=beams,
+                            live=self._live, spacing=a["spacing"], tan_half_az=ta, tan_half_el=te, a_az=a_az,
+                            a_el=a_el, terrain_dz=a["terrain_dz"], voxel=f.grid.spec.voxel_m, nx=nx, ny=ny, nz=nz,
+                            first_bin=f.first_bin, last_bin=f.last_bin, n_groups=n_groups,
+                            n_beams=f.lattice.n_beams, node_use=self.node_use)

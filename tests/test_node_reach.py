@@ -1,0 +1,117 @@
+"""kernels/node_reach.cl <-> radarcl/stages/node_reach.py against its float64 oracle,
+radarcl.stages.node_reach.node_reach: the node pairs a moving frame's voxels may read.
+
+The bound must hold every pair the gather reads. A still table records exactly those
+(``StillTable.node_use``, tests/test_fusion_cached.py), so at each pose here the device's bound
+holds the table's set, bit for bit; a moving radar's map made with the bound is the one made with
+every pair (tests/test_pipeline.py)."""
+
+import math
+
+import numpy as np
+import pytest
+from test_fusion import FIRST, LAST, LATTICES, MODELS, N_BINS, POSE, SMALL, SPACING, random_nodes
+
+from radarcl.errors import ConfigError
+from radarcl.geometry import pose_from_xyz_rpy
+from radarcl.grid import EvidenceGrid
+from radarcl.gridspec import GridSpec
+from radarcl.stages.fusion import Fusion
+from radarcl.stages.node_reach import NodeReach, node_reach
+
+# share of the window's (beam, bin, class) where float32's bound and float64's differ: only where
+# one lies within rounding of a class's height or the grid's edge
+DIFFERING_MAX = 0.002
+PLANAR = GridSpec((-1.0, -6.0, -3.0), 0.25, (48, 48, 8), brick_z=1)
+ABOVE = pose_from_xyz_rpy(2.0, 0.0, 4.0, pitch=0.2)          # over the grid's top, looking down into it
+
+CASES = {   # lattice, beam model, pose, grid, terrain_dz [m]
+    "paper, near field, pitched and rolled": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"],
+                                              POSE, SMALL, -0.8),
+    "paper, cone without near field": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=False, gaussian=False"],
+                                       pose_from_xyz_rpy(0.0, 1.0, 0.5, yaw=-0.3), SMALL, -0.5),
+    "paper, planar grid": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"], POSE, PLANAR,
+                           -2.0),
+    "paper, over the grid": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"], ABOVE, SMALL,
+                             -3.0),
+    "spinning, tall beams": (LATTICES["spinning, 90 azimuths"], MODELS["near_field=True, gaussian=True"],
+                             pose_from_xyz_rpy(0.5, 0.5, 0.2, roll=0.05), SMALL, -0.3),
+}
+
+
+def detstats_fusion(runtime, case, classes=2, live=None):
+    lattice, model, _, spec, terrain_dz = case
+    return Fusion(runtime, EvidenceGrid(runtime, spec, knowledge=True), lattice, model, N_BINS, SPACING, FIRST, LAST,
+                  still=True, detstats=True, terrain_dz=terrain_dz, classes=classes, live_segments=live)
+
+
+def bound(fusion, plan):
+    """(the device's bound, the float64 oracle's) of ``plan``."""
+    import pyopencl.array as cla
+
+    reach = NodeReach(fusion)
+    reach.enqueue(cla.to_device(fusion.runtime.queue, plan.beams)).wait()
+    return reach.node_use.get(), node_reach(plan.beams, **reach.arguments())
+
+
+def live_segments(seed):
+    """Random segments that never carry anything, a third of the bins live in every segment."""
+    live = np.random.default_rng(seed).integers(0, 16, (N_BINS, 2)).astype(np.uint8)
+    live[: N_BINS // 3] = 0xF
+    live[N_BINS // 2: N_BINS // 2 + 8, 1] = 0                      # no live segment of the terrain class
+    return live
+
+
+@pytest.mark.parametrize("classes", [2, 1])
+@pytest.mark.parametrize("case", CASES.values(), ids=CASES.keys())
+def test_the_device_bound_matches_the_float64_oracle(runtime, case, classes):
+    f = detstats_fusion(runtime, case, classes, live_segments(3)[:, :classes])
+    got, want = bound(f, f.plan(case[2]))
+    window = np.zeros(N_BINS, bool)
+    window[FIRST:LAST + 1] = True
+    assert (got[:, ~window] == 0).all() and (want[:, ~window] == 0).all()
+    assert got.max() < 1 << classes
+    differ = sum(((got >> c) & 1) != ((want >> c) & 1) for c in range(classes))
+    assert differ.sum() <= DIFFERING_MAX * got[:, window].size * classes
+    assert ((want & 1) != 0).any()
+
+
+@pytest.mark.parametrize("live", [None, 5], ids=["every segment live", "dead segments"])
+@pytest.mark.parametrize("case", CASES.values(), ids=CASES.keys())
+def test_the_bound_holds_every_node_pair_the_voxels_read(runtime, case, live):
+    """The still table's exact set (its entries' bins and classes) lies inside the bound, on the
+    device and in float64; the bound leaves out some of the window's pairs of each class where
+    the beams reach both, and no pair the table reads."""
+    lattice, _, pose, _, _ = case
+    f = detstats_fusion(runtime, case, live=None if live is None else live_segments(live))
+    frame = random_nodes(lattice, seed=4)[2]
+    f(frame, pose)
+    plan = f(frame, pose)
+    read = plan.table.node_use.get()
+    got, want = bound(f, plan)
+    assert read.any()
+    assert not (read & ~got).any(), "a pair the voxels read is outside the device's bound"
+    assert not (read & ~want).any(), "a pair the voxels read is outside the float64 bound"
+    window = got[:, FIRST:LAST + 1]
+    if lattice.n_el > 1:                                        # a tilted radar's beams: both classes, not everywhere
+        for c in (0, 1):
+            assert ((read >> c) & 1).any() and not ((window >> c) & 1).all()
+
+
+def test_the_bound_is_the_detection_statistics_models(runtime):
+    """Eq. 12's Fusion has no node pairs to bound; a Fusion without a terrain class takes none
+    (the bound would split no class)."""
+    case = CASES["paper, near field, pitched and rolled"]
+    lattice, model, pose, spec, _ = case
+    eq12 = Fusion(runtime, EvidenceGrid(runtime, spec), lattice, model, N_BINS, SPACING, FIRST, LAST)
+    with pytest.raises(ConfigError, match="detection-statistics"):
+        eq12.node_reach(eq12.plan(pose))
+    with pytest.raises(ConfigError, match="detection-statistics"):
+        NodeReach(eq12)
+    one = detstats_fusion(runtime, case, classes=1)
+    assert one.node_reach(one.plan(pose)) is None
+    two = detstats_fusion(runtime, case)
+    use, event = two.node_reach(two.plan(pose))
+    event.wait()
+    assert use.shape == (lattice.n_beams, N_BINS) and use.get().any()
+    assert math.isfinite(two.terrain_dz)
