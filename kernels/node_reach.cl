@@ -14,7 +14,8 @@
  *   in d (and d u_z - h(d) concave), so over d in [d_lo, D] both take their extremes at the ends;
  * - D^2 = d^2 + y^2 + z^2 <= d^2 (1 + tan_az^2 + tan_el^2) + a_az^2 + a_el^2 gives d_lo;
  * - the point is a voxel centre: within the box of the grid's voxel centres, in height
- *   and in range (the box's nearest and farthest points from the origin).
+ *   and in range (the box's nearest and farthest points from the origin);
+ * - a part of a frame (radarcl live: Fusion.restrict) fuses the beams of its azimuths alone.
  * Every bound is widened by REACH_M + REACH_REL x range [m], far beyond float32's rounding in the
  * gather (its ranges, bins, heights and rho2), so a voxel the gather finds in a beam and bin is
  * always within it (tests/test_node_reach.py against the still table's exact set).
@@ -54,6 +55,9 @@ __kernel void node_reach(
     const int last_bin,
     const int n_groups,               // groups of REACH_BINS bins from first_bin that meet the window
     const int n_beams,
+    const int n_el,                   // beams per azimuth: beam b is azimuth b / n_el's
+    const int az_lo,                  // the azimuths whose beams the frame fuses (a part of a frame: the
+    const int az_hi,                  //   others' pairs are read by none of its voxels)
     __global uint *node_use)          // (n_beams, N_BINS) out: bit c where class c's pairs may be read
 {
     const int id = get_global_id(0);
@@ -72,7 +76,7 @@ __kernel void node_reach(
     const float m = REACH_M + REACH_REL * reach;
     const float r_lo = MAXF((j0 - 0.5f) * spacing - m, 0.0f), r_hi = reach + m;
     uint bits = 0;
-    if (r_lo <= far + m && r_hi >= near - m) {
+    if (b / n_el >= az_lo && b / n_el <= az_hi && r_lo <= far + m && r_hi >= near - m) {
         const float d_lo = sqrt(MAXF(r_lo * r_lo - (a_az * a_az + a_el * a_el), 0.0f)
                                 / (1.0f + tan_half_az * tan_half_az + tan_half_el * tan_half_el));
         const float h_lo = half_height(d_lo, V4.z, W4.z, tan_half_az, tan_half_el, a_az, a_el);

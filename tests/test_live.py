@@ -64,6 +64,10 @@ def test_a_frame_fused_in_azimuth_ranges_equals_the_whole_frame(runtime, scene):
             parts.fuse(part, pose, azimuths=(lo, hi - 1))
     a, b = whole.snapshot(), parts.snapshot()
     assert np.abs(a).max() > 1000 and np.array_equal(a, b)
+    # the default model's knowledge and looks too: each part makes the node pairs of its own beams
+    assert whole.grid.has_knowledge and parts.detection.interpreter.nodes is not None
+    for channel in ("knowledge", "looks"):
+        assert np.array_equal(whole.grid.knowledge_snapshot(channel), parts.grid.knowledge_snapshot(channel))
     with pytest.raises(ConfigError, match="not a range"):
         parts.fuse(frames[0], poses[0], azimuths=(5, 64))
 

@@ -98,6 +98,29 @@ def test_the_bound_holds_every_node_pair_the_voxels_read(runtime, case, live):
             assert ((read >> c) & 1).any() and not ((window >> c) & 1).all()
 
 
+@pytest.mark.parametrize("case", [c for c in CASES.values() if not c[0].wraps], ids=[k for k, c in CASES.items()
+                                                                                    if not c[0].wraps])
+def test_a_part_of_a_frame_bounds_its_own_beams(runtime, case):
+    """A part of a frame (``Fusion.restrict``: the beams of some azimuths, as ``radarcl live``
+    fuses what has arrived) bounds the pairs of its beams alone: the whole frame's bound there, 0
+    elsewhere, on the device as in float64."""
+    lattice, _, pose, _, _ = case
+    f = detstats_fusion(runtime, case)
+    plan = f.plan(pose)
+    whole, _ = bound(f, plan)
+    part = f.restrict(plan, 20, 37)
+    assert part.azimuths == (20, 37) and plan.azimuths is None
+    use, event = f.node_reach(part)
+    event.wait()
+    got = use.get()
+    reach = NodeReach(f)
+    want = node_reach(plan.beams, **reach.arguments(), azimuths=part.azimuths)
+    mine = (np.arange(lattice.n_beams) // lattice.n_el >= 20) & (np.arange(lattice.n_beams) // lattice.n_el <= 37)
+    assert np.array_equal(got[mine], whole[mine]) and not got[~mine].any() and got[mine].any()
+    assert not want[~mine].any()
+    assert (got != want).mean() <= DIFFERING_MAX
+
+
 def test_the_bound_is_the_detection_statistics_models(runtime):
     """Eq. 12's Fusion has no node pairs to bound; a Fusion without a terrain class takes none
     (the bound would split no class)."""

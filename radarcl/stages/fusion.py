@@ -166,7 +166,8 @@ class Fusion(Stage):
 
     def node_reach(self, plan):
         """(node_use, event): the node pairs ``plan``'s voxels may read, bounded from its beams'
-        geometry on the device (``node_reach``; a still plan's table knows them exactly), for the
+        geometry on the device (``node_reach``; a still plan's table knows them exactly) and, for a
+        part of a frame (``restrict``), to its azimuths' beams, for the
         interpreter of a detection-statistics Fusion; None without a terrain class, where the
         bound would split no classes and only trim the range past the grid, which a rolling
         window has none of."""
@@ -174,7 +175,7 @@ class Fusion(Stage):
             return None
         if self._reach is None:
             self._reach = NodeReach(self)            # ConfigError without detstats
-        return self._reach.node_use, self._reach.enqueue(self._plan_device(plan)["beams"])
+        return self._reach.node_use, self._reach.enqueue(self._plan_device(plan)["beams"], plan.azimuths)
 
     def _live_segments(self, live_segments):
         """``live_segments`` checked, as the kernels read it: int32 (n_bins, classes), every segment
@@ -299,7 +300,8 @@ class Fusion(Stage):
         keep = i_lo <= i_hi
         windows = w[keep].copy()
         windows[:, 0], windows[:, 1] = i_lo[keep], i_hi[keep]
-        return FramePlan(plan.beams, plan.bricks[keep], windows, self, plan.generation, [plan.beams_outside])
+        return FramePlan(plan.beams, plan.bricks[keep], windows, self, plan.generation, [plan.beams_outside],
+                         azimuths=(lo, hi))
 
     def _windows(self, brick_index, edge, frame):
         centres, radius = brick_geometry(brick_index, edge * self.grid.spec.voxel_m, self.brick_z)

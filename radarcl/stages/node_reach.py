@@ -26,15 +26,18 @@ REACH_BINS = 8
 LOCAL_SIZE = 64             # work-items per group where the kernel allows it (any size works)
 
 
-def node_reach(beams, box_lo, box_hi, spacing, first_bin, last_bin, n_bins, tans, apertures, terrain_dz, live):
+def node_reach(beams, box_lo, box_hi, spacing, first_bin, last_bin, n_bins, tans, apertures, terrain_dz, live,
+               n_el=1, azimuths=None):
     """Float64 bound of the node pairs a frame's voxels may read: (n_beams, n_bins) uint32, bit c
     where class c (0 upright, 1 terrain; ``live``'s columns) of a bin in [first_bin, last_bin] may
     be read, bounded over groups of REACH_BINS bins from first_bin. ``beams``: (n_beams, 3, 4)
     the plan's axes u, v, w in grid coordinates, column 3 the origin; ``box_lo``, ``box_hi``: the
     grid's first and last voxel centres [m, grid coordinates];
     ``tans``: tan of the half beamwidths (az, el); ``apertures``: half apertures (0 without the
-    near-field cylinder); ``live``: (n_bins, classes) ``node_pairs.live_segments``. The bound is
-    the kernel's (kernels/node_reach.cl), widened by REACH_M + REACH_REL x range."""
+    near-field cylinder); ``live``: (n_bins, classes) ``node_pairs.live_segments``; ``azimuths``:
+    (lo, hi), the azimuths whose beams a part of a frame fuses (beam b is azimuth b // ``n_el``'s),
+    None for all. The bound is the kernel's (kernels/node_reach.cl), widened by REACH_M +
+    REACH_REL x range."""
     beams = np.asarray(beams, np.float64)
     live = np.asarray(live)
     classes = live.shape[1]
@@ -59,6 +62,9 @@ def node_reach(beams, box_lo, box_hi, spacing, first_bin, last_bin, n_bins, tans
     top = np.minimum(np.maximum(d_lo * uz + half_height(d_lo), r_hi * uz + half_height(r_hi)), hi[:, 2:]) + m
     bottom = np.maximum(np.minimum(d_lo * uz - half_height(d_lo), r_hi * uz - half_height(r_hi)), lo[:, 2:]) - m
     ok = (r_lo <= far + m) & (r_hi >= near - m) & (bottom <= top)
+    if azimuths is not None:
+        az = np.arange(len(beams))[:, None] // n_el
+        ok &= (az >= azimuths[0]) & (az <= azimuths[1])
     bits = (ok & (top >= terrain_dz)) * 1 | (ok & (bottom < terrain_dz)) * 2
     bits &= (1 << classes) - 1
     window = slice(first_bin, last_bin + 1)
@@ -99,11 +105,14 @@ class NodeReach:
         box_hi = (np.asarray(spec.shape, np.float64) - 0.5) * v
         return dict(box_lo=box_lo, box_hi=box_hi, spacing=f.bin_spacing_m, first_bin=f.first_bin, last_bin=f.last_bin,
                     n_bins=f.n_bins, tans=(math.tan(m.beamwidth_az_rad / 2), math.tan(m.beamwidth_el_rad / 2)),
-                    apertures=m.apertures, terrain_dz=f.terrain_dz, live=f.live_segments)
+                    apertures=m.apertures, terrain_dz=f.terrain_dz, live=f.live_segments, n_el=f.lattice.n_el)
 
-    def enqueue(self, beams, wait_for=None):
-        """Launch over the plan's ``beams`` (a device array (n_beams, 3) float4); returns the event."""
+    def enqueue(self, beams, azimuths=None, wait_for=None):
+        """Launch over the plan's ``beams`` (a device array (n_beams, 3) float4); ``azimuths``:
+        (lo, hi), the azimuths whose beams the plan fuses (a part of a frame: the others' pairs are
+        read by no voxel of it), None for all. Returns the event."""
         a, f = self.arguments(), self.fusion
+        az_lo, az_hi = (0, f.lattice.n_az - 1) if azimuths is None else azimuths
         n_groups = -(-(f.last_bin - f.first_bin + 1) // REACH_BINS)
         n, ls = f.lattice.n_beams * n_groups, self.local_size
         (ta, te), (a_az, a_el) = a["tans"], a["apertures"]
@@ -112,4 +121,5 @@ class NodeReach:
                             live=self._live, spacing=a["spacing"], tan_half_az=ta, tan_half_el=te, a_az=a_az,
                             a_el=a_el, terrain_dz=a["terrain_dz"], voxel=f.grid.spec.voxel_m, nx=nx, ny=ny, nz=nz,
                             first_bin=f.first_bin, last_bin=f.last_bin, n_groups=n_groups,
-                            n_beams=f.lattice.n_beams, node_use=self.node_use)
+                            n_beams=f.lattice.n_beams, n_el=f.lattice.n_el, az_lo=int(az_lo), az_hi=int(az_hi),
+                            node_use=self.node_use)
