@@ -17,8 +17,9 @@
  *   and in range (the box's nearest and farthest points from the origin);
  * - a part of a frame (radarcl live: Fusion.restrict) fuses the beams of its azimuths alone.
  * Every bound is widened by REACH_M + REACH_REL x range [m], far beyond float32's rounding in the
- * gather (its ranges, bins, heights and rho2), so a voxel the gather finds in a beam and bin is
- * always within it (tests/test_node_reach.py against the still table's exact set).
+ * gather (its ranges, bins, heights and rho2) and what a pose's rotation may lack of orthonormality
+ * (radarcl.stages.node_reach), so a voxel the gather finds in a beam and bin is always within it
+ * (tests/test_node_reach.py against the still table's exact set).
  *
  * Work mapping: get_global_id(0) = beam x n_groups + group, a group being REACH_BINS bins from
  * first_bin, bounded together (their ranges' union); any local size works.

@@ -3,10 +3,10 @@ radarcl.stages.node_reach.node_reach: the node pairs a moving frame's voxels may
 
 The bound must hold every pair the gather reads. A still table records exactly those
 (``StillTable.node_use``, tests/test_fusion_cached.py), so at each pose here the device's bound
-holds the table's set, bit for bit; a moving radar's map made with the bound is the one made with
-every pair (tests/test_pipeline.py)."""
-
-import math
+and the oracle's each contain the table's set, with the class boundary (terrain_dz) put just above
+and just below every height of the grid's voxel centres, where a bound too tight by any amount
+first loses a pair. A moving radar's map made with the bound is the one made with every pair
+(tests/test_pipeline.py)."""
 
 import numpy as np
 import pytest
@@ -24,32 +24,35 @@ from radarcl.stages.node_reach import NodeReach, node_reach
 DIFFERING_MAX = 0.002
 PLANAR = GridSpec((-1.0, -6.0, -3.0), 0.25, (48, 48, 8), brick_z=1)
 ABOVE = pose_from_xyz_rpy(2.0, 0.0, 4.0, pitch=0.2)          # over the grid's top, looking down into it
+PAPER = LATTICES["paper, tilt -10 deg"]
+# a radar moving while it scans: one pose per beam, rising, turning and rolling
+SCANNING = np.stack([pose_from_xyz_rpy(0.6 * f, 0.1, 0.2 * f, roll=0.05 * f, yaw=0.1 * f)
+                     for f in np.linspace(0, 1, PAPER.n_beams)])
 
-CASES = {   # lattice, beam model, pose, grid, terrain_dz [m]
-    "paper, near field, pitched and rolled": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"],
-                                              POSE, SMALL, -0.8),
-    "paper, cone without near field": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=False, gaussian=False"],
+CASES = {   # lattice, beam model, pose (or one per beam), grid, terrain_dz [m] splitting what the beams reach
+    "paper, near field, pitched and rolled": (PAPER, MODELS["near_field=True, gaussian=True"], POSE, SMALL, -0.8),
+    "paper, cone without near field": (PAPER, MODELS["near_field=False, gaussian=False"],
                                        pose_from_xyz_rpy(0.0, 1.0, 0.5, yaw=-0.3), SMALL, -0.5),
-    "paper, planar grid": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"], POSE, PLANAR,
-                           -2.0),
-    "paper, over the grid": (LATTICES["paper, tilt -10 deg"], MODELS["near_field=True, gaussian=True"], ABOVE, SMALL,
-                             -3.0),
+    "paper, planar grid": (PAPER, MODELS["near_field=True, gaussian=True"], POSE, PLANAR, -2.0),
+    "paper, over the grid": (PAPER, MODELS["near_field=True, gaussian=True"], ABOVE, SMALL, -3.0),
+    "paper, moving while it scans": (PAPER, MODELS["near_field=True, gaussian=True"], SCANNING, SMALL, -0.8),
     "spinning, tall beams": (LATTICES["spinning, 90 azimuths"], MODELS["near_field=True, gaussian=True"],
                              pose_from_xyz_rpy(0.5, 0.5, 0.2, roll=0.05), SMALL, -0.3),
 }
 
 
-def detstats_fusion(runtime, case, classes=2, live=None):
-    lattice, model, _, spec, terrain_dz = case
+def detstats_fusion(runtime, case, classes=2, live=None, terrain_dz=None):
+    lattice, model, pose, spec, dz = case
     return Fusion(runtime, EvidenceGrid(runtime, spec, knowledge=True), lattice, model, N_BINS, SPACING, FIRST, LAST,
-                  still=True, detstats=True, terrain_dz=terrain_dz, classes=classes, live_segments=live)
+                  per_beam_poses=np.ndim(pose) == 3, still=True, detstats=True,
+                  terrain_dz=dz if terrain_dz is None else terrain_dz, classes=classes, live_segments=live)
 
 
-def bound(fusion, plan):
+def bound(fusion, plan, local_size=None):
     """(the device's bound, the float64 oracle's) of ``plan``."""
     import pyopencl.array as cla
 
-    reach = NodeReach(fusion)
+    reach = NodeReach(fusion, local_size=local_size)
     reach.enqueue(cla.to_device(fusion.runtime.queue, plan.beams)).wait()
     return reach.node_use.get(), node_reach(plan.beams, **reach.arguments())
 
@@ -62,11 +65,21 @@ def live_segments(seed):
     return live
 
 
+def voxel_heights(case):
+    """Every height of the grid's voxel centres above the (first) beam's origin [m]."""
+    _, _, pose, spec, _ = case
+    origin_z = np.reshape(pose, (-1, 4, 4))[0, 2, 3] - spec.origin_m[2]
+    return (np.arange(spec.shape[2]) + 0.5) * spec.voxel_m - origin_z
+
+
 @pytest.mark.parametrize("classes", [2, 1])
 @pytest.mark.parametrize("case", CASES.values(), ids=CASES.keys())
 def test_the_device_bound_matches_the_float64_oracle(runtime, case, classes):
+    """The device's bits are the oracle's but within float32's rounding of a boundary, the window's
+    bins alone, the classes the pipeline keeps; any local size gives the same bits."""
     f = detstats_fusion(runtime, case, classes, live_segments(3)[:, :classes])
-    got, want = bound(f, f.plan(case[2]))
+    plan = f.plan(case[2])
+    got, want = bound(f, plan)
     window = np.zeros(N_BINS, bool)
     window[FIRST:LAST + 1] = True
     assert (got[:, ~window] == 0).all() and (want[:, ~window] == 0).all()
@@ -74,28 +87,48 @@ def test_the_device_bound_matches_the_float64_oracle(runtime, case, classes):
     differ = sum(((got >> c) & 1) != ((want >> c) & 1) for c in range(classes))
     assert differ.sum() <= DIFFERING_MAX * got[:, window].size * classes
     assert ((want & 1) != 0).any()
+    for local_size in (1, 7):
+        assert np.array_equal(bound(f, plan, local_size)[0], got)
 
 
-@pytest.mark.parametrize("live", [None, 5], ids=["every segment live", "dead segments"])
 @pytest.mark.parametrize("case", CASES.values(), ids=CASES.keys())
-def test_the_bound_holds_every_node_pair_the_voxels_read(runtime, case, live):
+def test_the_bound_holds_every_node_pair_the_voxels_read(runtime, case):
     """The still table's exact set (its entries' bins and classes) lies inside the bound, on the
-    device and in float64; the bound leaves out some of the window's pairs of each class where
-    the beams reach both, and no pair the table reads."""
-    lattice, _, pose, _, _ = case
-    f = detstats_fusion(runtime, case, live=None if live is None else live_segments(live))
+    device and in float64, with the class boundary just above and below every voxel-centre height
+    (and at the case's own, where the bound also leaves out some of each class's pairs)."""
+    lattice, _, pose, _, own = case
     frame = random_nodes(lattice, seed=4)[2]
+    heights = [own] + [h + e for h in voxel_heights(case) for e in (-1e-4, 1e-4)]
+    for terrain_dz in heights:
+        f = detstats_fusion(runtime, case, terrain_dz=terrain_dz)
+        f(frame, pose)
+        plan = f(frame, pose)
+        read = plan.table.node_use.get()
+        got, want = bound(f, plan)
+        assert read.any()
+        assert not (read & ~got).any(), f"a pair the voxels read is outside the device's bound, terrain_dz {terrain_dz}"
+        assert not (read & ~want).any(), f"a pair the voxels read is outside the float64 bound, terrain_dz {terrain_dz}"
+        if terrain_dz == own and lattice.n_el > 1:           # a tilted radar's beams: both classes, not everywhere
+            window = got[:, FIRST:LAST + 1]
+            for c in (0, 1):
+                assert ((read >> c) & 1).any() and not ((window >> c) & 1).all()
+
+
+@pytest.mark.parametrize("case", CASES.values(), ids=CASES.keys())
+def test_the_bound_leaves_out_only_segments_that_never_carry_anything(runtime, case):
+    """With segments that never carry anything (``live_segments``), the table leaves out their
+    entries and the bound a (bin, class) with no live segment; the table's set stays inside it."""
+    lattice, _, pose, _, _ = case
+    live = live_segments(5)
+    f = detstats_fusion(runtime, case, live=live)
+    frame = random_nodes(lattice, seed=6)[2]
     f(frame, pose)
-    plan = f(frame, pose)
-    read = plan.table.node_use.get()
-    got, want = bound(f, plan)
-    assert read.any()
-    assert not (read & ~got).any(), "a pair the voxels read is outside the device's bound"
-    assert not (read & ~want).any(), "a pair the voxels read is outside the float64 bound"
-    window = got[:, FIRST:LAST + 1]
-    if lattice.n_el > 1:                                        # a tilted radar's beams: both classes, not everywhere
-        for c in (0, 1):
-            assert ((read >> c) & 1).any() and not ((window >> c) & 1).all()
+    read = f(frame, pose).table.node_use.get()
+    got, want = bound(f, f.plan(pose))
+    assert read.any() and not (read & ~got).any() and not (read & ~want).any()
+    dead = (live & 0xF) == 0                                    # (bins, classes)
+    for c in (0, 1):
+        assert not ((got[:, dead[:, c]] >> c) & 1).any()
 
 
 @pytest.mark.parametrize("case", [c for c in CASES.values() if not c[0].wraps], ids=[k for k, c in CASES.items()
@@ -113,8 +146,7 @@ def test_a_part_of_a_frame_bounds_its_own_beams(runtime, case):
     use, event = f.node_reach(part)
     event.wait()
     got = use.get()
-    reach = NodeReach(f)
-    want = node_reach(plan.beams, **reach.arguments(), azimuths=part.azimuths)
+    want = node_reach(plan.beams, **NodeReach(f).arguments(), azimuths=part.azimuths)
     mine = (np.arange(lattice.n_beams) // lattice.n_el >= 20) & (np.arange(lattice.n_beams) // lattice.n_el <= 37)
     assert np.array_equal(got[mine], whole[mine]) and not got[~mine].any() and got[mine].any()
     assert not want[~mine].any()
@@ -137,4 +169,3 @@ def test_the_bound_is_the_detection_statistics_models(runtime):
     use, event = two.node_reach(two.plan(pose))
     event.wait()
     assert use.shape == (lattice.n_beams, N_BINS) and use.get().any()
-    assert math.isfinite(two.terrain_dz)

@@ -167,10 +167,10 @@ class Fusion(Stage):
     def node_reach(self, plan):
         """(node_use, event): the node pairs ``plan``'s voxels may read, bounded from its beams'
         geometry on the device (``node_reach``; a still plan's table knows them exactly) and, for a
-        part of a frame (``restrict``), to its azimuths' beams, for the
-        interpreter of a detection-statistics Fusion; None without a terrain class, where the
-        bound would split no classes and only trim the range past the grid, which a rolling
-        window has none of."""
+        part of a frame (``restrict``), to its azimuths' beams, for the interpreter of a
+        detection-statistics Fusion. ``node_use`` is one device array, which the next call
+        overwrites. None without a terrain class, where the bound would split no classes and only
+        trim the range past the grid, which a rolling window has none of."""
         if self.detstats and self.classes == 1:
             return None
         if self._reach is None:
@@ -451,8 +451,7 @@ class Fusion(Stage):
         none = self._no_table
         record = {**dict(counts=none[0], row_start=none[1], first=none[2], extras=none[2], node_use=none[1],
                          live=self._live), **record}
-        rt, m = self.runtime, self.model
-        a_az, a_el = m.apertures
+        rt = self.runtime
         nx, ny, nz = self.grid.spec.shape
         event = None
         for offset, gsize, n_items, c in self._chunk_launches(plan):
@@ -460,9 +459,16 @@ class Fusion(Stage):
                            **self._inputs(evidence, c), **self._plan_device(plan),
                            voxel=self.grid.spec.voxel_m, inv_spacing=1.0 / self.bin_spacing_m,
                            first_bin=self.first_bin, last_bin=self.last_bin, nx=nx, ny=ny, nz=nz,
-                           tan_half_az=math.tan(m.beamwidth_az_rad / 2), tan_half_el=math.tan(m.beamwidth_el_rad / 2),
-                           a_az=a_az, a_el=a_el, n_items=n_items, pool=self.grid.chunk(c), **record)
+                           **self.beam_volume(), n_items=n_items, pool=self.grid.chunk(c), **record)
         return event
+
+    def beam_volume(self):
+        """The beam volume as the kernels take it: tan_half_az, tan_half_el (the half-power
+        half-widths' tangents) and a_az, a_el (the half apertures, 0 without the near-field cylinder)."""
+        m = self.model
+        a_az, a_el = m.apertures
+        return dict(tan_half_az=math.tan(m.beamwidth_az_rad / 2), tan_half_el=math.tan(m.beamwidth_el_rad / 2),
+                    a_az=a_az, a_el=a_el)
 
     def download(self, wait_for=None):
         """Fusion writes the grid, not arrays of its own: read the map with ``grid.snapshot()``."""
