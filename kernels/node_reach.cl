@@ -67,10 +67,13 @@ __kernel void node_reach(
     const int b = id / n_groups, j0 = first_bin + (id % n_groups) * REACH_BINS;
     const int j1 = MINF(j0 + REACH_BINS, last_bin + 1);                /* the group's bins: [j0, j1) */
     const float4 U = beams[3 * b], V4 = beams[3 * b + 1], W4 = beams[3 * b + 2];
+    /* the beam's own origin: the gather's bins take beam 0's where a frame has one pose, which
+     * its beams share */
     const float3 o = (float3)(U.w, V4.w, W4.w);
     /* the box of the grid's voxel centres, from the origin, and its nearest and farthest points */
     const float3 lo = 0.5f * voxel - o, hi = (convert_float3((int3)(nx, ny, nz)) - 0.5f) * voxel - o;
-    const float gx = MAXF(MAXF(lo.x, -hi.x), 0.0f), gy = MAXF(MAXF(lo.y, -hi.y), 0.0f), gz = MAXF(MAXF(lo.z, -hi.z), 0.0f);
+    const float gx = MAXF(MAXF(lo.x, -hi.x), 0.0f), gy = MAXF(MAXF(lo.y, -hi.y), 0.0f);
+    const float gz = MAXF(MAXF(lo.z, -hi.z), 0.0f);
     const float sx = MAXF(-lo.x, hi.x), sy = MAXF(-lo.y, hi.y), sz = MAXF(-lo.z, hi.z);
     const float near = sqrt(gx * gx + gy * gy + gz * gz), far = sqrt(sx * sx + sy * sy + sz * sz);
     const float reach = (j1 - 0.5f) * spacing;

@@ -217,7 +217,7 @@ class FramePlan:
     generation: int = -1     # the grid's generation it was made for (slots die with grid.clear())
     _outside: list = field(default_factory=list, compare=False, repr=False)
     _table: list = field(default_factory=list, compare=False, repr=False)    # a StillTable, once recorded
-    azimuths: tuple | None = None   # (lo, hi): the azimuths whose beams a part of a frame fuses (Fusion.restrict); None: all
+    azimuths: tuple | None = None   # (lo, hi): the azimuths a part of a frame fuses (Fusion.restrict); None: all
 
     @property
     def table(self):
