@@ -82,7 +82,7 @@ SMALL = {
               " or test_detstats_sums_do_not_depend_on_the_order_of_frames)",
     "fusion_cached": "not test_the_table_is_recorded_when_a_pose_comes_back",  # the plan cache
     "fusion_plan": "not test_the_plans_lose_no_voxel_at_the_papers_scale",  # 112 M voxels
-    "node_reach": "not test_the_bound_holds_every_node_pair_the_voxels_read",  # 300 still tables recorded
+    "node_reach": "not test_the_bound_holds_every_node_pair_the_voxels_read",  # a table at every voxel height
 }
 
 # The first line of each report Oclgrind 21.10 writes (src/plugins/MemCheck.cpp, RaceDetector.cpp,
