@@ -140,7 +140,8 @@ class Interpreter(Stage):
         this plan's own, as ``upload`` filled them). Results stay in ``arrays["evidence"]``,
         ``["pulses"]``, ``["n_pulses"]``, ``["flags_out"]``. ``node_use``: the node pairs the
         frame's voxels read (a still plan's ``StillTable.node_use``, or a moving frame's bound,
-        ``Fusion.node_reach``; ``InterpretNodes.enqueue``), the others left as they were; None: all. Returns the kernel event."""
+        ``Fusion.node_reach``; ``InterpretNodes.enqueue``), the others left as they were; None:
+        all. Returns the kernel event."""
         ls = self.local_size
         gsize = (-(-self.n_beams // ls) * ls,)
         a = self.arrays
